@@ -1,0 +1,49 @@
+"""The engine's errors: one small hierarchy, mapped to 4xx by the API and to exit code 2 by the CLI.
+
+Every error says what is wrong with which input in words a person can act on; none of them is a
+traceback. ``SynthError`` derives from ``ValueError`` so plain Python callers can catch either.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["Cancelled", "InputTooLarge", "InvalidInput", "InvalidParameter", "SynthError", "UnsupportedFormat"]
+
+
+class SynthError(ValueError):
+    """Base class of every error the engine raises on purpose."""
+
+
+class InvalidInput(SynthError):
+    """An input image or volume is unusable: unreadable, truncated, empty, NaN, absurd shape.
+
+    ``source`` names the file (or field) so that the message points at it.
+    """
+
+    def __init__(self, source: str, problem: str) -> None:
+        self.source = source
+        self.problem = problem
+        super().__init__(f"{source}: {problem}")
+
+
+class UnsupportedFormat(InvalidInput):
+    """The bytes are not an image in a format the engine reads (HTTP 415)."""
+
+
+class InputTooLarge(InvalidInput):
+    """The input exceeds a configured pixel or byte limit, or is a decompression bomb (HTTP 413)."""
+
+
+class InvalidParameter(SynthError):
+    """A parameter is out of range or inconsistent with the inputs; ``name`` is the parameter."""
+
+    def __init__(self, name: str, value: Any, reason: str) -> None:
+        self.name = name
+        self.value = value
+        self.reason = reason
+        super().__init__(f"parameter '{name}' = {value!r}: {reason}")
+
+
+class Cancelled(SynthError):
+    """Raised through a progress callback to stop a synthesis early (a cancelled job)."""

@@ -1,0 +1,44 @@
+"""Parameter models: one frozen pydantic model per method, defaults = the papers' settings.
+
+The service's OpenAPI schema, the browser form and the CLI's ``--set`` all come from these models;
+nothing about a parameter (bounds, default, meaning) is written twice.
+"""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from synth.errors import InvalidParameter
+
+__all__ = ["MethodParams", "validate_params"]
+
+
+class MethodParams(BaseModel):
+    """Base of every method's parameter model: frozen, and unknown names are errors."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+P = TypeVar("P", bound=MethodParams)
+
+
+def validate_params(model: type[P], values: dict[str, Any] | P | None) -> P:
+    """Build ``model`` from ``values``, turning pydantic's report into one :class:`InvalidParameter`.
+
+    The first failing field is named, with pydantic's reason (``Input should be less than or equal
+    to 41``), so that a person sees which field to fix before any work starts.
+    """
+    if isinstance(values, model):
+        return values
+    try:
+        return model.model_validate(values or {})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        name = ".".join(str(p) for p in err.get("loc", ())) or "params"
+        reason = err.get("msg", "invalid value")
+        if err.get("type") == "extra_forbidden":
+            known = ", ".join(sorted(model.model_fields))
+            reason = f"unknown parameter (known: {known})"
+        raise InvalidParameter(name, err.get("input"), reason) from None
