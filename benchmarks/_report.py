@@ -1,0 +1,45 @@
+"""Shared machinery of the benchmarks: timing (median of runs) and writing a section of docs/benchmarks.md.
+
+Each benchmark owns one section, delimited by HTML comments, and rewrites only that section, so that
+benchmarks can run in any order and the document keeps the latest figures of each.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import re
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+_HEADER = "# Benchmarks\n\nMeasured by `make bench` (or `python -m benchmarks.<name>`); every figure is a median of several runs.\n"
+
+
+def machine() -> str:
+    """One line naming the machine the figures were measured on."""
+    return f"{os.cpu_count()} cores, {platform.machine()}, Python {platform.python_version()}"
+
+
+def median_time(fn: Callable[[], object], runs: int = 5, warmup: int = 1) -> tuple[float, list[float]]:
+    """Median wall-clock seconds of ``fn`` over ``runs`` runs, after ``warmup`` untimed runs (JIT)."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), times
+
+
+def write_section(name: str, markdown: str) -> None:
+    """Replace (or append) section ``name`` of docs/benchmarks.md with ``markdown``."""
+    DOC.parent.mkdir(parents=True, exist_ok=True)
+    text = DOC.read_text() if DOC.exists() else _HEADER
+    block = f"<!-- begin:{name} -->\n{markdown.rstrip()}\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}._\n<!-- end:{name} -->"
+    pattern = re.compile(rf"<!-- begin:{re.escape(name)} -->.*?<!-- end:{re.escape(name)} -->", re.S)
+    text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
+    DOC.write_text(text)
