@@ -1,0 +1,364 @@
+"""Per-pixel neighbourhood search and copy: the hot loop of every pixel-based method.
+
+For each position in a chunk of a scan order, compare the output's neighbourhood with exemplar
+neighbourhoods and copy the best match's features (and remember its source position). A
+neighbourhood distance is the weighted sum of up to three blocks:
+
+- ``cur``: the image being synthesized, same pyramid level (offsets usually causal or square);
+- ``par``: the already synthesized parent level, at ``(y // 2, x // 2)`` (full square);
+- ``gui``: a fixed guidance field at the same level (the tensor field of Akl 2014, eq 13).
+
+Each block has a per-position metric: ``SSD`` (sum of squared channel differences; also ED on
+tensors stored as ``(S_xx, sqrt(2) S_xy, S_yy)``), ``NORM`` (square root of that sum: FN, and LE
+on log-tensors) or ``SO`` (channels ``(sin O, cos O, C)``, Akl 2014 eqs 7-9). Output positions wrap
+(toroidal output); exemplar positions never do: candidates lie in ``valid`` so that every
+neighbourhood is fully inside the exemplar.
+
+Search: ``exact`` visits every valid exemplar position (the definition; partial distances stop
+early once they exceed the best so far, which leaves the argmin unchanged). Otherwise candidates
+are k-coherent (Tong et al. 2002): for every neighbour ``q`` in ``cand_offsets`` the source of
+``q`` shifted by ``p - q``, plus its ``k`` precomputed most similar exemplar positions, the same
+from an optional ``hint`` source map, and ``n_random`` seeded random positions. In the first pass
+unsynthesized output pixels (``done == 0``) are left out of the ``cur`` block.
+
+``synthesize_chunk_reference`` is the plain NumPy version the tests compare the kernel with.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "METRIC_NORM",
+    "METRIC_SO",
+    "METRIC_SSD",
+    "candidate_capacity",
+    "synthesize_chunk",
+    "synthesize_chunk_reference",
+]
+
+METRIC_SSD = 0
+METRIC_NORM = 1
+METRIC_SO = 2
+
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+@njit(cache=True, inline="always")
+def _splitmix(x: np.uint64) -> np.uint64:
+    z = x + _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True, inline="always")
+def _query_distance(q, lin, n, exf, base, metric, alpha, limit):  # noqa: ANN001, ANN202
+    """Distance between a gathered query block ``q[:n]`` and the exemplar block at ``base``.
+
+    ``exf`` is the exemplar as ``(h*w, C)``; ``lin[i]`` the linear offset of entry ``i``. Stops
+    early once the partial sum exceeds ``limit``.
+    """
+    C = q.shape[1]
+    s = 0.0
+    for i in range(n):
+        e = base + lin[i]
+        if metric == METRIC_SO:
+            s1 = q[i, 0]
+            c1 = q[i, 1]
+            k1 = q[i, 2]
+            s2 = exf[e, 0]
+            c2 = exf[e, 1]
+            k2 = exf[e, 2]
+            m_or = abs(s1 * c2 - c1 * s2) * min(k1, k2)
+            m_coh = max(k1 / k2, k2 / k1)
+            if alpha == 0.5:
+                s += math.sqrt(m_or * m_coh)
+            else:
+                s += m_or**alpha * m_coh ** (1.0 - alpha)
+        else:
+            t = 0.0
+            for c in range(C):
+                d = q[i, c] - exf[e, c]
+                t += d * d
+            s += math.sqrt(t) if metric == METRIC_NORM else t
+        if s > limit:
+            return s
+    return s
+
+
+@njit(cache=True)
+def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):  # noqa: ANN001, ANN202
+    """Copy the (wrapped) output neighbourhood of ``(oy, ox)`` into ``q``; return its length.
+
+    With ``use_mask`` the unsynthesized positions are skipped; ``lin`` receives the exemplar
+    linear offsets of the kept entries.
+    """
+    H = img.shape[0]
+    W = img.shape[1]
+    n = 0
+    for i in range(offs.shape[0]):
+        qy = (oy + offs[i, 0]) % H
+        qx = (ox + offs[i, 1]) % W
+        if use_mask and done[qy, qx] == 0:
+            continue
+        for c in range(img.shape[2]):
+            q[n, c] = img[qy, qx, c]
+        lin[n] = offs[i, 0] * ex_width + offs[i, 1]
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
+              q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, ex_width, cy, cx, best):  # noqa: ANN001, ANN202
+    d = 0.0
+    base = cy * ex_width + cx
+    if w_gui > 0.0:
+        d += w_gui * _query_distance(q_gui, l_gui, n_gui, guif, base, gui_metric, alpha, (best - d) / w_gui)
+        if d >= best:
+            return d
+    if w_par > 0.0:
+        pbase = (cy // 2) * par_width + cx // 2
+        d += w_par * _query_distance(q_par, l_par, n_par, parf, pbase, par_metric, alpha, (best - d) / w_par)
+        if d >= best:
+            return d
+    if w_cur > 0.0:
+        d += w_cur * _query_distance(q_cur, l_cur, n_cur, exf, base, metric, alpha, (best - d) / w_cur)
+    return d
+
+
+def candidate_capacity(n_cand_offsets: int, k: int, has_hint: bool, n_random: int) -> int:
+    """Largest number of candidates one position can have (the kernel's scratch size)."""
+    return n_cand_offsets * (k + 1) * (2 if has_hint else 1) + n_random + 1
+
+
+@njit(cache=True)
+def _add_candidate(cand, n, cy, cx, valid, stamp, tag, w):  # noqa: ANN001, ANN202
+    if cy < valid[0] or cy >= valid[1] or cx < valid[2] or cx >= valid[3]:
+        return n
+    key = cy * w + cx
+    if stamp[key] == tag:
+        return n
+    stamp[key] = tag
+    cand[n, 0] = cy
+    cand[n, 1] = cx
+    return n + 1
+
+
+@njit(cache=True)
+def _gather_candidates(cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid, n_random, key, stamp, tag, w):  # noqa: ANN001, ANN202
+    H = src.shape[0]
+    W = src.shape[1]
+    k = kset.shape[2]
+    n = 0
+    for sel in range(2 if use_hint else 1):
+        smap = src if sel == 0 else hint
+        for i in range(cand_offs.shape[0]):
+            qy = (oy + cand_offs[i, 0]) % H
+            qx = (ox + cand_offs[i, 1]) % W
+            sy = smap[qy, qx, 0] - cand_offs[i, 0]
+            sx = smap[qy, qx, 1] - cand_offs[i, 1]
+            n = _add_candidate(cand, n, sy, sx, valid, stamp, tag, w)
+            if valid[0] <= sy < valid[1] and valid[2] <= sx < valid[3]:
+                for j in range(k):
+                    ky = kset[sy, sx, j, 0]
+                    if ky >= 0:
+                        n = _add_candidate(cand, n, ky, kset[sy, sx, j, 1], valid, stamp, tag, w)
+    span_y = np.uint64(valid[1] - valid[0])
+    span_x = np.uint64(valid[3] - valid[2])
+    for j in range(n_random):
+        r = _splitmix(key + np.uint64(j))
+        ry = valid[0] + np.int64(r % span_y)
+        rx = valid[2] + np.int64((r >> np.uint64(32)) % span_x)
+        n = _add_candidate(cand, n, ry, rx, valid, stamp, tag, w)
+    return n
+
+
+@njit(cache=True)
+def _synthesize_chunk_kernel(
+    order, start, stop, out, ex, offs, metric, w_cur, par_out, par_ex, par_offs, par_metric, w_par,
+    gui_out, gui_ex, gui_offs, gui_metric, w_gui, alpha, src, hint, use_hint, done, first_pass, valid,
+    kset, cand_offs, exact, n_random, seed_key, stamp, counter, best_out, capacity,
+):  # noqa: ANN001, ANN202
+    W = out.shape[1]
+    w = ex.shape[1]
+    C = out.shape[2]
+    exf = ex.reshape(ex.shape[0] * w, C)
+    parf = par_ex.reshape(par_ex.shape[0] * par_ex.shape[1], par_ex.shape[2])
+    guif = gui_ex.reshape(gui_ex.shape[0] * gui_ex.shape[1], gui_ex.shape[2])
+    par_width = par_ex.shape[1]
+    cand = np.empty((capacity, 2), dtype=np.int64)
+    q_cur = np.empty((offs.shape[0], C), dtype=np.float32)
+    l_cur = np.empty(offs.shape[0], dtype=np.int64)
+    q_par = np.empty((par_offs.shape[0], par_out.shape[2]), dtype=np.float32)
+    l_par = np.empty(par_offs.shape[0], dtype=np.int64)
+    q_gui = np.empty((gui_offs.shape[0], gui_out.shape[2]), dtype=np.float32)
+    l_gui = np.empty(gui_offs.shape[0], dtype=np.int64)
+    for idx in range(start, stop):
+        p = order[idx]
+        oy = p // W
+        ox = p % W
+        n_cur = _gather_query(out, oy, ox, offs, w, done, first_pass, q_cur, l_cur)
+        n_par = 0
+        if w_par > 0.0:
+            n_par = _gather_query(par_out, oy // 2, ox // 2, par_offs, par_width, done, False, q_par, l_par)
+        n_gui = 0
+        if w_gui > 0.0:
+            n_gui = _gather_query(gui_out, oy, ox, gui_offs, w, done, False, q_gui, l_gui)
+        if n_cur == 0 and n_par == 0 and n_gui == 0:  # nothing to compare yet: keep the initial source
+            sy = src[oy, ox, 0]
+            sx = src[oy, ox, 1]
+            for c in range(C):
+                out[oy, ox, c] = ex[sy, sx, c]
+            done[oy, ox] = 1
+            best_out[oy, ox] = 0.0
+            continue
+        best = np.inf
+        by = -1
+        bx = -1
+        if exact:
+            for cy in range(valid[0], valid[1]):
+                for cx in range(valid[2], valid[3]):
+                    d = _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
+                                  q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, w,
+                                  cy, cx, best)
+                    if d < best:
+                        best = d
+                        by = cy
+                        bx = cx
+        else:
+            counter[0] += 1
+            key = _splitmix(seed_key ^ np.uint64(p))
+            n = _gather_candidates(cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid, n_random, key,
+                                   stamp, counter[0], w)
+            for j in range(n):
+                cy = cand[j, 0]
+                cx = cand[j, 1]
+                d = _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
+                              q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, w,
+                              cy, cx, best)
+                if d < best:
+                    best = d
+                    by = cy
+                    bx = cx
+        src[oy, ox, 0] = by
+        src[oy, ox, 1] = bx
+        for c in range(C):
+            out[oy, ox, c] = ex[by, bx, c]
+        done[oy, ox] = 1
+        best_out[oy, ox] = best
+
+
+def synthesize_chunk(state: dict, start: int, stop: int) -> None:
+    """Run the kernel on ``state['order'][start:stop]``; ``state`` holds the prepared arrays.
+
+    The keys are those of :func:`synthesize_chunk_reference`'s arguments; every array must be
+    C-contiguous, features float32, maps int64 (the caller, :mod:`synth.pixel_synthesis`, prepares
+    them once per pass).
+    """
+    s = state
+    _synthesize_chunk_kernel(
+        s["order"], start, stop, s["out"], s["ex"], s["offs"], s["metric"], s["w_cur"],
+        s["par_out"], s["par_ex"], s["par_offs"], s["par_metric"], s["w_par"],
+        s["gui_out"], s["gui_ex"], s["gui_offs"], s["gui_metric"], s["w_gui"], s["alpha"],
+        s["src"], s["hint"], s["use_hint"], s["done"], s["first_pass"], s["valid"], s["kset"], s["cand_offs"],
+        s["exact"], s["n_random"], np.uint64(s["seed_key"]), s["stamp"], s["counter"], s["best_out"],
+        s["capacity"],
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# Plain reference: the same algorithm, one position at a time, with NumPy and no early stopping.
+
+
+def _metric_reference(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -> np.ndarray:
+    """Position distances between ``a`` and ``b`` of shape ``(..., C)``."""
+    a64 = a.astype(np.float64)
+    b64 = b.astype(np.float64)
+    if metric == METRIC_SO:
+        m_or = np.abs(a64[..., 0] * b64[..., 1] - a64[..., 1] * b64[..., 0]) * np.minimum(a64[..., 2], b64[..., 2])
+        m_coh = np.maximum(a64[..., 2] / b64[..., 2], b64[..., 2] / a64[..., 2])
+        return m_or**alpha * m_coh ** (1.0 - alpha)
+    ssd = ((a64 - b64) ** 2).sum(axis=-1)
+    return np.sqrt(ssd) if metric == METRIC_NORM else ssd
+
+
+def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):  # noqa: ANN001, ANN202
+    H, W = out.shape[:2]
+    offs = offs[keep]
+    q = out[(oy + offs[:, 0]) % H, (ox + offs[:, 1]) % W]  # (K, C)
+    e = ex[cands[:, None, 0] + offs[None, :, 0], cands[:, None, 1] + offs[None, :, 1]]  # (N, K, C)
+    return _metric_reference(q[None], e, metric, alpha).sum(axis=1)
+
+
+def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray:
+    s = state
+    y0, y1, x0, x1 = (int(v) for v in s["valid"])
+    H, W = s["src"].shape[:2]
+    seen: list[tuple[int, int]] = []
+
+    def add(cy: int, cx: int) -> None:
+        if y0 <= cy < y1 and x0 <= cx < x1 and (cy, cx) not in seen:
+            seen.append((cy, cx))
+
+    maps = [s["src"], s["hint"]] if s["use_hint"] else [s["src"]]
+    for smap in maps:
+        for dy, dx in s["cand_offs"]:
+            sy, sx = (int(v) for v in smap[(oy + dy) % H, (ox + dx) % W] - (dy, dx))
+            add(sy, sx)
+            if y0 <= sy < y1 and x0 <= sx < x1:
+                for ky, kx in s["kset"][sy, sx]:
+                    if ky >= 0:
+                        add(int(ky), int(kx))
+    mask = (1 << 64) - 1
+    for j in range(s["n_random"]):
+        r = int(_splitmix(np.uint64((key + j) & mask)))
+        add(y0 + r % (y1 - y0), x0 + (r >> 32) % (x1 - x0))
+    return np.array(seen, dtype=np.int64).reshape(-1, 2)
+
+
+def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
+    """Slow, obvious NumPy version of :func:`synthesize_chunk` (same arguments, same results)."""
+    s = state
+    out, ex, src, done = s["out"], s["ex"], s["src"], s["done"]
+    H, W = out.shape[:2]
+    y0, y1, x0, x1 = (int(v) for v in s["valid"])
+    for p in s["order"][start:stop]:
+        oy, ox = divmod(int(p), W)
+        keep = np.ones(len(s["offs"]), dtype=bool)
+        if s["first_pass"]:
+            keep = done[(oy + s["offs"][:, 0]) % H, (ox + s["offs"][:, 1]) % W] != 0
+            if s["w_par"] == 0.0 and s["w_gui"] == 0.0 and not keep.any():  # nothing to compare yet
+                out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
+                done[oy, ox] = 1
+                s["best_out"][oy, ox] = 0.0
+                continue
+        if s["exact"]:
+            gy, gx = np.mgrid[y0:y1, x0:x1]
+            cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
+        else:
+            key = int(_splitmix(np.uint64(s["seed_key"]) ^ np.uint64(p)))
+            cands = _candidates_reference(s, oy, ox, key)
+        d = np.zeros(len(cands))
+        if s["w_gui"] > 0:
+            full = np.ones(len(s["gui_offs"]), dtype=bool)
+            d += s["w_gui"] * _block_reference(s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"],
+                                               s["gui_metric"], s["alpha"], full)
+        if s["w_par"] > 0:
+            full = np.ones(len(s["par_offs"]), dtype=bool)
+            d += s["w_par"] * _block_reference(s["par_out"], oy // 2, ox // 2, s["par_ex"], cands // 2,
+                                               s["par_offs"], s["par_metric"], s["alpha"], full)
+        if s["w_cur"] > 0:
+            d += s["w_cur"] * _block_reference(out, oy, ox, ex, cands, s["offs"], s["metric"], s["alpha"], keep)
+        best = int(np.argmin(d))
+        by, bx = cands[best]
+        src[oy, ox] = (by, bx)
+        out[oy, ox] = ex[by, bx]
+        done[oy, ox] = 1
+        s["best_out"][oy, ox] = d[best]

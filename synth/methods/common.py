@@ -1,0 +1,73 @@
+"""Parameters and helpers shared by the pixel-based methods (one definition each)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from synth.api import Progress
+from synth.errors import Cancelled
+from synth.neighbourhood import Shape
+from synth.params import MethodParams
+from synth.pixel_synthesis import SearchSettings
+from synth.scan import ScanOrder
+
+__all__ = ["NeighbourhoodParams", "as_features", "checked_progress"]
+
+
+class NeighbourhoodParams(MethodParams):
+    """Neighbourhood, scan and search options common to the Wei-Levoy family."""
+
+    neighbourhood_size: int = Field(13, ge=3, le=41, description="Side of the square/L neighbourhood (odd).")
+    neighbourhood: Shape = Field(
+        "causal", description="'causal' L-shape (with a lexicographic scan) or 'square' non-causal (random walk)."
+    )
+    scan: ScanOrder | None = Field(
+        None, description="Scan order; default lexicographic for a causal neighbourhood, random for a square one."
+    )
+    parent_size: int = Field(5, ge=3, le=15, description="Side of the parent-level square neighbourhood (odd).")
+    search: Literal["kcoherence", "exact"] = Field(
+        "kcoherence", description="'exact' compares every exemplar position (slow, the definition); "
+        "'kcoherence' compares k-coherent candidates (fast; measured as good in docs/benchmarks.md)."
+    )
+    k: int = Field(5, ge=0, le=32, description="k-coherence: similar exemplar positions proposed per candidate.")
+    random_candidates: int = Field(2, ge=0, le=64, description="k-coherence: random candidates added per pixel.")
+
+    @model_validator(mode="after")
+    def _odd_sizes(self) -> NeighbourhoodParams:
+        for name in ("neighbourhood_size", "parent_size"):
+            if getattr(self, name) % 2 == 0:
+                raise ValueError(f"{name} must be odd")
+        return self
+
+    def resolved_scan(self) -> ScanOrder:
+        return self.scan or ("lexicographic" if self.neighbourhood == "causal" else "random")
+
+    def search_settings(self, *, size: int, levels: int, iterations: int, alpha: float = 0.5) -> SearchSettings:
+        return SearchSettings(
+            size=size, shape=self.neighbourhood, scan=self.resolved_scan(), levels=levels,
+            parent_size=self.parent_size, iterations=iterations, search=self.search, k=self.k,
+            random_candidates=self.random_candidates, alpha=alpha,
+        )
+
+
+def as_features(image: np.ndarray) -> np.ndarray:
+    """An image as kernel features: ``(H, W, C)`` C-contiguous float32."""
+    img = image[..., None] if image.ndim == 2 else image
+    return np.ascontiguousarray(img, dtype=np.float32)
+
+
+def checked_progress(progress: Progress):  # noqa: ANN201
+    """Wrap a progress callback; whatever it raises to stop the work surfaces as :class:`Cancelled`."""
+
+    def report(stage: str, fraction: float) -> None:
+        try:
+            progress(stage, min(1.0, max(0.0, fraction)))
+        except Cancelled:
+            raise
+        except Exception as exc:  # a callback that raises means "stop"
+            raise Cancelled(f"cancelled during {stage}: {exc}") from exc
+
+    return report

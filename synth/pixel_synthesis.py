@@ -1,0 +1,352 @@
+"""Multi-resolution, pixel-by-pixel synthesis of a *source map* (Wei & Levoy 2000, generalised).
+
+Every pixel-based method here is this one loop with different features: the synthesized output
+is represented by its source map (for each output position, the exemplar position it copies), so
+that grey, colour and tensor-valued images, and images guided by a fixed field, share one engine.
+
+For each pyramid level, coarsest first: initialise the source map (random exemplar positions at
+the top, the parent's sources upsampled below), then run ``iterations`` passes over a scan order,
+each position taking the exemplar position whose neighbourhood is closest (see
+:mod:`synth.kernels.pixel_search` for the distance and the search). The output's borders wrap
+(toroidal output); exemplar neighbourhoods lie fully inside the exemplar.
+
+Weights: the pixel part (same level and parent level) and the guidance part of a neighbourhood
+are each divided by their *typical* size (the mean distance between random exemplar positions under
+their metric, times the number of positions compared) before ``p`` and ``1 - p`` weight them, so
+that ``p = 0.5`` means "both parts count equally" whatever the units (Akl 2014, eq 13).
+
+Departures from Wei & Levoy: in the first pass the not-yet-synthesized positions of the same
+level are left out of the comparison instead of being compared as initial noise (so a causal
+neighbourhood never reads an unsynthesized pixel); the fast search is k-coherence (Tong et al.
+2002), measured against the exact search in ``benchmarks/bench_synthesis.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from synth.errors import InvalidParameter
+from synth.kernels.pixel_search import (
+    METRIC_NORM,
+    METRIC_SO,
+    METRIC_SSD,
+    _metric_reference,
+    candidate_capacity,
+    synthesize_chunk,
+    synthesize_chunk_reference,
+)
+from synth.neighbourhood import Shape, neighbourhood_offsets, parent_offsets
+from synth.scan import ScanOrder, scan_order
+from synth.tensor import Metric, coherence, log_tensors, orientation
+
+__all__ = ["Guidance", "SearchSettings", "SynthesisReport", "synthesize_source_map", "tensor_features"]
+
+SearchKind = Literal["exact", "kcoherence"]
+
+#: The same-level neighbours whose sources propose k-coherent candidates (radius in pixels).
+_CANDIDATE_RADIUS = 2
+#: Dimensions kept by the PCA that precedes the k-nearest-neighbour tree of k-coherence.
+_PCA_DIMS = 12
+#: Largest neighbourhood used to find the k most similar exemplar positions (cost grows as size^2).
+_KSET_MAX_SIZE = 9
+#: Progress is reported about this many times per pass.
+_CHUNKS_PER_PASS = 64
+_COHERENCE_FLOOR = 1e-3
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """How one synthesis (one stage) searches: neighbourhood, scan, pyramid and search backend."""
+
+    size: int
+    shape: Shape = "causal"
+    scan: ScanOrder = "lexicographic"
+    levels: int = 1
+    parent_size: int = 5
+    iterations: int = 2
+    search: SearchKind = "kcoherence"
+    k: int = 5
+    random_candidates: int = 2
+    alpha: float = 0.5
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """A fixed field that guides the synthesis (the synthesized tensor field of Akl 2014, eq 13).
+
+    ``out_levels``/``ex_levels`` are kernel features (see :func:`tensor_features`), finest first;
+    ``weight`` is ``1 - p``; ``hint_levels`` optional source maps proposing candidates.
+    """
+
+    out_levels: Sequence[np.ndarray]
+    ex_levels: Sequence[np.ndarray]
+    metric: int
+    weight: float
+    size: int
+    hint_levels: Sequence[np.ndarray] | None = None
+
+
+@dataclass
+class SynthesisReport:
+    """Numbers measured during a run: mean best-match distance per level and pass."""
+
+    mean_best_distance: dict[str, float]
+
+    def final(self) -> float:
+        return list(self.mean_best_distance.values())[-1]
+
+
+ProgressFn = Callable[[str, float], None]
+
+
+def tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, int]:
+    """Per-position tensor features and the kernel metric code that realises ``metric``.
+
+    ED: ``(S_xx, sqrt2 S_xy, S_yy)`` under SSD (eq 6); FN: the same under its norm (eq 10);
+    LE: the log-tensors under the norm (eq 11); SO: ``(sin O, cos O, max(C, 1e-3))`` (eqs 7-9).
+    """
+    t = tensors.astype(np.float32)
+    if metric in ("ED", "FN"):
+        feats = np.stack([t[..., 0], np.sqrt(2.0) * t[..., 1], t[..., 2]], axis=-1)
+        code = METRIC_SSD if metric == "ED" else METRIC_NORM
+    elif metric == "LE":
+        lg = log_tensors(t.astype(np.float64))
+        feats = np.stack([lg[..., 0], np.sqrt(2.0) * lg[..., 1], lg[..., 2]], axis=-1)
+        code = METRIC_NORM
+    elif metric == "SO":
+        theta = orientation(t.astype(np.float64))
+        feats = np.stack([np.sin(theta), np.cos(theta), np.maximum(coherence(t), _COHERENCE_FLOOR)], axis=-1)
+        code = METRIC_SO
+    else:
+        raise InvalidParameter("metric", metric, "must be one of ED, SO, FN, LE")
+    return np.ascontiguousarray(feats, dtype=np.float32), code
+
+
+def _euclidean_embedding(feats: np.ndarray, code: int) -> np.ndarray:
+    """Features in a space where Euclidean distance approximates the metric (for the k-NN sets)."""
+    if code == METRIC_SO:  # doubled-angle vector scaled by coherence: orientations modulo pi
+        s, c, k = feats[..., 0], feats[..., 1], feats[..., 2]
+        return np.stack([k * (c * c - s * s), k * 2 * s * c], axis=-1)
+    return feats
+
+
+def _typical_distance(feats: np.ndarray, code: int, alpha: float, rng: np.random.Generator) -> float:
+    """Mean position distance between random pairs of positions: the unit of a block's distance."""
+    flat = feats.reshape(-1, feats.shape[-1])
+    i = rng.integers(0, len(flat), 4096)
+    j = rng.integers(0, len(flat), 4096)
+    d = float(np.mean(_metric_reference(flat[i], flat[j], code, alpha)))
+    return d if d > 1e-20 else 1.0
+
+
+def _valid_region(
+    ex_shape: tuple[int, int], radius: int, parent: tuple[tuple[int, int], int] | None, level: int
+) -> np.ndarray:
+    h, w = ex_shape
+    y0, y1, x0, x1 = radius, h - radius, radius, w - radius
+    if parent is not None:
+        (hp, wp), rp = parent
+        y0, x0 = max(y0, 2 * rp), max(x0, 2 * rp)
+        y1, x1 = min(y1, 2 * (hp - 1 - rp) + 2), min(x1, 2 * (wp - 1 - rp) + 2)
+    if y1 <= y0 or x1 <= x0:
+        raise InvalidParameter(
+            "neighbourhood_size",
+            2 * radius + 1,
+            f"no neighbourhood fits inside the exemplar at pyramid level {level} ({h}x{w} pixels): "
+            "use a smaller neighbourhood or fewer levels",
+        )
+    return np.array([y0, y1, x0, x1], dtype=np.int64)
+
+
+def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarray:
+    """Square neighbourhoods (flattened) of every valid position: ``(n_valid, size*size*C)``."""
+    r = size // 2
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    parts = [
+        feats[y0 + dy : y1 + dy, x0 + dx : x1 + dx].reshape(-1, feats.shape[-1])
+        for dy in range(-r, r + 1)
+        for dx in range(-r, r + 1)
+    ]
+    return np.concatenate(parts, axis=1)
+
+
+def _k_coherence_sets(embeds: Sequence[tuple[np.ndarray, float]], size: int, valid: np.ndarray, k: int) -> np.ndarray:
+    """For every valid exemplar position, its ``k`` most similar other valid positions.
+
+    Neighbourhoods (square, at most 9x9) of the weighted embeddings are projected on their first
+    principal components and queried in a k-d tree; ``-1`` marks positions without a set.
+    """
+    h, w = embeds[0][0].shape[:2]
+    kset = np.full((h, w, k, 2), -1, dtype=np.int64)
+    if k == 0:
+        return kset
+    ks = min(size, _KSET_MAX_SIZE)
+    # The k-NN neighbourhood must fit where the search neighbourhood fits.
+    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
+    vectors = vectors.astype(np.float64)
+    vectors -= vectors.mean(axis=0)
+    dims = min(_PCA_DIMS, vectors.shape[1], vectors.shape[0])
+    # Principal axes from the covariance (small: dims x dims of the neighbourhood length).
+    cov = vectors.T @ vectors
+    _, eigvec = np.linalg.eigh(cov)
+    projected = vectors @ eigvec[:, ::-1][:, :dims]
+    kk = min(k + 1, len(projected))
+    _, idx = cKDTree(projected).query(projected, k=kk)
+    idx = idx.reshape(len(projected), kk)
+    self_idx = np.arange(len(projected))[:, None]
+    neighbours = np.where(idx == self_idx, -1, idx)
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    vw = x1 - x0
+    out = np.full((len(projected), k), -1, dtype=np.int64)
+    for row in range(len(projected)):  # per-row compaction: drop self, keep order (small, once per level)
+        keep = neighbours[row][neighbours[row] >= 0][:k]
+        out[row, : len(keep)] = keep
+    ys = np.where(out >= 0, y0 + out // vw, -1)
+    xs = np.where(out >= 0, x0 + out % vw, -1)
+    kset[y0:y1, x0:x1, :, 0] = ys.reshape(y1 - y0, x1 - x0, k)
+    kset[y0:y1, x0:x1, :, 1] = xs.reshape(y1 - y0, x1 - x0, k)
+    return kset
+
+
+def _initial_sources(
+    shape: tuple[int, int], valid: np.ndarray, parent_src: np.ndarray | None, rng: np.random.Generator
+) -> np.ndarray:
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    H, W = shape
+    src = np.empty((H, W, 2), dtype=np.int64)
+    if parent_src is None:
+        src[..., 0] = rng.integers(y0, y1, size=(H, W))
+        src[..., 1] = rng.integers(x0, x1, size=(H, W))
+        return src
+    yy, xx = np.mgrid[0:H, 0:W]
+    up = parent_src[yy // 2, xx // 2]
+    src[..., 0] = np.clip(2 * up[..., 0] + yy % 2, y0, y1 - 1)
+    src[..., 1] = np.clip(2 * up[..., 1] + xx % 2, x0, x1 - 1)
+    return src
+
+
+def _empty_features(channels: int) -> np.ndarray:
+    return np.zeros((1, 1, channels), dtype=np.float32)
+
+
+def synthesize_source_map(
+    ex_levels: Sequence[np.ndarray],
+    out_shapes: Sequence[tuple[int, int]],
+    settings: SearchSettings,
+    *,
+    metric: int = METRIC_SSD,
+    p: float = 1.0,
+    guidance: Guidance | None = None,
+    seed: int = 0,
+    progress: ProgressFn | None = None,
+    stage: str = "synthesis",
+    span: tuple[float, float] = (0.0, 1.0),
+    reference: bool = False,
+) -> tuple[list[np.ndarray], SynthesisReport]:
+    """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
+
+    Parameters
+    ----------
+    ex_levels : list of ndarray (h_l, w_l, C), finest first
+        Exemplar features per level (pixels, or tensor features from :func:`tensor_features`).
+    out_shapes : list of (H_l, W_l), finest first
+    settings : SearchSettings
+    metric : int
+        Kernel metric code of the synthesized features (``METRIC_SSD`` for pixels).
+    p : float
+        Weight of the pixel part against the guidance part (eq 13); ignored without guidance.
+    guidance : Guidance, optional
+    seed : int
+    progress : callable (stage, fraction), optional
+        Called about 64 times per pass with the overall fraction inside ``span``; may raise to cancel.
+    reference : bool
+        Run the plain NumPy reference instead of the numba kernel (tests only: slow).
+    """
+    levels = settings.levels
+    if len(ex_levels) != levels or len(out_shapes) != levels:
+        raise InvalidParameter("levels", levels, "exemplar and output pyramids must have that many levels")
+    rng = np.random.default_rng(seed)
+    offs = neighbourhood_offsets(settings.size, settings.shape)
+    cand_offs = neighbourhood_offsets(2 * _CANDIDATE_RADIUS + 1, "square")
+    cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
+    if settings.shape == "causal":  # only already-synthesized neighbours propose in a causal scan
+        cand_offs = np.ascontiguousarray(cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))])
+    par_offs = parent_offsets(settings.parent_size)
+    gui_offs = neighbourhood_offsets(guidance.size, "square") if guidance is not None else np.zeros((0, 2), np.int32)
+    if guidance is not None:
+        gui_offs = np.ascontiguousarray(np.vstack([[0, 0], gui_offs]), dtype=np.int32)
+    chunk_fn = synthesize_chunk_reference if reference else synthesize_chunk
+    work = [settings.iterations * h * w for h, w in out_shapes]
+    total_work = float(sum(work))
+    done_work = 0.0
+    report: dict[str, float] = {}
+    srcs: list[np.ndarray | None] = [None] * levels
+    stamp_size = max(int(np.prod(e.shape[:2])) for e in ex_levels)
+    stamp = np.zeros(stamp_size, dtype=np.int64)
+    counter = np.zeros(1, dtype=np.int64)
+    for level in range(levels - 1, -1, -1):
+        ex = np.ascontiguousarray(ex_levels[level], dtype=np.float32)
+        shape = tuple(out_shapes[level])
+        has_parent = level < levels - 1
+        par_ex = np.ascontiguousarray(ex_levels[level + 1], dtype=np.float32) if has_parent else _empty_features(ex.shape[2])
+        radius = max(settings.size // 2, guidance.size // 2 if guidance is not None else 0)
+        valid = _valid_region(ex.shape[:2], radius, (par_ex.shape[:2], settings.parent_size // 2) if has_parent else None, level)
+        unit = _typical_distance(ex, metric, settings.alpha, rng)
+        n_pix = len(offs) + (len(par_offs) if has_parent else 0)
+        w_pix = (p if guidance is not None else 1.0) / (unit * n_pix)
+        if guidance is not None:
+            gui_out = np.ascontiguousarray(guidance.out_levels[level], dtype=np.float32)
+            gui_ex = np.ascontiguousarray(guidance.ex_levels[level], dtype=np.float32)
+            gunit = _typical_distance(gui_ex, guidance.metric, settings.alpha, rng)
+            w_gui = guidance.weight / (gunit * len(gui_offs))
+            hint = guidance.hint_levels[level] if guidance.hint_levels is not None else None
+        else:
+            gui_out = gui_ex = _empty_features(3)
+            w_gui = 0.0
+            hint = None
+        src = _initial_sources(shape, valid, srcs[level + 1] if has_parent else None, rng)
+        exact = settings.search == "exact"
+        embeds = [(_euclidean_embedding(ex, metric), w_pix)]
+        if guidance is not None:
+            embeds.append((_euclidean_embedding(gui_ex, guidance.metric), w_gui))
+        k = 0 if exact else settings.k
+        kset = _k_coherence_sets(embeds, settings.size, valid, k) if not exact else np.full((1, 1, 0, 2), -1, np.int64)
+        state = {
+            "out": np.ascontiguousarray(ex[src[..., 0], src[..., 1]]),
+            "ex": ex, "offs": offs, "metric": metric, "w_cur": w_pix,
+            "par_out": np.ascontiguousarray(ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]])
+            if has_parent else _empty_features(ex.shape[2]),
+            "par_ex": par_ex, "par_offs": par_offs, "par_metric": metric, "w_par": w_pix if has_parent else 0.0,
+            "gui_out": gui_out, "gui_ex": gui_ex, "gui_offs": gui_offs,
+            "gui_metric": guidance.metric if guidance is not None else METRIC_SSD, "w_gui": w_gui,
+            "alpha": float(settings.alpha), "src": src,
+            "hint": np.ascontiguousarray(hint, dtype=np.int64) if hint is not None else src,
+            "use_hint": hint is not None, "valid": valid, "kset": kset, "cand_offs": cand_offs,
+            "exact": exact, "n_random": 0 if exact else settings.random_candidates,
+            "stamp": stamp, "counter": counter, "capacity": candidate_capacity(len(cand_offs), k, hint is not None,
+                                                                                 settings.random_candidates),
+            "best_out": np.zeros(shape, dtype=np.float32),
+        }
+        n = shape[0] * shape[1]
+        for it in range(settings.iterations):
+            state["order"] = scan_order(shape, settings.scan, rng)
+            state["first_pass"] = it == 0
+            state["done"] = np.zeros(shape, dtype=np.uint8) if it == 0 else state["done"]
+            state["seed_key"] = int(rng.integers(0, 2**63))
+            step = max(1, n // _CHUNKS_PER_PASS)
+            label = f"{stage}: level {level + 1}/{levels}, pass {it + 1}/{settings.iterations}"
+            for start in range(0, n, step):
+                stop = min(n, start + step)
+                chunk_fn(state, start, stop)
+                if progress is not None:
+                    frac = (done_work + (it * n + stop)) / total_work
+                    progress(label, span[0] + (span[1] - span[0]) * frac)
+            report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state["best_out"]))
+        done_work += work[level]
+        srcs[level] = src
+    return [s for s in srcs if s is not None], SynthesisReport(report)
