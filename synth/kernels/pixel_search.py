@@ -16,8 +16,8 @@ neighbourhood is fully inside the exemplar.
 
 Search: ``exact`` visits every valid exemplar position (the definition; partial distances stop
 early once they exceed the best so far, which leaves the argmin unchanged). Otherwise candidates
-are k-coherent (Tong et al. 2002): for every neighbour ``q`` in ``cand_offsets`` the source of
-``q`` shifted by ``p - q``, plus its ``k`` precomputed most similar exemplar positions, the same
+are k-coherent (Tong et al. 2002): for every neighbour ``q`` in ``cand_offsets``, the source of
+``q`` and its ``k`` precomputed most similar exemplar positions, each shifted by ``p - q``; the same
 from an optional ``hint`` source map, and ``n_random`` seeded random positions. In the first pass
 unsynthesized output pixels (``done == 0``) are left out of the ``cur`` block.
 
@@ -162,14 +162,14 @@ def _gather_candidates(cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid
         for i in range(cand_offs.shape[0]):
             qy = (oy + cand_offs[i, 0]) % H
             qx = (ox + cand_offs[i, 1]) % W
-            sy = smap[qy, qx, 0] - cand_offs[i, 0]
-            sx = smap[qy, qx, 1] - cand_offs[i, 1]
-            n = _add_candidate(cand, n, sy, sx, valid, stamp, tag, w)
-            if valid[0] <= sy < valid[1] and valid[2] <= sx < valid[3]:
-                for j in range(k):
-                    ky = kset[sy, sx, j, 0]
-                    if ky >= 0:
-                        n = _add_candidate(cand, n, ky, kset[sy, sx, j, 1], valid, stamp, tag, w)
+            ay = smap[qy, qx, 0]
+            ax = smap[qy, qx, 1]
+            n = _add_candidate(cand, n, ay - cand_offs[i, 0], ax - cand_offs[i, 1], valid, stamp, tag, w)
+            for j in range(k):  # Tong et al.: the k positions similar to q's source, shifted by p - q
+                ky = kset[ay, ax, j, 0]
+                if ky >= 0:
+                    n = _add_candidate(cand, n, ky - cand_offs[i, 0], kset[ay, ax, j, 1] - cand_offs[i, 1],
+                                       valid, stamp, tag, w)
     span_y = np.uint64(valid[1] - valid[0])
     span_x = np.uint64(valid[3] - valid[2])
     for j in range(n_random):
@@ -310,12 +310,11 @@ def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray
     maps = [s["src"], s["hint"]] if s["use_hint"] else [s["src"]]
     for smap in maps:
         for dy, dx in s["cand_offs"]:
-            sy, sx = (int(v) for v in smap[(oy + dy) % H, (ox + dx) % W] - (dy, dx))
-            add(sy, sx)
-            if y0 <= sy < y1 and x0 <= sx < x1:
-                for ky, kx in s["kset"][sy, sx]:
-                    if ky >= 0:
-                        add(int(ky), int(kx))
+            ay, ax = (int(v) for v in smap[(oy + dy) % H, (ox + dx) % W])
+            add(ay - dy, ax - dx)
+            for ky, kx in s["kset"][ay, ax]:
+                if ky >= 0:
+                    add(int(ky) - dy, int(kx) - dx)
     mask = (1 << 64) - 1
     for j in range(s["n_random"]):
         r = int(_splitmix(np.uint64((key + j) & mask)))
