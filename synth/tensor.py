@@ -106,10 +106,12 @@ def structure_tensor(
     img = _float_image(image)
     if img.ndim not in (2, 3):
         raise InvalidParameter("image", f"shape {img.shape}", "must be (H, W) or (H, W, C)")
-    if not sigma_d > 0 or not sigma_w > 0:
-        raise InvalidParameter("sigma", (sigma_d, sigma_w), "sigma_d and sigma_w must be positive")
+    for name, value in (("sigma_d", sigma_d), ("sigma_w", sigma_w)):
+        # ``not value > 0`` alone lets ``inf`` through, which scipy turns into an OverflowError.
+        if not (np.isfinite(value) and value > 0):
+            raise InvalidParameter(name, value, "must be a positive, finite number of pixels")
     channels = img[..., None] if img.ndim == 2 else img
-    out = np.zeros(channels.shape[:2] + (3,), dtype=img.dtype)
+    out = np.zeros((*channels.shape[:2], 3), dtype=img.dtype)
     for c in range(channels.shape[2]):
         band = channels[..., c]
         ix = ndi.gaussian_filter(band, sigma_d, order=(0, 1), mode=mode)
@@ -220,7 +222,9 @@ def _component_distance_sq(t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
     return d[..., 0] ** 2 + 2.0 * d[..., 1] ** 2 + d[..., 2] ** 2
 
 
-def tensor_dissimilarity(t1: np.ndarray, t2: np.ndarray, metric: Metric = "ED", alpha: float = 0.5) -> np.ndarray:
+def tensor_dissimilarity(
+    t1: np.ndarray, t2: np.ndarray, metric: Metric = "ED", alpha: float = 0.5
+) -> np.ndarray:
     """Dissimilarity of tensors, element-wise over the leading axes (Akl 2014, eqs 6-11).
 
     - ``ED``: ``(a11-b11)^2 + (a22-b22)^2 + 2 (a12-b12)^2`` (eq 6, squared as in the paper);
