@@ -49,7 +49,7 @@ __all__ = ["Guidance", "SearchSettings", "SynthesisReport", "synthesize_source_m
 SearchKind = Literal["exact", "kcoherence"]
 
 #: The same-level neighbours whose sources propose k-coherent candidates (radius in pixels).
-_CANDIDATE_RADIUS = 2
+_CANDIDATE_RADIUS = 1
 #: Dimensions kept by the PCA that precedes the k-nearest-neighbour tree of k-coherence.
 _PCA_DIMS = 12
 #: Largest neighbourhood used to find the k most similar exemplar positions (cost grows as size^2).
@@ -277,9 +277,12 @@ def synthesize_source_map(
     if settings.shape == "causal":  # only already-synthesized neighbours propose in a causal scan
         cand_offs = np.ascontiguousarray(cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))])
     par_offs = parent_offsets(settings.parent_size)
-    gui_offs = neighbourhood_offsets(guidance.size, "square") if guidance is not None else np.zeros((0, 2), np.int32)
+    # The guidance (tensor) part has the pixel part's shape, centre included: the field is known there.
+    gui_offs = np.zeros((0, 2), np.int32)
     if guidance is not None:
-        gui_offs = np.ascontiguousarray(np.vstack([[0, 0], gui_offs]), dtype=np.int32)
+        gui_offs = np.ascontiguousarray(
+            np.vstack([[0, 0], neighbourhood_offsets(guidance.size, settings.shape)]), dtype=np.int32
+        )
     chunk_fn = synthesize_chunk_reference if reference else synthesize_chunk
     work = [settings.iterations * h * w for h, w in out_shapes]
     total_work = float(sum(work))

@@ -117,10 +117,11 @@ def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):  # noqa:
 @njit(cache=True)
 def _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
               q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, ex_width, cy, cx, best):  # noqa: ANN001, ANN202
+    # Cheapest block first (plain SSD over pixels), so early termination spares the tensor block.
     d = 0.0
     base = cy * ex_width + cx
-    if w_gui > 0.0:
-        d += w_gui * _query_distance(q_gui, l_gui, n_gui, guif, base, gui_metric, alpha, (best - d) / w_gui)
+    if w_cur > 0.0:
+        d += w_cur * _query_distance(q_cur, l_cur, n_cur, exf, base, metric, alpha, best / w_cur)
         if d >= best:
             return d
     if w_par > 0.0:
@@ -128,8 +129,8 @@ def _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par,
         d += w_par * _query_distance(q_par, l_par, n_par, parf, pbase, par_metric, alpha, (best - d) / w_par)
         if d >= best:
             return d
-    if w_cur > 0.0:
-        d += w_cur * _query_distance(q_cur, l_cur, n_cur, exf, base, metric, alpha, (best - d) / w_cur)
+    if w_gui > 0.0:
+        d += w_gui * _query_distance(q_gui, l_gui, n_gui, guif, base, gui_metric, alpha, (best - d) / w_gui)
     return d
 
 
@@ -345,16 +346,16 @@ def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
             key = int(_splitmix(np.uint64(s["seed_key"]) ^ np.uint64(p)))
             cands = _candidates_reference(s, oy, ox, key)
         d = np.zeros(len(cands))
-        if s["w_gui"] > 0:
-            full = np.ones(len(s["gui_offs"]), dtype=bool)
-            d += s["w_gui"] * _block_reference(s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"],
-                                               s["gui_metric"], s["alpha"], full)
+        if s["w_cur"] > 0:
+            d += s["w_cur"] * _block_reference(out, oy, ox, ex, cands, s["offs"], s["metric"], s["alpha"], keep)
         if s["w_par"] > 0:
             full = np.ones(len(s["par_offs"]), dtype=bool)
             d += s["w_par"] * _block_reference(s["par_out"], oy // 2, ox // 2, s["par_ex"], cands // 2,
                                                s["par_offs"], s["par_metric"], s["alpha"], full)
-        if s["w_cur"] > 0:
-            d += s["w_cur"] * _block_reference(out, oy, ox, ex, cands, s["offs"], s["metric"], s["alpha"], keep)
+        if s["w_gui"] > 0:
+            full = np.ones(len(s["gui_offs"]), dtype=bool)
+            d += s["w_gui"] * _block_reference(s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"],
+                                               s["gui_metric"], s["alpha"], full)
         best = int(np.argmin(d))
         by, bx = cands[best]
         src[oy, ox] = (by, bx)

@@ -13,8 +13,8 @@ Normalisation of eq 13 (the paper leaves it open): each part is divided by its t
 the mean distance between random exemplar positions under its metric times the number of
 positions it compares, so that ``p = 0.5`` weighs both parts equally (:mod:`synth.pixel_synthesis`).
 
-Departures, and why: the tensor part of a texture neighbourhood is a full square (``S_out`` is
-known everywhere before stage 2); the stage-1 source map proposes candidates to the stage-2 search
+The tensor part of a texture neighbourhood has the pixel part's shape (plus its centre, which
+``S_out`` already holds). Departure, and why: the stage-1 source map proposes candidates to the stage-2 search
 (it names, for every output position, an exemplar position whose tensor neighbourhood matches
 ``S_out`` there), which lets the fast search find what the constraint asks for.
 
