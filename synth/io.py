@@ -1,0 +1,721 @@
+"""Image and volume I/O: load and validate PNG/TIFF/JPEG, save PNG/TIFF, with errors a person can act on.
+
+Every loader returns the engine's one representation (ALGORITHMS.md, "Conventions"): a C-contiguous
+``float32`` array in [0, 1], ``(H, W)`` grey or ``(H, W, 3)`` RGB for an image, ``(D, H, W)`` for a
+volume. Every failure is one :mod:`synth.errors` exception that names the file and the problem:
+
+- :class:`~synth.errors.UnsupportedFormat`: the bytes are not a PNG, TIFF or JPEG image (the bytes
+  are judged, never the file name's extension);
+- :class:`~synth.errors.InputTooLarge`: more pixels than allowed, checked from the header before a
+  single pixel is decoded; Pillow's decompression-bomb warning counts as this error too;
+- :class:`~synth.errors.InvalidInput`: missing, empty, truncated or corrupt file, zero-size, tiny or
+  absurdly elongated image, NaN/inf in float data, or a shape that is not a 2-D image (or, for
+  :func:`load_volume`, not a 3-D stack).
+
+TIFF goes through ``tifffile`` so that 16-bit and floating-point data arrive exactly; TIFFs whose
+compression tifffile cannot decode without the optional ``imagecodecs`` package (LZW, PackBits, JPEG)
+or whose colour model it does not convert (CMYK, YCbCr) are decoded by Pillow instead. PNG and JPEG
+go through Pillow. Savers quantise in one place (:func:`to_uint`) and write atomically (a temporary
+file in the destination directory, then :func:`os.replace`), so a reader never sees half a file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import struct
+import uuid
+import warnings
+import zlib
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import tifffile
+from PIL import Image, UnidentifiedImageError
+
+from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
+
+__all__ = [
+    "DEFAULT_MAX_PIXELS",
+    "DEFAULT_MAX_VOXELS",
+    "LUMA_WEIGHTS",
+    "MAX_ASPECT_RATIO",
+    "MIN_SIDE",
+    "SUPPORTED_FORMATS",
+    "ImageSource",
+    "LoadMode",
+    "image_to_png_bytes",
+    "load_image",
+    "load_volume",
+    "save_image",
+    "save_volume",
+    "to_uint",
+]
+
+#: Largest image accepted by default (width * height); the environment variable
+#: ``TEXSYNTH_MAX_PIXELS`` overrides it, an explicit ``max_pixels`` argument overrides both.
+DEFAULT_MAX_PIXELS = 4096 * 4096
+#: Largest volume accepted by default (depth * height * width, 512 MiB as float32); the
+#: environment variable ``TEXSYNTH_MAX_VOXELS`` overrides it.
+DEFAULT_MAX_VOXELS = 512**3
+#: Longest side / shortest side above which an image is refused: a 1 x 64 strip holds no texture.
+MAX_ASPECT_RATIO = 64
+#: Shortest side (pixels) of a usable image: smaller than the smallest synthesis neighbourhood.
+MIN_SIDE = 8
+#: The formats the loaders accept, as Pillow names them (MPO is Pillow's name for a JPEG that
+#: carries extra pictures, as some cameras write).
+SUPPORTED_FORMATS = ("PNG", "TIFF", "JPEG")
+#: ITU-R BT.601 luma weights (R, G, B), as Pillow's ``convert("L")``; see :func:`load_image`.
+LUMA_WEIGHTS = (0.299, 0.587, 0.114)
+
+ImageSource = str | os.PathLike[str] | bytes | bytearray | memoryview
+LoadMode = Literal["auto", "grey", "rgb"]
+
+_PILLOW_FORMATS = frozenset({"PNG", "JPEG", "MPO", "TIFF"})
+_MAGIC = {
+    b"\x89PNG\r\n\x1a\n": "PNG",
+    b"\xff\xd8\xff": "JPEG",
+    b"II*\x00": "TIFF",
+    b"MM\x00*": "TIFF",
+    b"II+\x00": "TIFF",  # BigTIFF
+    b"MM\x00+": "TIFF",
+}
+_SUPPORTED_TEXT = "PNG, TIFF or JPEG"
+# What tifffile or Pillow raise on damaged data (beyond our own SynthError, re-raised untouched).
+_DECODE_ERRORS = (
+    tifffile.TiffFileError,
+    OSError,
+    SyntaxError,
+    ValueError,
+    KeyError,
+    IndexError,
+    EOFError,
+    struct.error,
+    zlib.error,
+)
+_TIFF_DIRECT_PHOTOMETRIC = frozenset(
+    {tifffile.PHOTOMETRIC.MINISBLACK, tifffile.PHOTOMETRIC.MINISWHITE, tifffile.PHOTOMETRIC.RGB}
+)
+
+
+# --------------------------------------------------------------------------------------------
+# loading
+
+
+def load_image(
+    source: ImageSource,
+    *,
+    name: str | None = None,
+    max_pixels: int | None = None,
+    mode: LoadMode = "auto",
+) -> np.ndarray:
+    """Load a PNG, TIFF or JPEG image as float32 in [0, 1], with a clear error for any bad input.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or bytes
+        A file path, or the file's raw bytes (an upload).
+    name : str, optional
+        What error messages call the input. Defaults to the path as given, or ``"image"`` for bytes.
+    max_pixels : int, optional
+        Largest accepted ``width * height``, checked from the header before decoding. Defaults to
+        the environment variable ``TEXSYNTH_MAX_PIXELS`` if set, else :data:`DEFAULT_MAX_PIXELS`.
+    mode : {'auto', 'grey', 'rgb'}
+        ``'auto'`` keeps grey as grey and RGB as RGB, except that an RGB image whose three channels
+        are identical becomes grey; ``'grey'`` converts colour to luma; ``'rgb'`` repeats a grey
+        image into three channels.
+
+    Returns
+    -------
+    numpy.ndarray
+        C-contiguous ``float32`` in [0, 1], shape ``(H, W)`` (grey) or ``(H, W, 3)`` (RGB).
+
+    Raises
+    ------
+    UnsupportedFormat
+        The bytes are not a PNG, TIFF or JPEG image (e.g. BMP, GIF, text).
+    InputTooLarge
+        More than ``max_pixels`` pixels, or above Pillow's decompression-bomb limit
+        (``PIL.Image.MAX_IMAGE_PIXELS``, whose warning range is an error here too).
+    InvalidInput
+        No such file, empty file, truncated or corrupt data, zero size, a side shorter than
+        :data:`MIN_SIDE`, an aspect ratio above :data:`MAX_ASPECT_RATIO`, NaN or inf values, more
+        than 4 channels, or several planes (a stack: see :func:`load_volume`).
+    InvalidParameter
+        ``mode`` or ``max_pixels`` is not valid.
+
+    Notes
+    -----
+    Conversion to [0, 1]:
+
+    - unsigned integers are divided by their full scale, ``2**bits - 1`` (255 for 8-bit, 65535 for
+      16-bit, 4095 for a 12-bit TIFF); 1-bit images give exactly 0 and 1;
+    - floating-point TIFFs (and signed-integer TIFFs, which detectors use for counts) must be
+      finite. Values already within [0, 1] are kept exactly; otherwise the whole image (all
+      channels together) is rescaled linearly from its minimum and maximum to [0, 1], because
+      HRTEM data often arrive as float counts. A constant image outside [0, 1] becomes all zeros;
+    - an alpha channel is dropped (ignored, not composited over any background): RGBA -> RGB,
+      grey+alpha (LA) -> grey; palette images are expanded to their colours; TIFF
+      ``MinIsWhite`` is inverted so that 1 is white.
+
+    Grey conversion (``mode='grey'``) uses the ITU-R BT.601 luma ``0.299 R + 0.587 G + 0.114 B``
+    (:data:`LUMA_WEIGHTS`), the weights of Pillow's ``convert("L")`` and ImageJ's weighted
+    conversion, computed in floating point without rounding to 8 bits. (scikit-image's ``rgb2gray``
+    uses the BT.709 weights instead; the difference is small for natural images.)
+
+    A 16-bit-per-channel RGB PNG is read at 8 bits per channel (Pillow's limit); 16-bit grey PNG and
+    every TIFF keep their full precision.
+    """
+    if mode not in ("auto", "grey", "rgb"):
+        raise InvalidParameter("mode", mode, "must be one of 'auto', 'grey', 'rgb'")
+    limit = _resolve_limit("max_pixels", max_pixels, "TEXSYNTH_MAX_PIXELS", DEFAULT_MAX_PIXELS)
+    data, label = _read_source(source, name, default_name="image")
+    image, fallback_reason = None, None
+    if _sniff(data) == "TIFF":
+        image, fallback_reason = _decode_tiff_image(data, label, limit)
+    if image is None:
+        image = _decode_with_pillow(data, label, limit, tiff_reason=fallback_reason)
+    return _apply_mode(image, mode)
+
+
+def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int | None = None) -> np.ndarray:
+    """Load a grey volume from a multi-page TIFF stack (one page per z-slice) as float32 in [0, 1].
+
+    Parameters
+    ----------
+    source : str, os.PathLike or bytes
+        A file path, or the file's raw bytes.
+    name : str, optional
+        What error messages call the input. Defaults to the path as given, or ``"volume"`` for bytes.
+    max_voxels : int, optional
+        Largest accepted ``depth * height * width``, checked from the header before decoding.
+        Defaults to the environment variable ``TEXSYNTH_MAX_VOXELS`` if set, else
+        :data:`DEFAULT_MAX_VOXELS`.
+
+    Returns
+    -------
+    numpy.ndarray
+        C-contiguous ``float32`` in [0, 1], shape ``(D, H, W)`` with ``D >= 2``.
+
+    Raises
+    ------
+    UnsupportedFormat
+        The bytes are not a TIFF, or use a compression that needs the optional ``imagecodecs``.
+    InputTooLarge
+        More than ``max_voxels`` voxels.
+    InvalidInput
+        No such file, empty, truncated or corrupt; a single 2-D image; a colour stack; a shape that
+        is not ``(D, H, W)``; slices smaller than :data:`MIN_SIDE` or more elongated than
+        :data:`MAX_ASPECT_RATIO`; NaN or inf values.
+
+    Notes
+    -----
+    Values are converted to [0, 1] as in :func:`load_image` (integers by their full scale, float
+    data rescaled from the whole volume's minimum and maximum only if outside [0, 1]).
+    """
+    limit = _resolve_limit("max_voxels", max_voxels, "TEXSYNTH_MAX_VOXELS", DEFAULT_MAX_VOXELS)
+    data, label = _read_source(source, name, default_name="volume")
+    fmt = _sniff(data)
+    if fmt != "TIFF":
+        what = f"a {fmt} image" if fmt else "not a TIFF file"
+        raise UnsupportedFormat(label, f"{what}: volumes are read from multi-page TIFF stacks")
+    try:
+        with tifffile.TiffFile(io.BytesIO(data)) as tif:
+            series = tif.series[0]
+            page = series.pages[0]
+            shape, axes = tuple(series.shape), series.axes
+            if 0 in shape:
+                raise InvalidInput(label, f"the volume has zero size (shape {shape})")
+            if "S" in axes:
+                raise InvalidInput(
+                    label, f"a colour stack (shape {shape}, axes {axes}); a grey (D, H, W) stack is needed"
+                )
+            if len(shape) == 2:
+                raise InvalidInput(
+                    label,
+                    f"a single 2-D image ({shape[1]}x{shape[0]} pixels), not a volume: a volume is a "
+                    "multi-page TIFF stack (use load_image for 2-D images)",
+                )
+            if len(shape) != 3:
+                raise InvalidInput(
+                    label, f"has shape {shape} (axes {axes}); a 3-D grey stack (D, H, W) is needed"
+                )
+            depth, height, width = shape
+            if depth * height * width > limit:
+                raise InputTooLarge(
+                    label,
+                    f"{width}x{height}x{depth} = {depth * height * width} voxels is more than the limit "
+                    f"of {limit} (set TEXSYNTH_MAX_VOXELS or max_voxels to change it)",
+                )
+            _check_shape(label, height, width, None)
+            photometric = page.photometric
+            if photometric not in (tifffile.PHOTOMETRIC.MINISBLACK, tifffile.PHOTOMETRIC.MINISWHITE):
+                raise InvalidInput(label, f"TIFF photometric {photometric.name}: a grey stack is needed")
+            try:
+                raw = series.asarray()
+            except (KeyError, ValueError, ImportError) as exc:
+                if _missing_codec(exc):
+                    raise UnsupportedFormat(label, _codec_message(page)) from None
+                raise
+            bits = page.bitspersample
+    except SynthError:
+        raise
+    except _DECODE_ERRORS as exc:
+        raise InvalidInput(label, f"corrupt or truncated TIFF data ({_describe(exc)})") from None
+    volume = _to_unit_float(raw, label, bits=bits)
+    if photometric == tifffile.PHOTOMETRIC.MINISWHITE:
+        volume = 1.0 - volume
+    return np.ascontiguousarray(volume, dtype=np.float32)
+
+
+# --------------------------------------------------------------------------------------------
+# saving
+
+
+def to_uint(image: np.ndarray, bit_depth: int = 8) -> np.ndarray:
+    """Quantise a float image in [0, 1] to unsigned integers: clip, scale, round to nearest.
+
+    The one quantisation used by every saver (and by :func:`image_to_png_bytes`).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        Real-valued array of any shape; values outside [0, 1] are clipped.
+    bit_depth : {8, 16}
+        8 gives ``uint8`` (0-255), 16 gives ``uint16`` (0-65535).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``uint8`` or ``uint16`` array of the same shape; ``round(clip(image, 0, 1) * (2**bit_depth - 1))``
+        with ties to even.
+
+    Raises
+    ------
+    InvalidParameter
+        ``bit_depth`` is not 8 or 16, or ``image`` is not real-valued or holds NaN/inf.
+
+    Examples
+    --------
+    >>> to_uint(np.array([0.0, 0.2, 1.0, 1.5]), 8)
+    array([  0,  51, 255, 255], dtype=uint8)
+    """
+    dtype = _uint_dtype(bit_depth)
+    arr = np.asarray(image)
+    if not (
+        np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool
+    ):
+        raise InvalidParameter("image", f"array of {arr.dtype}", "must hold real numbers")
+    work = arr.astype(np.promote_types(arr.dtype, np.float32), copy=False)
+    if not np.all(np.isfinite(work)):
+        raise InvalidParameter("image", "array with NaN/inf", "must hold finite values to be saved")
+    full_scale = np.iinfo(dtype).max
+    return np.rint(np.clip(work, 0.0, 1.0) * full_scale).astype(dtype)
+
+
+def image_to_png_bytes(image: np.ndarray, bit_depth: int = 8) -> bytes:
+    """Encode a float image in [0, 1] as PNG bytes (the service's previews and downloads).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        ``(H, W)`` grey or ``(H, W, 3)`` RGB, values clipped to [0, 1].
+    bit_depth : {8, 16}
+        16 is available for grey images only: Pillow neither writes nor reads 16 bits per RGB
+        channel, so 16-bit colour is written as TIFF (:func:`save_image` with a ``.tif`` path).
+
+    Returns
+    -------
+    bytes
+        A PNG file.
+
+    Raises
+    ------
+    InvalidParameter
+        Bad bit depth, bad shape, NaN/inf, or 16-bit RGB.
+    """
+    quantised = to_uint(_savable_image(image), bit_depth)
+    if bit_depth == 16 and quantised.ndim == 3:
+        raise InvalidParameter(
+            "bit_depth", bit_depth, "16-bit PNG is for grey images only; save 16-bit RGB as .tif"
+        )
+    buf = io.BytesIO()
+    Image.fromarray(quantised).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def save_image(path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: int = 8) -> None:
+    """Write a float image in [0, 1] as PNG (``.png``) or TIFF (``.tif``/``.tiff``), atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination; its extension picks the format. The file appears complete or not at all.
+    image : numpy.ndarray
+        ``(H, W)`` grey or ``(H, W, 3)`` RGB; values are clipped to [0, 1] and rounded.
+    bit_depth : {8, 16}
+        Bits per channel. 16-bit PNG is grey only (see :func:`image_to_png_bytes`); 16-bit TIFF
+        takes grey or RGB.
+
+    Raises
+    ------
+    InvalidParameter
+        Unknown extension, bit depth other than 8 or 16, bad image, or the file cannot be written.
+
+    Notes
+    -----
+    TIFFs are written uncompressed, readable by every TIFF reader (Fiji, Pillow, tifffile).
+    """
+    target = Path(path)
+    suffix = target.suffix.lower()
+    _uint_dtype(bit_depth)
+    if suffix == ".png":
+        data = image_to_png_bytes(image, bit_depth)
+    elif suffix in (".tif", ".tiff"):
+        quantised = to_uint(_savable_image(image), bit_depth)
+        buf = io.BytesIO()
+        tifffile.imwrite(buf, quantised, photometric="rgb" if quantised.ndim == 3 else "minisblack")
+        data = buf.getvalue()
+    else:
+        raise InvalidParameter("path", str(path), "extension must be .png, .tif or .tiff")
+    _atomic_write(target, data)
+
+
+def save_volume(path: str | os.PathLike[str], volume: np.ndarray, *, bit_depth: int = 16) -> None:
+    """Write a ``(D, H, W)`` volume as a multi-page TIFF stack that Fiji opens with D slices, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination ending in ``.tif`` or ``.tiff``.
+    volume : numpy.ndarray
+        ``(D, H, W)`` grey volume in [0, 1]; values are clipped and rounded.
+    bit_depth : {8, 16}
+        Bits per voxel.
+
+    Raises
+    ------
+    InvalidParameter
+        Wrong extension or shape, bit depth other than 8 or 16, NaN/inf, or the file cannot be written.
+
+    Notes
+    -----
+    One page per z-slice, with ImageJ metadata (``images=D, slices=D``, axes ``ZYX``) so that Fiji
+    and ImageJ show a z-stack rather than a time series; uncompressed, as ImageJ writes its own.
+    """
+    target = Path(path)
+    if target.suffix.lower() not in (".tif", ".tiff"):
+        raise InvalidParameter("path", str(path), "a volume is saved as a TIFF stack: use .tif or .tiff")
+    _uint_dtype(bit_depth)
+    arr = np.asarray(volume)
+    if arr.ndim != 3 or 0 in arr.shape:
+        raise InvalidParameter("volume", f"shape {arr.shape}", "must be a non-empty (D, H, W) grey volume")
+    buf = io.BytesIO()
+    # photometric explicitly: tifffile would store a stack whose last axis is 3 or 4 long as RGB
+    tifffile.imwrite(
+        buf, to_uint(arr, bit_depth), imagej=True, photometric="minisblack", metadata={"axes": "ZYX"}
+    )
+    _atomic_write(target, buf.getvalue())
+
+
+# --------------------------------------------------------------------------------------------
+# helpers: sources, limits, shapes
+
+
+def _read_source(source: ImageSource, name: str | None, *, default_name: str) -> tuple[bytes, str]:
+    """The bytes of ``source`` and the label that error messages use for it."""
+    if isinstance(source, bytes | bytearray | memoryview):
+        data, label = bytes(source), name or default_name
+    elif isinstance(source, str | os.PathLike):
+        label = name or os.fspath(source)
+        try:
+            data = Path(source).read_bytes()
+        except FileNotFoundError:
+            raise InvalidInput(label, "no such file") from None
+        except IsADirectoryError:
+            raise InvalidInput(label, "is a directory, not an image file") from None
+        except PermissionError:
+            raise InvalidInput(label, "permission denied") from None
+        except OSError as exc:
+            raise InvalidInput(label, f"cannot be read ({exc.strerror or exc})") from None
+    else:
+        raise InvalidParameter("source", type(source).__name__, "must be a file path or the file's bytes")
+    if not data:
+        raise InvalidInput(label, "empty file (0 bytes)")
+    return data, label
+
+
+def _resolve_limit(param: str, value: int | None, env_var: str, default: int) -> int:
+    """An explicit limit, else the environment variable's, else the default; positive integers only."""
+    if value is None:
+        raw = os.environ.get(env_var, "").strip()
+        if not raw:
+            return default
+        try:
+            value = int(raw)
+        except ValueError:
+            raise InvalidParameter(env_var, raw, "must be a positive whole number") from None
+        param = env_var
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value <= 0:
+        raise InvalidParameter(param, value, "must be a positive whole number")
+    return int(value)
+
+
+def _sniff(data: bytes) -> str | None:
+    """The allowed format the leading bytes announce, or None."""
+    for magic, fmt in _MAGIC.items():
+        if data.startswith(magic):
+            return fmt
+    return None
+
+
+def _check_shape(label: str, height: int, width: int, max_pixels: int | None) -> None:
+    """Refuse zero-size, too large (if ``max_pixels``), tiny and absurdly elongated images."""
+    if height == 0 or width == 0:
+        raise InvalidInput(label, f"the image has zero size ({width}x{height} pixels)")
+    if max_pixels is not None and width * height > max_pixels:
+        raise InputTooLarge(
+            label,
+            f"{width}x{height} = {width * height} pixels is more than the limit of {max_pixels} "
+            "(crop or downscale it, or raise TEXSYNTH_MAX_PIXELS / max_pixels)",
+        )
+    if min(height, width) < MIN_SIDE:
+        raise InvalidInput(
+            label, f"{width}x{height} pixels is too small: at least {MIN_SIDE} pixels are needed on each side"
+        )
+    if max(height, width) > MAX_ASPECT_RATIO * min(height, width):
+        raise InvalidInput(
+            label,
+            f"{width}x{height} pixels is too elongated: the longer side may be at most {MAX_ASPECT_RATIO} "
+            "times the shorter",
+        )
+
+
+def _describe(exc: BaseException) -> str:
+    text = str(exc).strip().strip("'\"")
+    return text or type(exc).__name__
+
+
+def _missing_codec(exc: BaseException) -> bool:
+    """Whether tifffile failed for want of an optional codec package (not because the data are bad)."""
+    return isinstance(exc, ImportError) or "imagecodecs" in str(exc)
+
+
+def _codec_message(page: tifffile.TiffPage) -> str:
+    compression = getattr(page.compression, "name", str(page.compression))
+    return (
+        f"TIFF compression {compression} cannot be decoded here; save the file uncompressed or with Deflate"
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# helpers: decoding
+
+
+def _decode_tiff_image(data: bytes, label: str, max_pixels: int) -> tuple[np.ndarray | None, str | None]:
+    """Decode a 2-D TIFF with tifffile; ``(None, reason)`` means "let Pillow try" (codec, colour model)."""
+    try:
+        with tifffile.TiffFile(io.BytesIO(data)) as tif:
+            series = tif.series[0]
+            page = series.pages[0]
+            shape, axes = tuple(series.shape), series.axes
+            if 0 in shape:
+                raise InvalidInput(label, f"the image has zero size (shape {shape})")
+            planar = axes == "SYX"
+            if planar:
+                shape, axes = (*shape[1:], shape[0]), "YXS"
+            if axes not in ("YX", "YXS"):
+                hint = " (a stack: use load_volume)" if len(shape) == 3 and "S" not in axes else ""
+                raise InvalidInput(
+                    label, f"has shape {shape} (axes {axes}); a single 2-D grey or RGB image is needed{hint}"
+                )
+            height, width = shape[:2]
+            channels = shape[2] if axes == "YXS" else 1
+            if channels > 4:
+                raise InvalidInput(
+                    label, f"has {channels} channels; at most 4 (grey, grey+alpha, RGB, RGBA) are supported"
+                )
+            _check_shape(label, height, width, max_pixels)
+            photometric = page.photometric
+            palette = photometric == tifffile.PHOTOMETRIC.PALETTE and channels == 1
+            if not palette and photometric not in _TIFF_DIRECT_PHOTOMETRIC:
+                return None, f"photometric {getattr(photometric, 'name', photometric)}"
+            try:
+                raw = series.asarray()
+            except (KeyError, ValueError, ImportError) as exc:
+                if _missing_codec(exc):
+                    return None, _codec_message(page)
+                raise
+            if planar:
+                raw = np.moveaxis(raw, 0, -1)
+            colormap = page.colormap if palette else None
+            bits = page.bitspersample
+    except SynthError:
+        raise
+    except _DECODE_ERRORS as exc:
+        raise InvalidInput(label, f"corrupt or truncated TIFF data ({_describe(exc)})") from None
+    if colormap is not None:
+        rgb = np.moveaxis(_colormap_to_unit(colormap)[:, raw], 0, -1)
+        return np.ascontiguousarray(rgb), None
+    if raw.ndim == 3:
+        raw = raw[..., :1] if raw.shape[2] <= 2 else raw[..., :3]  # drop alpha / extra samples
+        if raw.shape[2] == 1:
+            raw = raw[..., 0]
+    image = _to_unit_float(raw, label, bits=bits)
+    if photometric == tifffile.PHOTOMETRIC.MINISWHITE:
+        image = 1.0 - image
+    return image, None
+
+
+def _colormap_to_unit(colormap: np.ndarray) -> np.ndarray:
+    """A TIFF colour map ``(3, 2**bits)`` as float32 in [0, 1].
+
+    The map is 16-bit by the standard, but many writers (Pillow among them) store 8-bit colours as
+    ``v * 256``, and some as plain 8-bit values: both are recognised, as libtiff and Pillow do.
+    """
+    cmap = colormap.astype(np.uint32)
+    if not np.any(cmap & 0xFF):
+        return (cmap >> 8).astype(np.float32) / np.float32(255)
+    if cmap.max() < 256:
+        return cmap.astype(np.float32) / np.float32(255)
+    return cmap.astype(np.float32) / np.float32(65535)
+
+
+def _decode_with_pillow(data: bytes, label: str, max_pixels: int, *, tiff_reason: str | None) -> np.ndarray:
+    """Open, check the format and size from the header, verify, reopen, load, convert."""
+    fmt = None
+    try:
+        with warnings.catch_warnings():
+            # Pillow only warns between 1x and 2x MAX_IMAGE_PIXELS: make it an error, here only.
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data)) as im:
+                fmt = im.format
+                if fmt not in _PILLOW_FORMATS:
+                    raise UnsupportedFormat(label, f"{fmt} images are not supported (use {_SUPPORTED_TEXT})")
+                _check_shape(label, im.height, im.width, max_pixels)
+                im.verify()
+            with Image.open(io.BytesIO(data)) as im:
+                im.load()
+                return _pillow_to_float(im, label)
+    except SynthError:
+        raise
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
+        raise InputTooLarge(
+            label, f"too many pixels to decode safely, possible decompression bomb ({exc})"
+        ) from None
+    except UnidentifiedImageError:
+        if tiff_reason:
+            raise UnsupportedFormat(label, f"cannot decode this TIFF ({tiff_reason})") from None
+        announced = _sniff(data)
+        if announced:
+            raise InvalidInput(
+                label, f"corrupt or truncated {announced} data (the header cannot be read)"
+            ) from None
+        raise UnsupportedFormat(label, f"not an image in a supported format ({_SUPPORTED_TEXT})") from None
+    except _DECODE_ERRORS as exc:
+        what = fmt or _sniff(data) or "image"
+        raise InvalidInput(label, f"corrupt or truncated {what} data ({_describe(exc)})") from None
+
+
+def _pillow_to_float(im: Image.Image, label: str) -> np.ndarray:
+    """A loaded Pillow image as float in [0, 1], ``(H, W)`` or ``(H, W, 3)``, alpha dropped."""
+    mode = im.mode
+    if mode in ("P", "PA"):
+        im, mode = im.convert("RGBA"), "RGBA"
+    if mode in ("1", "L", "RGB", "F", "I") or mode.startswith("I;16"):
+        arr = np.asarray(im)
+    elif mode == "LA":
+        arr = np.asarray(im)[..., 0]
+    elif mode in ("RGBA", "RGBX"):
+        arr = np.asarray(im)[..., :3]
+    else:  # CMYK, YCbCr, LAB, HSV, premultiplied alpha, ...
+        arr = np.asarray(im.convert("RGB"))
+    return _to_unit_float(arr, label)
+
+
+def _to_unit_float(arr: np.ndarray, label: str, *, bits: int | None = None) -> np.ndarray:
+    """Integers by their full scale (``2**bits - 1``); floats and signed counts checked and rescaled."""
+    if arr.dtype == bool:
+        return arr.astype(np.float32)
+    if np.issubdtype(arr.dtype, np.unsignedinteger):
+        dtype_bits = arr.dtype.itemsize * 8
+        n_bits = bits if bits is not None and 1 <= bits <= dtype_bits else dtype_bits
+        return arr.astype(np.float32) / np.float32(2**n_bits - 1)
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.signedinteger)):
+        raise InvalidInput(label, f"unsupported sample type {arr.dtype}")
+    if np.issubdtype(arr.dtype, np.floating):
+        if np.isnan(arr).any():
+            raise InvalidInput(label, "contains NaN values; only finite numbers are accepted")
+        if np.isinf(arr).any():
+            raise InvalidInput(label, "contains infinite (inf) values; only finite numbers are accepted")
+    lo, hi = arr.min(), arr.max()
+    if lo >= 0 and hi <= 1:
+        return arr.astype(np.float32)
+    if hi == lo:
+        return np.zeros(arr.shape, np.float32)
+    work = arr.astype(np.float64)
+    return ((work - float(lo)) / (float(hi) - float(lo))).astype(np.float32)
+
+
+def _apply_mode(image: np.ndarray, mode: LoadMode) -> np.ndarray:
+    """Grey/RGB according to ``mode``; C-contiguous float32 clipped to [0, 1]."""
+    if image.ndim == 3:
+        if mode == "grey":
+            r, g, b = LUMA_WEIGHTS
+            image = (
+                np.float32(r) * image[..., 0] + np.float32(g) * image[..., 1] + np.float32(b) * image[..., 2]
+            )
+        elif (
+            mode == "auto"
+            and np.array_equal(image[..., 0], image[..., 1])
+            and np.array_equal(image[..., 1], image[..., 2])
+        ):
+            image = image[..., 0]
+    elif mode == "rgb":
+        image = np.repeat(image[..., np.newaxis], 3, axis=2)
+    out = np.ascontiguousarray(image, dtype=np.float32)
+    np.clip(out, 0.0, 1.0, out=out)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# helpers: saving
+
+
+def _uint_dtype(bit_depth: int) -> type[np.unsignedinteger]:
+    if isinstance(bit_depth, bool) or bit_depth not in (8, 16):
+        raise InvalidParameter("bit_depth", bit_depth, "must be 8 or 16")
+    return np.uint8 if bit_depth == 8 else np.uint16
+
+
+def _savable_image(image: np.ndarray) -> np.ndarray:
+    """``image`` as ``(H, W)`` or ``(H, W, 3)`` (a trailing single channel is dropped), else an error."""
+    arr = np.asarray(image)
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] == 3)) or 0 in arr.shape:
+        raise InvalidParameter(
+            "image", f"shape {arr.shape}", "must be a non-empty (H, W) grey or (H, W, 3) RGB image"
+        )
+    return arr
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    """Write ``data`` to a temporary file beside ``path``, flush it to disk, then rename over ``path``."""
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    created = False
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+        created = True
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        if created:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise InvalidParameter("path", str(path), f"cannot write the file ({exc.strerror or exc})") from None
