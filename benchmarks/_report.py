@@ -15,7 +15,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
-_HEADER = "# Benchmarks\n\nMeasured by `make bench` (or `python -m benchmarks.<name>`); every figure is a median of several runs.\n"
+_HEADER = (
+    "# Benchmarks\n\nMeasured by `make bench` (or `python -m benchmarks.<name>`); "
+    "every figure is a median of several runs.\n"
+)
 
 
 def machine() -> str:
@@ -39,7 +42,10 @@ def write_section(name: str, markdown: str) -> None:
     """Replace (or append) section ``name`` of docs/benchmarks.md with ``markdown``."""
     DOC.parent.mkdir(parents=True, exist_ok=True)
     text = DOC.read_text() if DOC.exists() else _HEADER
-    block = f"<!-- begin:{name} -->\n{markdown.rstrip()}\n\n_Measured {time.strftime('%Y-%m-%d')} on {machine()}._\n<!-- end:{name} -->"
+    stamp = f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}._"
+    block = f"<!-- begin:{name} -->\n{markdown.rstrip()}\n\n{stamp}\n<!-- end:{name} -->"
     pattern = re.compile(rf"<!-- begin:{re.escape(name)} -->.*?<!-- end:{re.escape(name)} -->", re.S)
-    text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
+    text = (
+        pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
+    )
     DOC.write_text(text)

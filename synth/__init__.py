@@ -4,7 +4,14 @@ The engine is a library first: :func:`synth.api.synthesize` does everything the 
 ``texsynth`` command line do, with the same parameters and the same results.
 """
 
-from synth.errors import Cancelled, InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
+from synth.errors import (
+    Cancelled,
+    InputTooLarge,
+    InvalidInput,
+    InvalidParameter,
+    SynthError,
+    UnsupportedFormat,
+)
 
 __version__ = "0.1.0"
 

@@ -165,7 +165,7 @@ def _output_size(
         if constraint is not None:
             return tuple(constraint.shape[:2])
         base = tuple(2 * s for s in exemplar.shape[:2])
-        return base if ndim == 2 else (base[0],) + base
+        return base if ndim == 2 else (base[0], *base)
     shape = tuple(int(s) for s in size)
     if len(shape) != ndim:
         raise InvalidParameter("size", size, f"needs {ndim} values for this method")

@@ -8,7 +8,14 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["Cancelled", "InputTooLarge", "InvalidInput", "InvalidParameter", "SynthError", "UnsupportedFormat"]
+__all__ = [
+    "Cancelled",
+    "InputTooLarge",
+    "InvalidInput",
+    "InvalidParameter",
+    "SynthError",
+    "UnsupportedFormat",
+]
 
 
 class SynthError(ValueError):

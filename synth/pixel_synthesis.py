@@ -44,7 +44,14 @@ from synth.neighbourhood import Shape, neighbourhood_offsets, parent_offsets
 from synth.scan import ScanOrder, scan_order
 from synth.tensor import Metric, coherence, log_tensors, orientation
 
-__all__ = ["Guidance", "SearchSettings", "SynthesisReport", "synthesize_source_map", "tensor_features"]
+__all__ = [
+    "Guidance",
+    "SearchSettings",
+    "SynthesisReport",
+    "level_neighbourhood_size",
+    "synthesize_source_map",
+    "tensor_features",
+]
 
 SearchKind = Literal["exact", "kcoherence"]
 
@@ -144,6 +151,20 @@ def _typical_distance(feats: np.ndarray, code: int, alpha: float, rng: np.random
     return d if d > 1e-20 else 1.0
 
 
+def level_neighbourhood_size(size: int, level_shape: tuple[int, int]) -> int:
+    """The neighbourhood side used at a coarse pyramid level: ``size``, shrunk (odd, >= 3) to at
+    most half the level's shorter side.
+
+    Departure, and why: Akl 2014's Table 1 asks for 13x13 neighbourhoods on 4 levels of a 128x128
+    exemplar; its coarsest level is 16x16, where a 13x13 neighbourhood fits at only 4x4 positions and
+    the synthesis degenerates into copying one of 16 tensors. Coarse levels carry coarse structure,
+    so a smaller neighbourhood there loses little and keeps hundreds of candidates.
+    """
+    cap = max(3, min(level_shape) // 2)
+    cap -= 1 - cap % 2
+    return int(min(size, cap))
+
+
 def _valid_region(
     ex_shape: tuple[int, int], radius: int, parent: tuple[tuple[int, int], int] | None, level: int
 ) -> np.ndarray:
@@ -175,7 +196,9 @@ def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarr
     return np.concatenate(parts, axis=1)
 
 
-def _k_coherence_sets(embeds: Sequence[tuple[np.ndarray, float]], size: int, valid: np.ndarray, k: int) -> np.ndarray:
+def _k_coherence_sets(
+    embeds: Sequence[tuple[np.ndarray, float]], size: int, valid: np.ndarray, k: int, mask: np.ndarray
+) -> np.ndarray:
     """For every valid exemplar position, its ``k`` most similar other valid positions.
 
     Neighbourhoods (square, at most 9x9) of the weighted embeddings are projected on their first
@@ -186,48 +209,75 @@ def _k_coherence_sets(embeds: Sequence[tuple[np.ndarray, float]], size: int, val
     if k == 0:
         return kset
     ks = min(size, _KSET_MAX_SIZE)
-    # The k-NN neighbourhood must fit where the search neighbourhood fits.
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    inside = mask[y0:y1, x0:x1].ravel() != 0
     vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
-    vectors = vectors.astype(np.float64)
+    vectors = vectors[inside].astype(np.float64)
     vectors -= vectors.mean(axis=0)
     dims = min(_PCA_DIMS, vectors.shape[1], vectors.shape[0])
-    # Principal axes from the covariance (small: dims x dims of the neighbourhood length).
-    cov = vectors.T @ vectors
-    _, eigvec = np.linalg.eigh(cov)
+    # Principal axes from the covariance (small: the neighbourhood length squared).
+    _, eigvec = np.linalg.eigh(vectors.T @ vectors)
     projected = vectors @ eigvec[:, ::-1][:, :dims]
     kk = min(k + 1, len(projected))
     _, idx = cKDTree(projected).query(projected, k=kk)
     idx = idx.reshape(len(projected), kk)
-    self_idx = np.arange(len(projected))[:, None]
-    neighbours = np.where(idx == self_idx, -1, idx)
-    y0, y1, x0, x1 = (int(v) for v in valid)
-    vw = x1 - x0
-    out = np.full((len(projected), k), -1, dtype=np.int64)
-    for row in range(len(projected)):  # per-row compaction: drop self, keep order (small, once per level)
-        keep = neighbours[row][neighbours[row] >= 0][:k]
-        out[row, : len(keep)] = keep
-    ys = np.where(out >= 0, y0 + out // vw, -1)
-    xs = np.where(out >= 0, x0 + out % vw, -1)
-    kset[y0:y1, x0:x1, :, 0] = ys.reshape(y1 - y0, x1 - x0, k)
-    kset[y0:y1, x0:x1, :, 1] = xs.reshape(y1 - y0, x1 - x0, k)
+    # Drop each position itself (wherever the tree put it among equal distances), keep k others.
+    is_self = idx == np.arange(len(projected))[:, None]
+    idx = np.take_along_axis(idx, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k]
+    idx = np.where(
+        np.take_along_axis(is_self, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k], -1, idx
+    )
+    rows, cols = np.divmod(np.flatnonzero(inside), x1 - x0)
+    ys = np.where(idx >= 0, y0 + rows[idx], -1)
+    xs = np.where(idx >= 0, x0 + cols[idx], -1)
+    kset[y0 + rows, x0 + cols, : idx.shape[1], 0] = ys
+    kset[y0 + rows, x0 + cols, : idx.shape[1], 1] = xs
     return kset
 
 
-def _initial_sources(
-    shape: tuple[int, int], valid: np.ndarray, parent_src: np.ndarray | None, rng: np.random.Generator
+def _level_mask(
+    ex_masks: Sequence[np.ndarray] | None, level: int, shape: tuple[int, int], valid: np.ndarray
 ) -> np.ndarray:
+    mask = (
+        np.ones(shape, dtype=np.uint8)
+        if ex_masks is None
+        else np.ascontiguousarray(ex_masks[level], dtype=np.uint8)
+    )
     y0, y1, x0, x1 = (int(v) for v in valid)
+    if not mask[y0:y1, x0:x1].any():
+        raise InvalidParameter(
+            "neighbourhood_size", None, f"no valid exemplar position at pyramid level {level}"
+        )
+    return mask
+
+
+def _initial_sources(
+    shape: tuple[int, int],
+    valid: np.ndarray,
+    mask: np.ndarray,
+    parent_src: np.ndarray | None,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Random valid exemplar positions at the top level; the parent's sources, upsampled, below.
+
+    An upsampled source that is not a valid position is replaced by a random valid one.
+    """
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    allowed = np.zeros_like(mask, dtype=bool)
+    allowed[y0:y1, x0:x1] = mask[y0:y1, x0:x1] != 0
+    positions = np.argwhere(allowed)
     H, W = shape
-    src = np.empty((H, W, 2), dtype=np.int64)
+    pick = positions[rng.integers(0, len(positions), size=H * W)].reshape(H, W, 2)
     if parent_src is None:
-        src[..., 0] = rng.integers(y0, y1, size=(H, W))
-        src[..., 1] = rng.integers(x0, x1, size=(H, W))
-        return src
+        return np.ascontiguousarray(pick, dtype=np.int64)
     yy, xx = np.mgrid[0:H, 0:W]
     up = parent_src[yy // 2, xx // 2]
-    src[..., 0] = np.clip(2 * up[..., 0] + yy % 2, y0, y1 - 1)
-    src[..., 1] = np.clip(2 * up[..., 1] + xx % 2, x0, x1 - 1)
-    return src
+    src = np.stack(
+        [np.clip(2 * up[..., 0] + yy % 2, y0, y1 - 1), np.clip(2 * up[..., 1] + xx % 2, x0, x1 - 1)], axis=-1
+    )
+    bad = ~allowed[src[..., 0], src[..., 1]]
+    src[bad] = pick[bad]
+    return np.ascontiguousarray(src, dtype=np.int64)
 
 
 def _empty_features(channels: int) -> np.ndarray:
@@ -247,6 +297,7 @@ def synthesize_source_map(
     stage: str = "synthesis",
     span: tuple[float, float] = (0.0, 1.0),
     reference: bool = False,
+    ex_masks: Sequence[np.ndarray] | None = None,
 ) -> tuple[list[np.ndarray], SynthesisReport]:
     """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
 
@@ -266,22 +317,20 @@ def synthesize_source_map(
         Called about 64 times per pass with the overall fraction inside ``span``; may raise to cancel.
     reference : bool
         Run the plain NumPy reference instead of the numba kernel (tests only: slow).
+    ex_masks : list of ndarray (h_l, w_l) bool, finest first, optional
+        Exemplar positions that may be copied, per level (besides the neighbourhood-fits rectangle).
+        Masked positions' neighbourhoods must lie inside the array; the caller guarantees they are
+        meaningful (e.g. inside a rotated copy of the exemplar).
     """
     levels = settings.levels
     if len(ex_levels) != levels or len(out_shapes) != levels:
         raise InvalidParameter("levels", levels, "exemplar and output pyramids must have that many levels")
     rng = np.random.default_rng(seed)
-    offs = neighbourhood_offsets(settings.size, settings.shape)
     cand_offs = neighbourhood_offsets(2 * _CANDIDATE_RADIUS + 1, "square")
     cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
     if settings.shape == "causal":  # only already-synthesized neighbours propose in a causal scan
-        cand_offs = np.ascontiguousarray(cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))])
-    par_offs = parent_offsets(settings.parent_size)
-    # The guidance (tensor) part has the pixel part's shape, centre included: the field is known there.
-    gui_offs = np.zeros((0, 2), np.int32)
-    if guidance is not None:
-        gui_offs = np.ascontiguousarray(
-            np.vstack([[0, 0], neighbourhood_offsets(guidance.size, settings.shape)]), dtype=np.int32
+        cand_offs = np.ascontiguousarray(
+            cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))]
         )
     chunk_fn = synthesize_chunk_reference if reference else synthesize_chunk
     work = [settings.iterations * h * w for h, w in out_shapes]
@@ -296,9 +345,23 @@ def synthesize_source_map(
         ex = np.ascontiguousarray(ex_levels[level], dtype=np.float32)
         shape = tuple(out_shapes[level])
         has_parent = level < levels - 1
-        par_ex = np.ascontiguousarray(ex_levels[level + 1], dtype=np.float32) if has_parent else _empty_features(ex.shape[2])
-        radius = max(settings.size // 2, guidance.size // 2 if guidance is not None else 0)
-        valid = _valid_region(ex.shape[:2], radius, (par_ex.shape[:2], settings.parent_size // 2) if has_parent else None, level)
+        par_ex = (
+            np.ascontiguousarray(ex_levels[level + 1], dtype=np.float32)
+            if has_parent
+            else _empty_features(ex.shape[2])
+        )
+        # The finest level keeps the requested size (too large is the user's error, said clearly).
+        size = settings.size if level == 0 else level_neighbourhood_size(settings.size, ex.shape[:2])
+        parent_size = level_neighbourhood_size(settings.parent_size, par_ex.shape[:2]) if has_parent else 1
+        offs = neighbourhood_offsets(size, settings.shape)
+        par_offs = parent_offsets(parent_size) if has_parent else np.zeros((0, 2), np.int32)
+        # The guidance (tensor) part has the pixel part's shape, centre included: the field is known there.
+        gui_offs = np.zeros((0, 2), np.int32)
+        if guidance is not None:
+            gui_offs = np.ascontiguousarray(np.vstack([[0, 0], offs]), dtype=np.int32)
+        valid = _valid_region(
+            ex.shape[:2], size // 2, (par_ex.shape[:2], parent_size // 2) if has_parent else None, level
+        )
         unit = _typical_distance(ex, metric, settings.alpha, rng)
         n_pix = len(offs) + (len(par_offs) if has_parent else 0)
         w_pix = (p if guidance is not None else 1.0) / (unit * n_pix)
@@ -312,27 +375,51 @@ def synthesize_source_map(
             gui_out = gui_ex = _empty_features(3)
             w_gui = 0.0
             hint = None
-        src = _initial_sources(shape, valid, srcs[level + 1] if has_parent else None, rng)
+        mask = _level_mask(ex_masks, level, ex.shape[:2], valid)
+        src = _initial_sources(shape, valid, mask, srcs[level + 1] if has_parent else None, rng)
         exact = settings.search == "exact"
         embeds = [(_euclidean_embedding(ex, metric), w_pix)]
         if guidance is not None:
             embeds.append((_euclidean_embedding(gui_ex, guidance.metric), w_gui))
         k = 0 if exact else settings.k
-        kset = _k_coherence_sets(embeds, settings.size, valid, k) if not exact else np.full((1, 1, 0, 2), -1, np.int64)
+        kset = (
+            _k_coherence_sets(embeds, size, valid, k, mask)
+            if not exact
+            else np.full((1, 1, 0, 2), -1, np.int64)
+        )
         state = {
             "out": np.ascontiguousarray(ex[src[..., 0], src[..., 1]]),
-            "ex": ex, "offs": offs, "metric": metric, "w_cur": w_pix,
-            "par_out": np.ascontiguousarray(ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]])
-            if has_parent else _empty_features(ex.shape[2]),
-            "par_ex": par_ex, "par_offs": par_offs, "par_metric": metric, "w_par": w_pix if has_parent else 0.0,
-            "gui_out": gui_out, "gui_ex": gui_ex, "gui_offs": gui_offs,
-            "gui_metric": guidance.metric if guidance is not None else METRIC_SSD, "w_gui": w_gui,
-            "alpha": float(settings.alpha), "src": src,
+            "ex": ex,
+            "offs": offs,
+            "metric": metric,
+            "w_cur": w_pix,
+            "par_out": np.ascontiguousarray(
+                ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]]
+            )
+            if has_parent
+            else _empty_features(ex.shape[2]),
+            "par_ex": par_ex,
+            "par_offs": par_offs,
+            "par_metric": metric,
+            "w_par": w_pix if has_parent else 0.0,
+            "gui_out": gui_out,
+            "gui_ex": gui_ex,
+            "gui_offs": gui_offs,
+            "gui_metric": guidance.metric if guidance is not None else METRIC_SSD,
+            "w_gui": w_gui,
+            "alpha": float(settings.alpha),
+            "src": src,
             "hint": np.ascontiguousarray(hint, dtype=np.int64) if hint is not None else src,
-            "use_hint": hint is not None, "valid": valid, "kset": kset, "cand_offs": cand_offs,
-            "exact": exact, "n_random": 0 if exact else settings.random_candidates,
-            "stamp": stamp, "counter": counter, "capacity": candidate_capacity(len(cand_offs), k, hint is not None,
-                                                                                 settings.random_candidates),
+            "use_hint": hint is not None,
+            "valid": valid,
+            "mask": mask,
+            "kset": kset,
+            "cand_offs": cand_offs,
+            "exact": exact,
+            "n_random": 0 if exact else settings.random_candidates,
+            "stamp": stamp,
+            "counter": counter,
+            "capacity": candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
             "best_out": np.zeros(shape, dtype=np.float32),
         }
         n = shape[0] * shape[1]

@@ -83,13 +83,27 @@ def test_kernel_matches_reference_on_pixels(search: str, shape: str, channels: i
     ex = _rng_image((22, 20, channels), seed=channels)
     levels = 2
     settings = SearchSettings(
-        size=5, shape=shape, scan="lexicographic" if shape == "causal" else "random", levels=levels,
-        parent_size=3, iterations=2, search=search, k=3, random_candidates=2,
+        size=5,
+        shape=shape,
+        scan="lexicographic" if shape == "causal" else "random",
+        levels=levels,
+        parent_size=3,
+        iterations=2,
+        search=search,
+        k=3,
+        random_candidates=2,
     )
-    _run_both(ex_levels=gaussian_pyramid(ex, levels), out_shapes=level_shapes((14, 12), levels), settings=settings, seed=3)
+    _run_both(
+        ex_levels=gaussian_pyramid(ex, levels),
+        out_shapes=level_shapes((14, 12), levels),
+        settings=settings,
+        seed=3,
+    )
 
 
-@pytest.mark.parametrize(("metric", "code"), [("ED", METRIC_SSD), ("FN", METRIC_NORM), ("LE", METRIC_NORM), ("SO", METRIC_SO)])
+@pytest.mark.parametrize(
+    ("metric", "code"), [("ED", METRIC_SSD), ("FN", METRIC_NORM), ("LE", METRIC_NORM), ("SO", METRIC_SO)]
+)
 @pytest.mark.parametrize("search", ["exact", "kcoherence"])
 def test_kernel_matches_reference_with_tensor_guidance(metric: str, code: int, search: str) -> None:
     ex = _rng_image((24, 24), seed=5)
@@ -97,19 +111,32 @@ def test_kernel_matches_reference_with_tensor_guidance(metric: str, code: int, s
     assert got == code
     out_tensors = structure_tensor(_rng_image((12, 12), seed=6), mode="wrap")
     guidance = Guidance(
-        out_levels=[tensor_features(out_tensors, metric)[0]], ex_levels=[feats], metric=code, weight=0.4, size=3,
+        out_levels=[tensor_features(out_tensors, metric)[0]],
+        ex_levels=[feats],
+        metric=code,
+        weight=0.4,
+        size=3,
         hint_levels=[np.random.default_rng(1).integers(2, 20, (12, 12, 2))],
     )
-    settings = SearchSettings(size=5, levels=1, iterations=2, search=search, k=2, random_candidates=1, alpha=0.3)
-    _run_both(ex_levels=[ex[..., None]], out_shapes=[(12, 12)], settings=settings, p=0.6, guidance=guidance, seed=2)
+    settings = SearchSettings(
+        size=5, levels=1, iterations=2, search=search, k=2, random_candidates=1, alpha=0.3
+    )
+    _run_both(
+        ex_levels=[ex[..., None]], out_shapes=[(12, 12)], settings=settings, p=0.6, guidance=guidance, seed=2
+    )
 
 
 @pytest.mark.parametrize("metric", ["SO", "LE"])
 def test_kernel_matches_reference_when_synthesizing_tensors(metric: str) -> None:
     feats, code = tensor_features(structure_tensor(_rng_image((20, 20), seed=8)), metric)  # type: ignore[arg-type]
     settings = SearchSettings(size=3, levels=2, parent_size=3, iterations=1, search="exact")
-    _run_both(ex_levels=gaussian_pyramid(feats, 2), out_shapes=level_shapes((10, 10), 2), settings=settings,
-              metric=code, seed=4)
+    _run_both(
+        ex_levels=gaussian_pyramid(feats, 2),
+        out_shapes=level_shapes((10, 10), 2),
+        settings=settings,
+        metric=code,
+        seed=4,
+    )
 
 
 # ---------------------------------------------------------------- option semantics
@@ -121,16 +148,38 @@ def test_causal_first_pass_never_reads_unsynthesized_pixels() -> None:
     offs = neighbourhood_offsets(5, "causal")
     src = np.full((10, 10, 2), 8, dtype=np.int64)
     state = {
-        "order": scan_order((10, 10), "lexicographic"), "out": np.full((10, 10, 1), np.nan, np.float32),
-        "ex": ex, "offs": offs, "metric": METRIC_SSD, "w_cur": 1.0,
-        "par_out": np.zeros((1, 1, 1), np.float32), "par_ex": np.zeros((1, 1, 1), np.float32),
-        "par_offs": parent_offsets(3), "par_metric": METRIC_SSD, "w_par": 0.0,
-        "gui_out": np.zeros((1, 1, 3), np.float32), "gui_ex": np.zeros((1, 1, 3), np.float32),
-        "gui_offs": np.zeros((0, 2), np.int32), "gui_metric": METRIC_SSD, "w_gui": 0.0, "alpha": 0.5,
-        "src": src, "hint": src, "use_hint": False, "done": np.zeros((10, 10), np.uint8), "first_pass": True,
-        "valid": np.array([2, 14, 2, 14]), "kset": np.full((1, 1, 0, 2), -1, np.int64),
-        "cand_offs": np.zeros((1, 2), np.int32), "exact": True, "n_random": 0, "seed_key": 1,
-        "stamp": np.zeros(256, np.int64), "counter": np.zeros(1, np.int64), "capacity": 4,
+        "order": scan_order((10, 10), "lexicographic"),
+        "out": np.full((10, 10, 1), np.nan, np.float32),
+        "ex": ex,
+        "offs": offs,
+        "metric": METRIC_SSD,
+        "w_cur": 1.0,
+        "par_out": np.zeros((1, 1, 1), np.float32),
+        "par_ex": np.zeros((1, 1, 1), np.float32),
+        "par_offs": parent_offsets(3),
+        "par_metric": METRIC_SSD,
+        "w_par": 0.0,
+        "gui_out": np.zeros((1, 1, 3), np.float32),
+        "gui_ex": np.zeros((1, 1, 3), np.float32),
+        "gui_offs": np.zeros((0, 2), np.int32),
+        "gui_metric": METRIC_SSD,
+        "w_gui": 0.0,
+        "alpha": 0.5,
+        "src": src,
+        "hint": src,
+        "use_hint": False,
+        "done": np.zeros((10, 10), np.uint8),
+        "first_pass": True,
+        "valid": np.array([2, 14, 2, 14]),
+        "mask": np.ones((16, 16), np.uint8),
+        "kset": np.full((1, 1, 0, 2), -1, np.int64),
+        "cand_offs": np.zeros((1, 2), np.int32),
+        "exact": True,
+        "n_random": 0,
+        "seed_key": 1,
+        "stamp": np.zeros(256, np.int64),
+        "counter": np.zeros(1, np.int64),
+        "capacity": 4,
         "best_out": np.zeros((10, 10), np.float32),
     }
     synthesize_chunk(state, 0, 100)
@@ -140,11 +189,28 @@ def test_causal_first_pass_never_reads_unsynthesized_pixels() -> None:
 
 
 @pytest.mark.parametrize("search", ["exact", "kcoherence"])
+def test_masked_exemplar_positions_are_never_copied(search: str) -> None:
+    ex = _rng_image((24, 24, 1), seed=9)
+    mask = np.zeros((24, 24), np.uint8)
+    mask[:, 12:] = 1
+    settings = SearchSettings(size=3, levels=1, iterations=2, search=search, k=3)
+    srcs, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask])
+    assert (srcs[0][..., 1] >= 12).all()
+    ref, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask], reference=True)
+    np.testing.assert_array_equal(srcs[0], ref[0])
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
 def test_periodic_exemplar_gives_periodic_output(search: str) -> None:
     tile = _rng_image((8, 8), seed=11)
     ex = np.tile(tile, (5, 5))
-    r = synthesize("wei-levoy", ex, size=(32, 24), seed=3,
-                   params={"levels": 1, "neighbourhood_size": 5, "search": search, "iterations": 1})
+    r = synthesize(
+        "wei-levoy",
+        ex,
+        size=(32, 24),
+        seed=3,
+        params={"levels": 1, "neighbourhood_size": 5, "search": search, "iterations": 1},
+    )
     np.testing.assert_array_equal(r.image, np.roll(r.image, 8, axis=0))
     np.testing.assert_array_equal(r.image, np.roll(r.image, 8, axis=1))
 
@@ -166,8 +232,13 @@ def test_every_tensor_metric_is_selectable_and_matters() -> None:
     ex = _rng_image((40, 40), seed=2)
     fields = {}
     for metric in ("ED", "SO", "FN", "LE"):
-        r = synthesize("tensor-constrained", ex, size=(24, 24), seed=1,
-                       params={"metric": metric, "neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3})
+        r = synthesize(
+            "tensor-constrained",
+            ex,
+            size=(24, 24),
+            seed=1,
+            params={"metric": metric, "neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3},
+        )
         assert r.params["metric"] == metric
         assert r.tensor_field is not None and r.tensor_field.shape == (24, 24, 3)
         fields[metric] = r.tensor_field
@@ -176,7 +247,9 @@ def test_every_tensor_metric_is_selectable_and_matters() -> None:
 
 def test_output_copies_exemplar_values() -> None:
     ex = _rng_image((30, 30, 3))
-    r = synthesize("wei-levoy", ex, size=(20, 20), params={"neighbourhood_size": 5, "levels": 2, "parent_size": 3})
+    r = synthesize(
+        "wei-levoy", ex, size=(20, 20), params={"neighbourhood_size": 5, "levels": 2, "parent_size": 3}
+    )
     src = r.extras["source_map"]
     np.testing.assert_array_equal(r.image, ex[src[..., 0], src[..., 1]])
     assert r.image.shape == (20, 20, 3) and r.image.dtype == np.float32
@@ -210,7 +283,9 @@ def test_unknown_metric_and_out_of_range_p_are_named() -> None:
 
 def test_neighbourhood_larger_than_the_exemplar_is_a_clear_error() -> None:
     with pytest.raises(InvalidParameter, match="no neighbourhood fits inside the exemplar"):
-        synthesize("wei-levoy", _rng_image((16, 16)), size=(16, 16), params={"neighbourhood_size": 21, "levels": 1})
+        synthesize(
+            "wei-levoy", _rng_image((16, 16)), size=(16, 16), params={"neighbourhood_size": 21, "levels": 1}
+        )
 
 
 def test_unknown_method_and_bad_size_and_seed() -> None:
@@ -224,9 +299,13 @@ def test_unknown_method_and_bad_size_and_seed() -> None:
 
 def test_progress_reaches_one_often_and_in_order() -> None:
     seen: list[tuple[str, float]] = []
-    synthesize("tensor-constrained", _rng_image((32, 32)), size=(32, 32),
-               params={"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3},
-               progress=lambda stage, f: seen.append((stage, f)))
+    synthesize(
+        "tensor-constrained",
+        _rng_image((32, 32)),
+        size=(32, 32),
+        params={"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3},
+        progress=lambda stage, f: seen.append((stage, f)),
+    )
     fractions = [f for _, f in seen]
     assert fractions == sorted(fractions)
     assert fractions[-1] == 1.0
@@ -240,4 +319,6 @@ def test_a_progress_callback_that_raises_cancels() -> None:
             raise RuntimeError("job cancelled")
 
     with pytest.raises(Cancelled, match="job cancelled"):
-        synthesize("wei-levoy", _rng_image((32, 32)), size=(32, 32), params={"neighbourhood_size": 5}, progress=stop)
+        synthesize(
+            "wei-levoy", _rng_image((32, 32)), size=(32, 32), params={"neighbourhood_size": 5}, progress=stop
+        )

@@ -8,6 +8,10 @@ neighbourhood distance is the weighted sum of up to three blocks:
 - ``par``: the already synthesized parent level, at ``(y // 2, x // 2)`` (full square);
 - ``gui``: a fixed guidance field at the same level (the tensor field of Akl 2014, eq 13).
 
+Candidates lie in the rectangle ``valid`` and where ``mask`` (uint8, exemplar-sized) is non-zero:
+the mask lets one exemplar canvas hold several images (e.g. rotated copies of the exemplar, each
+valid only where its neighbourhoods are fully inside the rotated image).
+
 Each block has a per-position metric: ``SSD`` (sum of squared channel differences; also ED on
 tensors stored as ``(S_xx, sqrt(2) S_xy, S_yy)``), ``NORM`` (square root of that sum: FN, and LE
 on log-tensors) or ``SO`` (channels ``(sin O, cos O, C)``, Akl 2014 eqs 7-9). Output positions wrap
@@ -58,7 +62,7 @@ def _splitmix(x: np.uint64) -> np.uint64:
 
 
 @njit(cache=True, inline="always")
-def _query_distance(q, lin, n, exf, base, metric, alpha, limit):  # noqa: ANN001, ANN202
+def _query_distance(q, lin, n, exf, base, metric, alpha, limit):
     """Distance between a gathered query block ``q[:n]`` and the exemplar block at ``base``.
 
     ``exf`` is the exemplar as ``(h*w, C)``; ``lin[i]`` the linear offset of entry ``i``. Stops
@@ -93,7 +97,7 @@ def _query_distance(q, lin, n, exf, base, metric, alpha, limit):  # noqa: ANN001
 
 
 @njit(cache=True)
-def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):  # noqa: ANN001, ANN202
+def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):
     """Copy the (wrapped) output neighbourhood of ``(oy, ox)`` into ``q``; return its length.
 
     With ``use_mask`` the unsynthesized positions are skipped; ``lin`` receives the exemplar
@@ -115,8 +119,32 @@ def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):  # noqa:
 
 
 @njit(cache=True)
-def _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
-              q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, ex_width, cy, cx, best):  # noqa: ANN001, ANN202
+def _distance(
+    q_cur,
+    l_cur,
+    n_cur,
+    exf,
+    w_cur,
+    q_par,
+    l_par,
+    n_par,
+    parf,
+    w_par,
+    par_width,
+    q_gui,
+    l_gui,
+    n_gui,
+    guif,
+    w_gui,
+    metric,
+    par_metric,
+    gui_metric,
+    alpha,
+    ex_width,
+    cy,
+    cx,
+    best,
+):
     # Cheapest block first (plain SSD over pixels), so early termination spares the tensor block.
     d = 0.0
     base = cy * ex_width + cx
@@ -140,8 +168,10 @@ def candidate_capacity(n_cand_offsets: int, k: int, has_hint: bool, n_random: in
 
 
 @njit(cache=True)
-def _add_candidate(cand, n, cy, cx, valid, stamp, tag, w):  # noqa: ANN001, ANN202
+def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w):
     if cy < valid[0] or cy >= valid[1] or cx < valid[2] or cx >= valid[3]:
+        return n
+    if mask[cy, cx] == 0:
         return n
     key = cy * w + cx
     if stamp[key] == tag:
@@ -153,7 +183,9 @@ def _add_candidate(cand, n, cy, cx, valid, stamp, tag, w):  # noqa: ANN001, ANN2
 
 
 @njit(cache=True)
-def _gather_candidates(cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid, n_random, key, stamp, tag, w):  # noqa: ANN001, ANN202
+def _gather_candidates(
+    cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid, mask, n_random, key, stamp, tag, w
+):
     H = src.shape[0]
     W = src.shape[1]
     k = kset.shape[2]
@@ -165,28 +197,71 @@ def _gather_candidates(cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid
             qx = (ox + cand_offs[i, 1]) % W
             ay = smap[qy, qx, 0]
             ax = smap[qy, qx, 1]
-            n = _add_candidate(cand, n, ay - cand_offs[i, 0], ax - cand_offs[i, 1], valid, stamp, tag, w)
+            n = _add_candidate(
+                cand, n, ay - cand_offs[i, 0], ax - cand_offs[i, 1], valid, mask, stamp, tag, w
+            )
             for j in range(k):  # Tong et al.: the k positions similar to q's source, shifted by p - q
                 ky = kset[ay, ax, j, 0]
                 if ky >= 0:
-                    n = _add_candidate(cand, n, ky - cand_offs[i, 0], kset[ay, ax, j, 1] - cand_offs[i, 1],
-                                       valid, stamp, tag, w)
+                    n = _add_candidate(
+                        cand,
+                        n,
+                        ky - cand_offs[i, 0],
+                        kset[ay, ax, j, 1] - cand_offs[i, 1],
+                        valid,
+                        mask,
+                        stamp,
+                        tag,
+                        w,
+                    )
     span_y = np.uint64(valid[1] - valid[0])
     span_x = np.uint64(valid[3] - valid[2])
     for j in range(n_random):
         r = _splitmix(key + np.uint64(j))
         ry = valid[0] + np.int64(r % span_y)
         rx = valid[2] + np.int64((r >> np.uint64(32)) % span_x)
-        n = _add_candidate(cand, n, ry, rx, valid, stamp, tag, w)
+        n = _add_candidate(cand, n, ry, rx, valid, mask, stamp, tag, w)
     return n
 
 
 @njit(cache=True)
 def _synthesize_chunk_kernel(
-    order, start, stop, out, ex, offs, metric, w_cur, par_out, par_ex, par_offs, par_metric, w_par,
-    gui_out, gui_ex, gui_offs, gui_metric, w_gui, alpha, src, hint, use_hint, done, first_pass, valid,
-    kset, cand_offs, exact, n_random, seed_key, stamp, counter, best_out, capacity,
-):  # noqa: ANN001, ANN202
+    order,
+    start,
+    stop,
+    out,
+    ex,
+    offs,
+    metric,
+    w_cur,
+    par_out,
+    par_ex,
+    par_offs,
+    par_metric,
+    w_par,
+    gui_out,
+    gui_ex,
+    gui_offs,
+    gui_metric,
+    w_gui,
+    alpha,
+    src,
+    hint,
+    use_hint,
+    done,
+    first_pass,
+    valid,
+    mask,
+    kset,
+    cand_offs,
+    exact,
+    n_random,
+    seed_key,
+    stamp,
+    counter,
+    best_out,
+    capacity,
+):
     W = out.shape[1]
     w = ex.shape[1]
     C = out.shape[2]
@@ -226,9 +301,34 @@ def _synthesize_chunk_kernel(
         if exact:
             for cy in range(valid[0], valid[1]):
                 for cx in range(valid[2], valid[3]):
-                    d = _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
-                                  q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, w,
-                                  cy, cx, best)
+                    if mask[cy, cx] == 0:
+                        continue
+                    d = _distance(
+                        q_cur,
+                        l_cur,
+                        n_cur,
+                        exf,
+                        w_cur,
+                        q_par,
+                        l_par,
+                        n_par,
+                        parf,
+                        w_par,
+                        par_width,
+                        q_gui,
+                        l_gui,
+                        n_gui,
+                        guif,
+                        w_gui,
+                        metric,
+                        par_metric,
+                        gui_metric,
+                        alpha,
+                        w,
+                        cy,
+                        cx,
+                        best,
+                    )
                     if d < best:
                         best = d
                         by = cy
@@ -236,14 +336,52 @@ def _synthesize_chunk_kernel(
         else:
             counter[0] += 1
             key = _splitmix(seed_key ^ np.uint64(p))
-            n = _gather_candidates(cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid, n_random, key,
-                                   stamp, counter[0], w)
+            n = _gather_candidates(
+                cand,
+                oy,
+                ox,
+                src,
+                hint,
+                use_hint,
+                kset,
+                cand_offs,
+                valid,
+                mask,
+                n_random,
+                key,
+                stamp,
+                counter[0],
+                w,
+            )
             for j in range(n):
                 cy = cand[j, 0]
                 cx = cand[j, 1]
-                d = _distance(q_cur, l_cur, n_cur, exf, w_cur, q_par, l_par, n_par, parf, w_par, par_width,
-                              q_gui, l_gui, n_gui, guif, w_gui, metric, par_metric, gui_metric, alpha, w,
-                              cy, cx, best)
+                d = _distance(
+                    q_cur,
+                    l_cur,
+                    n_cur,
+                    exf,
+                    w_cur,
+                    q_par,
+                    l_par,
+                    n_par,
+                    parf,
+                    w_par,
+                    par_width,
+                    q_gui,
+                    l_gui,
+                    n_gui,
+                    guif,
+                    w_gui,
+                    metric,
+                    par_metric,
+                    gui_metric,
+                    alpha,
+                    w,
+                    cy,
+                    cx,
+                    best,
+                )
                 if d < best:
                     best = d
                     by = cy
@@ -265,11 +403,40 @@ def synthesize_chunk(state: dict, start: int, stop: int) -> None:
     """
     s = state
     _synthesize_chunk_kernel(
-        s["order"], start, stop, s["out"], s["ex"], s["offs"], s["metric"], s["w_cur"],
-        s["par_out"], s["par_ex"], s["par_offs"], s["par_metric"], s["w_par"],
-        s["gui_out"], s["gui_ex"], s["gui_offs"], s["gui_metric"], s["w_gui"], s["alpha"],
-        s["src"], s["hint"], s["use_hint"], s["done"], s["first_pass"], s["valid"], s["kset"], s["cand_offs"],
-        s["exact"], s["n_random"], np.uint64(s["seed_key"]), s["stamp"], s["counter"], s["best_out"],
+        s["order"],
+        start,
+        stop,
+        s["out"],
+        s["ex"],
+        s["offs"],
+        s["metric"],
+        s["w_cur"],
+        s["par_out"],
+        s["par_ex"],
+        s["par_offs"],
+        s["par_metric"],
+        s["w_par"],
+        s["gui_out"],
+        s["gui_ex"],
+        s["gui_offs"],
+        s["gui_metric"],
+        s["w_gui"],
+        s["alpha"],
+        s["src"],
+        s["hint"],
+        s["use_hint"],
+        s["done"],
+        s["first_pass"],
+        s["valid"],
+        s["mask"],
+        s["kset"],
+        s["cand_offs"],
+        s["exact"],
+        s["n_random"],
+        np.uint64(s["seed_key"]),
+        s["stamp"],
+        s["counter"],
+        s["best_out"],
         s["capacity"],
     )
 
@@ -283,14 +450,16 @@ def _metric_reference(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -
     a64 = a.astype(np.float64)
     b64 = b.astype(np.float64)
     if metric == METRIC_SO:
-        m_or = np.abs(a64[..., 0] * b64[..., 1] - a64[..., 1] * b64[..., 0]) * np.minimum(a64[..., 2], b64[..., 2])
+        m_or = np.abs(a64[..., 0] * b64[..., 1] - a64[..., 1] * b64[..., 0]) * np.minimum(
+            a64[..., 2], b64[..., 2]
+        )
         m_coh = np.maximum(a64[..., 2] / b64[..., 2], b64[..., 2] / a64[..., 2])
         return m_or**alpha * m_coh ** (1.0 - alpha)
     ssd = ((a64 - b64) ** 2).sum(axis=-1)
     return np.sqrt(ssd) if metric == METRIC_NORM else ssd
 
 
-def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):  # noqa: ANN001, ANN202
+def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):
     H, W = out.shape[:2]
     offs = offs[keep]
     q = out[(oy + offs[:, 0]) % H, (ox + offs[:, 1]) % W]  # (K, C)
@@ -305,7 +474,7 @@ def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray
     seen: list[tuple[int, int]] = []
 
     def add(cy: int, cx: int) -> None:
-        if y0 <= cy < y1 and x0 <= cx < x1 and (cy, cx) not in seen:
+        if y0 <= cy < y1 and x0 <= cx < x1 and s["mask"][cy, cx] and (cy, cx) not in seen:
             seen.append((cy, cx))
 
     maps = [s["src"], s["hint"]] if s["use_hint"] else [s["src"]]
@@ -342,20 +511,33 @@ def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
         if s["exact"]:
             gy, gx = np.mgrid[y0:y1, x0:x1]
             cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
+            cands = cands[s["mask"][cands[:, 0], cands[:, 1]] != 0]
         else:
             key = int(_splitmix(np.uint64(s["seed_key"]) ^ np.uint64(p)))
             cands = _candidates_reference(s, oy, ox, key)
         d = np.zeros(len(cands))
         if s["w_cur"] > 0:
-            d += s["w_cur"] * _block_reference(out, oy, ox, ex, cands, s["offs"], s["metric"], s["alpha"], keep)
+            d += s["w_cur"] * _block_reference(
+                out, oy, ox, ex, cands, s["offs"], s["metric"], s["alpha"], keep
+            )
         if s["w_par"] > 0:
             full = np.ones(len(s["par_offs"]), dtype=bool)
-            d += s["w_par"] * _block_reference(s["par_out"], oy // 2, ox // 2, s["par_ex"], cands // 2,
-                                               s["par_offs"], s["par_metric"], s["alpha"], full)
+            d += s["w_par"] * _block_reference(
+                s["par_out"],
+                oy // 2,
+                ox // 2,
+                s["par_ex"],
+                cands // 2,
+                s["par_offs"],
+                s["par_metric"],
+                s["alpha"],
+                full,
+            )
         if s["w_gui"] > 0:
             full = np.ones(len(s["gui_offs"]), dtype=bool)
-            d += s["w_gui"] * _block_reference(s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"],
-                                               s["gui_metric"], s["alpha"], full)
+            d += s["w_gui"] * _block_reference(
+                s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"], s["gui_metric"], s["alpha"], full
+            )
         best = int(np.argmin(d))
         by, bx = cands[best]
         src[oy, ox] = (by, bx)

@@ -22,18 +22,27 @@ class NeighbourhoodParams(MethodParams):
 
     neighbourhood_size: int = Field(13, ge=3, le=41, description="Side of the square/L neighbourhood (odd).")
     neighbourhood: Shape = Field(
-        "causal", description="'causal' L-shape (with a lexicographic scan) or 'square' non-causal (random walk)."
+        "causal",
+        description="'causal' L-shape (with a lexicographic scan) or 'square' non-causal (random walk).",
     )
     scan: ScanOrder | None = Field(
-        None, description="Scan order; default lexicographic for a causal neighbourhood, random for a square one."
+        None,
+        description="Scan order; default lexicographic for a causal neighbourhood, random for a square one.",
     )
-    parent_size: int = Field(5, ge=3, le=15, description="Side of the parent-level square neighbourhood (odd).")
+    parent_size: int = Field(
+        5, ge=3, le=15, description="Side of the parent-level square neighbourhood (odd)."
+    )
     search: Literal["kcoherence", "exact"] = Field(
-        "kcoherence", description="'exact' compares every exemplar position (slow, the definition); "
-        "'kcoherence' compares k-coherent candidates (fast; measured as good in docs/benchmarks.md)."
+        "kcoherence",
+        description="'exact' compares every exemplar position (slow, the definition); "
+        "'kcoherence' compares k-coherent candidates (fast; measured as good in docs/benchmarks.md).",
     )
-    k: int = Field(5, ge=0, le=32, description="k-coherence: similar exemplar positions proposed per candidate.")
-    random_candidates: int = Field(2, ge=0, le=64, description="k-coherence: random candidates added per pixel.")
+    k: int = Field(
+        5, ge=0, le=32, description="k-coherence: similar exemplar positions proposed per candidate."
+    )
+    random_candidates: int = Field(
+        2, ge=0, le=64, description="k-coherence: random candidates added per pixel."
+    )
 
     @model_validator(mode="after")
     def _odd_sizes(self) -> NeighbourhoodParams:
@@ -45,11 +54,20 @@ class NeighbourhoodParams(MethodParams):
     def resolved_scan(self) -> ScanOrder:
         return self.scan or ("lexicographic" if self.neighbourhood == "causal" else "random")
 
-    def search_settings(self, *, size: int, levels: int, iterations: int, alpha: float = 0.5) -> SearchSettings:
+    def search_settings(
+        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5
+    ) -> SearchSettings:
         return SearchSettings(
-            size=size, shape=self.neighbourhood, scan=self.resolved_scan(), levels=levels,
-            parent_size=self.parent_size, iterations=iterations, search=self.search, k=self.k,
-            random_candidates=self.random_candidates, alpha=alpha,
+            size=size,
+            shape=self.neighbourhood,
+            scan=self.resolved_scan(),
+            levels=levels,
+            parent_size=self.parent_size,
+            iterations=iterations,
+            search=self.search,
+            k=self.k,
+            random_candidates=self.random_candidates,
+            alpha=alpha,
         )
 
 
@@ -59,7 +77,7 @@ def as_features(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(img, dtype=np.float32)
 
 
-def checked_progress(progress: Progress):  # noqa: ANN201
+def checked_progress(progress: Progress):
     """Wrap a progress callback; whatever it raises to stop the work surfaces as :class:`Cancelled`."""
 
     def report(stage: str, fraction: float) -> None:

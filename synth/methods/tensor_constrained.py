@@ -48,18 +48,25 @@ class TensorConstrainedParams(NeighbourhoodParams):
     structure_iterations: int = Field(2, ge=1, le=10, description="Passes per level, structure stage.")
     texture_iterations: int = Field(2, ge=1, le=10, description="Passes per level, texture stage.")
     structure_neighbourhood_size: int | None = Field(
-        None, ge=3, le=41, description="Neighbourhood side of the structure stage (default: neighbourhood_size)."
+        None,
+        ge=3,
+        le=41,
+        description="Neighbourhood side of the structure stage (default: neighbourhood_size).",
     )
     metric: Metric = Field("SO", description="Tensor dissimilarity: ED, SO (shape-orientation), FN or LE.")
-    alpha: float = Field(0.5, ge=0.0, le=1.0, description="SO metric: weight of orientation against coherence.")
-    p: float = Field(0.5, ge=0.0, le=1.0, description="Eq 13: weight of the pixel part against the tensor part.")
+    alpha: float = Field(
+        0.5, ge=0.0, le=1.0, description="SO metric: weight of orientation against coherence."
+    )
+    p: float = Field(
+        0.5, ge=0.0, le=1.0, description="Eq 13: weight of the pixel part against the tensor part."
+    )
     sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
     sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
 
 
 def synthesize_tensor_field(
     s_in: np.ndarray, size: tuple[int, int], params: TensorConstrainedParams, *, seed: int, progress, span
-) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:  # noqa: ANN001
+) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """Stage 1: synthesize ``S_out`` from ``S_in``; returns ``(S_out, source map, stats)``."""
     levels = params.structure_levels
     feats, code = tensor_features(s_in, params.metric)
@@ -67,10 +74,18 @@ def synthesize_tensor_field(
     feat_levels = [tensor_features(t, params.metric)[0] for t in raw_levels]
     del feats
     n = params.structure_neighbourhood_size or params.neighbourhood_size
-    settings = params.search_settings(size=n, levels=levels, iterations=params.structure_iterations, alpha=params.alpha)
+    settings = params.search_settings(
+        size=n, levels=levels, iterations=params.structure_iterations, alpha=params.alpha
+    )
     srcs, stats = synthesize_source_map(
-        feat_levels, level_shapes(size, levels), settings, metric=code, seed=seed, progress=progress,
-        stage="structure", span=span,
+        feat_levels,
+        level_shapes(size, levels),
+        settings,
+        metric=code,
+        seed=seed,
+        progress=progress,
+        stage="structure",
+        span=span,
     )
     src = srcs[0]
     return s_in[src[..., 0], src[..., 1]].astype(np.float32), src, stats.mean_best_distance
@@ -101,22 +116,39 @@ def run_tensor_constrained(
     for _ in range(levels - 1):
         hints.append(np.ascontiguousarray(hints[-1][::2, ::2] // 2))
     guidance = Guidance(
-        out_levels=gui_out, ex_levels=gui_ex, metric=gui_code, weight=1.0 - params.p,
-        size=params.neighbourhood_size, hint_levels=hints,
+        out_levels=gui_out,
+        ex_levels=gui_ex,
+        metric=gui_code,
+        weight=1.0 - params.p,
+        size=params.neighbourhood_size,
+        hint_levels=hints,
     )
     settings = params.search_settings(
-        size=params.neighbourhood_size, levels=levels, iterations=params.texture_iterations, alpha=params.alpha
+        size=params.neighbourhood_size,
+        levels=levels,
+        iterations=params.texture_iterations,
+        alpha=params.alpha,
     )
     srcs, stats_texture = synthesize_source_map(
-        gaussian_pyramid(as_features(exemplar), levels), level_shapes(size, levels), settings,
-        p=params.p, guidance=guidance, seed=seed + 1, progress=report, stage="texture", span=(0.5, 1.0),
+        gaussian_pyramid(as_features(exemplar), levels),
+        level_shapes(size, levels),
+        settings,
+        p=params.p,
+        guidance=guidance,
+        seed=seed + 1,
+        progress=report,
+        stage="texture",
+        span=(0.5, 1.0),
     )
     src = srcs[0]
     image = exemplar[src[..., 0], src[..., 1]].astype(np.float32)
     t2 = time.perf_counter()
     report("done", 1.0)
     return Result(
-        method="tensor-constrained", image=image, params=params.model_dump(), seed=seed,
+        method="tensor-constrained",
+        image=image,
+        params=params.model_dump(),
+        seed=seed,
         timings={"structure": t1 - t0, "texture": t2 - t1},
         tensor_field=s_out,
         extras={
@@ -124,14 +156,16 @@ def run_tensor_constrained(
             "orientation": orientation(s_out),
             "source_map": src.astype(np.int32),
         },
-        stats={"mean_best_distance": {"structure": stats_structure, "texture": stats_texture.mean_best_distance}},
+        stats={
+            "mean_best_distance": {"structure": stats_structure, "texture": stats_texture.mean_best_distance}
+        },
     )
 
 
 SPEC = register(
     MethodSpec(
         name="tensor-constrained",
-        summary="Two-stage synthesis: structure tensor field first, then the texture under it (Akl et al. 2014).",
+        summary="Two-stage synthesis: structure tensor field first, then the texture under it (Akl 2014).",
         params_model=TensorConstrainedParams,
         run=run_tensor_constrained,
         paper="Akl, Yaacoub, Donias, Da Costa, Germain, ICIP 2014",

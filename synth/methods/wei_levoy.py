@@ -46,7 +46,9 @@ def run_wei_levoy(
     start = time.perf_counter()
     report = checked_progress(progress)
     ex_levels = gaussian_pyramid(as_features(exemplar), params.levels)
-    settings = params.search_settings(size=params.neighbourhood_size, levels=params.levels, iterations=params.iterations)
+    settings = params.search_settings(
+        size=params.neighbourhood_size, levels=params.levels, iterations=params.iterations
+    )
     srcs, stats = synthesize_source_map(
         ex_levels, level_shapes(size, params.levels), settings, seed=seed, progress=report, stage="texture"
     )
@@ -54,7 +56,10 @@ def run_wei_levoy(
     image = exemplar[src[..., 0], src[..., 1]].astype(np.float32)
     report("done", 1.0)
     return Result(
-        method="wei-levoy", image=image, params=params.model_dump(), seed=seed,
+        method="wei-levoy",
+        image=image,
+        params=params.model_dump(),
+        seed=seed,
         timings={"texture": time.perf_counter() - start},
         extras={"source_map": src.astype(np.int32)},
         stats={"mean_best_distance": stats.mean_best_distance},
