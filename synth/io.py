@@ -46,6 +46,7 @@ __all__ = [
     "SUPPORTED_FORMATS",
     "ImageSource",
     "LoadMode",
+    "atomic_write_bytes",
     "image_to_png_bytes",
     "load_image",
     "load_volume",
@@ -380,7 +381,7 @@ def save_image(path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: in
         data = buf.getvalue()
     else:
         raise InvalidParameter("path", str(path), "extension must be .png, .tif or .tiff")
-    _atomic_write(target, data)
+    atomic_write_bytes(target, data)
 
 
 def save_volume(path: str | os.PathLike[str], volume: np.ndarray, *, bit_depth: int = 16) -> None:
@@ -417,7 +418,7 @@ def save_volume(path: str | os.PathLike[str], volume: np.ndarray, *, bit_depth: 
     tifffile.imwrite(
         buf, to_uint(arr, bit_depth), imagej=True, photometric="minisblack", metadata={"axes": "ZYX"}
     )
-    _atomic_write(target, buf.getvalue())
+    atomic_write_bytes(target, buf.getvalue())
 
 
 # --------------------------------------------------------------------------------------------
@@ -702,7 +703,7 @@ def _savable_image(image: np.ndarray) -> np.ndarray:
     return arr
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
+def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to a temporary file beside ``path``, flush it to disk, then rename over ``path``."""
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
     created = False

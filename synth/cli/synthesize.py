@@ -1,0 +1,137 @@
+"""``texsynth synthesize METHOD --exemplar PATH --size WxH --out DIR``: one synthesis, all artifacts.
+
+Writes ``output.png`` (16-bit with ``--bit-depth 16``), ``output.tiff``, ``manifest.json``,
+``metrics.json``, the tensor field's ``coherence.png``/``orientation.png`` and comparison plots (see
+:mod:`synth.artifacts`). Parameters come from the method's model: ``--set name=value`` (values are
+read as JSON when they parse, e.g. ``--set levels=3 --set metric=ED``). A progress bar is drawn on
+stderr when it is a terminal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from synth.errors import InvalidParameter
+
+__all__ = ["parse_assignments", "parse_size", "register"]
+
+
+def parse_size(text: str) -> tuple[int, ...]:
+    """``'WxH'`` -> ``(H, W)``; ``'WxHxD'`` -> ``(D, H, W)`` (array order)."""
+    try:
+        parts = [int(p) for p in text.lower().split("x")]
+    except ValueError:
+        parts = []
+    if len(parts) not in (2, 3) or any(p <= 0 for p in parts):
+        raise InvalidParameter("size", text, "must look like WxH (e.g. 256x256) or WxHxD for volumes")
+    return tuple(reversed(parts))
+
+
+def parse_assignments(items: list[str]) -> dict[str, Any]:
+    """``['a=1', 'b=ED']`` -> ``{'a': 1, 'b': 'ED'}``; values parse as JSON when they can."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        if not sep or not name.strip():
+            raise InvalidParameter("--set", item, "must look like name=value")
+        try:
+            out[name.strip()] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[name.strip()] = raw
+    return out
+
+
+class _ProgressBar:
+    """A one-line progress bar on a terminal; silent otherwise (logs and pipes stay clean)."""
+
+    def __init__(self, stream: Any = sys.stderr) -> None:
+        self.stream = stream
+        self.enabled = hasattr(stream, "isatty") and stream.isatty()
+        self.start = time.perf_counter()
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if not self.enabled:
+            return
+        width = 30
+        filled = round(width * fraction)
+        elapsed = time.perf_counter() - self.start
+        bar = "#" * filled + "." * (width - filled)
+        line = f"\r[{bar}] {100 * fraction:5.1f}% {elapsed:6.1f}s  {stage[:48]:<48}"
+        self.stream.write(line)
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _run(args: argparse.Namespace) -> int:
+    from synth.api import available_methods, synthesize
+    from synth.artifacts import write_artifacts
+    from synth.io import load_image
+
+    methods = available_methods()
+    if args.method not in methods:
+        raise InvalidParameter("METHOD", args.method, f"unknown method (known: {', '.join(sorted(methods))})")
+    if args.bit_depth not in (8, 16):
+        raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
+    params = parse_assignments(args.set or [])
+    size = parse_size(args.size) if args.size else None
+    exemplar = load_image(args.exemplar)
+    constraint = load_image(args.constraint) if args.constraint else None
+    bar = _ProgressBar()
+    try:
+        result = synthesize(
+            args.method,
+            exemplar,
+            size=size,
+            params=params,
+            seed=args.seed,
+            progress=bar,
+            constraint=constraint,
+        )
+    finally:
+        bar.close()
+    out = Path(args.out)
+    names, metrics = write_artifacts(
+        out,
+        result,
+        exemplar,
+        constraint,
+        {"exemplar": str(args.exemplar), "constraint": str(args.constraint) if args.constraint else None},
+        bit_depth=args.bit_depth,
+        plots=not args.no_plots,
+    )
+    summary = metrics.get("summary", {})
+    print(
+        f"{args.method}: {'x'.join(str(s) for s in reversed(result.image.shape[:2]))} in "
+        f"{result.timings.get('total', 0.0):.2f} s -> {out}/ ({len(names)} files)"
+    )
+    if summary:
+        print("  " + ", ".join(f"{k} {v:.4g}" for k, v in summary.items() if isinstance(v, int | float)))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "synthesize",
+        help="synthesize a texture from an exemplar",
+        description="Synthesize a texture (METHOD from 'texsynth methods') and write the output, its tensor "
+        "field images, metrics, plots and a manifest into DIR.",
+    )
+    p.add_argument("method", metavar="METHOD", help="method name, e.g. wei-levoy or tensor-constrained")
+    p.add_argument("--exemplar", required=True, type=Path, help="exemplar image (PNG, TIFF or JPEG)")
+    p.add_argument("--constraint", type=Path, help="constraint image, for methods that take one")
+    p.add_argument("--size", help="output size WxH (default: the constraint's, else twice the exemplar's)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    p.add_argument("--set", action="append", metavar="NAME=VALUE", help="a method parameter (repeatable)")
+    p.add_argument("--bit-depth", type=int, default=8, help="bit depth of output.png: 8 or 16")
+    p.add_argument("--no-plots", action="store_true", help="skip the comparison plots")
+    p.add_argument("--out", required=True, type=Path, help="output directory (created)")
+    p.set_defaults(func=_run)
