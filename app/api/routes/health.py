@@ -1,0 +1,44 @@
+"""``/api/health``: is the API up, the broker reachable, a worker alive?"""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response
+
+from app.api.deps import ServiceDep
+from app.schemas import HealthPublic
+
+router = APIRouter(prefix="/api/health", tags=["health"])
+
+
+@router.get("", response_model=HealthPublic, responses={503: {"model": HealthPublic}})
+def health(service: ServiceDep, response: Response) -> dict:
+    """``200`` when API, broker and at least one worker are up; ``503`` naming what is missing."""
+    broker = service.broker_ok()
+    workers = [w["name"] for w in service.store.workers(fresh_within=10.0)]
+    _, queued = service.store.list(state="queued", limit=1)
+    _, running = service.store.list(state="running", limit=1)
+    problems = []
+    if not broker:
+        problems.append("the broker is unreachable (check REDIS_URL / the data directory)")
+    if not workers:
+        problems.append("no worker is running (start one with `texsynth worker`)")
+    if problems:
+        response.status_code = 503
+    url = service.settings.redis_url or "filesystem://" + str(service.settings.broker_dir)
+    return {
+        "status": "ok" if not problems else "degraded",
+        "api": True,
+        "broker": broker,
+        "broker_url": _redact(url),
+        "workers": workers,
+        "queued": queued,
+        "running": running,
+        "message": "; ".join(problems) or "ready",
+    }
+
+
+def _redact(url: str) -> str:
+    if "@" in url and "://" in url:
+        scheme, rest = url.split("://", 1)
+        return f"{scheme}://***@{rest.split('@', 1)[1]}"
+    return url

@@ -1,0 +1,123 @@
+"""``/api/jobs``: submit, list, report, cancel; artifacts, inputs and previews are plain GETs."""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
+from fastapi.responses import FileResponse
+
+from app.api.deps import ServiceDep
+from app.schemas import ErrorPublic, JobPublic, JobsPublic
+from app.service import Upload
+from worker.store import STATES
+
+router = APIRouter(prefix="/api/jobs", tags=["jobs"])
+
+_ERRORS = {
+    413: {"model": ErrorPublic, "description": "upload or image too large"},
+    415: {"model": ErrorPublic, "description": "not an image format texsynth reads"},
+    422: {"model": ErrorPublic, "description": "bad parameter or unusable image (the field is named)"},
+}
+
+
+def read_uploads(exemplar: UploadFile | None, constraint: UploadFile | None) -> list[Upload]:
+    uploads = []
+    for role, upload in (("exemplar", exemplar), ("constraint", constraint)):
+        if upload is not None:
+            uploads.append(Upload(role, upload.filename or "", upload.file.read()))
+    return uploads
+
+
+@router.post("", status_code=202, response_model=JobPublic, responses=_ERRORS)
+def submit_job(
+    service: ServiceDep,
+    response: Response,
+    exemplar: Annotated[UploadFile | None, File(description="the exemplar image (PNG, TIFF, ...)")] = None,
+    method: Annotated[str, Form(description="a method name from GET /api/methods")] = "wei-levoy",
+    params: Annotated[
+        str, Form(description='JSON object: the method\'s parameters and "width"/"height"')
+    ] = "{}",
+    seed: Annotated[int | None, Form(description="random seed; same inputs + seed = same output")] = None,
+    constraint: Annotated[
+        UploadFile | None, File(description="constraint image, for methods that take one")
+    ] = None,
+) -> dict:
+    """Validate and queue a synthesis job; ``202`` with the job's URL in ``Location``."""
+    request = service.validate(method, params, seed, read_uploads(exemplar, constraint))
+    job = service.submit(request)
+    response.headers["Location"] = f"/api/jobs/{job.id}"
+    return service.job_public(job)
+
+
+@router.get("", response_model=JobsPublic)
+def list_jobs(
+    service: ServiceDep,
+    state: Annotated[str | None, Query(description=f"one of {', '.join(STATES)}")] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> dict:
+    """Jobs, newest first."""
+    if state is not None and state not in STATES:
+        raise HTTPException(422, f"state must be one of {', '.join(STATES)}, not {state!r}")
+    jobs, count = service.store.list(state=state, limit=limit, offset=offset)
+    return {"data": [service.job_public(j) for j in jobs], "count": count}
+
+
+def _job(service: ServiceDep, job_id: str):
+    job = service.store.get(job_id)
+    if job is None:
+        raise HTTPException(404, f"no job with id {job_id!r}; list jobs with GET /api/jobs")
+    return job
+
+
+@router.get("/{job_id}", response_model=JobPublic, responses={404: {"model": ErrorPublic}})
+def get_job(service: ServiceDep, job_id: str) -> dict:
+    """State, progress, timings, error message and artifact URLs of one job."""
+    return service.job_public(_job(service, job_id))
+
+
+@router.delete(
+    "/{job_id}", status_code=202, response_model=JobPublic, responses={404: {"model": ErrorPublic}}
+)
+def cancel_job(service: ServiceDep, job_id: str) -> dict:
+    """Cancel a queued or running job (a finished job is left as it is)."""
+    _job(service, job_id)
+    job = service.store.request_cancel(job_id)
+    assert job is not None
+    if job.state == "cancelled":
+        # A queued message is dropped by the workers; if revoking fails, the record says cancelled
+        # and a delivered message skips the job anyway.
+        with contextlib.suppress(Exception):
+            service.celery.control.revoke(job_id)
+    return service.job_public(job)
+
+
+@router.get("/{job_id}/artifacts/{name:path}", responses={404: {"model": ErrorPublic}})
+def get_artifact(service: ServiceDep, job_id: str, name: str) -> FileResponse:
+    """One artifact of a succeeded job (names are listed in the job's ``artifacts``)."""
+    job = _job(service, job_id)
+    if name not in job.artifacts:
+        listed = ", ".join(job.artifacts) or f"none yet (the job is {job.state})"
+        raise HTTPException(404, f"job {job_id} has no artifact {name!r}; artifacts: {listed}")
+    path = service.store.job_dir(job_id) / "out" / name
+    return FileResponse(path, filename=path.name if not name.endswith(".png") else None)
+
+
+@router.get("/{job_id}/inputs/{role}", responses={404: {"model": ErrorPublic}})
+def get_input(service: ServiceDep, job_id: str, role: str) -> FileResponse:
+    job = _job(service, job_id)
+    if role not in job.inputs:
+        raise HTTPException(404, f"job {job_id} has no {role!r} input; inputs: {', '.join(job.inputs)}")
+    return FileResponse(service.store.job_dir(job_id) / "inputs" / job.inputs[role])
+
+
+@router.get("/{job_id}/preview.png", responses={404: {"model": ErrorPublic}})
+def get_preview(service: ServiceDep, job_id: str) -> FileResponse:
+    """A small preview of the running synthesis, when the method provides one."""
+    _job(service, job_id)
+    path = service.store.job_dir(job_id) / "preview.png"
+    if not path.exists():
+        raise HTTPException(404, "no preview yet")
+    return FileResponse(path, headers={"Cache-Control": "no-store"})

@@ -1,0 +1,54 @@
+"""``/api/sweeps``: run a parameter grid as a Celery group and collect all metrics in one table."""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
+
+from app.api.deps import ServiceDep
+from app.api.routes.jobs import _ERRORS, read_uploads
+from app.schemas import ErrorPublic, SweepPublic
+
+router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
+
+
+@router.post("", status_code=202, response_model=SweepPublic, responses=_ERRORS)
+def submit_sweep(
+    service: ServiceDep,
+    response: Response,
+    exemplar: Annotated[UploadFile | None, File()] = None,
+    method: Annotated[str, Form()] = "wei-levoy",
+    grid: Annotated[
+        str, Form(description='JSON: parameter -> list of values, e.g. {"neighbourhood": [5, 9]}')
+    ] = "{}",
+    params: Annotated[str, Form(description="JSON: fixed parameters (and width/height) of every run")] = "{}",
+    seed: Annotated[int | None, Form()] = None,
+    constraint: Annotated[UploadFile | None, File()] = None,
+) -> dict:
+    """One job per point of ``grid`` (the product of its lists), sharing the inputs and the seed."""
+    request = service.validate(method, params, seed, read_uploads(exemplar, constraint))
+    sweep_id = service.submit_sweep(request, grid)
+    response.headers["Location"] = f"/api/sweeps/{sweep_id}"
+    sweep = service.store.get_sweep(sweep_id)
+    return service.sweep_public(sweep)
+
+
+@router.get("/{sweep_id}", response_model=SweepPublic, responses={404: {"model": ErrorPublic}})
+def get_sweep(
+    service: ServiceDep, sweep_id: str, format: Annotated[str, Query(pattern="^(json|csv)$")] = "json"
+):
+    """The sweep's table: one row per run with its grid values and metrics (``?format=csv`` for CSV)."""
+    sweep = service.store.get_sweep(sweep_id)
+    if sweep is None:
+        raise HTTPException(404, f"no sweep with id {sweep_id!r}")
+    public = service.sweep_public(sweep)
+    if format == "csv":
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=public["columns"], extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(public["rows"])
+        return Response(buf.getvalue(), media_type="text/csv")
+    return public

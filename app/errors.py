@@ -1,0 +1,72 @@
+"""One place that turns errors into JSON a person can act on: ``{"detail", "field", "error"}``.
+
+Engine errors map by kind (DESIGN.md): InputTooLarge -> 413, UnsupportedFormat -> 415,
+InvalidInput / InvalidParameter -> 422; a broker that does not answer -> 503.
+"""
+
+from __future__ import annotations
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException
+
+from app.service import BrokerUnavailable
+from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
+
+__all__ = ["install_error_handlers"]
+
+_HTTP_KINDS = {
+    400: "bad_request",
+    404: "not_found",
+    405: "method_not_allowed",
+    413: "input_too_large",
+    415: "unsupported_format",
+    422: "invalid_parameter",
+    503: "unavailable",
+}
+
+
+def _error(status: int, detail: str, field: str | None, kind: str) -> JSONResponse:
+    return JSONResponse({"detail": detail, "field": field, "error": kind}, status_code=status)
+
+
+def synth_error_response(exc: SynthError) -> JSONResponse:
+    if isinstance(exc, InputTooLarge):
+        return _error(413, str(exc), exc.source, "input_too_large")
+    if isinstance(exc, UnsupportedFormat):
+        return _error(415, str(exc), exc.source, "unsupported_format")
+    if isinstance(exc, InvalidInput):
+        return _error(422, str(exc), exc.source, "invalid_input")
+    if isinstance(exc, InvalidParameter):
+        return _error(422, str(exc), exc.name, "invalid_parameter")
+    return _error(422, str(exc), None, "invalid_request")
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(SynthError)
+    async def _synth(request: Request, exc: SynthError) -> JSONResponse:
+        return synth_error_response(exc)
+
+    @app.exception_handler(HTTPException)
+    async def _http(request: Request, exc: HTTPException) -> JSONResponse:
+        detail = str(exc.detail)
+        return _error(exc.status_code, detail, None, _HTTP_KINDS.get(exc.status_code, "error"))
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
+        err = exc.errors()[0]
+        loc = [str(p) for p in err.get("loc", ()) if p not in ("body", "query", "path", "form")]
+        field = ".".join(loc) or None
+        return _error(
+            422, f"{field or 'request'}: {err.get('msg', 'invalid value')}", field, "invalid_parameter"
+        )
+
+    @app.exception_handler(BrokerUnavailable)
+    async def _broker(request: Request, exc: BrokerUnavailable) -> JSONResponse:
+        return _error(
+            503,
+            f"the job queue is unreachable, nothing was queued; try again shortly ({exc})",
+            None,
+            "unavailable",
+        )

@@ -1,0 +1,91 @@
+"""Response models of the REST API, one group per resource (Public / ListPublic {data, count})."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+__all__ = [
+    "ErrorPublic",
+    "HealthPublic",
+    "JobPublic",
+    "JobsPublic",
+    "MethodPublic",
+    "MethodsPublic",
+    "SweepPublic",
+]
+
+
+class ErrorPublic(BaseModel):
+    detail: str = Field(description="what is wrong and what to do about it")
+    field: str | None = Field(None, description="the form field or parameter at fault")
+    error: str = Field(description="machine-readable kind: input_too_large, unsupported_format, ...")
+
+
+class JobPublic(BaseModel):
+    id: str
+    url: str
+    page: str
+    state: str = Field(description="queued, running, succeeded, failed or cancelled")
+    method: str
+    params: dict[str, Any]
+    seed: int
+    stage: str
+    fraction: float = Field(description="progress in [0, 1]")
+    message: str = Field(description="why the job failed, or what happened to it")
+    cancel_requested: bool
+    attempts: int
+    created: float
+    started: float | None
+    finished: float | None
+    elapsed: float | None
+    timings: dict[str, float]
+    metrics: dict[str, Any]
+    artifacts: dict[str, str] = Field(description="artifact name -> URL")
+    inputs: dict[str, str] = Field(description="input role -> URL")
+    preview: str | None = Field(None, description="URL of a small preview of the running synthesis")
+    sweep_id: str | None = None
+
+
+class JobsPublic(BaseModel):
+    data: list[JobPublic]
+    count: int
+
+
+class MethodPublic(BaseModel):
+    name: str
+    summary: str
+    paper: str
+    constraint: str = Field(description="none, optional or required")
+    output_ndim: int
+    params_schema: dict[str, Any]
+    size_schema: dict[str, Any]
+
+
+class MethodsPublic(BaseModel):
+    data: list[MethodPublic]
+    count: int
+
+
+class SweepPublic(BaseModel):
+    id: str
+    url: str
+    method: str
+    grid: dict[str, list[Any]]
+    params: dict[str, Any]
+    state: str = Field(description="running until every job ended, then done")
+    counts: dict[str, int]
+    columns: list[str]
+    rows: list[dict[str, Any]] = Field(description="one row per run: job id, state, its grid values, metrics")
+
+
+class HealthPublic(BaseModel):
+    status: str
+    api: bool
+    broker: bool
+    broker_url: str
+    workers: list[str]
+    queued: int
+    running: int
+    message: str

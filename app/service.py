@@ -1,0 +1,352 @@
+"""What the API does, without HTTP: validate a submission, store it, queue it; report; cancel.
+
+Routes stay thin: they parse the request and call a :class:`Service` method. Everything a request
+can get wrong is checked here *before* anything is stored or queued, and raised as an engine error
+(:mod:`synth.errors`) that the API maps to 413/415/422.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import random
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from typing import Any
+
+from celery import group
+
+from synth import __version__ as synth_version
+from synth.api import MethodSpec
+from synth.errors import InvalidInput, InvalidParameter
+from synth.params import validate_params
+from worker.config import Settings
+from worker.imaging import check_upload, decode_image
+from worker.methods import methods
+from worker.queue import QUEUE, TASK_NAME, create_celery
+from worker.reaper import Reaper
+from worker.store import JobRecord, JobStore
+
+__all__ = ["SIZE_FIELDS", "JobRequest", "Service", "Upload"]
+
+SIZE_FIELDS = ("width", "height", "depth")
+MIN_SIDE, MAX_SIDE = 8, 8192
+
+
+@dataclass(frozen=True)
+class Upload:
+    role: str
+    filename: str
+    data: bytes
+
+
+@dataclass(frozen=True)
+class JobRequest:
+    """A validated submission: everything needed to create and queue a job."""
+
+    method: str
+    params: dict[str, Any]  # the method's parameters (as validated, defaults filled) + width/height[/depth]
+    seed: int
+    inputs: dict[str, tuple[str, bytes]]
+
+
+class Service:
+    """The job service of one API process: settings, job store, Celery producer, reaper."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        settings.ensure_dirs()
+        self.store = JobStore(settings.db_path, settings.jobs_dir)
+        self.celery = create_celery(settings)
+        self._send_lock = threading.Lock()
+        self.reaper = Reaper(self.store, settings, self.send, self.terminate)
+
+    # -- queue ----------------------------------------------------------------------------------
+
+    def send(self, job_id: str) -> None:
+        with self._send_lock:
+            self.celery.send_task(TASK_NAME, args=[job_id], task_id=job_id, queue=QUEUE)
+
+    def send_group(self, job_ids: list[str]) -> None:
+        sig = group(
+            self.celery.signature(TASK_NAME, args=(j,), immutable=True, queue=QUEUE).set(task_id=j)
+            for j in job_ids
+        )
+        with self._send_lock:
+            sig.apply_async()
+
+    def terminate(self, job_id: str) -> None:
+        """Kill the worker child running ``job_id`` (the fallback when the engine does not stop)."""
+        with self._send_lock:
+            self.celery.control.revoke(job_id, terminate=True, signal="SIGKILL")
+
+    def broker_ok(self) -> bool:
+        try:
+            with self.celery.connection_for_write() as conn:
+                conn.ensure_connection(max_retries=1, interval_start=0, timeout=2)
+            return True
+        except Exception:
+            return False
+
+    # -- methods ----------------------------------------------------------------------------------
+
+    def methods(self) -> dict[str, MethodSpec]:
+        return methods(self.settings)
+
+    def method(self, name: str) -> MethodSpec:
+        known = self.methods()
+        if name not in known:
+            raise InvalidParameter(
+                "method", name, f"unknown method; choose one of: {', '.join(sorted(known))}"
+            )
+        return known[name]
+
+    def size_schema(self, spec: MethodSpec) -> dict[str, Any]:
+        side = {"type": "integer", "minimum": MIN_SIDE, "maximum": MAX_SIDE, "default": 128}
+        props = {
+            "width": {**side, "title": "Output width (px)"},
+            "height": {**side, "title": "Output height (px)"},
+        }
+        if spec.output_ndim == 3:
+            props["depth"] = {**side, "default": 64, "title": "Output depth (slices)"}
+        return {"type": "object", "properties": props}
+
+    # -- submission -----------------------------------------------------------------------------
+
+    def validate(
+        self, method: str, params_json: str | dict, seed: int | None, uploads: list[Upload]
+    ) -> JobRequest:
+        """Check a submission completely (method, parameters, size, images) or raise an engine error."""
+        spec = self.method(method)
+        params = _parse_params(params_json)
+        size = {
+            k: params.pop(k) for k in SIZE_FIELDS if k in params and k not in spec.params_model.model_fields
+        }
+        size = self._validate_size(spec, size)
+        model = validate_params(spec.params_model, params)
+        if seed is None:
+            seed = random.randrange(2**31)
+        if not 0 <= seed < 2**32:
+            raise InvalidParameter("seed", seed, "must be an integer in [0, 2**32)")
+        by_role = {u.role: u for u in uploads if u.data or u.filename}
+        if "exemplar" not in by_role:
+            raise InvalidInput("exemplar", "no exemplar image was uploaded (multipart field 'exemplar')")
+        if spec.constraint == "required" and "constraint" not in by_role:
+            raise InvalidInput(
+                "constraint", f"method '{method}' needs a constraint image (field 'constraint')"
+            )
+        if spec.constraint == "none" and "constraint" in by_role:
+            raise InvalidInput("constraint", f"method '{method}' takes no constraint image; leave it out")
+        for upload in by_role.values():
+            check_upload(upload.data, upload.role, self.settings.max_input_pixels)
+            decode_image(
+                upload.data, upload.role, self.settings.max_input_pixels
+            )  # truncated/corrupt -> 422 now, not later
+        return JobRequest(
+            method=method,
+            params={**model.model_dump(mode="json"), **size},
+            seed=int(seed),
+            inputs={role: (u.filename or role, u.data) for role, u in by_role.items()},
+        )
+
+    def _validate_size(self, spec: MethodSpec, size: dict[str, Any]) -> dict[str, int]:
+        needed = ("width", "height") if spec.output_ndim == 2 else ("depth", "width", "height")
+        out = {}
+        for name in needed:
+            value = size.get(name, 128 if name != "depth" else 64)
+            if isinstance(value, bool) or not isinstance(value, int | float) or int(value) != value:
+                raise InvalidParameter(name, value, "must be a whole number of pixels")
+            if not MIN_SIDE <= value <= MAX_SIDE:
+                raise InvalidParameter(name, value, f"must lie in [{MIN_SIDE}, {MAX_SIDE}] pixels")
+            out[name] = int(value)
+        extra = set(size) - set(needed)
+        if extra:
+            raise InvalidParameter(
+                sorted(extra)[0], size[sorted(extra)[0]], f"method '{spec.name}' makes 2-D images"
+            )
+        pixels = 1
+        for v in out.values():
+            pixels *= v
+        if pixels > self.settings.max_output_pixels:
+            raise InvalidParameter(
+                "width",
+                out["width"],
+                f"output of {pixels} pixels is more than this service's "
+                f"limit of {self.settings.max_output_pixels}; ask for a smaller size",
+            )
+        return out
+
+    def manifest(self, req: JobRequest) -> dict[str, Any]:
+        return {"method": req.method, "params": req.params, "seed": req.seed, "texsynth": synth_version}
+
+    def submit(self, req: JobRequest) -> JobRecord:
+        job = self.store.create_job(
+            method=req.method,
+            params=req.params,
+            seed=req.seed,
+            inputs=req.inputs,
+            manifest=self.manifest(req),
+        )
+        self._queue([job.id])
+        return self.store.get(job.id) or job
+
+    def _queue(self, job_ids: list[str]) -> None:
+        try:
+            if len(job_ids) == 1:
+                self.send(job_ids[0])
+            else:
+                self.send_group(job_ids)
+        except Exception as exc:
+            for job_id in job_ids:
+                self.store.finish(
+                    job_id, None, "failed", f"could not be queued: the broker is unreachable ({exc})"
+                )
+            raise BrokerUnavailable(str(exc)) from exc
+
+    def submit_sweep(self, req: JobRequest, grid_json: str | dict) -> str:
+        """One job per point of the parameter grid (a Celery group); returns the sweep's id."""
+        spec = self.method(req.method)
+        grid = _parse_json(grid_json, "grid")
+        if not isinstance(grid, dict) or not grid:
+            raise InvalidParameter(
+                "grid", grid, 'must be an object of parameter -> list of values, e.g. {"n": [5, 9]}'
+            )
+        for name, values in grid.items():
+            if not isinstance(values, list) or not values:
+                raise InvalidParameter(f"grid.{name}", values, "must be a non-empty list of values")
+        runs = 1
+        for values in grid.values():
+            runs *= len(values)
+        if runs > self.settings.max_sweep_runs:
+            raise InvalidParameter(
+                "grid", runs, f"{runs} runs is more than the limit of {self.settings.max_sweep_runs}"
+            )
+        points = []
+        for combo in itertools.product(*grid.values()):
+            point = dict(zip(grid.keys(), combo, strict=True))
+            params = {**req.params, **point}
+            size = {
+                k: params.pop(k)
+                for k in SIZE_FIELDS
+                if k in params and k not in spec.params_model.model_fields
+            }
+            size = self._validate_size(spec, size)
+            try:
+                model = validate_params(spec.params_model, params)
+            except InvalidParameter as exc:
+                raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
+            points.append({**model.model_dump(mode="json"), **size})
+        sweep_id = uuid.uuid4().hex
+        job_ids = []
+        for params in points:
+            job = self.store.create_job(
+                method=req.method,
+                params=params,
+                seed=req.seed,
+                inputs=req.inputs,
+                sweep_id=sweep_id,
+                manifest={**self.manifest(req), "params": params, "sweep_id": sweep_id},
+            )
+            job_ids.append(job.id)
+        self.store.create_sweep(sweep_id, req.method, grid, req.params, job_ids)
+        self._queue(job_ids)
+        return sweep_id
+
+    # -- reporting ----------------------------------------------------------------------------------
+
+    def job_public(self, job: JobRecord) -> dict[str, Any]:
+        base = f"/api/jobs/{job.id}"
+        end = job.finished or (time.time() if job.state == "running" else None)
+        preview = None
+        if job.preview_at and job.state == "running":
+            preview = f"{base}/preview.png?t={int(job.preview_at * 1000)}"
+        return {
+            "id": job.id,
+            "url": base,
+            "page": f"/#/jobs/{job.id}",
+            "state": job.state,
+            "method": job.method,
+            "params": job.params,
+            "seed": job.seed,
+            "stage": job.stage,
+            "fraction": job.fraction,
+            "message": job.message,
+            "cancel_requested": job.cancel_requested is not None,
+            "attempts": job.attempts,
+            "created": job.created,
+            "started": job.started,
+            "finished": job.finished,
+            "elapsed": (end - job.started) if (end and job.started) else None,
+            "timings": job.timings,
+            "metrics": job.metrics,
+            "artifacts": {name: f"{base}/artifacts/{name}" for name in job.artifacts},
+            "inputs": {role: f"{base}/inputs/{role}" for role in job.inputs},
+            "preview": preview,
+            "sweep_id": job.sweep_id,
+        }
+
+    def sweep_public(self, sweep: dict[str, Any]) -> dict[str, Any]:
+        rows, counts, metric_names = [], {}, []
+        for job_id in sweep["job_ids"]:
+            job = self.store.get(job_id)
+            if job is None:
+                continue
+            counts[job.state] = counts.get(job.state, 0) + 1
+            flat = _flatten(job.metrics)
+            metric_names += [k for k in flat if k not in metric_names]
+            rows.append(
+                {"job": job.id, "state": job.state, **{k: job.params.get(k) for k in sweep["grid"]}, **flat}
+            )
+        active = counts.get("queued", 0) + counts.get("running", 0)
+        return {
+            "id": sweep["id"],
+            "url": f"/api/sweeps/{sweep['id']}",
+            "method": sweep["method"],
+            "grid": sweep["grid"],
+            "params": sweep["params"],
+            "state": "running" if active else "done",
+            "counts": counts,
+            "columns": ["job", "state", *sweep["grid"], *metric_names],
+            "rows": rows,
+        }
+
+    def start(self) -> None:
+        if not self.reaper.is_alive():
+            self.reaper.start()
+
+    def stop(self) -> None:
+        self.reaper.stop()
+
+
+class BrokerUnavailable(RuntimeError):
+    """The broker did not take the job (HTTP 503)."""
+
+
+def _parse_json(value: str | dict, field: str) -> Any:
+    if isinstance(value, dict):
+        return value
+    try:
+        return json.loads(value or "{}")
+    except json.JSONDecodeError as exc:
+        raise InvalidParameter(
+            field, value[:80], f"is not valid JSON ({exc.msg} at position {exc.pos})"
+        ) from None
+
+
+def _parse_params(value: str | dict) -> dict[str, Any]:
+    params = _parse_json(value, "params")
+    if not isinstance(params, dict):
+        raise InvalidParameter("params", params, 'must be a JSON object, e.g. {"width": 128, "height": 128}')
+    return dict(params)
+
+
+def _flatten(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat = {}
+    for key, value in metrics.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        elif isinstance(value, int | float | str | bool) or value is None:
+            flat[f"{prefix}{key}"] = value
+    return flat

@@ -1,0 +1,1 @@
+"""Integration tests of the job service: API + real worker processes + real broker."""

@@ -1,0 +1,62 @@
+"""A small, real method for the service tests: ``test-blur`` (registered through TEXSYNTH_EXTRA_METHODS).
+
+It tiles the exemplar to the output size and blurs it in ``steps`` steps, sleeping ``delay`` seconds
+per step and reporting progress (with a preview) after each: a job whose duration the tests choose,
+to watch progress, cancel it, or kill its worker mid-run. Deterministic for a given input and seed.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from pydantic import Field
+from scipy import ndimage as ndi
+
+from synth.api import MethodSpec, Result, register
+from synth.params import MethodParams
+from synth.tensor import structure_tensor
+
+
+class BlurParams(MethodParams):
+    steps: int = Field(10, ge=1, le=1000, description="blur steps (one progress report each)")
+    delay: float = Field(0.05, ge=0.0, le=10.0, description="seconds of sleep per step")
+    sigma: float = Field(0.5, gt=0.0, le=10.0, description="Gaussian blur per step, in pixels")
+
+
+def _run(exemplar, *, size, params: BlurParams, seed, progress, constraint=None) -> Result:
+    start = time.perf_counter()
+    reps = [int(np.ceil(s / e)) for s, e in zip(size, exemplar.shape[:2], strict=True)]
+    image = np.tile(exemplar, reps + [1] * (exemplar.ndim - 2))[: size[0], : size[1]]
+    rng = np.random.default_rng(seed)
+    image = np.roll(image, (int(rng.integers(size[0])), int(rng.integers(size[1]))), axis=(0, 1))
+    accepts_preview = getattr(progress, "accepts_preview", False)
+    for step in range(params.steps):
+        sigma = (params.sigma, params.sigma, 0) if image.ndim == 3 else params.sigma
+        image = ndi.gaussian_filter(image, sigma, mode="wrap")
+        if params.delay:
+            time.sleep(params.delay)
+        kwargs = {"preview": image} if accepts_preview else {}
+        progress(f"blur step {step + 1}/{params.steps}", (step + 1) / params.steps, **kwargs)
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    grey = image.mean(axis=2) if image.ndim == 3 else image
+    return Result(
+        method="test-blur",
+        image=image,
+        params=params.model_dump(),
+        seed=seed,
+        timings={"blur": time.perf_counter() - start},
+        tensor_field=structure_tensor(grey),
+        stats={"steps": params.steps},
+    )
+
+
+register(
+    MethodSpec(
+        name="test-blur",
+        summary="Tile and blur (service tests only)",
+        params_model=BlurParams,
+        run=_run,
+        constraint="optional",
+    )
+)

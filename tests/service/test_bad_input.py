@@ -1,0 +1,118 @@
+"""Rejected requests: the right status, a message naming the problem, and nothing stored or queued."""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+
+import httpx
+import pytest
+
+from tests.service.conftest import MAX_BODY, Service
+
+pytestmark = pytest.mark.integration
+
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A tiny PNG whose header declares ``width x height`` pixels (a decompression bomb's header)."""
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 1, 0, 0, 0, 0)
+    idat = zlib.compress(b"\x00" * 1024)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+def _queue_files(service: Service) -> list[str]:
+    queue = service.data_dir / "broker" / "queue"
+    return sorted(p.name for p in queue.iterdir()) if queue.exists() else []
+
+
+@pytest.fixture
+def nothing_queued(embedded):
+    """Asserts after the test that no job record, job folder or broker message was added."""
+    store = embedded.store()
+    count, folders = store.count(), set((embedded.data_dir / "jobs").iterdir())
+    yield
+    assert store.count() == count
+    assert set((embedded.data_dir / "jobs").iterdir()) == folders
+    assert _queue_files(embedded) == []
+
+
+def _post(service: Service, exemplar: bytes | None = None, **fields) -> httpx.Response:
+    files = {"exemplar": ("exemplar.png", exemplar, "image/png")} if exemplar is not None else None
+    data = {k: (json.dumps(v) if isinstance(v, dict) else str(v)) for k, v in fields.items()}
+    return httpx.post(embedded_url(service) + "/api/jobs", files=files, data=data, timeout=30)
+
+
+def embedded_url(service: Service) -> str:
+    return service.url
+
+
+@pytest.mark.usefixtures("nothing_queued")
+class TestRejected:
+    def test_oversize_body_413(self, embedded):
+        r = _post(embedded, b"\x89PNG" + b"\0" * (MAX_BODY + 1024), method="test-blur")
+        assert r.status_code == 413
+        assert r.json()["error"] == "input_too_large" and "MiB" in r.json()["detail"]
+
+    def test_decompression_bomb_413(self, embedded):
+        r = _post(embedded, _png_declaring(60000, 60000), method="test-blur")
+        assert r.status_code == 413, r.text
+        assert r.json()["field"] == "exemplar" and "pixels" in r.json()["detail"]
+
+    def test_not_an_image_415(self, embedded):
+        r = _post(embedded, b"%PDF-1.4 this is not an image", method="test-blur")
+        assert r.status_code == 415 and r.json()["field"] == "exemplar"
+
+    def test_truncated_image_422(self, embedded, exemplar_png):
+        r = _post(embedded, exemplar_png[: len(exemplar_png) // 2], method="test-blur")
+        assert r.status_code == 422 and r.json()["field"] == "exemplar"
+        assert "truncated" in r.json()["detail"] or "corrupt" in r.json()["detail"]
+
+    @pytest.mark.parametrize(
+        ("params", "field"),
+        [
+            ({"steps": 0}, "steps"),
+            ({"sigma": "wide"}, "sigma"),
+            ({"no_such_parameter": 1}, "no_such_parameter"),
+            ({"width": 100000, "height": 64}, "width"),
+            ({"width": 64, "height": 2.5}, "height"),
+        ],
+    )
+    def test_bad_parameter_422_names_the_field(self, embedded, exemplar_png, params, field):
+        r = _post(embedded, exemplar_png, method="test-blur", params=params)
+        assert r.status_code == 422, r.text
+        assert r.json()["field"] == field and field in r.json()["detail"]
+
+    def test_params_not_json_422(self, embedded, exemplar_png):
+        r = _post(embedded, exemplar_png, method="test-blur", params="{width: 3")
+        assert r.status_code == 422 and r.json()["field"] == "params"
+
+    def test_unknown_method_422(self, embedded, exemplar_png):
+        r = _post(embedded, exemplar_png, method="no-such-method")
+        assert r.status_code == 422 and r.json()["field"] == "method" and "test-blur" in r.json()["detail"]
+
+    def test_missing_exemplar_422(self, embedded):
+        r = _post(embedded, None, method="test-blur")
+        assert r.status_code == 422 and r.json()["field"] == "exemplar"
+
+    def test_unknown_job_404(self, embedded):
+        for method, path in (
+            ("GET", "/api/jobs/nope"),
+            ("DELETE", "/api/jobs/nope"),
+            ("GET", "/api/jobs/nope/artifacts/output.png"),
+            ("GET", "/api/sweeps/nope"),
+        ):
+            r = httpx.request(method, embedded.url + path)
+            assert r.status_code == 404 and "nope" in r.json()["detail"]
+
+    def test_bad_sweep_grid_422(self, embedded, exemplar_png):
+        r = httpx.post(
+            embedded.url + "/api/sweeps",
+            files={"exemplar": ("e.png", exemplar_png, "image/png")},
+            data={"method": "test-blur", "grid": json.dumps({"steps": [1, 0]})},
+        )
+        assert r.status_code == 422 and r.json()["field"] == "grid.steps"

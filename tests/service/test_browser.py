@@ -1,0 +1,90 @@
+"""The browser page in real headless Chromium (Debian's package, driven by Playwright; no download).
+
+Upload an exemplar (its preview appears), pick a method, read the generated parameter form, submit,
+watch the progress bar move on the job page, and see the result image and the metrics. A screenshot
+of the finished job page is saved under the test's tmp dir (and ``TEXSYNTH_SCREENSHOT`` if set).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.integration, pytest.mark.browser]
+
+CHROMIUM = "/usr/bin/chromium"
+ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not Path(CHROMIUM).exists():
+        pytest.skip("Debian's chromium is not installed (`apt-get install chromium`; .ci/run installs it)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
+        yield b
+        b.close()
+
+
+def test_upload_submit_watch_progress_see_result(browser, embedded, exemplar_png, tmp_path):
+    exemplar = tmp_path / "fringes.png"
+    exemplar.write_bytes(exemplar_png)
+    page = browser.new_page(viewport={"width": 1200, "height": 1000})
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.goto(embedded.url + "/")
+
+    page.set_input_files("#exemplar", str(exemplar))
+    page.wait_for_selector("#exemplar-preview:not([hidden])")
+    page.select_option("#method", "test-blur")
+    # the form is generated from the method's JSON schema, with its defaults
+    assert page.input_value("#param-steps") == "10"
+    assert page.input_value("#param-width") == "128"
+    page.fill("#param-steps", "25")
+    page.fill("#param-delay", "0.12")
+    page.fill("#param-width", "96")
+    page.fill("#param-height", "96")
+    page.click("#submit")
+
+    page.wait_for_url("**/#/jobs/*")
+    # the progress bar moves while the job runs
+    page.wait_for_function(
+        "() => { const p = document.querySelector('#progress'); return p && p.value > 0 && p.value < 1; }",
+        timeout=30_000,
+    )
+    page.wait_for_selector("#job-state.succeeded", timeout=60_000)
+    result = page.wait_for_selector("img#result")
+    page.wait_for_function("() => document.querySelector('img#result').naturalWidth === 96")
+    assert result.is_visible()
+    assert page.locator("#metrics tbody tr").count() > 0
+    assert page.locator("#downloads a", has_text="output.tiff").count() == 1
+    shot = tmp_path / "job-page.png"
+    page.screenshot(path=str(shot), full_page=True)
+    if os.environ.get("TEXSYNTH_SCREENSHOT"):
+        shutil.copy(shot, os.environ["TEXSYNTH_SCREENSHOT"])
+    assert not errors, errors
+
+    # a rejected submission shows the service's message and marks the field
+    page.goto(embedded.url + "/")
+    page.set_input_files("#exemplar", str(exemplar))
+    page.select_option("#method", "test-blur")
+    page.fill("#param-steps", "0")
+    page.evaluate("document.querySelector('#param-steps').removeAttribute('min')")
+    page.click("#submit")
+    page.wait_for_selector("#form-error:not([hidden])")
+    assert "steps" in page.inner_text("#form-error")
+    # the recent-jobs list shows the job we ran
+    assert page.locator("#jobs-table tbody tr").count() >= 1
+    page.close()

@@ -1,0 +1,69 @@
+"""The workers' Celery application: ``celery -A worker.celery_app worker`` (or ``texsynth worker``).
+
+Configuration comes from :func:`worker.queue.create_celery` with the environment's :class:`Settings`;
+the signal handlers below keep the service's job records honest about which process holds a job.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+
+from celery import signals
+
+from worker.config import Settings
+from worker.queue import TASK_NAME, create_celery
+from worker.store import JobStore
+
+__all__ = ["app", "settings", "store"]
+
+log = logging.getLogger(__name__)
+
+
+settings = Settings.from_env()
+app = create_celery(settings)
+_store: JobStore | None = None
+
+
+def store() -> JobStore:
+    """This process's job store (opened on first use, after a fork)."""
+    global _store
+    if _store is None:
+        _store = JobStore(settings.db_path, settings.jobs_dir)
+    return _store
+
+
+@signals.task_received.connect
+def _on_received(request=None, **_):
+    """The main process took a job's message: remember who holds it (it may be lost with it)."""
+    if request is not None and request.name == TASK_NAME and request.args:
+        store().mark_received(str(request.args[0]), os.getpid())
+
+
+@signals.worker_ready.connect
+def _on_ready(sender=None, **_):
+    name = getattr(sender, "hostname", None) or f"worker@{os.getpid()}"
+    started, pid = time.time(), os.getpid()
+
+    def beat() -> None:
+        while True:
+            try:
+                store().worker_heartbeat(name, pid, started)
+            except Exception:
+                log.exception("worker heartbeat failed")
+            time.sleep(2.0)
+
+    threading.Thread(target=beat, name="texsynth-worker-heartbeat", daemon=True).start()
+
+
+@signals.worker_process_init.connect
+def _on_child_start(**_):
+    global _store
+    _store = None  # never share an SQLite connection across a fork
+    if settings.worker_nice:
+        os.nice(settings.worker_nice)  # the API stays responsive on a machine busy with jobs
+    from worker.methods import methods
+
+    methods(settings)  # import the methods (numba compiles lazily) before the first job

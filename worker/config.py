@@ -1,0 +1,98 @@
+"""One ``Settings`` object shared by the API, the worker and ``texsynth serve``.
+
+Every value comes from an environment variable (``TEXSYNTH_*``, plus ``REDIS_URL``) or its default,
+so the API process and every worker process on every machine read the same configuration. With no
+``REDIS_URL`` the service runs on the embedded default: Celery's filesystem transport and an SQLite
+result backend, both under the data directory.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = ["Settings"]
+
+_ENV_PREFIX = "TEXSYNTH_"
+
+
+class Settings(BaseModel):
+    """Configuration of the job service; :meth:`from_env` is the one way the processes build it."""
+
+    model_config = ConfigDict(frozen=True)
+
+    data_dir: Path = Field(Path("data"), description="job inputs, artifacts, job records, embedded broker")
+    redis_url: str | None = Field(None, description="Redis for broker and results; unset = embedded default")
+    # Input limits: checked by the API before anything is stored or queued.
+    max_body_bytes: int = Field(32 * 2**20, description="largest accepted request body (HTTP 413 above)")
+    max_input_pixels: int = Field(4096 * 4096, description="largest accepted exemplar/constraint (413 above)")
+    max_output_pixels: int = Field(4096 * 4096, description="largest output width*height(*depth)")
+    max_sweep_runs: int = Field(64, description="largest parameter grid of one sweep")
+    # Worker: long CPU tasks, at-least-once delivery (DESIGN.md "Queue and storage").
+    soft_time_limit: int = Field(1800, description="seconds before the job is asked to stop (fails)")
+    hard_time_limit: int = Field(1860, description="seconds before the worker child is killed")
+    concurrency: int = Field(max(1, os.cpu_count() or 1), description="worker processes")
+    worker_nice: int = Field(5, description="niceness of worker children, keeps the API responsive")
+    max_attempts: int = Field(3, description="runs of one job (worker lost -> re-run) before it fails")
+    heartbeat_seconds: float = Field(1.0, description="how often a running job proves it is alive")
+    stale_seconds: float = Field(10.0, description="a run silent this long is dead (other machines)")
+    cancel_grace_seconds: float = Field(2.0, description="after this, a cancel terminates the worker child")
+    extra_methods: tuple[str, ...] = Field((), description="modules imported to register more methods")
+
+    @classmethod
+    def from_env(cls, environ: dict[str, str] | None = None, **overrides: Any) -> Settings:
+        """Build from ``TEXSYNTH_<NAME>`` variables (``TEXSYNTH_DATA_DIR``, ...) and ``REDIS_URL``."""
+        env = os.environ if environ is None else environ
+        values: dict[str, Any] = {}
+        for name in cls.model_fields:
+            raw = env.get(_ENV_PREFIX + name.upper())
+            if raw is not None and raw != "":
+                values[name] = (
+                    tuple(m for m in raw.split(",") if m.strip()) if name == "extra_methods" else raw
+                )
+        if env.get("REDIS_URL"):
+            values.setdefault("redis_url", env["REDIS_URL"])
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        settings = cls.model_validate(values)
+        return settings.model_copy(update={"data_dir": settings.data_dir.expanduser().resolve()})
+
+    def to_env(self) -> dict[str, str]:
+        """The environment that makes :meth:`from_env` rebuild these settings in a child process."""
+        env = {}
+        for name, value in self.model_dump().items():
+            if name == "redis_url":
+                if value:
+                    env["REDIS_URL"] = value
+                continue
+            if name == "extra_methods":
+                value = ",".join(value)
+            env[_ENV_PREFIX + name.upper()] = str(value)
+        return env
+
+    @property
+    def embedded(self) -> bool:
+        return not self.redis_url
+
+    @property
+    def jobs_dir(self) -> Path:
+        return self.data_dir / "jobs"
+
+    @property
+    def db_path(self) -> Path:
+        return self.data_dir / "jobs.sqlite"
+
+    @property
+    def broker_dir(self) -> Path:
+        return self.data_dir / "broker"
+
+    def ensure_dirs(self) -> None:
+        for folder in (
+            self.jobs_dir,
+            self.broker_dir / "queue",
+            self.broker_dir / "control",
+            self.broker_dir / "processed",
+        ):
+            folder.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,162 @@
+"""Run one job: claim it, synthesize with progress, write artifacts, commit - or record why not.
+
+This is the body of the Celery task, kept free of Celery so that it reads top to bottom. It is
+idempotent, the condition for at-least-once delivery (``acks_late``): a duplicate delivery of a job
+that is running or finished does nothing; a re-delivery after a crash takes the job over and writes
+a fresh set of artifacts into its own staging folder, committed only if it still owns the job.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import threading
+import time
+from typing import Any
+
+from synth.api import synthesize
+from synth.errors import Cancelled, SynthError
+from worker.artifacts import write_artifacts
+from worker.config import Settings
+from worker.imaging import decode_image, preview_png
+from worker.methods import methods
+from worker.store import JobStore, atomic_write_bytes
+
+__all__ = ["JobProgress", "run_job"]
+
+log = logging.getLogger(__name__)
+
+
+class JobProgress:
+    """The engine's progress callback for one run: records stage/fraction, previews, and cancels.
+
+    ``(stage, fraction)`` is the engine's protocol; a method may also pass ``preview=<float image>``
+    now and then, which becomes the job's small ``preview.png``. Writes are throttled; each write
+    also tells whether the run must stop (job cancelled, or taken over), and then this raises
+    :class:`synth.Cancelled` from inside the engine.
+    """
+
+    accepts_preview = True  # a method checks this before passing ``preview=``
+
+    def __init__(self, store: JobStore, job_id: str, token: str, min_interval: float = 0.2) -> None:
+        self.store, self.job_id, self.token = store, job_id, token
+        self.min_interval = min_interval
+        self._last_write = 0.0
+        self._last_preview = 0.0
+        self._last_stage = ""
+        self.stopped = False
+
+    def __call__(self, stage: str, fraction: float, preview: Any = None, **_: Any) -> None:
+        now = time.monotonic()
+        wrote_preview = False
+        if preview is not None and now - self._last_preview >= 1.0:
+            try:
+                atomic_write_bytes(self.store.job_dir(self.job_id) / "preview.png", preview_png(preview))
+                wrote_preview = True
+                self._last_preview = now
+            except (ValueError, TypeError) as exc:  # a malformed preview must not kill the run
+                log.warning("job %s: preview not written: %s", self.job_id, exc)
+        if stage == self._last_stage and now - self._last_write < self.min_interval and not wrote_preview:
+            return
+        self._last_write, self._last_stage = now, stage
+        if not self.store.progress(self.job_id, self.token, stage, fraction, preview=wrote_preview):
+            self.stopped = True
+            raise Cancelled(f"job {self.job_id} was cancelled")
+
+
+class _Heartbeat(threading.Thread):
+    """Proves the run is alive while the engine computes (also between progress calls)."""
+
+    def __init__(self, store: JobStore, job_id: str, token: str, interval: float) -> None:
+        super().__init__(name=f"heartbeat-{job_id}", daemon=True)
+        self.store, self.job_id, self.token, self.interval = store, job_id, token, interval
+        self.done = threading.Event()
+
+    def run(self) -> None:
+        while not self.done.wait(self.interval):
+            try:
+                if not self.store.heartbeat(self.job_id, self.token):
+                    return
+            except Exception:  # a busy database must not kill the run; the next beat retries
+                log.exception("heartbeat of job %s failed", self.job_id)
+
+
+def run_job(
+    store: JobStore, settings: Settings, job_id: str, *, soft_timeout: type[BaseException] = ()
+) -> dict:
+    """Run job ``job_id`` to its end; return small metadata (state, message) for the result backend.
+
+    ``soft_timeout`` is the exception the queue raises at the soft time limit (Celery's
+    ``SoftTimeLimitExceeded``), recorded as a failure with the limit in the message.
+    """
+    token, why = store.claim(job_id, os.getpid(), settings.stale_seconds)
+    if token is None:
+        log.info("job %s not run: %s", job_id, why)
+        return {"job": job_id, "state": "skipped", "message": why}
+    job = store.get(job_id)
+    assert job is not None
+    folder = store.job_dir(job_id)
+    staging = folder / f".run-{token}"
+    beat = _Heartbeat(store, job_id, token, settings.heartbeat_seconds)
+    beat.start()
+    progress = JobProgress(store, job_id, token)
+    try:
+        progress("loading inputs", 0.0)
+        manifest = json.loads((folder / "manifest.json").read_text())
+        exemplar = decode_image((folder / "inputs" / job.inputs["exemplar"]).read_bytes(), "exemplar")
+        constraint = None
+        if "constraint" in job.inputs:
+            constraint = decode_image(
+                (folder / "inputs" / job.inputs["constraint"]).read_bytes(), "constraint"
+            )
+        methods(settings)  # registers TEXSYNTH_EXTRA_METHODS in this process
+        params = dict(job.params)
+        size = tuple(params.pop(k) for k in ("depth", "height", "width") if k in params) or None
+        start = time.time()
+        result = synthesize(
+            job.method,
+            exemplar,
+            size=size,
+            params=params,
+            seed=job.seed,
+            progress=progress,
+            constraint=constraint,
+        )
+        progress("writing artifacts", 1.0)
+        manifest.update(attempt=job.attempts, started=start, finished=time.time())
+        names, metrics = write_artifacts(staging, result, exemplar, constraint, manifest)
+        timings = {k: float(v) for k, v in result.timings.items()}
+        if store.commit_success(job_id, token, staging, names, timings, metrics):
+            return {"job": job_id, "state": "succeeded"}
+        return _stopped(store, job_id, token)
+    except Cancelled:
+        return _stopped(store, job_id, token)
+    except SynthError as exc:
+        store.finish(job_id, token, "failed", str(exc))
+        return {"job": job_id, "state": "failed", "message": str(exc)}
+    except soft_timeout:
+        message = (
+            f"stopped after the time limit of {settings.soft_time_limit} s; "
+            "try a smaller output size or fewer pyramid levels"
+        )
+        store.finish(job_id, token, "failed", message)
+        return {"job": job_id, "state": "failed", "message": message}
+    except Exception as exc:
+        log.exception("job %s crashed", job_id)
+        message = f"internal error in the worker: {type(exc).__name__}: {exc}"
+        store.finish(job_id, token, "failed", message)
+        return {"job": job_id, "state": "failed", "message": message}
+    finally:
+        beat.done.set()
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _stopped(store: JobStore, job_id: str, token: str) -> dict:
+    """The run had to stop: record ``cancelled`` if the job was cancelled, else leave it to its new run."""
+    job = store.get(job_id)
+    if job is not None and job.cancel_requested and job.run_token == token:
+        store.finish(job_id, token, "cancelled", "cancelled by request")
+        return {"job": job_id, "state": "cancelled"}
+    return {"job": job_id, "state": "superseded"}
