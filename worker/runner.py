@@ -17,8 +17,8 @@ import time
 from typing import Any
 
 from synth.api import synthesize
+from synth.artifacts import write_artifacts
 from synth.errors import Cancelled, SynthError
-from worker.artifacts import write_artifacts
 from worker.config import Settings
 from worker.imaging import decode_image, preview_png
 from worker.methods import methods
