@@ -58,12 +58,16 @@ SearchKind = Literal["exact", "kcoherence"]
 #: The same-level neighbours whose sources propose k-coherent candidates (radius in pixels).
 _CANDIDATE_RADIUS = 1
 #: Dimensions kept by the PCA that precedes the k-nearest-neighbour tree of k-coherence.
-_PCA_DIMS = 12
+_PCA_DIMS = 8
 #: Largest neighbourhood used to find the k most similar exemplar positions (cost grows as size^2).
-_KSET_MAX_SIZE = 9
+#: Rows of the sample that estimates the principal axes (the axes, not the projection, are sampled).
+_PCA_SAMPLE = 4096
+_KSET_MAX_SIZE = 7
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
+#: A coarse level's neighbourhood side is at most its shorter side divided by this.
+_COARSE_DIVISOR = 4
 
 
 @dataclass(frozen=True)
@@ -153,14 +157,17 @@ def _typical_distance(feats: np.ndarray, code: int, alpha: float, rng: np.random
 
 def level_neighbourhood_size(size: int, level_shape: tuple[int, int]) -> int:
     """The neighbourhood side used at a coarse pyramid level: ``size``, shrunk (odd, >= 3) to at
-    most half the level's shorter side.
+    most a quarter of the level's shorter side.
 
     Departure, and why: Akl 2014's Table 1 asks for 13x13 neighbourhoods on 4 levels of a 128x128
     exemplar; its coarsest level is 16x16, where a 13x13 neighbourhood fits at only 4x4 positions and
-    the synthesis degenerates into copying one of 16 tensors. Coarse levels carry coarse structure,
-    so a smaller neighbourhood there loses little and keeps hundreds of candidates.
+    the synthesis degenerates into copying one of 16 tensors. Worse, whatever lies within a
+    neighbourhood radius of the exemplar's border can never be copied, and at level L that band is
+    ``2^L`` times wider in the exemplar: laminae bent near the border disappeared from the output's
+    orientation distribution. Coarse levels carry coarse structure, so a smaller neighbourhood there
+    loses little, keeps the border band under about 12 exemplar pixels and keeps many candidates.
     """
-    cap = max(3, min(level_shape) // 2)
+    cap = max(3, int(min(level_shape) // _COARSE_DIVISOR))
     cap -= 1 - cap % 2
     return int(min(size, cap))
 
@@ -201,7 +208,7 @@ def _k_coherence_sets(
 ) -> np.ndarray:
     """For every valid exemplar position, its ``k`` most similar other valid positions.
 
-    Neighbourhoods (square, at most 9x9) of the weighted embeddings are projected on their first
+    Neighbourhoods (square, at most 7x7) of the weighted embeddings are projected on their first
     principal components and queried in a k-d tree; ``-1`` marks positions without a set.
     """
     h, w = embeds[0][0].shape[:2]
@@ -215,8 +222,9 @@ def _k_coherence_sets(
     vectors = vectors[inside].astype(np.float64)
     vectors -= vectors.mean(axis=0)
     dims = min(_PCA_DIMS, vectors.shape[1], vectors.shape[0])
-    # Principal axes from the covariance (small: the neighbourhood length squared).
-    _, eigvec = np.linalg.eigh(vectors.T @ vectors)
+    # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
+    sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
+    _, eigvec = np.linalg.eigh(sample.T @ sample)
     projected = vectors @ eigvec[:, ::-1][:, :dims]
     kk = min(k + 1, len(projected))
     _, idx = cKDTree(projected).query(projected, k=kk)
@@ -298,6 +306,7 @@ def synthesize_source_map(
     span: tuple[float, float] = (0.0, 1.0),
     reference: bool = False,
     ex_masks: Sequence[np.ndarray] | None = None,
+    on_level_done: Callable[[int, dict], None] | None = None,
 ) -> tuple[list[np.ndarray], SynthesisReport]:
     """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
 
@@ -321,6 +330,8 @@ def synthesize_source_map(
         Exemplar positions that may be copied, per level (besides the neighbourhood-fits rectangle).
         Masked positions' neighbourhoods must lie inside the array; the caller guarantees they are
         meaningful (e.g. inside a rotated copy of the exemplar).
+    on_level_done : callable (level, state), optional
+        Receives each level's final kernel state (benchmarks use it to compare searches).
     """
     levels = settings.levels
     if len(ex_levels) != levels or len(out_shapes) != levels:
@@ -439,4 +450,6 @@ def synthesize_source_map(
             report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state["best_out"]))
         done_work += work[level]
         srcs[level] = src
+        if on_level_done is not None:
+            on_level_done(level, state)
     return [s for s in srcs if s is not None], SynthesisReport(report)

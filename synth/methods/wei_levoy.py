@@ -32,6 +32,9 @@ class WeiLevoyParams(NeighbourhoodParams):
 
     levels: int = Field(3, ge=1, le=6, description="Gaussian pyramid levels of exemplar and output.")
     iterations: int = Field(2, ge=1, le=10, description="Passes per pyramid level.")
+    # Pixel neighbourhoods need more k-coherent candidates than smooth tensor fields to match exact search
+    # within 5% (docs/benchmarks.md, "Fast search against exact search").
+    k: int = Field(10, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
 
 
 def run_wei_levoy(
