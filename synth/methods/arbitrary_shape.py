@@ -1,0 +1,404 @@
+"""Arbitrary-shape synthesis: the exemplar's texture dressed on a constraint image's structure.
+
+Akl, Yaacoub, Donias, Da Costa, Germain (GRETSI), in three steps:
+
+1. **Constraint field** (section 2.1, eqs 1-3): the orientation field ``O_con`` of the constraint
+   image ``I_con`` (eq 1) turns every tensor of the exemplar's field ``S_en`` by the angle at the
+   same position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`synth.tensor.rotate_tensors`).
+2. **Rotated dictionary** ``D_M`` (section 2.2, eq 4): intensity + tensor neighbourhoods of the
+   exemplar turned by ``2 pi m / M`` (the paper's step: 5 degrees, ``M = 72``), each copy with its
+   own tensor field, only neighbourhoods fully inside a copy (:mod:`synth.rotation`).
+3. **Synthesis** (section 3, eqs 5-6): for every output position the neighbourhood made of the
+   output's intensities and ``S_con``'s tensors is matched in ``D_M`` with
+   ``W SSD + (1 - W) STD`` (ED metric in the paper) and the best match's pixel is copied; causal
+   neighbourhood with a lexicographic scan (or square with a random walk), optional Gaussian
+   pyramids whose neighbourhoods include the parent level. This is the shared engine of
+   :mod:`synth.pixel_synthesis` run on the canvas of ``D_M``, guided by ``S_con``.
+
+Choices the paper leaves open, and departures (why)
+---------------------------------------------------
+- ``rotation_reference='dominant'`` (default) turns ``S_en`` by ``O_con - O_dom``, ``O_dom`` the
+  exemplar's dominant orientation, so that the output's structures run along the constraint's;
+  ``'absolute'`` turns by ``O_con`` (the paper, literally: right only when ``O_dom = 0``).
+- Sizes: the paper assumes ``I_en`` and ``I_con`` of the same size and proposes, otherwise, to
+  synthesize an exemplar-like texture of the constraint's size first. That is done with
+  tensor-constrained synthesis (:func:`synth.methods.tensor_constrained.run_tensor_constrained`);
+  its texture's tensor field is ``S_en`` and its source map says which exemplar position each
+  output position stands for.
+- ``restrict_rotations`` (the paper's own perspective, section 4): the search looks only at the
+  copies turned by the local angle. The search is the k-coherence search of the shared kernel, whose
+  candidates are the output neighbours' sources (Ashikhmin coherence) plus a *hint* per position;
+  the hint is the exemplar position ``S_con`` was built from, in a copy turned by an angle within
+  ``rotation_window`` of the local angle (:func:`synth.rotation.rotation_candidates`), and no random
+  candidates are drawn (they would fall anywhere in ``D_M``). Neighbours' sources may still lie in
+  another copy where the angle turns fast; ``stats['in_window_fraction']`` reports the share of
+  output pixels copied from inside the window. Without the restriction there are no hints and
+  ``random_candidates`` random positions of the whole ``D_M`` are tried per pixel (the paper's
+  global search, approximated by k-coherence).
+- k-coherence sets over ``D_M`` cost memory in proportion to ``M`` times the exemplar's area times
+  the neighbourhood: ``k`` defaults to 0 here and is refused when the sets would not fit
+  (:data:`K_SET_MEMORY_LIMIT`).
+- The naive variant (the paper's ``I_sor/O``) guides by ``I_con``'s own tensors:
+  ``constraint_tensors='constraint'``.
+- A featureless constraint (no gradient anywhere) has no orientation to follow: :class:`InvalidInput`.
+  Where only part of it is flat, ``O_con`` there is 0, so the exemplar keeps its own orientation.
+- ``W`` is applied to normalised parts, as in :mod:`synth.pixel_synthesis` (each part divided by its
+  typical value), so ``W = 0.5`` weighs intensities and tensors equally; the paper gives no value,
+  the default 0.1 is the measured best (docs/arbitrary-shape.md).
+
+The measure of "following the constraint" is :func:`orientation_agreement`.
+
+References
+----------
+A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Synthèse de texture contrainte par champ
+de structure arbitraire", GRETSI (eqs 1-6, figures 1-4).
+A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis of
+directional textures for virtual material design", IEEE ICIP 2014.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+from skimage.transform import resize
+
+from synth.api import MethodSpec, Progress, Result, register
+from synth.errors import InvalidInput, InvalidParameter
+from synth.io import LUMA_WEIGHTS
+from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
+from synth.pixel_synthesis import Guidance, level_neighbourhood_size, synthesize_source_map, tensor_features
+from synth.pyramid import gaussian_pyramid, level_shapes
+from synth.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
+from synth.tensor import (
+    Metric,
+    coherence,
+    dominant_orientation,
+    orientation,
+    rotate_tensors,
+    structure_tensor,
+    wrap_angle,
+)
+
+__all__ = [
+    "K_SET_MEMORY_LIMIT",
+    "ArbitraryShapeParams",
+    "constraint_field",
+    "orientation_agreement",
+    "run_arbitrary_shape",
+]
+
+#: Largest estimated size (bytes) of the k-coherence set computation over ``D_M``.
+K_SET_MEMORY_LIMIT = 1_500_000_000
+#: A constraint whose largest tensor trace is below this (images in [0, 1]) has no structure at all.
+FLAT_TRACE = 1e-8
+#: Scale of the orientation analysis of :func:`orientation_agreement` (pixels): a window about one
+#: fringe period wide (the generated constraints' period is 8 px; HRTEM fringes 3-6 px).
+AGREEMENT_SIGMA_W = 4.0
+
+
+class ArbitraryShapeParams(NeighbourhoodParams):
+    """Parameters of arbitrary-shape synthesis; defaults = the GRETSI paper's settings (section 4)."""
+
+    angular_step: float = Field(
+        5.0, gt=0.0, le=180.0, description="Degrees between the rotated copies of D_M (M = 360 / step)."
+    )
+    levels: int = Field(1, ge=1, le=4, description="Gaussian pyramid levels (the paper: 1 or 2).")
+    iterations: int = Field(2, ge=1, le=10, description="Passes per pyramid level (the paper: 2).")
+    # The paper gives no value of W; 0.1 follows the constraint best at an unchanged grey-level
+    # histogram on the generated constraints (docs/arbitrary-shape.md, measured for 0.5, 0.3, 0.1).
+    w: float = Field(
+        0.1, ge=0.0, le=1.0, description="W of eq 5: weight of the intensity SSD against the tensor STD."
+    )
+    metric: Metric = Field("ED", description="Tensor dissimilarity: ED (the paper), SO, FN or LE.")
+    alpha: float = Field(
+        0.5, ge=0.0, le=1.0, description="SO metric: weight of orientation against coherence."
+    )
+    rotation_reference: Literal["dominant", "absolute", "local"] = Field(
+        "dominant",
+        description="'dominant': turn the exemplar's tensors by O_con minus the exemplar's dominant "
+        "orientation (structures follow the constraint, keeping the exemplar's own orientation "
+        "spread); 'absolute': by O_con (the paper, literally); 'local': by O_con minus each tensor's "
+        "own orientation (S_con's orientation is O_con exactly; for weakly oriented exemplars).",
+    )
+    restrict_rotations: bool = Field(
+        True,
+        description="Search only the copies turned by the local constraint angle (within rotation_window).",
+    )
+    rotation_window: float = Field(
+        2.5,
+        ge=0.0,
+        le=90.0,
+        description="Half-width (degrees) of the window of copies searched with restrict_rotations "
+        "(at least the nearest copy).",
+    )
+    constraint_tensors: Literal["rotated-exemplar", "constraint"] = Field(
+        "rotated-exemplar",
+        description="'rotated-exemplar': S_con, the exemplar's tensors turned by O_con (the method); "
+        "'constraint': the constraint image's own tensors (the paper's naive I_sor/O, for comparison).",
+    )
+    sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
+    sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
+    k: int = Field(
+        0,
+        ge=0,
+        le=32,
+        description="k-coherence sets over D_M (memory grows with M); 0: neighbours' sources and hints only.",
+    )
+
+    @model_validator(mode="after")
+    def _whole_turn(self) -> ArbitraryShapeParams:
+        m = 360.0 / self.angular_step
+        if abs(m - round(m)) > 1e-6:
+            raise ValueError("angular_step must divide 360 degrees (5 gives the paper's 72 rotations)")
+        if self.restrict_rotations and self.search == "exact":
+            raise ValueError(
+                "restrict_rotations needs search='kcoherence' (the exact search visits all of D_M)"
+            )
+        return self
+
+    @property
+    def n_rotations(self) -> int:
+        return round(360.0 / self.angular_step)
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim == 3:
+        img = (img @ np.asarray(LUMA_WEIGHTS, dtype=np.float32)).astype(np.float32)
+    return img
+
+
+def orientation_agreement(
+    output: np.ndarray,
+    constraint: np.ndarray,
+    *,
+    sigma_d: float = 1.0,
+    sigma_w: float = AGREEMENT_SIGMA_W,
+) -> float:
+    """How well ``output``'s structures follow ``constraint``'s: weighted mean ``|sin(O_out - O_con)|``.
+
+    Both images' structure orientations are measured (:func:`synth.tensor.structure_tensor`, scales
+    ``sigma_d``, ``sigma_w``); each pixel counts by the product of the two coherences, so that only
+    places where both images have an orientation vote. 0 is perfect agreement; independent random
+    orientations give ``2 / pi = 0.64``; perpendicular structures give 1. RGB images count by their
+    luma.
+
+    Examples
+    --------
+    >>> from synth.patterns import grating
+    >>> a = grating((64, 64), 0.3, noise=0.1)
+    >>> round(orientation_agreement(a, grating((64, 64), 0.3)), 2)
+    0.0
+    >>> round(orientation_agreement(a, grating((64, 64), 0.3 + np.pi / 2)), 2)
+    1.0
+    """
+    out, con = _grey(output), _grey(constraint)
+    if out.shape != con.shape or out.ndim != 2:
+        raise InvalidInput(
+            "output", f"shape {output.shape} does not match the constraint's {constraint.shape}"
+        )
+    s_out = structure_tensor(out, sigma_d, sigma_w)
+    s_con = structure_tensor(con, sigma_d, sigma_w)
+    weight = coherence(s_out).astype(np.float64) * coherence(s_con)
+    total = weight.sum()
+    if total <= 0:
+        raise InvalidInput("constraint", "no pixel where both images have an orientation")
+    diff = np.abs(np.sin(orientation(s_out).astype(np.float64) - orientation(s_con)))
+    return float((weight * diff).sum() / total)
+
+
+def constraint_field(
+    constraint: np.ndarray, shape: tuple[int, int], sigma_d: float, sigma_w: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The constraint image at ``shape`` (grey) and its tensor field; a flat image is an error."""
+    con = _grey(constraint)
+    if con.ndim != 2:
+        raise InvalidInput("constraint", f"shape {constraint.shape} is neither (H, W) grey nor (H, W, 3) RGB")
+    if not np.isfinite(con).all():
+        raise InvalidInput("constraint", "contains NaN or infinite values")
+    if con.shape != tuple(shape):
+        con = resize(con, shape, order=1, anti_aliasing=True, preserve_range=True).astype(np.float32)
+    s_icon = structure_tensor(con, sigma_d, sigma_w)
+    if float((s_icon[..., 0] + s_icon[..., 2]).max()) < FLAT_TRACE:
+        raise InvalidInput(
+            "constraint",
+            "is featureless (flat): it has no structure orientation for the texture to follow; "
+            "give an image with fringes, edges or any oriented content",
+        )
+    return con, s_icon
+
+
+def _identity_sources(shape: tuple[int, int]) -> np.ndarray:
+    return np.stack(np.mgrid[0 : shape[0], 0 : shape[1]], axis=-1).astype(np.int64)
+
+
+def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``S_en``'s texture at the output size and, per position, the exemplar position it shows."""
+    if tuple(exemplar.shape[:2]) == tuple(size):
+        return exemplar, _identity_sources(size), {}
+    sub = TensorConstrainedParams(
+        neighbourhood_size=params.neighbourhood_size,
+        neighbourhood=params.neighbourhood,
+        scan=params.scan,
+        parent_size=params.parent_size,
+        search=params.search,
+        sigma_d=params.sigma_d,
+        sigma_w=params.sigma_w,
+    )
+
+    def sub_progress(stage: str, fraction: float) -> None:
+        report(f"exemplar-like texture, {stage}", 0.4 * fraction)
+
+    res = run_tensor_constrained(exemplar, size=size, params=sub, seed=seed, progress=sub_progress)
+    return res.image, res.extras["source_map"].astype(np.int64), res.stats
+
+
+def _check_k_memory(params: ArbitraryShapeParams, dictionary: RotatedDictionary, channels: int) -> None:
+    if params.k == 0 or params.search == "exact":
+        return
+    ks = min(params.neighbourhood_size, 9)
+    need = int(dictionary.area.sum()) * ks * ks * (channels + 3) * 12
+    if need > K_SET_MEMORY_LIMIT:
+        raise InvalidParameter(
+            "k",
+            params.k,
+            f"k-coherence sets over the {dictionary.n_rotations} rotated copies would need about "
+            f"{need / 1e9:.1f} GB; use k=0, a larger angular_step or a smaller exemplar",
+        )
+
+
+def _hint_levels(hint: np.ndarray, levels: int) -> list[np.ndarray]:
+    hints = [np.ascontiguousarray(hint)]
+    for _ in range(levels - 1):
+        hints.append(np.ascontiguousarray(hints[-1][::2, ::2] // 2))
+    return hints
+
+
+def run_arbitrary_shape(
+    exemplar: np.ndarray,
+    *,
+    size: tuple[int, int],
+    params: ArbitraryShapeParams,
+    seed: int,
+    progress: Progress,
+    constraint: np.ndarray | None = None,
+) -> Result:
+    if constraint is None:
+        raise InvalidInput("constraint", "arbitrary-shape synthesis needs a constraint image")
+    report = checked_progress(progress)
+    t0 = time.perf_counter()
+    size = (int(size[0]), int(size[1]))
+    con, s_icon = constraint_field(constraint, size, params.sigma_d, params.sigma_w)
+    o_con = orientation(s_icon)
+    s_ex = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
+    o_dom = dominant_orientation(s_ex)
+
+    # Step 1: S_con, the exemplar-like texture's tensors turned by the constraint's angle (eqs 2-3).
+    base, base_src, base_stats = _base_texture(exemplar, size, params, seed, report)
+    t1 = time.perf_counter()
+    s_en = s_ex if base is exemplar else structure_tensor(base, params.sigma_d, params.sigma_w)
+    reference = {"dominant": o_dom, "absolute": 0.0, "local": None}[params.rotation_reference]
+    reference = orientation(s_en).astype(np.float64) if reference is None else reference
+    delta = wrap_angle(o_con.astype(np.float64) - reference)
+    s_con = rotate_tensors(s_en, delta).astype(np.float32)
+    guide = s_con if params.constraint_tensors == "rotated-exemplar" else s_icon.astype(np.float32)
+
+    # Step 2: the rotated dictionary D_M.
+    dictionary = build_rotated_dictionary(exemplar, params.n_rotations, tensors=s_ex)
+    features = as_features(dictionary.image)
+    _check_k_memory(params, dictionary, features.shape[2])
+    levels = params.levels
+    ex_levels = gaussian_pyramid(features, levels)
+    shapes = [lv.shape[:2] for lv in ex_levels]
+    radii = [
+        (params.neighbourhood_size if lvl == 0 else level_neighbourhood_size(params.neighbourhood_size, sh))
+        // 2
+        for lvl, sh in enumerate(shapes)
+    ]
+    parent_radii = [level_neighbourhood_size(params.parent_size, sh) // 2 for sh in shapes[1:]] + [0]
+    masks = dictionary.level_masks(radii, parent_radii)
+    t2 = time.perf_counter()
+
+    # Step 3: synthesis in D_M guided by S_con (eq 5), hints into the copies at the local angle.
+    rng = np.random.default_rng(seed)
+    window = np.radians(params.rotation_window)
+    hint = None
+    if params.restrict_rotations:
+        m_hint = rotation_candidates(delta, params.n_rotations, window, rng)
+        hint = _hint_levels(dictionary.to_canvas(base_src, m_hint), levels)
+    gui_code = tensor_features(guide, params.metric)[1]
+    guidance = Guidance(
+        out_levels=[tensor_features(t, params.metric)[0] for t in gaussian_pyramid(guide, levels)],
+        ex_levels=[
+            tensor_features(t, params.metric)[0] for t in gaussian_pyramid(dictionary.tensors, levels)
+        ],
+        metric=gui_code,
+        weight=1.0 - params.w,
+        size=params.neighbourhood_size,
+        hint_levels=hint,
+    )
+    settings = params.search_settings(
+        size=params.neighbourhood_size, levels=levels, iterations=params.iterations, alpha=params.alpha
+    )
+    if params.restrict_rotations:  # random candidates would land anywhere in D_M
+        settings = type(settings)(**{**settings.__dict__, "random_candidates": 0})
+    srcs, synthesis = synthesize_source_map(
+        ex_levels,
+        level_shapes(size, levels),
+        settings,
+        p=params.w,
+        guidance=guidance,
+        seed=seed + 2,
+        progress=report,
+        stage="texture",
+        span=(0.4 if base is not exemplar else 0.0, 1.0),
+        ex_masks=masks,
+    )
+    src = srcs[0]
+    image = dictionary.image[src[..., 0], src[..., 1]]
+    image = image[..., 0] if exemplar.ndim == 2 else image
+    t3 = time.perf_counter()
+    used = dictionary.angles[dictionary.tile_index[src[..., 0], src[..., 1]]]
+    half = max(window, np.pi / params.n_rotations)
+    in_window = np.abs(wrap_angle(used - delta)) <= half + 1e-9
+    report("done", 1.0)
+    return Result(
+        method="arbitrary-shape",
+        image=np.ascontiguousarray(image, dtype=np.float32),
+        params=params.model_dump(),
+        seed=seed,
+        timings={"exemplar_like": t1 - t0, "dictionary": t2 - t1, "texture": t3 - t2},
+        tensor_field=guide,
+        extras={
+            "constraint_orientation": o_con.astype(np.float32),
+            "constraint_coherence": coherence(s_icon).astype(np.float32),
+            "orientation": orientation(guide).astype(np.float32),
+            "coherence": coherence(guide).astype(np.float32),
+            "source_rotation": used.astype(np.float32),
+            "source_map": src.astype(np.int32),
+        },
+        stats={
+            "n_rotations": params.n_rotations,
+            "dominant_orientation": float(o_dom),
+            "in_window_fraction": float(in_window.mean()),
+            "orientation_agreement": orientation_agreement(image, con),
+            "mean_best_distance": synthesis.mean_best_distance,
+            "exemplar_like": base_stats,
+        },
+    )
+
+
+SPEC = register(
+    MethodSpec(
+        name="arbitrary-shape",
+        summary="The exemplar's texture following any constraint image's structure (Akl et al., GRETSI).",
+        params_model=ArbitraryShapeParams,
+        run=run_arbitrary_shape,
+        constraint="required",
+        paper="Akl, Yaacoub, Donias, Da Costa, Germain, GRETSI",
+    )
+)
