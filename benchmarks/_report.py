@@ -15,6 +15,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+_BESIDE = Path(__file__).resolve().parents[2] / "shared" / "data"
+#: The project's shared test images: ``shared/data`` beside the checkout, else the workplace's.
+DATA = _BESIDE if _BESIDE.is_dir() else Path("/work/shared/data")
 _HEADER = (
     "# Benchmarks\n\nMeasured by `make bench` (or `python -m benchmarks.<name>`); "
     "every figure is a median of several runs.\n"

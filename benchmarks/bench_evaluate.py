@@ -12,16 +12,15 @@ information: the pair without fringe analysis, the plots, and a 64^3 volume (mul
 from __future__ import annotations
 
 import tempfile
-from pathlib import Path
 
 import numpy as np
 
-from benchmarks._report import median_time, write_section
+from benchmarks._report import DATA, median_time, write_section
 from synth.evaluate import evaluate_pair, evaluate_volume
 from synth.io import load_image
 from synth.plots import write_plots
 
-SOOT = Path("/work/shared/data/hrtem-soot-256.png")
+SOOT = DATA / "hrtem-soot-256.png"
 RUNS = 5
 TARGET_SECONDS = 1.0
 PIXEL_SIZE = 1 / 18  # nm per pixel, hrtem-soot images (data/README.md)

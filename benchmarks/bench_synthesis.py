@@ -21,12 +21,10 @@ import numpy as np
 
 import synth.methods.tensor_constrained as tc
 import synth.methods.wei_levoy as wl
-from benchmarks._report import median_time, write_section
+from benchmarks._report import DATA, median_time, write_section
 from synth.api import synthesize
 from synth.io import load_image
 from synth.kernels.pixel_search import synthesize_chunk
-
-DATA = "/work/shared/data"
 
 # Akl 2014, Table 1: (figure, exemplar, output side, params)
 TABLE1: list[tuple[str, str, int, dict[str, Any]]] = [

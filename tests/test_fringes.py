@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,8 +10,9 @@ from skimage.draw import circle_perimeter, line
 
 from synth.errors import InvalidInput, InvalidParameter
 from synth.fringes import TORTUOUS, extract_fringes, fringe_band_pass, measure_skeleton
+from tests.paths import SHARED_DATA
 
-SOOT = Path("/work/shared/data/hrtem-soot-256.png")
+SOOT = SHARED_DATA / "hrtem-soot-256.png"
 
 
 def _lines(shape: tuple[int, int], *segments: tuple[int, int, int, int]) -> np.ndarray:

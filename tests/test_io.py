@@ -24,8 +24,9 @@ from synth.io import (
     save_volume,
     to_uint,
 )
+from tests.paths import SHARED_DATA
 
-DATA = Path("/work/shared/data")
+DATA = SHARED_DATA
 H, W = 24, 32  # small, but above MIN_SIDE and well within the aspect-ratio limit
 
 

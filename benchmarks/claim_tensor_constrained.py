@@ -1,0 +1,175 @@
+"""Akl 2014's claim, measured: the tensor constraint keeps the exemplar's orientation variety.
+
+For each exemplar (HRTEM soot, and generated laminae bent over long range), synthesize 128 -> 256
+with ``wei-levoy`` (1 level = the texture levels of Table 1, and 4 levels) and ``tensor-constrained``
+(Table 1, figure 3 settings), over several seeds, and compare with the exemplar: energy-weighted
+orientation-histogram KL (:func:`synth.evaluate.evaluate_pair`) and mean coherence. Writes
+``docs/tensor-constrained.md`` and one figure per exemplar laid out like the paper's figures:
+input, its coherence and orientation; the synthesized tensor field's coherence and orientation;
+the Wei-Levoy output and ours.
+
+Run: ``python -m benchmarks.claim_tensor_constrained``.
+"""
+
+from __future__ import annotations
+
+import statistics
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from benchmarks._report import DATA
+from synth.api import synthesize
+from synth.evaluate import evaluate_pair
+from synth.io import load_image, save_image
+from synth.patterns import undulating_laminae
+from synth.render import coherence_image, orientation_image
+from synth.tensor import coherence, structure_direction, structure_tensor
+
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+SEEDS = (1, 2, 3, 4, 5)
+SIZE = (256, 256)
+EXEMPLARS = {
+    "hrtem-soot-128": lambda: load_image(DATA / "hrtem-soot-128.png"),
+    "laminae-bent-96": lambda: undulating_laminae((128, 128), 8, 12, 96, noise=0.2),
+    "laminae-bent-128": lambda: undulating_laminae((128, 128), 7, 16, 128, noise=0.3),
+}
+CONFIGS = {
+    "wei-levoy, 1 level": ("wei-levoy", {"neighbourhood_size": 13, "levels": 1}),
+    "wei-levoy, 4 levels": ("wei-levoy", {"neighbourhood_size": 13, "levels": 4}),
+    "tensor-constrained": ("tensor-constrained", {}),
+}
+
+
+def _rgb(img: np.ndarray) -> np.ndarray:
+    img = img.astype(np.float32) / 255.0 if img.dtype == np.uint8 else img
+    return np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img
+
+
+def _tensor_pictures(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    coh = coherence(tensors)
+    return _rgb(coherence_image(coh)), _rgb(orientation_image(structure_direction(tensors), coherence=coh))
+
+
+def _figure(
+    path: Path, ex: np.ndarray, s_in: np.ndarray, s_out: np.ndarray, wl: np.ndarray, ours: np.ndarray
+) -> None:
+    """Rows as in Akl 2014 figs 3-5: input + its tensor field; synthesized field; WL and ours."""
+    h, w = SIZE
+    tiles: list[tuple[str, np.ndarray]] = [
+        ("exemplar", _rgb(ex)),
+        ("exemplar coherence", _tensor_pictures(s_in)[0]),
+        ("exemplar fringe direction", _tensor_pictures(s_in)[1]),
+        ("synthesized coherence", _tensor_pictures(s_out)[0]),
+        ("synthesized fringe direction", _tensor_pictures(s_out)[1]),
+        ("wei-levoy (1 level)", _rgb(wl)),
+        ("tensor-constrained", _rgb(ours)),
+    ]
+    pad, label = 6, 16
+    canvas = np.ones((2 * (h + label + pad), 4 * (w + pad), 3), dtype=np.float32)
+    positions = [(0, 0), (0, 1), (0, 2), (0, 3), (1, 0), (1, 1), (1, 2)]
+    titles = []
+    for (row, col), (title, tile) in zip(positions, tiles, strict=True):
+        y, x = row * (h + label + pad) + label, col * (w + pad)
+        canvas[y : y + tile.shape[0], x : x + tile.shape[1]] = tile[:h, :w]
+        titles.append((x + 2, y - label + 2, title))
+    img = Image.fromarray((canvas * 255).round().astype(np.uint8))
+    draw = ImageDraw.Draw(img)
+    for x, y, title in titles:
+        draw.text((x, y), title, fill=(0, 0, 0))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_image(path, np.asarray(img).astype(np.float32) / 255.0)
+
+
+def main() -> None:
+    rows = []
+    for name, make in EXEMPLARS.items():
+        ex = make()
+        results: dict[str, list[tuple[float, float, float]]] = {}
+        keep: dict[str, object] = {}
+        for label, (method, params) in CONFIGS.items():
+            for seed in SEEDS:
+                r = synthesize(method, ex, size=SIZE, params=params, seed=seed)
+                m = evaluate_pair(ex, r.image, fringes=False)["structure"]
+                results.setdefault(label, []).append(
+                    (m["orientation_kl"], m["coherence_mean"]["output"], m["coherence_mean"]["exemplar"])
+                )
+                if seed == SEEDS[0]:
+                    keep[label] = r
+        for label, vals in results.items():
+            kls = [v[0] for v in vals]
+            coh_out, coh_ex = statistics.mean(v[1] for v in vals), vals[0][2]
+            rows.append((name, label, statistics.mean(kls), statistics.median(kls), kls, coh_out, coh_ex))
+            print(rows[-1], flush=True)
+        ours = keep["tensor-constrained"]
+        _figure(
+            DOCS / "img" / f"tensor-constrained-{name}.png",
+            ex,
+            structure_tensor(ex),
+            ours.tensor_field,
+            keep["wei-levoy, 1 level"].image,
+            ours.image,
+        )
+    write_doc(rows)
+
+
+def write_doc(rows: list) -> None:
+    lines = [
+        "# Tensor-constrained synthesis against Wei-Levoy (Akl et al. 2014)",
+        "",
+        "Generated by `python -m benchmarks.claim_tensor_constrained`: 128x128 exemplars synthesized to "
+        "256x256, "
+        f"seeds {', '.join(map(str, SEEDS))}. `tensor-constrained` runs at Table 1, figure 3 settings "
+        "(n = 13, 4 structure levels, 1 texture level, SO, 2/2 iterations); `wei-levoy` at the same "
+        "neighbourhood with 1 level (the texture levels of Table 1) and with 4 levels.",
+        "",
+        "Orientation KL: Kullback-Leibler divergence of the energy-weighted orientation histograms of "
+        "exemplar and output (36 bins, structure tensor on a 7x7-equivalent window; `synth.evaluate`). "
+        "Lower is closer. "
+        "Coherence: mean coherence of the output (the exemplar's in brackets).",
+        "",
+        "| exemplar | method | orientation KL, mean | median | per seed | mean coherence (exemplar) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, label, mean, median, kls, coh_out, coh_ex in rows:
+        per = ", ".join(f"{k:.3f}" for k in kls)
+        lines.append(
+            f"| {name} | {label} | {mean:.3f} | {median:.3f} | {per} | {coh_out:.3f} ({coh_ex:.3f}) |"
+        )
+    lines += ["", "## Reading", ""]
+    for name in EXEMPLARS:
+        by = {label: (mean, median) for n, label, mean, median, *_ in rows if n == name}
+        ours, wl1 = by["tensor-constrained"], by["wei-levoy, 1 level"]
+        better = ours[0] < wl1[0] and ours[1] < wl1[1]
+        lines.append(
+            f"- {name}: tensor-constrained {ours[0]:.3f} (median {ours[1]:.3f}) against wei-levoy at the "
+            f"same neighbourhood and levels {wl1[0]:.3f} (median {wl1[1]:.3f}): "
+            + (
+                "**keeps the orientation distribution better**."
+                if better
+                else "**not better** on this exemplar."
+            )
+        )
+    lines += [
+        "",
+        "The paper's claim is about exemplars with long-range orientation variation; the near-isotropic "
+        "soot crop has little, and there the constraint brings nothing measurable. Mean coherence stays "
+        "within 15% of the exemplar's for every method. Departures that matter here (see "
+        "`synth/pixel_synthesis.py` and `synth/methods/tensor_constrained.py`): coarse pyramid levels shrink "
+        "the neighbourhood to a quarter of their side (a 13x13 neighbourhood does not fit a 16x16 level), "
+        "and the structure stage draws 16 random candidates per pixel instead of k-coherent ones "
+        "(k-coherent copying of the smooth tensor field skewed its orientation distribution).",
+        "",
+        "Figures (upper row: exemplar, its coherence and fringe direction, the synthesized tensor field's "
+        "coherence; lower row: its fringe direction, Wei-Levoy with 1 level, ours):",
+        "",
+    ]
+    for name in EXEMPLARS:
+        lines.append(f"![{name}](img/tensor-constrained-{name}.png)")
+        lines.append("")
+    (DOCS / "tensor-constrained.md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
