@@ -225,6 +225,25 @@ def _gather_candidates(
 
 
 @njit(cache=True)
+def _valid_positions(valid, mask):
+    """Every exemplar position of the ``valid`` rectangle that ``mask`` allows, in raster order."""
+    n = 0
+    for cy in range(valid[0], valid[1]):
+        for cx in range(valid[2], valid[3]):
+            if mask[cy, cx] != 0:
+                n += 1
+    out = np.empty((n, 2), dtype=np.int64)
+    n = 0
+    for cy in range(valid[0], valid[1]):
+        for cx in range(valid[2], valid[3]):
+            if mask[cy, cx] != 0:
+                out[n, 0] = cy
+                out[n, 1] = cx
+                n += 1
+    return out
+
+
+@njit(cache=True)
 def _synthesize_chunk_kernel(
     order,
     start,
@@ -276,6 +295,7 @@ def _synthesize_chunk_kernel(
     l_par = np.empty(par_offs.shape[0], dtype=np.int64)
     q_gui = np.empty((gui_offs.shape[0], gui_out.shape[2]), dtype=np.float32)
     l_gui = np.empty(gui_offs.shape[0], dtype=np.int64)
+    all_cand = _valid_positions(valid, mask) if exact else np.empty((0, 2), dtype=np.int64)
     for idx in range(start, stop):
         p = order[idx]
         oy = p // W
@@ -298,41 +318,9 @@ def _synthesize_chunk_kernel(
         best = np.inf
         by = -1
         bx = -1
-        if exact:
-            for cy in range(valid[0], valid[1]):
-                for cx in range(valid[2], valid[3]):
-                    if mask[cy, cx] == 0:
-                        continue
-                    d = _distance(
-                        q_cur,
-                        l_cur,
-                        n_cur,
-                        exf,
-                        w_cur,
-                        q_par,
-                        l_par,
-                        n_par,
-                        parf,
-                        w_par,
-                        par_width,
-                        q_gui,
-                        l_gui,
-                        n_gui,
-                        guif,
-                        w_gui,
-                        metric,
-                        par_metric,
-                        gui_metric,
-                        alpha,
-                        w,
-                        cy,
-                        cx,
-                        best,
-                    )
-                    if d < best:
-                        best = d
-                        by = cy
-                        bx = cx
+        if exact:  # the definition: every valid exemplar position, listed once per call
+            pool = all_cand
+            n = all_cand.shape[0]
         else:
             counter[0] += 1
             key = _splitmix(seed_key ^ np.uint64(p))
@@ -353,39 +341,40 @@ def _synthesize_chunk_kernel(
                 counter[0],
                 w,
             )
-            for j in range(n):
-                cy = cand[j, 0]
-                cx = cand[j, 1]
-                d = _distance(
-                    q_cur,
-                    l_cur,
-                    n_cur,
-                    exf,
-                    w_cur,
-                    q_par,
-                    l_par,
-                    n_par,
-                    parf,
-                    w_par,
-                    par_width,
-                    q_gui,
-                    l_gui,
-                    n_gui,
-                    guif,
-                    w_gui,
-                    metric,
-                    par_metric,
-                    gui_metric,
-                    alpha,
-                    w,
-                    cy,
-                    cx,
-                    best,
-                )
-                if d < best:
-                    best = d
-                    by = cy
-                    bx = cx
+            pool = cand
+        for j in range(n):
+            cy = pool[j, 0]
+            cx = pool[j, 1]
+            d = _distance(
+                q_cur,
+                l_cur,
+                n_cur,
+                exf,
+                w_cur,
+                q_par,
+                l_par,
+                n_par,
+                parf,
+                w_par,
+                par_width,
+                q_gui,
+                l_gui,
+                n_gui,
+                guif,
+                w_gui,
+                metric,
+                par_metric,
+                gui_metric,
+                alpha,
+                w,
+                cy,
+                cx,
+                best,
+            )
+            if d < best:
+                best = d
+                by = cy
+                bx = cx
         src[oy, ox, 0] = by
         src[oy, ox, 1] = bx
         for c in range(C):
