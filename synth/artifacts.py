@@ -20,13 +20,13 @@ import numpy as np
 
 from synth import __version__
 from synth.api import Result
-from synth.evaluate import evaluate_pair, evaluate_volume
+from synth.evaluate import evaluate_pair, evaluate_volume, to_json_types
 from synth.io import atomic_write_bytes, image_to_png_bytes, save_image, save_volume
 from synth.plots import write_plots
 from synth.render import coherence_image, orientation_image
 from synth.tensor import coherence, structure_direction, structure_tensor
 
-__all__ = ["jsonable", "versions", "write_artifacts"]
+__all__ = ["versions", "write_artifacts"]
 
 
 def versions() -> dict[str, str]:
@@ -43,21 +43,6 @@ def versions() -> dict[str, str]:
         "scikit-image": skimage.__version__,
         "numba": numba.__version__,
     }
-
-
-def jsonable(value: Any) -> Any:
-    """``value`` with numpy scalars/arrays made plain, non-finite floats as ``None``."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist() if value.size <= 4096 else f"<array {value.shape}>"
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
 
 
 def _png(path: Path, rendering: np.ndarray) -> None:
@@ -125,8 +110,8 @@ def write_artifacts(
             save_image(folder / f"{key}.png", rendered)
             names.append(f"{key}.png")
 
-    metrics = jsonable(evaluate_volume(exemplar, image) if volume else evaluate_pair(exemplar, image))
-    doc = {"metrics": metrics, "stats": jsonable(result.stats), "timings": jsonable(result.timings)}
+    metrics = to_json_types(evaluate_volume(exemplar, image) if volume else evaluate_pair(exemplar, image))
+    doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
     atomic_write_bytes(folder / "metrics.json", json.dumps(doc, indent=2).encode())
     names.append("metrics.json")
     if plots and not volume:
@@ -137,11 +122,11 @@ def write_artifacts(
     doc = {
         **(manifest or {}),
         "method": result.method,
-        "params": jsonable(result.params),
+        "params": to_json_types(result.params),
         "seed": result.seed,
         "exemplar_shape": list(np.shape(exemplar)),
         "output_shape": list(image.shape),
-        "timings": jsonable(result.timings),
+        "timings": to_json_types(result.timings),
         "versions": versions(),
     }
     atomic_write_bytes(folder / "manifest.json", json.dumps(doc, indent=2).encode())

@@ -99,6 +99,7 @@ __all__ = [
     "grey_histogram",
     "kl_divergence",
     "moments",
+    "to_json_types",
     "window_sigma",
 ]
 
@@ -454,14 +455,14 @@ def _headline(block: Mapping[str, Any]) -> dict[str, Any]:
     return head
 
 
-def _clean(obj: Any) -> Any:
+def to_json_types(obj: Any) -> Any:
     """Plain JSON types: numpy scalars to Python, NaN/inf to None, tuples to lists."""
     if isinstance(obj, Mapping):
-        return {str(k): _clean(v) for k, v in obj.items()}
+        return {str(k): to_json_types(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [_clean(v) for v in obj]
+        return [to_json_types(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return [_clean(v) for v in obj.tolist()]
+        return [to_json_types(v) for v in obj.tolist()]
     if isinstance(obj, bool | np.bool_):
         return bool(obj)
     if isinstance(obj, int | np.integer):
@@ -561,7 +562,7 @@ def evaluate_pair(
         "shape": {"exemplar": list(ex.shape), "output": list(out.shape)},
         **block,
     }
-    return _clean(result)
+    return to_json_types(result)
 
 
 def _spread(values: list[float | None]) -> dict[str, float | None]:
@@ -692,4 +693,4 @@ def evaluate_volume(
         "overall": overall,
         "summary": summary,
     }
-    return _clean(result)
+    return to_json_types(result)
