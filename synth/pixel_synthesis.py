@@ -57,12 +57,8 @@ SearchKind = Literal["exact", "kcoherence"]
 
 #: The same-level neighbours whose sources propose k-coherent candidates (radius in pixels).
 _CANDIDATE_RADIUS = 1
-#: Dimensions kept by the PCA that precedes the k-nearest-neighbour tree of k-coherence.
-_PCA_DIMS = 8
-#: Largest neighbourhood used to find the k most similar exemplar positions (cost grows as size^2).
 #: Rows of the sample that estimates the principal axes (the axes, not the projection, are sampled).
 _PCA_SAMPLE = 4096
-_KSET_MAX_SIZE = 7
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
@@ -84,6 +80,9 @@ class SearchSettings:
     k: int = 5
     random_candidates: int = 2
     alpha: float = 0.5
+    #: k-coherence sets: neighbourhood side and principal components of the k-NN search that builds them.
+    kset_size: int = 7
+    kset_dims: int = 8
 
 
 @dataclass(frozen=True)
@@ -204,24 +203,31 @@ def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarr
 
 
 def _k_coherence_sets(
-    embeds: Sequence[tuple[np.ndarray, float]], size: int, valid: np.ndarray, k: int, mask: np.ndarray
+    embeds: Sequence[tuple[np.ndarray, float]],
+    size: int,
+    valid: np.ndarray,
+    k: int,
+    mask: np.ndarray,
+    kset_size: int = 7,
+    kset_dims: int = 8,
 ) -> np.ndarray:
     """For every valid exemplar position, its ``k`` most similar other valid positions.
 
-    Neighbourhoods (square, at most 7x7) of the weighted embeddings are projected on their first
-    principal components and queried in a k-d tree; ``-1`` marks positions without a set.
+    Neighbourhoods (square, at most ``kset_size``) of the weighted embeddings are projected on their
+    first ``kset_dims`` principal components and queried in a k-d tree; ``-1`` marks positions
+    without a set.
     """
     h, w = embeds[0][0].shape[:2]
     kset = np.full((h, w, k, 2), -1, dtype=np.int64)
     if k == 0:
         return kset
-    ks = min(size, _KSET_MAX_SIZE)
+    ks = min(size, kset_size)
     y0, y1, x0, x1 = (int(v) for v in valid)
     inside = mask[y0:y1, x0:x1].ravel() != 0
     vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
     vectors = vectors[inside].astype(np.float64)
     vectors -= vectors.mean(axis=0)
-    dims = min(_PCA_DIMS, vectors.shape[1], vectors.shape[0])
+    dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
     # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
     sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
     _, eigvec = np.linalg.eigh(sample.T @ sample)
@@ -394,7 +400,7 @@ def synthesize_source_map(
             embeds.append((_euclidean_embedding(gui_ex, guidance.metric), w_gui))
         k = 0 if exact else settings.k
         kset = (
-            _k_coherence_sets(embeds, size, valid, k, mask)
+            _k_coherence_sets(embeds, size, valid, k, mask, settings.kset_size, settings.kset_dims)
             if not exact
             else np.full((1, 1, 0, 2), -1, np.int64)
         )

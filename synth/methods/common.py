@@ -55,8 +55,9 @@ class NeighbourhoodParams(MethodParams):
         return self.scan or ("lexicographic" if self.neighbourhood == "causal" else "random")
 
     def search_settings(
-        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5
+        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5, **search: int
     ) -> SearchSettings:
+        """The driver's settings from these parameters; ``search`` overrides internal knobs (k-set size)."""
         return SearchSettings(
             size=size,
             shape=self.neighbourhood,
@@ -68,6 +69,7 @@ class NeighbourhoodParams(MethodParams):
             k=self.k,
             random_candidates=self.random_candidates,
             alpha=alpha,
+            **search,
         )
 
 
