@@ -132,3 +132,42 @@ def test_unknown_method_and_missing_exemplar(tmp_path: Path, capsys: pytest.Capt
         == 2
     )
     assert "none.png: no such file" in capsys.readouterr().err
+
+
+def test_same_bytes_whatever_the_number_of_threads(exemplar: Path, tmp_path: Path) -> None:
+    """BLAS (the k-coherence PCA) and numba thread counts must not change a single byte."""
+    import os
+    import subprocess
+    import sys
+
+    outputs = []
+    for threads in ("1", "2"):
+        env = dict(
+            os.environ, OPENBLAS_NUM_THREADS=threads, OMP_NUM_THREADS=threads, NUMBA_NUM_THREADS=threads
+        )
+        out = tmp_path / f"t{threads}"
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "synth.cli",
+                "synthesize",
+                "tensor-constrained",
+                "--exemplar",
+                str(exemplar),
+                "--size",
+                "40x40",
+                "--seed",
+                "2",
+                "--set",
+                "structure_levels=2",
+                *FAST,
+                "--out",
+                str(out),
+            ],
+            env=env,
+            check=True,
+            capture_output=True,
+        )
+        outputs.append((out / "output.png").read_bytes())
+    assert outputs[0] == outputs[1]
