@@ -322,3 +322,16 @@ def test_a_progress_callback_that_raises_cancels() -> None:
         synthesize(
             "wei-levoy", _rng_image((32, 32)), size=(32, 32), params={"neighbourhood_size": 5}, progress=stop
         )
+
+
+def test_structure_neighbourhood_changes_only_the_structure_stage() -> None:
+    ex = _rng_image((40, 40), seed=4)
+    base = {"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3}
+    causal = synthesize("tensor-constrained", ex, size=(24, 24), seed=1, params=base)
+    square = synthesize(
+        "tensor-constrained", ex, size=(24, 24), seed=1, params=base | {"structure_neighbourhood": "square"}
+    )
+    assert square.params["structure_neighbourhood"] == "square" and square.params["neighbourhood"] == "causal"
+    assert causal.tensor_field.tobytes() != square.tensor_field.tobytes()
+    with pytest.raises(InvalidParameter, match="structure_neighbourhood"):
+        synthesize("tensor-constrained", ex, params={"structure_neighbourhood": "round"})

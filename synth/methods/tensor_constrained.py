@@ -33,6 +33,7 @@ from pydantic import Field
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from synth.neighbourhood import Shape
 from synth.pixel_synthesis import Guidance, synthesize_source_map, tensor_features
 from synth.pyramid import gaussian_pyramid, level_shapes
 from synth.tensor import Metric, coherence, orientation, structure_tensor
@@ -52,6 +53,9 @@ class TensorConstrainedParams(NeighbourhoodParams):
         ge=3,
         le=41,
         description="Neighbourhood side of the structure stage (default: neighbourhood_size).",
+    )
+    structure_neighbourhood: Shape | None = Field(
+        None, description="Neighbourhood shape of the structure stage (default: neighbourhood)."
     )
     metric: Metric = Field("SO", description="Tensor dissimilarity: ED, SO (shape-orientation), FN or LE.")
     alpha: float = Field(
@@ -84,7 +88,12 @@ def synthesize_tensor_field(
     feat_levels = [tensor_features(t, params.metric)[0] for t in gaussian_pyramid(s_in, levels)]
     n = params.structure_neighbourhood_size or params.neighbourhood_size
     structure = params.model_copy(
-        update={"k": params.structure_k, "random_candidates": params.structure_random_candidates}
+        update={
+            "k": params.structure_k,
+            "random_candidates": params.structure_random_candidates,
+            "neighbourhood": params.structure_neighbourhood or params.neighbourhood,
+            "scan": params.scan if params.structure_neighbourhood is None else None,
+        }
     )
     settings = structure.search_settings(
         size=n, levels=levels, iterations=params.structure_iterations, alpha=params.alpha
