@@ -75,6 +75,7 @@ from skimage.filters import threshold_otsu
 from skimage.morphology import black_tophat, disk, skeletonize, white_tophat
 
 from synth.errors import InvalidInput, InvalidParameter
+from synth.tensor import wrap_angle
 
 __all__ = [
     "MIN_LENGTH",
@@ -508,8 +509,7 @@ def measure_skeleton(
     dcol = (ends[:, 1, 1] - ends[:, 0, 1]).astype(np.float64)
     chord = np.round(np.hypot(drow, dcol), 9)
     # y is up (dy = -drow); a chord has an orientation, not a direction: wrap to (-pi/2, pi/2]
-    theta = np.arctan2(-drow, dcol)
-    theta = np.pi / 2 - np.mod(np.pi / 2 - theta, np.pi)
+    theta = wrap_angle(np.arctan2(-drow, dcol))
     tortuosity = lengths / chord
     return Fringes(
         lengths=lengths,

@@ -49,6 +49,7 @@ __all__ = [
     "SearchSettings",
     "SynthesisReport",
     "level_neighbourhood_size",
+    "source_map_pyramid",
     "synthesize_source_map",
     "tensor_features",
 ]
@@ -152,6 +153,15 @@ def _typical_distance(feats: np.ndarray, code: int, alpha: float, rng: np.random
     j = rng.integers(0, len(flat), 4096)
     d = float(np.mean(_metric_reference(flat[i], flat[j], code, alpha)))
     return d if d > 1e-20 else 1.0
+
+
+def source_map_pyramid(src: np.ndarray, levels: int) -> list[np.ndarray]:
+    """A source map at every pyramid level, finest first: each level takes every other output
+    position and halves its exemplar coordinates (the hints a coarser level's search is offered)."""
+    maps = [np.ascontiguousarray(src)]
+    for _ in range(levels - 1):
+        maps.append(np.ascontiguousarray(maps[-1][::2, ::2] // 2))
+    return maps
 
 
 def level_neighbourhood_size(size: int, level_shape: tuple[int, int]) -> int:

@@ -70,7 +70,13 @@ from synth.errors import InvalidInput, InvalidParameter
 from synth.io import LUMA_WEIGHTS
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
 from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
-from synth.pixel_synthesis import Guidance, level_neighbourhood_size, synthesize_source_map, tensor_features
+from synth.pixel_synthesis import (
+    Guidance,
+    level_neighbourhood_size,
+    source_map_pyramid,
+    synthesize_source_map,
+    tensor_features,
+)
 from synth.pyramid import gaussian_pyramid, level_shapes
 from synth.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
 from synth.tensor import (
@@ -271,13 +277,6 @@ def _check_k_memory(params: ArbitraryShapeParams, dictionary: RotatedDictionary,
         )
 
 
-def _hint_levels(hint: np.ndarray, levels: int) -> list[np.ndarray]:
-    hints = [np.ascontiguousarray(hint)]
-    for _ in range(levels - 1):
-        hints.append(np.ascontiguousarray(hints[-1][::2, ::2] // 2))
-    return hints
-
-
 def run_arbitrary_shape(
     exemplar: np.ndarray,
     *,
@@ -329,7 +328,7 @@ def run_arbitrary_shape(
     hint = None
     if params.restrict_rotations:
         m_hint = rotation_candidates(delta, params.n_rotations, window, rng)
-        hint = _hint_levels(dictionary.to_canvas(base_src, m_hint), levels)
+        hint = source_map_pyramid(dictionary.to_canvas(base_src, m_hint), levels)
     gui_code = tensor_features(guide, params.metric)[1]
     guidance = Guidance(
         out_levels=[tensor_features(t, params.metric)[0] for t in gaussian_pyramid(guide, levels)],

@@ -34,7 +34,7 @@ from pydantic import Field
 from synth.api import MethodSpec, Progress, Result, register
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
 from synth.neighbourhood import Shape
-from synth.pixel_synthesis import Guidance, synthesize_source_map, tensor_features
+from synth.pixel_synthesis import Guidance, source_map_pyramid, synthesize_source_map, tensor_features
 from synth.pyramid import gaussian_pyramid, level_shapes
 from synth.tensor import Metric, coherence, orientation, structure_tensor
 
@@ -133,9 +133,7 @@ def run_tensor_constrained(
     gui_code = tensor_features(s_in, params.metric)[1]
     gui_ex = [tensor_features(t, params.metric)[0] for t in gaussian_pyramid(s_in, levels)]
     gui_out = [tensor_features(t, params.metric)[0] for t in gaussian_pyramid(s_out, levels, mode="wrap")]
-    hints = [src_structure]
-    for _ in range(levels - 1):
-        hints.append(np.ascontiguousarray(hints[-1][::2, ::2] // 2))
+    hints = source_map_pyramid(src_structure, levels)
     guidance = Guidance(
         out_levels=gui_out,
         ex_levels=gui_ex,
