@@ -84,6 +84,9 @@ class SearchSettings:
     #: k-coherence sets: neighbourhood side and principal components of the k-NN search that builds them.
     kset_size: int = 7
     kset_dims: int = 8
+    #: Histogram-matching weight (see :func:`synthesize_source_map`'s ``histogram``): 0 = plain nearest
+    #: neighbour; larger values push the output's label histogram toward its target.
+    histogram_weight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -304,6 +307,30 @@ def _initial_sources(
     return np.ascontiguousarray(src, dtype=np.int64)
 
 
+def _histogram_state(
+    histogram: tuple[np.ndarray, np.ndarray] | None, src: np.ndarray, valid: np.ndarray, mask: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The kernel's histogram arrays: a label per exemplar position, the output's count per label
+    (from the initial sources) and the wanted count per label.
+
+    Without ``histogram`` the labels are the positions themselves and the target is a uniform use of
+    every copyable position (Chen & Wang's position histogram); with ``(labels, fractions)`` the
+    target is ``fractions`` of the output's pixels.
+    """
+    h, w = mask.shape
+    n_out = src.shape[0] * src.shape[1]
+    if histogram is None:
+        y0, y1, x0, x1 = (int(v) for v in valid)
+        labels = np.arange(h * w, dtype=np.int64)
+        target = np.full(h * w, n_out / max(1, int(np.count_nonzero(mask[y0:y1, x0:x1]))))
+    else:
+        labels = np.ascontiguousarray(histogram[0], dtype=np.int64).ravel()
+        # A label rarer than one output pixel still has room for one.
+        target = np.maximum(np.asarray(histogram[1], dtype=np.float64) * n_out, 1.0)
+    count = np.bincount(labels[(src[..., 0] * w + src[..., 1]).ravel()], minlength=len(target))
+    return {"labels": labels, "label_count": count.astype(np.int64), "label_target": target}
+
+
 def _empty_features(channels: int) -> np.ndarray:
     return np.zeros((1, 1, channels), dtype=np.float32)
 
@@ -323,6 +350,7 @@ def synthesize_source_map(
     reference: bool = False,
     ex_masks: Sequence[np.ndarray] | None = None,
     on_level_done: Callable[[int, dict], None] | None = None,
+    histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> tuple[list[np.ndarray], SynthesisReport]:
     """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
 
@@ -348,6 +376,10 @@ def synthesize_source_map(
         meaningful (e.g. inside a rotated copy of the exemplar).
     on_level_done : callable (level, state), optional
         Receives each level's final kernel state (benchmarks use it to compare searches).
+    histogram : list of (labels (h_l, w_l) int, fractions (n_labels,)), finest first, optional
+        With ``settings.histogram_weight > 0``: the label of every exemplar position and the fraction
+        of the output each label should cover (e.g. orientation bins and the exemplar's orientation
+        histogram). Default: Chen & Wang's position histogram (every copyable position used equally).
     """
     levels = settings.levels
     if len(ex_levels) != levels or len(out_shapes) != levels:
@@ -448,6 +480,8 @@ def synthesize_source_map(
             "counter": counter,
             "capacity": candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
             "best_out": np.zeros(shape, dtype=np.float32),
+            **_histogram_state(histogram[level] if histogram is not None else None, src, valid, mask),
+            "hist_weight": float(settings.histogram_weight),
         }
         n = shape[0] * shape[1]
         for it in range(settings.iterations):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -181,6 +183,10 @@ def test_causal_first_pass_never_reads_unsynthesized_pixels() -> None:
         "counter": np.zeros(1, np.int64),
         "capacity": 4,
         "best_out": np.zeros((10, 10), np.float32),
+        "labels": np.zeros(256, np.int64),
+        "label_count": np.array([100], np.int64),
+        "label_target": np.array([100.0]),
+        "hist_weight": 0.0,
     }
     synthesize_chunk(state, 0, 100)
     assert np.isfinite(state["best_out"]).all()
@@ -335,3 +341,97 @@ def test_structure_neighbourhood_changes_only_the_structure_stage() -> None:
     assert causal.tensor_field.tobytes() != square.tensor_field.tobytes()
     with pytest.raises(InvalidParameter, match="structure_neighbourhood"):
         synthesize("tensor-constrained", ex, params={"structure_neighbourhood": "round"})
+
+
+# ---------------------------------------------------------------- histogram matching
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize("labelled", [False, True])
+def test_kernel_matches_reference_with_histogram_matching(search: str, labelled: bool) -> None:
+    ex = _rng_image((22, 20, 1), seed=12)
+    levels = 2
+    settings = SearchSettings(
+        size=5, levels=levels, parent_size=3, iterations=2, search=search, k=2, histogram_weight=3.0
+    )
+    histogram = None
+    if labelled:  # four grey-level bins as labels, wanting equal shares
+        histogram = [
+            (np.minimum((lvl[..., 0] * 4).astype(np.int64), 3), np.full(4, 0.25))
+            for lvl in gaussian_pyramid(ex, levels)
+        ]
+    _run_both(
+        ex_levels=gaussian_pyramid(ex, levels),
+        out_shapes=level_shapes((14, 12), levels),
+        settings=settings,
+        seed=5,
+        histogram=histogram,
+    )
+
+
+def _usage(src: np.ndarray, shape: tuple[int, int], border: int) -> np.ndarray:
+    """How often each copyable exemplar position is copied."""
+    counts = np.bincount((src[..., 0] * shape[1] + src[..., 1]).ravel(), minlength=shape[0] * shape[1])
+    return counts.reshape(shape)[border:-border, border:-border]
+
+
+def test_position_histogram_spreads_the_use_of_exemplar_positions() -> None:
+    """Chen & Wang's position histogram: no exemplar position is copied far more than its share."""
+    ex = _rng_image((20, 20, 1), seed=13)
+    plain = SearchSettings(size=3, levels=1, iterations=2, search="exact")
+    runs = {
+        w: synthesize_source_map([ex], [(36, 36)], replace(plain, histogram_weight=w), seed=2)[0][0]
+        for w in (0.0, 20.0)
+    }
+    share = 36 * 36 / (18 * 18)  # output pixels per copyable position
+    plain_use, matched_use = (_usage(runs[w], (20, 20), 1) for w in (0.0, 20.0))
+    assert plain_use.sum() == matched_use.sum() == 36 * 36
+    assert plain_use.std() > 10 * share  # smooth noise: plain search copies a few positions over and over
+    assert matched_use.std() < share / 2
+    assert (matched_use == 0).mean() < 0.1
+
+
+def test_labelled_histogram_pulls_the_output_toward_the_target_fractions() -> None:
+    """Labels = dark/bright exemplar pixels, target 50/50 although the exemplar is 80% dark."""
+    rng = np.random.default_rng(3)
+    ex = (np.where(rng.random((24, 24)) < 0.8, 0.0, 0.6) + 0.4 * rng.random((24, 24))).astype(np.float32)
+    ex = ex[..., None]
+    labels = (ex[..., 0] > 0.5).astype(np.int64)
+    settings = SearchSettings(size=3, levels=1, iterations=2, search="exact", histogram_weight=50.0)
+    bright = {}
+    for name, s in {"plain": replace(settings, histogram_weight=0.0), "matched": settings}.items():
+        src = synthesize_source_map([ex], [(32, 32)], s, seed=1, histogram=[(labels, np.array([0.5, 0.5]))])[
+            0
+        ][0]
+        bright[name] = float(labels[src[..., 0], src[..., 1]].mean())
+    assert bright["plain"] < 0.3
+    assert 0.4 < bright["matched"] < 0.6
+
+
+def test_structure_histogram_option_selects_the_matching() -> None:
+    ex = _rng_image((40, 40), seed=4)
+    base = {"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3}
+    fields = {
+        h: synthesize(
+            "tensor-constrained", ex, size=(24, 24), seed=1, params=base | {"structure_histogram": h}
+        )
+        for h in ("none", "position", "orientation")
+    }
+    assert fields["orientation"].params["structure_histogram_weight"] == 10.0
+    assert len({r.tensor_field.tobytes() for r in fields.values()}) == 3
+    unweighted = synthesize(
+        "tensor-constrained", ex, size=(24, 24), seed=1, params=base | {"structure_histogram_weight": 0.0}
+    )
+    assert unweighted.tensor_field.tobytes() == fields["none"].tensor_field.tobytes()
+    with pytest.raises(InvalidParameter, match="structure_histogram"):
+        synthesize("tensor-constrained", ex, params={"structure_histogram": "colour"})
+
+
+def test_orientation_labels_bin_the_field_and_sum_to_one() -> None:
+    from synth.methods.tensor_constrained import orientation_labels
+    from synth.patterns import grating
+
+    tensors = structure_tensor(grating((32, 32), period=8, angle=np.pi / 4))
+    labels, fractions = orientation_labels(tensors, bins=36)
+    assert labels.shape == (32, 32) and fractions.sum() == pytest.approx(1.0)
+    assert np.argmax(fractions) in (26, 27)  # gradient at 45 degrees + 90 = 135/5 = bin 27 (edge: 26)

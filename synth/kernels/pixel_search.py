@@ -25,6 +25,10 @@ are k-coherent (Tong et al. 2002): for every neighbour ``q`` in ``cand_offsets``
 from an optional ``hint`` source map, and ``n_random`` seeded random positions. In the first pass
 unsynthesized output pixels (``done == 0``) are left out of the ``cur`` block.
 
+Histogram matching (optional, ``hist_weight > 0``): every exemplar position carries a label (its
+position, or e.g. its orientation bin); the output's count per label is kept up to date, and a
+candidate's distance is multiplied by ``1 + hist_weight * max(0, count / target - 1)`` for its label.
+
 ``synthesize_chunk_reference`` is the plain NumPy version the tests compare the kernel with.
 """
 
@@ -243,6 +247,17 @@ def _valid_positions(valid, mask):
     return out
 
 
+@njit(cache=True, inline="always")
+def _histogram_factor(count, target, weight):
+    """Histogram-matching penalty: a candidate whose label (its exemplar position, Chen & Wang's
+    position histogram, or its orientation bin) the output already holds ``count`` times, against
+    ``target`` wanted, has its distance multiplied by ``1 + weight * max(0, count / target - 1)``:
+    over-represented labels lose against equally good, under-represented ones. A verbatim
+    continuation (distance 0) is never penalised: the matching acts where copied patches meet."""
+    excess = count / target - 1.0
+    return 1.0 + weight * excess if excess > 0.0 else 1.0
+
+
 @njit(cache=True)
 def _synthesize_chunk_kernel(
     order,
@@ -280,6 +295,10 @@ def _synthesize_chunk_kernel(
     counter,
     best_out,
     capacity,
+    labels,
+    label_count,
+    label_target,
+    hist_weight,
 ):
     W = out.shape[1]
     w = ex.shape[1]
@@ -315,7 +334,10 @@ def _synthesize_chunk_kernel(
             done[oy, ox] = 1
             best_out[oy, ox] = 0.0
             continue
+        # This pixel's current source leaves the histogram while it looks for a new one.
+        label_count[labels[src[oy, ox, 0] * w + src[oy, ox, 1]]] -= 1
         best = np.inf
+        best_raw = np.inf
         by = -1
         bx = -1
         if exact:  # the definition: every valid exemplar position, listed once per call
@@ -345,6 +367,10 @@ def _synthesize_chunk_kernel(
         for j in range(n):
             cy = pool[j, 0]
             cx = pool[j, 1]
+            f = 1.0
+            if hist_weight > 0.0:
+                lab = labels[cy * w + cx]
+                f = _histogram_factor(label_count[lab], label_target[lab], hist_weight)
             d = _distance(
                 q_cur,
                 l_cur,
@@ -369,18 +395,20 @@ def _synthesize_chunk_kernel(
                 w,
                 cy,
                 cx,
-                best,
+                best / f,
             )
-            if d < best:
-                best = d
+            if d * f < best:
+                best = d * f
+                best_raw = d
                 by = cy
                 bx = cx
         src[oy, ox, 0] = by
         src[oy, ox, 1] = bx
+        label_count[labels[by * w + bx]] += 1
         for c in range(C):
             out[oy, ox, c] = ex[by, bx, c]
         done[oy, ox] = 1
-        best_out[oy, ox] = best
+        best_out[oy, ox] = best_raw
 
 
 def synthesize_chunk(state: dict, start: int, stop: int) -> None:
@@ -427,6 +455,10 @@ def synthesize_chunk(state: dict, start: int, stop: int) -> None:
         s["counter"],
         s["best_out"],
         s["capacity"],
+        s["labels"],
+        s["label_count"],
+        s["label_target"],
+        float(s["hist_weight"]),
     )
 
 
@@ -527,9 +559,16 @@ def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
             d += s["w_gui"] * _block_reference(
                 s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"], s["gui_metric"], s["alpha"], full
             )
-        best = int(np.argmin(d))
+        labels, count, ew = s["labels"], s["label_count"], ex.shape[1]
+        count[labels[src[oy, ox, 0] * ew + src[oy, ox, 1]]] -= 1
+        factor = np.ones(len(cands))
+        if s["hist_weight"] > 0:
+            lab = labels[cands[:, 0] * ew + cands[:, 1]]
+            factor = 1.0 + s["hist_weight"] * np.maximum(count[lab] / s["label_target"][lab] - 1.0, 0.0)
+        best = int(np.argmin(d * factor))
         by, bx = cands[best]
         src[oy, ox] = (by, bx)
+        count[labels[by * ew + bx]] += 1
         out[oy, ox] = ex[by, bx]
         done[oy, ox] = 1
         s["best_out"][oy, ox] = d[best]

@@ -55,7 +55,7 @@ class NeighbourhoodParams(MethodParams):
         return self.scan or ("lexicographic" if self.neighbourhood == "causal" else "random")
 
     def search_settings(
-        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5, **search: int
+        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5, **search: float
     ) -> SearchSettings:
         """The driver's settings from these parameters; ``search`` overrides internal knobs (k-set size)."""
         return SearchSettings(

@@ -35,6 +35,13 @@ class WeiLevoyParams(NeighbourhoodParams):
     # Pixel neighbourhoods need more k-coherent candidates than smooth tensor fields to match exact
     # search within 5% (docs/benchmarks.md, "Fast search against exact search").
     k: int = Field(10, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
+    histogram_weight: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description="Position-histogram matching weight (Chen & Wang 2010): 0 = plain Wei-Levoy; larger "
+        "values push toward every exemplar position being copied equally often.",
+    )
 
 
 def run_wei_levoy(
@@ -57,6 +64,7 @@ def run_wei_levoy(
         iterations=params.iterations,
         kset_size=9,
         kset_dims=16,
+        histogram_weight=params.histogram_weight,
     )
     srcs, stats = synthesize_source_map(
         ex_levels, level_shapes(size, params.levels), settings, seed=seed, progress=report, stage="texture"
