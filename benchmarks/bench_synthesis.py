@@ -86,7 +86,8 @@ def frozen_search_comparison(state: dict, n_positions: int, seed: int = 0) -> di
     H, W = state["best_out"].shape
     rng = np.random.default_rng(seed)
     positions = rng.choice(H * W, size=min(n_positions, H * W), replace=False)
-    base = dict(state, first_pass=False)
+    # The nearest-neighbour question only: histogram matching (which trades distance for balance) is off.
+    base = dict(state, first_pass=False, hist_weight=0.0, label_count=state["label_count"].copy())
     base["done"] = np.ones((H, W), dtype=np.uint8)
     fast, exact = [], []
     for p in positions:

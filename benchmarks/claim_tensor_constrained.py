@@ -181,6 +181,15 @@ def write_doc(rows: list) -> None:
             )
     lines += [
         "",
+        "Summary of this run: with the paper's causal settings and structure-stage histogram matching "
+        "(the default), tensor-constrained keeps the orientation distribution better than Wei-Levoy on "
+        "all three exemplars; the paper-literal variant does not. On the weakly oriented soot, "
+        "Wei-Levoy with Chen & Wang's position histogram alone does as well or better: there the gain "
+        "comes from histogram matching, not from the tensor constraint. On the curved laminae, the "
+        "claim's case, the same position histogram does not rescue Wei-Levoy (bent-96 gets worse: "
+        "balancing positions breaks laminae at seams), while the constrained synthesis keeps the "
+        "orientations. Mean coherence stays within 15% of the exemplar's for every variant.",
+        "",
         "`tensor-constrained` (the default) runs the paper's Table 1 settings with one departure in the "
         "structure stage: histogram matching, the solid-texture papers' tool (Kopf et al. 2007; Chen & "
         "Wang 2010). A candidate tensor whose orientation bin (5 degrees) the synthesized field already "
