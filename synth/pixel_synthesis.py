@@ -45,6 +45,7 @@ from synth.scan import ScanOrder, scan_order
 from synth.tensor import Metric, coherence, log_tensors, orientation
 
 __all__ = [
+    "CandidateWindow",
     "Guidance",
     "SearchSettings",
     "SynthesisReport",
@@ -103,6 +104,22 @@ class Guidance:
     weight: float
     size: int
     hint_levels: Sequence[np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class CandidateWindow:
+    """Per-position restriction of the candidates: classes of exemplar positions and wanted classes.
+
+    A candidate is searched at an output position only when its class lies within ``span`` of the
+    position's wanted class, cyclically modulo ``period`` (the arbitrary-shape method's rotated
+    copies of the exemplar near the local constraint angle). ``ex_levels`` (h_l, w_l) and
+    ``out_levels`` (H_l, W_l) int arrays, finest first; a negative class is never searched.
+    """
+
+    ex_levels: Sequence[np.ndarray]
+    out_levels: Sequence[np.ndarray]
+    period: int
+    span: int
 
 
 @dataclass
@@ -331,6 +348,23 @@ def _histogram_state(
     return {"labels": labels, "label_count": count.astype(np.int64), "label_target": target}
 
 
+def _window_state(window: CandidateWindow | None, level: int) -> dict[str, object]:
+    """The kernel's class-window arrays at ``level`` (a span of -1 switches the window off)."""
+    if window is None:
+        return {
+            "cls": np.zeros(1, np.int64),
+            "want_cls": np.zeros((1, 1), np.int64),
+            "cls_period": 1,
+            "cls_span": -1,
+        }
+    return {
+        "cls": np.ascontiguousarray(window.ex_levels[level], dtype=np.int64).ravel(),
+        "want_cls": np.ascontiguousarray(window.out_levels[level], dtype=np.int64),
+        "cls_period": int(window.period),
+        "cls_span": int(window.span),
+    }
+
+
 def _empty_features(channels: int) -> np.ndarray:
     return np.zeros((1, 1, channels), dtype=np.float32)
 
@@ -351,6 +385,7 @@ def synthesize_source_map(
     ex_masks: Sequence[np.ndarray] | None = None,
     on_level_done: Callable[[int, dict], None] | None = None,
     histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+    window: CandidateWindow | None = None,
 ) -> tuple[list[np.ndarray], SynthesisReport]:
     """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
 
@@ -380,6 +415,8 @@ def synthesize_source_map(
         With ``settings.histogram_weight > 0``: the label of every exemplar position and the fraction
         of the output each label should cover (e.g. orientation bins and the exemplar's orientation
         histogram). Default: Chen & Wang's position histogram (every copyable position used equally).
+    window : CandidateWindow, optional
+        Restricts, per output position, the exemplar positions searched (exact and fast search).
     """
     levels = settings.levels
     if len(ex_levels) != levels or len(out_shapes) != levels:
@@ -482,6 +519,7 @@ def synthesize_source_map(
             "best_out": np.zeros(shape, dtype=np.float32),
             **_histogram_state(histogram[level] if histogram is not None else None, src, valid, mask),
             "hist_weight": float(settings.histogram_weight),
+            **_window_state(window, level),
         }
         n = shape[0] * shape[1]
         for it in range(settings.iterations):

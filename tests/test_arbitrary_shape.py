@@ -200,7 +200,15 @@ def test_restriction_copies_from_the_copies_at_the_local_angle() -> None:
     off = synthesize(
         "arbitrary-shape", ex, constraint=con, params={"neighbourhood_size": 7, "restrict_rotations": False}
     )
-    assert on.stats["in_window_fraction"] > off.stats["in_window_fraction"]
+    assert on.stats["in_window_fraction"] > 0.98 > 0.5 > off.stats["in_window_fraction"]
+
+
+def test_exact_search_with_restriction_searches_only_the_window() -> None:
+    ex = _fringes(0, (16, 16))
+    con = concentric_rings((16, 16))
+    params = {"angular_step": 30.0, "neighbourhood_size": 5, "search": "exact", "rotation_window": 0.0}
+    res = synthesize("arbitrary-shape", ex, constraint=con, params=params)
+    assert res.stats["in_window_fraction"] == 1.0
 
 
 def test_local_reference_aligns_every_tensor_with_the_constraint() -> None:
@@ -221,13 +229,12 @@ def test_rgb_exemplar_and_pyramids() -> None:
     ("params", "name"),
     [
         ({"angular_step": 7.0}, "angular_step"),
-        ({"search": "exact"}, "params"),
         ({"rotation_reference": "paper"}, "rotation_reference"),
         ({"constraint_tensors": "both"}, "constraint_tensors"),
     ],
 )
 def test_invalid_parameters_are_named(params: dict, name: str) -> None:
-    with pytest.raises(InvalidParameter, match=name if name != "params" else "restrict_rotations"):
+    with pytest.raises(InvalidParameter, match=name):
         _run(_fringes(0), grating((32, 32), 0.5), **params)
 
 
@@ -259,3 +266,22 @@ def test_same_seed_same_bytes() -> None:
     a, b = _run(ex, con, seed=4), _run(ex, con, seed=4)
     assert a.image.tobytes() == b.image.tobytes()
     assert _run(ex, con, seed=5).image.tobytes() != a.image.tobytes()
+
+
+def test_window_search_strict_or_hints() -> None:
+    """'strict' copies only from the copies at the local angle; 'hints' lets other copies compete;
+    the default is strict, and hints with the local reference."""
+    ex, con = _fringes(0), concentric_rings((32, 32))
+    base = {"neighbourhood_size": 7}
+    strict = synthesize("arbitrary-shape", ex, constraint=con, params=base | {"window_search": "strict"})
+    hints = synthesize("arbitrary-shape", ex, constraint=con, params=base | {"window_search": "hints"})
+    default = synthesize("arbitrary-shape", ex, constraint=con, params=base)
+    assert strict.stats["in_window_fraction"] > 0.98 > hints.stats["in_window_fraction"]
+    assert default.image.tobytes() == strict.image.tobytes()
+    local = {"rotation_reference": "local"}
+    assert (
+        synthesize("arbitrary-shape", ex, constraint=con, params=base | local).image.tobytes()
+        == synthesize(
+            "arbitrary-shape", ex, constraint=con, params=base | local | {"window_search": "hints"}
+        ).image.tobytes()
+    )

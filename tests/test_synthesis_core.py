@@ -11,7 +11,13 @@ from synth import Cancelled, InvalidParameter
 from synth.api import synthesize
 from synth.kernels.pixel_search import METRIC_NORM, METRIC_SO, METRIC_SSD, synthesize_chunk
 from synth.neighbourhood import neighbourhood_offsets, parent_offsets
-from synth.pixel_synthesis import Guidance, SearchSettings, synthesize_source_map, tensor_features
+from synth.pixel_synthesis import (
+    CandidateWindow,
+    Guidance,
+    SearchSettings,
+    synthesize_source_map,
+    tensor_features,
+)
 from synth.pyramid import gaussian_pyramid, level_shapes
 from synth.scan import SCAN_ORDERS, hilbert_points, morton_points, scan_order
 from synth.tensor import structure_tensor
@@ -187,6 +193,10 @@ def test_causal_first_pass_never_reads_unsynthesized_pixels() -> None:
         "label_count": np.array([100], np.int64),
         "label_target": np.array([100.0]),
         "hist_weight": 0.0,
+        "cls": np.zeros(1, np.int64),
+        "want_cls": np.zeros((1, 1), np.int64),
+        "cls_period": 1,
+        "cls_span": -1,
     }
     synthesize_chunk(state, 0, 100)
     assert np.isfinite(state["best_out"]).all()
@@ -435,3 +445,37 @@ def test_orientation_labels_bin_the_field_and_sum_to_one() -> None:
     labels, fractions = orientation_labels(tensors, bins=36)
     assert labels.shape == (32, 32) and fractions.sum() == pytest.approx(1.0)
     assert np.argmax(fractions) in (26, 27)  # gradient at 45 degrees + 90 = 135/5 = bin 27 (edge: 26)
+
+
+# ---------------------------------------------------------------- per-position candidate window
+
+
+def _striped_window(ex_shape: tuple[int, int], out_shape: tuple[int, int], span: int) -> CandidateWindow:
+    """Exemplar columns in 4 classes (stripes of 5), output rows wanting class ``row % 4``."""
+    cls = np.broadcast_to(np.arange(ex_shape[1]) // 5 % 4, ex_shape).copy()
+    cls[:, :5] = -1  # never searched
+    want = np.broadcast_to((np.arange(out_shape[0]) % 4)[:, None], out_shape).copy()
+    return CandidateWindow([cls], [want], period=4, span=span)
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize("span", [0, 1])
+def test_kernel_matches_reference_with_a_candidate_window(search: str, span: int) -> None:
+    ex = _rng_image((22, 22, 1), seed=14)
+    settings = SearchSettings(size=5, levels=1, iterations=2, search=search, k=2, random_candidates=3)
+    _run_both(
+        ex_levels=[ex],
+        out_shapes=[(12, 10)],
+        settings=settings,
+        seed=6,
+        window=_striped_window((22, 22), (12, 10), span),
+    )
+
+
+def test_candidate_window_restricts_every_copied_position() -> None:
+    ex = _rng_image((22, 22, 1), seed=15)
+    window = _striped_window((22, 22), (12, 10), 0)
+    settings = SearchSettings(size=3, levels=1, iterations=2, search="exact")
+    src = synthesize_source_map([ex], [(12, 10)], settings, seed=1, window=window)[0][0]
+    got = window.ex_levels[0][src[..., 0], src[..., 1]]
+    np.testing.assert_array_equal(got, window.out_levels[0])

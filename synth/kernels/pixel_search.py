@@ -29,6 +29,11 @@ Histogram matching (optional, ``hist_weight > 0``): every exemplar position carr
 position, or e.g. its orientation bin); the output's count per label is kept up to date, and a
 candidate's distance is multiplied by ``1 + hist_weight * max(0, count / target - 1)`` for its label.
 
+Class window (optional, ``cls_span >= 0``): every exemplar position has a class (e.g. the rotated
+copy of the exemplar it lies in) and every output position a wanted class; a candidate counts only
+when its class is within ``cls_span`` of the wanted one, cyclically modulo ``cls_period``. When no
+proposal qualifies, the position keeps its current source.
+
 ``synthesize_chunk_reference`` is the plain NumPy version the tests compare the kernel with.
 """
 
@@ -171,14 +176,29 @@ def candidate_capacity(n_cand_offsets: int, k: int, has_hint: bool, n_random: in
     return n_cand_offsets * (k + 1) * (2 if has_hint else 1) + n_random + 1
 
 
+@njit(cache=True, inline="always")
+def _class_allowed(cls, key, want, period, span):
+    """Whether exemplar position ``key``'s class lies within ``span`` of ``want`` (cyclic, ``period``);
+    always true when ``span < 0`` (no window)."""
+    if span < 0:
+        return True
+    k = cls[key]
+    if k < 0:
+        return False
+    d = (k - want) % period
+    return min(d, period - d) <= span
+
+
 @njit(cache=True)
-def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w):
+def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w, cls, want, period, span):
     if cy < valid[0] or cy >= valid[1] or cx < valid[2] or cx >= valid[3]:
         return n
     if mask[cy, cx] == 0:
         return n
     key = cy * w + cx
     if stamp[key] == tag:
+        return n
+    if not _class_allowed(cls, key, want, period, span):
         return n
     stamp[key] = tag
     cand[n, 0] = cy
@@ -188,7 +208,25 @@ def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w):
 
 @njit(cache=True)
 def _gather_candidates(
-    cand, oy, ox, src, hint, use_hint, kset, cand_offs, valid, mask, n_random, key, stamp, tag, w
+    cand,
+    oy,
+    ox,
+    src,
+    hint,
+    use_hint,
+    kset,
+    cand_offs,
+    valid,
+    mask,
+    n_random,
+    key,
+    stamp,
+    tag,
+    w,
+    cls,
+    want,
+    period,
+    span,
 ):
     H = src.shape[0]
     W = src.shape[1]
@@ -202,7 +240,19 @@ def _gather_candidates(
             ay = smap[qy, qx, 0]
             ax = smap[qy, qx, 1]
             n = _add_candidate(
-                cand, n, ay - cand_offs[i, 0], ax - cand_offs[i, 1], valid, mask, stamp, tag, w
+                cand,
+                n,
+                ay - cand_offs[i, 0],
+                ax - cand_offs[i, 1],
+                valid,
+                mask,
+                stamp,
+                tag,
+                w,
+                cls,
+                want,
+                period,
+                span,
             )
             for j in range(k):  # Tong et al.: the k positions similar to q's source, shifted by p - q
                 ky = kset[ay, ax, j, 0]
@@ -217,6 +267,10 @@ def _gather_candidates(
                         stamp,
                         tag,
                         w,
+                        cls,
+                        want,
+                        period,
+                        span,
                     )
     span_y = np.uint64(valid[1] - valid[0])
     span_x = np.uint64(valid[3] - valid[2])
@@ -224,7 +278,7 @@ def _gather_candidates(
         r = _splitmix(key + np.uint64(j))
         ry = valid[0] + np.int64(r % span_y)
         rx = valid[2] + np.int64((r >> np.uint64(32)) % span_x)
-        n = _add_candidate(cand, n, ry, rx, valid, mask, stamp, tag, w)
+        n = _add_candidate(cand, n, ry, rx, valid, mask, stamp, tag, w, cls, want, period, span)
     return n
 
 
@@ -299,6 +353,10 @@ def _synthesize_chunk_kernel(
     label_count,
     label_target,
     hist_weight,
+    cls,
+    want_cls,
+    cls_period,
+    cls_span,
 ):
     W = out.shape[1]
     w = ex.shape[1]
@@ -340,6 +398,7 @@ def _synthesize_chunk_kernel(
         best_raw = np.inf
         by = -1
         bx = -1
+        want = want_cls[oy, ox] if cls_span >= 0 else 0
         if exact:  # the definition: every valid exemplar position, listed once per call
             pool = all_cand
             n = all_cand.shape[0]
@@ -362,11 +421,21 @@ def _synthesize_chunk_kernel(
                 stamp,
                 counter[0],
                 w,
+                cls,
+                want,
+                cls_period,
+                cls_span,
             )
+            if n == 0:  # every proposal fell outside the class window: keep the current source
+                cand[0, 0] = src[oy, ox, 0]
+                cand[0, 1] = src[oy, ox, 1]
+                n = 1
             pool = cand
         for j in range(n):
             cy = pool[j, 0]
             cx = pool[j, 1]
+            if exact and not _class_allowed(cls, cy * w + cx, want, cls_period, cls_span):
+                continue
             f = 1.0
             if hist_weight > 0.0:
                 lab = labels[cy * w + cx]
@@ -402,6 +471,35 @@ def _synthesize_chunk_kernel(
                 best_raw = d
                 by = cy
                 bx = cx
+        if by < 0:  # exact search with an empty class window: keep the current source
+            by = src[oy, ox, 0]
+            bx = src[oy, ox, 1]
+            best_raw = _distance(
+                q_cur,
+                l_cur,
+                n_cur,
+                exf,
+                w_cur,
+                q_par,
+                l_par,
+                n_par,
+                parf,
+                w_par,
+                par_width,
+                q_gui,
+                l_gui,
+                n_gui,
+                guif,
+                w_gui,
+                metric,
+                par_metric,
+                gui_metric,
+                alpha,
+                w,
+                by,
+                bx,
+                np.inf,
+            )
         src[oy, ox, 0] = by
         src[oy, ox, 1] = bx
         label_count[labels[by * w + bx]] += 1
@@ -459,6 +557,10 @@ def synthesize_chunk(state: dict, start: int, stop: int) -> None:
         s["label_count"],
         s["label_target"],
         float(s["hist_weight"]),
+        s["cls"],
+        s["want_cls"],
+        int(s["cls_period"]),
+        int(s["cls_span"]),
     )
 
 
@@ -488,6 +590,16 @@ def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):
     return _metric_reference(q[None], e, metric, alpha).sum(axis=1)
 
 
+def _in_class_window(state: dict, cands: np.ndarray, oy: int, ox: int) -> np.ndarray:
+    """Which candidates ``(N, 2)`` the class window of output position ``(oy, ox)`` allows."""
+    s = state
+    if s["cls_span"] < 0:
+        return np.ones(len(cands), dtype=bool)
+    k = s["cls"][cands[:, 0] * s["ex"].shape[1] + cands[:, 1]]
+    d = (k - s["want_cls"][oy, ox]) % s["cls_period"]
+    return (k >= 0) & (np.minimum(d, s["cls_period"] - d) <= s["cls_span"])
+
+
 def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray:
     s = state
     y0, y1, x0, x1 = (int(v) for v in s["valid"])
@@ -495,7 +607,8 @@ def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray
     seen: list[tuple[int, int]] = []
 
     def add(cy: int, cx: int) -> None:
-        if y0 <= cy < y1 and x0 <= cx < x1 and s["mask"][cy, cx] and (cy, cx) not in seen:
+        inside = y0 <= cy < y1 and x0 <= cx < x1 and s["mask"][cy, cx]
+        if inside and (cy, cx) not in seen and _in_class_window(s, np.array([[cy, cx]]), oy, ox)[0]:
             seen.append((cy, cx))
 
     maps = [s["src"], s["hint"]] if s["use_hint"] else [s["src"]]
@@ -510,6 +623,8 @@ def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray
     for j in range(s["n_random"]):
         r = int(_splitmix(np.uint64((key + j) & mask)))
         add(y0 + r % (y1 - y0), x0 + (r >> 32) % (x1 - x0))
+    if not seen:  # every proposal fell outside the class window: the current source
+        seen.append((int(s["src"][oy, ox, 0]), int(s["src"][oy, ox, 1])))
     return np.array(seen, dtype=np.int64).reshape(-1, 2)
 
 
@@ -533,6 +648,9 @@ def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
             gy, gx = np.mgrid[y0:y1, x0:x1]
             cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
             cands = cands[s["mask"][cands[:, 0], cands[:, 1]] != 0]
+            cands = cands[_in_class_window(s, cands, oy, ox)]
+            if len(cands) == 0:  # an empty class window: the current source
+                cands = src[oy, ox][None].astype(np.int64)
         else:
             key = int(_splitmix(np.uint64(s["seed_key"]) ^ np.uint64(p)))
             cands = _candidates_reference(s, oy, ox, key)
