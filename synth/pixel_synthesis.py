@@ -139,7 +139,7 @@ def tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, in
     """Per-position tensor features and the kernel metric code that realises ``metric``.
 
     ED: ``(S_xx, sqrt2 S_xy, S_yy)`` under SSD (eq 6); FN: the same under its norm (eq 10);
-    LE: the log-tensors under the norm (eq 11); SO: ``(sin O, cos O, max(C, 1e-3))`` (eqs 7-9).
+    LE: the log-tensors under the norm (eq 11); SO: ``(sin O, cos O, C, 1 / C)``, ``C >= 1e-3`` (eqs 7-9).
     """
     t = tensors.astype(np.float32)
     if metric in ("ED", "FN"):
@@ -151,7 +151,9 @@ def tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, in
         code = METRIC_NORM
     elif metric == "SO":
         theta = orientation(t.astype(np.float64))
-        feats = np.stack([np.sin(theta), np.cos(theta), np.maximum(coherence(t), _COHERENCE_FLOOR)], axis=-1)
+        coh = np.maximum(coherence(t), _COHERENCE_FLOOR)
+        # 1 / C is stored so that the kernel's M_coh = max(C1 / C2, C2 / C1) needs no division.
+        feats = np.stack([np.sin(theta), np.cos(theta), coh, 1.0 / coh], axis=-1)
         code = METRIC_SO
     else:
         raise InvalidParameter("metric", metric, "must be one of ED, SO, FN, LE")
@@ -263,7 +265,7 @@ def _k_coherence_sets(
     _, eigvec = np.linalg.eigh(sample.T @ sample)
     projected = vectors @ eigvec[:, ::-1][:, :dims]
     kk = min(k + 1, len(projected))
-    _, idx = cKDTree(projected).query(projected, k=kk)
+    _, idx = cKDTree(projected).query(projected, k=kk, workers=-1)  # independent queries: same answer
     idx = idx.reshape(len(projected), kk)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]

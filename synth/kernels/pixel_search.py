@@ -14,7 +14,7 @@ valid only where its neighbourhoods are fully inside the rotated image).
 
 Each block has a per-position metric: ``SSD`` (sum of squared channel differences; also ED on
 tensors stored as ``(S_xx, sqrt(2) S_xy, S_yy)``), ``NORM`` (square root of that sum: FN, and LE
-on log-tensors) or ``SO`` (channels ``(sin O, cos O, C)``, Akl 2014 eqs 7-9). Output positions wrap
+on log-tensors) or ``SO`` (channels ``(sin O, cos O, C, 1 / C)``, Akl 2014 eqs 7-9). Output positions wrap
 (toroidal output); exemplar positions never do: candidates lie in ``valid`` so that every
 neighbourhood is fully inside the exemplar.
 
@@ -26,8 +26,9 @@ from an optional ``hint`` source map, and ``n_random`` seeded random positions. 
 unsynthesized output pixels (``done == 0``) are left out of the ``cur`` block.
 
 Histogram matching (optional, ``hist_weight > 0``): every exemplar position carries a label (its
-position, or e.g. its orientation bin); the output's count per label is kept up to date, and a
-candidate's distance is multiplied by ``1 + hist_weight * max(0, count / target - 1)`` for its label.
+position, or e.g. its orientation bin); the output's count per label is kept up to date while the
+weight is positive, and a candidate's distance is multiplied by
+``1 + hist_weight * max(0, count / target - 1)`` for its label.
 
 Class window (optional, ``cls_span >= 0``): every exemplar position has a class (e.g. the rotated
 copy of the exemplar it lies in) and every output position a wanted class; a candidate counts only
@@ -62,7 +63,7 @@ _MIX2 = np.uint64(0x94D049BB133111EB)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _splitmix(x: np.uint64) -> np.uint64:
     z = x + _GOLDEN
     z = (z ^ (z >> np.uint64(30))) * _MIX1
@@ -70,7 +71,7 @@ def _splitmix(x: np.uint64) -> np.uint64:
     return z ^ (z >> np.uint64(31))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _query_distance(q, lin, n, exf, base, metric, alpha, limit):
     """Distance between a gathered query block ``q[:n]`` and the exemplar block at ``base``.
 
@@ -88,11 +89,12 @@ def _query_distance(q, lin, n, exf, base, metric, alpha, limit):
             s2 = exf[e, 0]
             c2 = exf[e, 1]
             k2 = exf[e, 2]
-            m_or = abs(s1 * c2 - c1 * s2) * min(k1, k2)
-            m_coh = max(k1 / k2, k2 / k1)
-            if alpha == 0.5:
-                s += math.sqrt(m_or * m_coh)
+            sin_d = abs(s1 * c2 - c1 * s2)
+            if alpha == 0.5:  # M_or M_coh = |sin| min(C1, C2) max(C1, C2) / min(C1, C2) = |sin| max(C1, C2)
+                s += math.sqrt(sin_d * max(k1, k2))
             else:
+                m_or = sin_d * min(k1, k2)
+                m_coh = max(k1 * exf[e, 3], k2 * q[i, 3])  # channel 3 holds 1 / C: no division here
                 s += m_or**alpha * m_coh ** (1.0 - alpha)
         else:
             t = 0.0
@@ -105,7 +107,7 @@ def _query_distance(q, lin, n, exf, base, metric, alpha, limit):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):
     """Copy the (wrapped) output neighbourhood of ``(oy, ox)`` into ``q``; return its length.
 
@@ -127,7 +129,7 @@ def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _distance(
     q_cur,
     l_cur,
@@ -176,7 +178,7 @@ def candidate_capacity(n_cand_offsets: int, k: int, has_hint: bool, n_random: in
     return n_cand_offsets * (k + 1) * (2 if has_hint else 1) + n_random + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _class_allowed(cls, key, want, period, span):
     """Whether exemplar position ``key``'s class lies within ``span`` of ``want`` (cyclic, ``period``);
     always true when ``span < 0`` (no window)."""
@@ -189,7 +191,7 @@ def _class_allowed(cls, key, want, period, span):
     return min(d, period - d) <= span
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w, cls, want, period, span):
     if cy < valid[0] or cy >= valid[1] or cx < valid[2] or cx >= valid[3]:
         return n
@@ -198,7 +200,7 @@ def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w, cls, want, perio
     key = cy * w + cx
     if stamp[key] == tag:
         return n
-    if not _class_allowed(cls, key, want, period, span):
+    if span >= 0 and not _class_allowed(cls, key, want, period, span):
         return n
     stamp[key] = tag
     cand[n, 0] = cy
@@ -206,7 +208,7 @@ def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w, cls, want, perio
     return n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _gather_candidates(
     cand,
     oy,
@@ -282,7 +284,7 @@ def _gather_candidates(
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _valid_positions(valid, mask):
     """Every exemplar position of the ``valid`` rectangle that ``mask`` allows, in raster order."""
     n = 0
@@ -301,7 +303,7 @@ def _valid_positions(valid, mask):
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _histogram_factor(count, target, weight):
     """Histogram-matching penalty: a candidate whose label (its exemplar position, Chen & Wang's
     position histogram, or its orientation bin) the output already holds ``count`` times, against
@@ -312,7 +314,7 @@ def _histogram_factor(count, target, weight):
     return 1.0 + weight * excess if excess > 0.0 else 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _synthesize_chunk_kernel(
     order,
     start,
@@ -393,7 +395,8 @@ def _synthesize_chunk_kernel(
             best_out[oy, ox] = 0.0
             continue
         # This pixel's current source leaves the histogram while it looks for a new one.
-        label_count[labels[src[oy, ox, 0] * w + src[oy, ox, 1]]] -= 1
+        if hist_weight > 0.0:
+            label_count[labels[src[oy, ox, 0] * w + src[oy, ox, 1]]] -= 1
         best = np.inf
         best_raw = np.inf
         by = -1
@@ -434,75 +437,78 @@ def _synthesize_chunk_kernel(
         for j in range(n):
             cy = pool[j, 0]
             cx = pool[j, 1]
-            if exact and not _class_allowed(cls, cy * w + cx, want, cls_period, cls_span):
+            if exact and cls_span >= 0 and not _class_allowed(cls, cy * w + cx, want, cls_period, cls_span):
                 continue
-            f = 1.0
             if hist_weight > 0.0:
                 lab = labels[cy * w + cx]
                 f = _histogram_factor(label_count[lab], label_target[lab], hist_weight)
-            d = _distance(
-                q_cur,
-                l_cur,
-                n_cur,
-                exf,
-                w_cur,
-                q_par,
-                l_par,
-                n_par,
-                parf,
-                w_par,
-                par_width,
-                q_gui,
-                l_gui,
-                n_gui,
-                guif,
-                w_gui,
-                metric,
-                par_metric,
-                gui_metric,
-                alpha,
-                w,
-                cy,
-                cx,
-                best / f,
-            )
-            if d * f < best:
-                best = d * f
-                best_raw = d
+                d = f * _distance(
+                    q_cur,
+                    l_cur,
+                    n_cur,
+                    exf,
+                    w_cur,
+                    q_par,
+                    l_par,
+                    n_par,
+                    parf,
+                    w_par,
+                    par_width,
+                    q_gui,
+                    l_gui,
+                    n_gui,
+                    guif,
+                    w_gui,
+                    metric,
+                    par_metric,
+                    gui_metric,
+                    alpha,
+                    w,
+                    cy,
+                    cx,
+                    best / f,
+                )
+            else:
+                f = 1.0
+                d = _distance(
+                    q_cur,
+                    l_cur,
+                    n_cur,
+                    exf,
+                    w_cur,
+                    q_par,
+                    l_par,
+                    n_par,
+                    parf,
+                    w_par,
+                    par_width,
+                    q_gui,
+                    l_gui,
+                    n_gui,
+                    guif,
+                    w_gui,
+                    metric,
+                    par_metric,
+                    gui_metric,
+                    alpha,
+                    w,
+                    cy,
+                    cx,
+                    best,
+                )
+            if d < best:
+                best = d
+                best_raw = d / f
                 by = cy
                 bx = cx
-        if by < 0:  # exact search with an empty class window: keep the current source
+        if by < 0:  # an exact search with an empty class window: keep the source and its distance
             by = src[oy, ox, 0]
             bx = src[oy, ox, 1]
-            best_raw = _distance(
-                q_cur,
-                l_cur,
-                n_cur,
-                exf,
-                w_cur,
-                q_par,
-                l_par,
-                n_par,
-                parf,
-                w_par,
-                par_width,
-                q_gui,
-                l_gui,
-                n_gui,
-                guif,
-                w_gui,
-                metric,
-                par_metric,
-                gui_metric,
-                alpha,
-                w,
-                by,
-                bx,
-                np.inf,
-            )
+            best_raw = best_out[oy, ox]
         src[oy, ox, 0] = by
         src[oy, ox, 1] = bx
-        label_count[labels[by * w + bx]] += 1
+        if hist_weight > 0.0:
+            label_count[labels[by * w + bx]] += 1
         for c in range(C):
             out[oy, ox, c] = ex[by, bx, c]
         done[oy, ox] = 1
@@ -576,7 +582,10 @@ def _metric_reference(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -
         m_or = np.abs(a64[..., 0] * b64[..., 1] - a64[..., 1] * b64[..., 0]) * np.minimum(
             a64[..., 2], b64[..., 2]
         )
-        m_coh = np.maximum(a64[..., 2] / b64[..., 2], b64[..., 2] / a64[..., 2])
+        m_coh = np.maximum(a64[..., 2] * b64[..., 3], b64[..., 2] * a64[..., 3])
+        if alpha == 0.5:  # the kernel's exact identity M_or M_coh = |sin| max(C1, C2)
+            sin_d = np.abs(a64[..., 0] * b64[..., 1] - a64[..., 1] * b64[..., 0])
+            return np.sqrt(sin_d * np.maximum(a64[..., 2], b64[..., 2]))
         return m_or**alpha * m_coh ** (1.0 - alpha)
     ssd = ((a64 - b64) ** 2).sum(axis=-1)
     return np.sqrt(ssd) if metric == METRIC_NORM else ssd
@@ -649,8 +658,10 @@ def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
             cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
             cands = cands[s["mask"][cands[:, 0], cands[:, 1]] != 0]
             cands = cands[_in_class_window(s, cands, oy, ox)]
-            if len(cands) == 0:  # an empty class window: the current source
-                cands = src[oy, ox][None].astype(np.int64)
+            if len(cands) == 0:  # an empty class window: keep the source and its distance
+                out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
+                done[oy, ox] = 1
+                continue
         else:
             key = int(_splitmix(np.uint64(s["seed_key"]) ^ np.uint64(p)))
             cands = _candidates_reference(s, oy, ox, key)
@@ -678,15 +689,16 @@ def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
                 s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"], s["gui_metric"], s["alpha"], full
             )
         labels, count, ew = s["labels"], s["label_count"], ex.shape[1]
-        count[labels[src[oy, ox, 0] * ew + src[oy, ox, 1]]] -= 1
         factor = np.ones(len(cands))
-        if s["hist_weight"] > 0:
+        if s["hist_weight"] > 0:  # counts are kept only while they matter
+            count[labels[src[oy, ox, 0] * ew + src[oy, ox, 1]]] -= 1
             lab = labels[cands[:, 0] * ew + cands[:, 1]]
             factor = 1.0 + s["hist_weight"] * np.maximum(count[lab] / s["label_target"][lab] - 1.0, 0.0)
         best = int(np.argmin(d * factor))
         by, bx = cands[best]
         src[oy, ox] = (by, bx)
-        count[labels[by * ew + bx]] += 1
+        if s["hist_weight"] > 0:
+            count[labels[by * ew + bx]] += 1
         out[oy, ox] = ex[by, bx]
         done[oy, ox] = 1
         s["best_out"][oy, ox] = d[best]
