@@ -285,3 +285,13 @@ def test_window_search_strict_or_hints() -> None:
             "arbitrary-shape", ex, constraint=con, params=base | local | {"window_search": "hints"}
         ).image.tobytes()
     )
+
+
+def test_square_random_walk_follows_a_constant_angle_too() -> None:
+    """The paper's other configuration (square neighbourhood, random walk), as the weakly oriented
+    recipe of docs/arbitrary-shape.md uses it with the local reference."""
+    con = grating((32, 32), np.radians(50), 8.0)
+    res = _run(_fringes(0), con, neighbourhood="square", iterations=3, rotation_reference="local", w=0.2)
+    assert res.params["scan"] is None and res.params["neighbourhood"] == "square"
+    assert _angle_between(_dominant(res.image), np.radians(50)) < 8
+    assert orientation_agreement(res.image, con) < 0.2

@@ -113,7 +113,12 @@ AGREEMENT_SIGMA_W = 4.0
 
 
 class ArbitraryShapeParams(NeighbourhoodParams):
-    """Parameters of arbitrary-shape synthesis; defaults = the GRETSI paper's settings (section 4)."""
+    """Parameters of arbitrary-shape synthesis; defaults = the GRETSI paper's settings (section 4).
+
+    For weakly oriented exemplars (HRTEM soot, whose own orientations scatter widely), the measured
+    best is ``rotation_reference='local', neighbourhood='square', neighbourhood_size=9,
+    iterations=4, w=0.2`` (docs/arbitrary-shape.md).
+    """
 
     angular_step: float = Field(
         5.0, gt=0.0, le=180.0, description="Degrees between the rotated copies of D_M (M = 360 / step)."
