@@ -439,63 +439,36 @@ def _synthesize_chunk_kernel(
             cx = pool[j, 1]
             if exact and cls_span >= 0 and not _class_allowed(cls, cy * w + cx, want, cls_period, cls_span):
                 continue
+            f = 1.0
             if hist_weight > 0.0:
                 lab = labels[cy * w + cx]
                 f = _histogram_factor(label_count[lab], label_target[lab], hist_weight)
-                d = f * _distance(
-                    q_cur,
-                    l_cur,
-                    n_cur,
-                    exf,
-                    w_cur,
-                    q_par,
-                    l_par,
-                    n_par,
-                    parf,
-                    w_par,
-                    par_width,
-                    q_gui,
-                    l_gui,
-                    n_gui,
-                    guif,
-                    w_gui,
-                    metric,
-                    par_metric,
-                    gui_metric,
-                    alpha,
-                    w,
-                    cy,
-                    cx,
-                    best / f,
-                )
-            else:
-                f = 1.0
-                d = _distance(
-                    q_cur,
-                    l_cur,
-                    n_cur,
-                    exf,
-                    w_cur,
-                    q_par,
-                    l_par,
-                    n_par,
-                    parf,
-                    w_par,
-                    par_width,
-                    q_gui,
-                    l_gui,
-                    n_gui,
-                    guif,
-                    w_gui,
-                    metric,
-                    par_metric,
-                    gui_metric,
-                    alpha,
-                    w,
-                    cy,
-                    cx,
-                    best,
-                )
+            d = f * _distance(
+                q_cur,
+                l_cur,
+                n_cur,
+                exf,
+                w_cur,
+                q_par,
+                l_par,
+                n_par,
+                parf,
+                w_par,
+                par_width,
+                q_gui,
+                l_gui,
+                n_gui,
+                guif,
+                w_gui,
+                metric,
+                par_metric,
+                gui_metric,
+                alpha,
+                w,
+                cy,
+                cx,
+                best / f,
+            )
             if d < best:
                 best = d
                 best_raw = d / f
