@@ -116,7 +116,7 @@ class ArbitraryShapeParams(NeighbourhoodParams):
     """Parameters of arbitrary-shape synthesis; defaults = the GRETSI paper's settings (section 4).
 
     For weakly oriented exemplars (HRTEM soot, whose own orientations scatter widely), the measured
-    best is ``rotation_reference='local', neighbourhood='square', neighbourhood_size=9,
+    best is ``rotation_reference='local', sigma_w=2, neighbourhood='square', neighbourhood_size=7,
     iterations=4, w=0.2`` (docs/arbitrary-shape.md).
     """
 
