@@ -12,6 +12,7 @@ COPY pyproject.toml README.md ./
 COPY synth ./synth
 COPY app ./app
 COPY worker ./worker
+COPY jobs ./jobs
 RUN pip install . \
     && useradd --create-home --uid 1000 texsynth \
     && mkdir -p /data && chown texsynth /data

@@ -19,7 +19,7 @@ serve: $(STAMP)
 	$(BIN)/texsynth serve
 
 test: $(STAMP)
-	$(BIN)/python -m ruff check synth app worker tests benchmarks
+	$(BIN)/python -m ruff check synth app worker jobs tests benchmarks
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)

@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from app.main import create_app
-    from worker.config import Settings
+    from jobs.config import Settings
 
     settings = Settings.from_env(data_dir=args.data_dir, concurrency=args.workers)
     settings.ensure_dirs()

@@ -1,8 +1,8 @@
 """The FastAPI application: REST API under ``/api`` (OpenAPI at ``/docs``) and the browser page at ``/``.
 
 ``create_app(settings)`` builds it; ``uvicorn --factory app.main:create_app`` serves it with the
-environment's :class:`~worker.config.Settings`. The API never runs synthesis: it validates, stores,
-queues and reports. Its :class:`~worker.reaper.Reaper` settles jobs whose worker vanished.
+environment's :class:`~jobs.config.Settings`. The API never runs synthesis: it validates, stores,
+queues and reports. Its :class:`~jobs.reaper.Reaper` settles jobs whose worker vanished.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from app.api.routes import health, jobs, methods, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
 from app.service import Service
+from jobs.config import Settings
 from synth import __version__
-from worker.config import Settings
 
 __all__ = ["create_app"]
 

@@ -18,16 +18,16 @@ from typing import Any
 
 from celery import group
 
+from jobs.config import Settings
+from jobs.methods import methods
+from jobs.queue import QUEUE, TASK_NAME, create_celery
+from jobs.reaper import Reaper
+from jobs.store import JobRecord, JobStore
+from jobs.uploads import check_upload, decode_image
 from synth import __version__ as synth_version
 from synth.api import MethodSpec
 from synth.errors import InvalidInput, InvalidParameter
 from synth.params import validate_params
-from worker.config import Settings
-from worker.imaging import check_upload, decode_image
-from worker.methods import methods
-from worker.queue import QUEUE, TASK_NAME, create_celery
-from worker.reaper import Reaper
-from worker.store import JobRecord, JobStore
 
 __all__ = ["SIZE_FIELDS", "JobRequest", "Service", "Upload"]
 

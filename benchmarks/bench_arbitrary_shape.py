@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._report import median_time, write_section
+from synth.analysis.tensor import dominant_orientation, structure_tensor
 from synth.api import synthesize
 from synth.evaluate import grey_histogram, kl_divergence
 from synth.io import load_image
+from synth.io.patterns import concentric_rings, grating, spiral, waves
 from synth.methods.arbitrary_shape import orientation_agreement
-from synth.patterns import concentric_rings, grating, spiral, waves
-from synth.tensor import dominant_orientation, structure_tensor
 
 SIZE = 256
 RUNS = 3
@@ -220,8 +220,8 @@ def figure(exemplar_name: str, path: Path) -> None:
     """Side-by-side figure: exemplar, constraint, O_con, S_con's orientation, naive result, ours."""
     from PIL import Image, ImageDraw
 
-    from synth.render import orientation_image
-    from synth.tensor import coherence, structure_direction
+    from synth.analysis.tensor import coherence, structure_direction
+    from synth.output.render import orientation_image
 
     ex = exemplars()[exemplar_name]
     rows = []

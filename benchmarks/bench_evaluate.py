@@ -18,7 +18,7 @@ import numpy as np
 from benchmarks._report import DATA, median_time, write_section
 from synth.evaluate import evaluate_pair, evaluate_volume
 from synth.io import load_image
-from synth.plots import write_plots
+from synth.output.plots import write_plots
 
 SOOT = DATA / "hrtem-soot-256.png"
 RUNS = 5

@@ -20,12 +20,12 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from benchmarks._report import DATA
+from synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from synth.api import synthesize
 from synth.evaluate import evaluate_pair
 from synth.io import load_image, save_image
-from synth.patterns import undulating_laminae
-from synth.render import coherence_image, orientation_image
-from synth.tensor import coherence, structure_direction, structure_tensor
+from synth.io.patterns import undulating_laminae
+from synth.output.render import coherence_image, orientation_image
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 SEEDS = (1, 2, 3, 4, 5, 6, 7, 8)

@@ -1,6 +1,6 @@
 """The workers' Celery application: ``celery -A worker.celery_app worker`` (or ``texsynth worker``).
 
-Configuration comes from :func:`worker.queue.create_celery` with the environment's :class:`Settings`;
+Configuration comes from :func:`jobs.queue.create_celery` with the environment's :class:`Settings`;
 the signal handlers below keep the service's job records honest about which process holds a job.
 """
 
@@ -13,9 +13,9 @@ import time
 
 from celery import signals
 
-from worker.config import Settings
-from worker.queue import TASK_NAME, create_celery
-from worker.store import JobStore
+from jobs.config import Settings
+from jobs.queue import TASK_NAME, create_celery
+from jobs.store import JobStore
 
 __all__ = ["app", "settings", "store"]
 
@@ -64,6 +64,6 @@ def _on_child_start(**_):
     _store = None  # never share an SQLite connection across a fork
     if settings.worker_nice:
         os.nice(settings.worker_nice)  # the API stays responsive on a machine busy with jobs
-    from worker.methods import methods
+    from jobs.methods import methods
 
     methods(settings)  # import the methods (numba compiles lazily) before the first job

@@ -16,13 +16,13 @@ import threading
 import time
 from typing import Any
 
+from jobs.config import Settings
+from jobs.methods import methods
+from jobs.store import JobStore, atomic_write_bytes
+from jobs.uploads import decode_image, preview_png
 from synth.api import synthesize
-from synth.artifacts import write_artifacts
 from synth.errors import Cancelled, SynthError
-from worker.config import Settings
-from worker.imaging import decode_image, preview_png
-from worker.methods import methods
-from worker.store import JobStore, atomic_write_bytes
+from synth.output.artifacts import write_artifacts
 
 __all__ = ["JobProgress", "run_job"]
 

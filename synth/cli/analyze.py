@@ -27,8 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from synth import render, tensor
+from synth.analysis import tensor
 from synth.errors import InvalidParameter
+from synth.output import render
 
 __all__ = ["TensorAnalysis", "analyze_image", "register", "run"]
 

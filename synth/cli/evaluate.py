@@ -5,7 +5,7 @@
 ``OUT`` is a 2-D image, or a volume: a TIFF with more than one page is read with
 :func:`synth.io.load_volume` and evaluated slice by slice along each axis
 (:func:`synth.evaluate.evaluate_volume`). Prints a table, or the full metrics as JSON with
-``--json``; ``--plots DIR`` also writes the comparison PNGs (:func:`synth.plots.write_plots`).
+``--json``; ``--plots DIR`` also writes the comparison PNGs (:func:`synth.output.plots.write_plots`).
 Bad input is one line on stderr and exit status 2 (handled by :func:`synth.cli.main`).
 """
 
@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
         output = load_image(args.output)
         metrics = evaluate_pair(exemplar, output, **options)
     if args.plots is not None:
-        from synth.plots import write_plots  # deferred: matplotlib only when plots are asked for
+        from synth.output.plots import write_plots  # deferred: matplotlib only when plots are asked for
 
         try:
             written = write_plots(exemplar, output, metrics, args.plots)

@@ -2,7 +2,7 @@
 
 Writes ``output.png`` (16-bit with ``--bit-depth 16``), ``output.tiff``, ``manifest.json``,
 ``metrics.json``, the tensor field's ``coherence.png``/``orientation.png`` and comparison plots (see
-:mod:`synth.artifacts`). Parameters come from the method's model: ``--set name=value`` (values are
+:mod:`synth.output.artifacts`). Parameters come from the method's model: ``--set name=value`` (values are
 read as JSON when they parse, e.g. ``--set levels=3 --set metric=ED``). A progress bar is drawn on
 stderr when it is a terminal.
 """
@@ -73,8 +73,8 @@ class _ProgressBar:
 
 def _run(args: argparse.Namespace) -> int:
     from synth.api import available_methods, synthesize
-    from synth.artifacts import write_artifacts
     from synth.io import load_image
+    from synth.output.artifacts import write_artifacts
 
     methods = available_methods()
     if args.method not in methods:

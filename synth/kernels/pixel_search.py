@@ -492,7 +492,7 @@ def synthesize_chunk(state: dict, start: int, stop: int) -> None:
     """Run the kernel on ``state['order'][start:stop]``; ``state`` holds the prepared arrays.
 
     The keys are those of :func:`synthesize_chunk_reference`'s arguments; every array must be
-    C-contiguous, features float32, maps int64 (the caller, :mod:`synth.pixel_synthesis`, prepares
+    C-contiguous, features float32, maps int64 (the caller, :mod:`synth.pixel.synthesis`, prepares
     them once per pass).
     """
     s = state

@@ -4,16 +4,16 @@ Akl, Yaacoub, Donias, Da Costa, Germain (GRETSI), in three steps:
 
 1. **Constraint field** (section 2.1, eqs 1-3): the orientation field ``O_con`` of the constraint
    image ``I_con`` (eq 1) turns every tensor of the exemplar's field ``S_en`` by the angle at the
-   same position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`synth.tensor.rotate_tensors`).
+   same position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`synth.analysis.tensor.rotate_tensors`).
 2. **Rotated dictionary** ``D_M`` (section 2.2, eq 4): intensity + tensor neighbourhoods of the
    exemplar turned by ``2 pi m / M`` (the paper's step: 5 degrees, ``M = 72``), each copy with its
-   own tensor field, only neighbourhoods fully inside a copy (:mod:`synth.rotation`).
+   own tensor field, only neighbourhoods fully inside a copy (:mod:`synth.analysis.rotation`).
 3. **Synthesis** (section 3, eqs 5-6): for every output position the neighbourhood made of the
    output's intensities and ``S_con``'s tensors is matched in ``D_M`` with
    ``W SSD + (1 - W) STD`` (ED metric in the paper) and the best match's pixel is copied; causal
    neighbourhood with a lexicographic scan (or square with a random walk), optional Gaussian
    pyramids whose neighbourhoods include the parent level. This is the shared engine of
-   :mod:`synth.pixel_synthesis` run on the canvas of ``D_M``, guided by ``S_con``.
+   :mod:`synth.pixel.synthesis` run on the canvas of ``D_M``, guided by ``S_con``.
 
 Choices the paper leaves open, and departures (why)
 ---------------------------------------------------
@@ -28,7 +28,7 @@ Choices the paper leaves open, and departures (why)
 - ``restrict_rotations`` (the paper's own perspective, section 4): the search looks only at the
   copies turned by the local angle, within ``rotation_window`` (at least the nearest copy; a copy and
   its half-turn twin alike). With ``window_search='strict'`` (default) the kernel's per-position
-  candidate window (:class:`synth.pixel_synthesis.CandidateWindow`) drops every candidate from
+  candidate window (:class:`synth.pixel.synthesis.CandidateWindow`) drops every candidate from
   another copy, in the exact and the k-coherence search alike; every position is also offered a
   *hint*, the exemplar position ``S_con`` was built from in an in-window copy (moved to the nearest
   copyable position of that copy near its border), and no random candidates are drawn. With
@@ -45,7 +45,7 @@ Choices the paper leaves open, and departures (why)
   ``constraint_tensors='constraint'``.
 - A featureless constraint (no gradient anywhere) has no orientation to follow: :class:`InvalidInput`.
   Where only part of it is flat, ``O_con`` there is 0, so the exemplar keeps its own orientation.
-- ``W`` is applied to normalised parts, as in :mod:`synth.pixel_synthesis` (each part divided by its
+- ``W`` is applied to normalised parts, as in :mod:`synth.pixel.synthesis` (each part divided by its
   typical value), so ``W = 0.5`` weighs intensities and tensors equally; the paper gives no value,
   the default 0.1 is the measured best (docs/arbitrary-shape.md).
 
@@ -69,22 +69,8 @@ from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 from skimage.transform import resize
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.errors import InvalidInput, InvalidParameter
-from synth.io import LUMA_WEIGHTS
-from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
-from synth.pixel_synthesis import (
-    CandidateWindow,
-    Guidance,
-    level_neighbourhood_size,
-    source_map_pyramid,
-    synthesize_source_map,
-    tensor_features,
-)
-from synth.pyramid import gaussian_pyramid, level_shapes
-from synth.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
-from synth.tensor import (
+from synth.analysis.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
+from synth.analysis.tensor import (
     Metric,
     coherence,
     dominant_orientation,
@@ -92,6 +78,20 @@ from synth.tensor import (
     rotate_tensors,
     structure_tensor,
     wrap_angle,
+)
+from synth.api import MethodSpec, Progress, Result, register
+from synth.errors import InvalidInput, InvalidParameter
+from synth.grid.pyramid import gaussian_pyramid, level_shapes
+from synth.io import LUMA_WEIGHTS
+from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
+from synth.pixel.synthesis import (
+    CandidateWindow,
+    Guidance,
+    level_neighbourhood_size,
+    source_map_pyramid,
+    synthesize_source_map,
+    tensor_features,
 )
 
 __all__ = [
@@ -204,7 +204,7 @@ def orientation_agreement(
 ) -> float:
     """How well ``output``'s structures follow ``constraint``'s: weighted mean ``|sin(O_out - O_con)|``.
 
-    Both images' structure orientations are measured (:func:`synth.tensor.structure_tensor`, scales
+    Both images' structure orientations are measured (:func:`synth.analysis.tensor.structure_tensor`, scales
     ``sigma_d``, ``sigma_w``); each pixel counts by the product of the two coherences, so that only
     places where both images have an orientation vote. 0 is perfect agreement; independent random
     orientations give ``2 / pi = 0.64``; perpendicular structures give 1. RGB images count by their
@@ -212,7 +212,7 @@ def orientation_agreement(
 
     Examples
     --------
-    >>> from synth.patterns import grating
+    >>> from synth.io.patterns import grating
     >>> a = grating((64, 64), 0.3, noise=0.1)
     >>> round(orientation_agreement(a, grating((64, 64), 0.3)), 2)
     0.0

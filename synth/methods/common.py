@@ -9,10 +9,10 @@ from pydantic import Field, model_validator
 
 from synth.api import Progress
 from synth.errors import Cancelled
-from synth.neighbourhood import Shape
+from synth.grid.neighbourhood import Shape
+from synth.grid.scan import ScanOrder
 from synth.params import MethodParams
-from synth.pixel_synthesis import SearchSettings
-from synth.scan import ScanOrder
+from synth.pixel.synthesis import SearchSettings
 
 __all__ = ["NeighbourhoodParams", "as_features", "checked_progress"]
 

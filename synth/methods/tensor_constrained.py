@@ -17,7 +17,7 @@ literally; docs/tensor-constrained.md compares both.
 
 Normalisation of eq 13 (the paper leaves it open): each part is divided by its typical value,
 the mean distance between random exemplar positions under its metric times the number of
-positions it compares, so that ``p = 0.5`` weighs both parts equally (:mod:`synth.pixel_synthesis`).
+positions it compares, so that ``p = 0.5`` weighs both parts equally (:mod:`synth.pixel.synthesis`).
 
 The tensor part of a texture neighbourhood has the pixel part's shape (plus its centre, which
 ``S_out`` already holds). Departure, and why: the stage-1 source map proposes candidates to the stage-2 search
@@ -38,12 +38,12 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
+from synth.analysis.tensor import Metric, coherence, orientation, structure_tensor
 from synth.api import MethodSpec, Progress, Result, register
+from synth.grid.neighbourhood import Shape
+from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.neighbourhood import Shape
-from synth.pixel_synthesis import Guidance, source_map_pyramid, synthesize_source_map, tensor_features
-from synth.pyramid import gaussian_pyramid, level_shapes
-from synth.tensor import Metric, coherence, orientation, structure_tensor
+from synth.pixel.synthesis import Guidance, source_map_pyramid, synthesize_source_map, tensor_features
 
 __all__ = [
     "TensorConstrainedParams",

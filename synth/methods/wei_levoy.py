@@ -8,7 +8,7 @@ output, exemplar neighbourhoods fully inside the exemplar.
 References
 ----------
 L.-Y. Wei, M. Levoy, "Fast texture synthesis using tree-structured vector quantization",
-SIGGRAPH 2000. Departures (see :mod:`synth.pixel_synthesis`): unsynthesized pixels are ignored in
+SIGGRAPH 2000. Departures (see :mod:`synth.pixel.synthesis`): unsynthesized pixels are ignored in
 the first pass rather than compared as noise; the default search is k-coherence, not TSVQ.
 """
 
@@ -20,9 +20,9 @@ import numpy as np
 from pydantic import Field
 
 from synth.api import MethodSpec, Progress, Result, register
+from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.pixel_synthesis import synthesize_source_map
-from synth.pyramid import gaussian_pyramid, level_shapes
+from synth.pixel.synthesis import synthesize_source_map
 
 __all__ = ["WeiLevoyParams", "run_wei_levoy"]
 

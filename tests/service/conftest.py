@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from synth.client import Client
-from worker.store import JobStore
+from app.client import Client
+from jobs.store import JobStore
 
 REPO = Path(__file__).resolve().parents[2]
 TEST_METHODS = "tests.service.methods_for_tests"

@@ -13,9 +13,9 @@ import numpy as np
 from pydantic import Field
 from scipy import ndimage as ndi
 
+from synth.analysis.tensor import structure_tensor
 from synth.api import MethodSpec, Result, register
 from synth.params import MethodParams
-from synth.tensor import structure_tensor
 
 
 class BlurParams(MethodParams):

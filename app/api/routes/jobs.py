@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse
 from app.api.deps import ServiceDep
 from app.schemas import ErrorPublic, JobPublic, JobsPublic
 from app.service import Upload
-from worker.store import STATES
+from jobs.store import STATES
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 

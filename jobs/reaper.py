@@ -1,0 +1,110 @@
+"""Settle jobs whose worker vanished, so that no job is shown as running (or queued) forever.
+
+Runs in the API process every couple of seconds (:class:`Reaper`). A run is dead when its process
+is gone on this machine or its heartbeat is older than ``stale_seconds``. A dead run is re-queued
+(at-least-once: the task is idempotent) until ``max_attempts`` runs were lost or the hard time
+limit was reached; then the job fails with a message that says why. A queued job whose message was
+taken by a worker main process that died (the filesystem transport loses it) is sent again. A
+cancel that the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+from jobs.config import Settings
+from jobs.store import JobStore, pid_alive
+
+__all__ = ["Reaper", "reap_once"]
+
+log = logging.getLogger(__name__)
+
+
+def reap_once(
+    store: JobStore,
+    settings: Settings,
+    send: Callable[[str], None],
+    terminate: Callable[[str], None],
+    terminated: set[str],
+    now: float | None = None,
+) -> list[tuple[str, str]]:
+    """One pass over the active jobs; returns ``(job id, action)`` for what it changed."""
+    now = time.time() if now is None else now
+    actions = []
+    for job in store.active():
+        if job.state == "running" and job.cancel_requested:
+            waited = now - job.cancel_requested
+            dead = store.run_is_dead(job, now, settings.stale_seconds)
+            if waited > settings.cancel_grace_seconds and job.id not in terminated and not dead:
+                terminate(job.id)
+                terminated.add(job.id)
+                actions.append((job.id, "terminate"))
+            settle = dead or waited > settings.cancel_grace_seconds + 5
+            why = "cancelled by request (the run was stopped)"
+            if settle and store.finish(job.id, None, "cancelled", why):
+                actions.append((job.id, "cancelled"))
+        elif job.state == "running" and store.run_is_dead(job, now, settings.stale_seconds):
+            ran = now - (job.started or now)
+            if ran >= settings.hard_time_limit:
+                message = (
+                    f"stopped at the hard time limit of {settings.hard_time_limit} s; "
+                    "try a smaller output size"
+                )
+                if store.finish(job.id, None, "failed", message):
+                    actions.append((job.id, "failed"))
+            elif job.attempts >= settings.max_attempts:
+                message = (
+                    f"the worker running this job stopped unexpectedly {job.attempts} times "
+                    "(killed, or out of memory?); giving up - try a smaller output size"
+                )
+                if store.finish(job.id, None, "failed", message):
+                    actions.append((job.id, "failed"))
+            elif store.requeue(
+                job.id,
+                f"the worker running this job stopped; re-queued (run {job.attempts + 1} "
+                f"of at most {settings.max_attempts})",
+            ):
+                send(job.id)
+                actions.append((job.id, "requeued"))
+        elif (
+            job.state == "queued"
+            and job.received_pid
+            and job.received_host == store.host
+            and not pid_alive(job.received_pid)
+        ) and store.requeue(job.id, "the worker holding this job stopped; re-queued"):
+            send(job.id)
+            actions.append((job.id, "resent"))
+    for job_id, action in actions:
+        log.warning("reaper: job %s %s", job_id, action)
+    return actions
+
+
+class Reaper(threading.Thread):
+    """Calls :func:`reap_once` every ``interval`` seconds until :meth:`stop`."""
+
+    def __init__(
+        self,
+        store: JobStore,
+        settings: Settings,
+        send: Callable[[str], None],
+        terminate: Callable[[str], None],
+        interval: float = 1.0,
+    ) -> None:
+        super().__init__(name="texsynth-reaper", daemon=True)
+        self.store, self.settings, self.send, self.terminate = store, settings, send, terminate
+        self.interval = interval
+        self.terminated: set[str] = set()
+        self._stop_event = threading.Event()
+
+    def run(self) -> None:
+        while not self._stop_event.wait(self.interval):
+            try:
+                reap_once(self.store, self.settings, self.send, self.terminate, self.terminated)
+            except Exception:  # keep reaping; a broker hiccup must not end the thread
+                log.exception("reaper pass failed")
+
+    def stop(self) -> None:
+        self._stop_event.set()

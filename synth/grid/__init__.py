@@ -1,0 +1,1 @@
+"""N-dimensional machinery shared by every pixel method: Gaussian pyramids, neighbourhoods, scan orders."""

@@ -1,0 +1,134 @@
+"""Every artifact of a synthesis, written into one folder: what the CLI and the service's worker keep.
+
+A 2-D run gives ``output.png`` (8-bit, or 16-bit on request), ``output.tiff`` (16-bit),
+``coherence.png`` and ``orientation.png`` of the synthesized structure tensor field (of the output
+when the method has none; ``constraint_*`` of the constraint when there is one), renderings of the
+method's extra maps, ``metrics.json`` (:func:`synth.evaluate.evaluate_pair`: exemplar vs output),
+``plots/*.png`` (:func:`synth.output.plots.write_plots`) and ``manifest.json`` (method, full parameters, seed,
+versions, timings). A volume gives ``output.tiff`` as a multi-page stack and ``output.png`` as its
+middle slice, and its metrics are the multi-2D ones. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from synth import __version__
+from synth.analysis.tensor import coherence, structure_direction, structure_tensor
+from synth.api import Result
+from synth.evaluate import evaluate_pair, evaluate_volume, to_json_types
+from synth.io import atomic_write_bytes, image_to_png_bytes, save_image, save_volume
+from synth.output.plots import write_plots
+from synth.output.render import coherence_image, orientation_image
+
+__all__ = ["versions", "write_artifacts"]
+
+
+def versions() -> dict[str, str]:
+    """Versions of texsynth and of the libraries that decide its results."""
+    import numba
+    import scipy
+    import skimage
+
+    return {
+        "texsynth": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "scikit-image": skimage.__version__,
+        "numba": numba.__version__,
+    }
+
+
+def _png(path: Path, rendering: np.ndarray) -> None:
+    arr = rendering.astype(np.float32) / 255.0 if rendering.dtype == np.uint8 else rendering
+    atomic_write_bytes(path, image_to_png_bytes(arr))
+
+
+def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list[str]:
+    names = [f"{prefix}coherence.png", f"{prefix}orientation.png"]
+    coh = coherence(tensors)
+    _png(folder / names[0], coherence_image(coh, legend=True))
+    _png(folder / names[1], orientation_image(structure_direction(tensors), coherence=coh, legend=True))
+    return names
+
+
+def _render_extra(arr: np.ndarray) -> np.ndarray | None:
+    """A viewable image of an extra map: grey/RGB rescaled to [0, 1]; a 2-channel map (e.g. the
+    source coordinates of each pixel) as red = first, green = second channel; ``None`` otherwise."""
+    if not np.isfinite(arr).all() or arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (2, 3)):
+        return None
+    if arr.ndim == 3 and arr.shape[2] == 2:
+        arr = np.concatenate([arr, np.zeros_like(arr[..., :1])], axis=2)
+    lo, hi = arr.min(axis=(0, 1)), arr.max(axis=(0, 1))
+    return np.where(hi > lo, (arr - lo) / np.where(hi > lo, hi - lo, 1), 0).astype(np.float32)
+
+
+def write_artifacts(
+    folder: Path,
+    result: Result,
+    exemplar: np.ndarray,
+    constraint: np.ndarray | None = None,
+    manifest: dict[str, Any] | None = None,
+    *,
+    bit_depth: int = 8,
+    plots: bool = True,
+) -> tuple[list[str], dict[str, Any]]:
+    """Write all artifacts of ``result`` into ``folder``; return their names and the metrics.
+
+    ``bit_depth`` (8 or 16) is that of ``output.png``; ``output.tiff`` is always 16-bit.
+    ``manifest`` adds fields (e.g. a job id) to ``manifest.json``.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    image = np.asarray(result.image, dtype=np.float32)
+    volume = image.ndim == 3 and image.shape[-1] != 3
+    names = ["output.png", "output.tiff"]
+    save_image(folder / "output.png", image[image.shape[0] // 2] if volume else image, bit_depth=bit_depth)
+    if volume:
+        save_volume(folder / "output.tiff", image, bit_depth=16)
+    else:
+        save_image(folder / "output.tiff", image, bit_depth=16)
+        tensors = (
+            result.tensor_field if result.tensor_field is not None else structure_tensor(image, mode="wrap")
+        )
+        names += _write_tensor_images(folder, "", np.asarray(tensors))
+    if constraint is not None:
+        names += _write_tensor_images(
+            folder, "constraint_", structure_tensor(np.asarray(constraint, np.float32))
+        )
+    for key, extra in sorted(result.extras.items()):
+        if key in ("coherence", "orientation"):  # already rendered above, with legends
+            continue
+        rendered = _render_extra(np.asarray(extra, dtype=np.float32))
+        if rendered is not None:
+            save_image(folder / f"{key}.png", rendered)
+            names.append(f"{key}.png")
+
+    metrics = to_json_types(evaluate_volume(exemplar, image) if volume else evaluate_pair(exemplar, image))
+    doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
+    atomic_write_bytes(folder / "metrics.json", json.dumps(doc, indent=2).encode())
+    names.append("metrics.json")
+    if plots and not volume:
+        plot_dir = folder / "plots"
+        plot_dir.mkdir(exist_ok=True)
+        names += sorted(f"plots/{Path(p).name}" for p in write_plots(exemplar, image, metrics, plot_dir))
+
+    doc = {
+        **(manifest or {}),
+        "method": result.method,
+        "params": to_json_types(result.params),
+        "seed": result.seed,
+        "exemplar_shape": list(np.shape(exemplar)),
+        "output_shape": list(image.shape),
+        "timings": to_json_types(result.timings),
+        "versions": versions(),
+    }
+    atomic_write_bytes(folder / "manifest.json", json.dumps(doc, indent=2).encode())
+    names.append("manifest.json")
+    return names, metrics

@@ -1,0 +1,545 @@
+"""Multi-resolution, pixel-by-pixel synthesis of a *source map* (Wei & Levoy 2000, generalised).
+
+Every pixel-based method here is this one loop with different features: the synthesized output
+is represented by its source map (for each output position, the exemplar position it copies), so
+that grey, colour and tensor-valued images, and images guided by a fixed field, share one engine.
+
+For each pyramid level, coarsest first: initialise the source map (random exemplar positions at
+the top, the parent's sources upsampled below), then run ``iterations`` passes over a scan order,
+each position taking the exemplar position whose neighbourhood is closest (see
+:mod:`synth.kernels.pixel_search` for the distance and the search). The output's borders wrap
+(toroidal output); exemplar neighbourhoods lie fully inside the exemplar.
+
+Weights: the pixel part (same level and parent level) and the guidance part of a neighbourhood
+are each divided by their *typical* size (the mean distance between random exemplar positions under
+their metric, times the number of positions compared) before ``p`` and ``1 - p`` weight them, so
+that ``p = 0.5`` means "both parts count equally" whatever the units (Akl 2014, eq 13).
+
+Departures from Wei & Levoy: in the first pass the not-yet-synthesized positions of the same
+level are left out of the comparison instead of being compared as initial noise (so a causal
+neighbourhood never reads an unsynthesized pixel); the fast search is k-coherence (Tong et al.
+2002), measured against the exact search in ``benchmarks/bench_synthesis.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from synth.analysis.tensor import Metric, coherence, log_tensors, orientation
+from synth.errors import InvalidParameter
+from synth.grid.neighbourhood import Shape, neighbourhood_offsets, parent_offsets
+from synth.grid.scan import ScanOrder, scan_order
+from synth.kernels.pixel_search import (
+    METRIC_NORM,
+    METRIC_SO,
+    METRIC_SSD,
+    _metric_reference,
+    candidate_capacity,
+    synthesize_chunk,
+    synthesize_chunk_reference,
+)
+
+__all__ = [
+    "CandidateWindow",
+    "Guidance",
+    "SearchSettings",
+    "SynthesisReport",
+    "level_neighbourhood_size",
+    "source_map_pyramid",
+    "synthesize_source_map",
+    "tensor_features",
+]
+
+SearchKind = Literal["exact", "kcoherence"]
+
+#: The same-level neighbours whose sources propose k-coherent candidates (radius in pixels).
+_CANDIDATE_RADIUS = 1
+#: Rows of the sample that estimates the principal axes (the axes, not the projection, are sampled).
+_PCA_SAMPLE = 4096
+#: Progress is reported about this many times per pass.
+_CHUNKS_PER_PASS = 64
+_COHERENCE_FLOOR = 1e-3
+#: A coarse level's neighbourhood side is at most its shorter side divided by this.
+_COARSE_DIVISOR = 4
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """How one synthesis (one stage) searches: neighbourhood, scan, pyramid and search backend."""
+
+    size: int
+    shape: Shape = "causal"
+    scan: ScanOrder = "lexicographic"
+    levels: int = 1
+    parent_size: int = 5
+    iterations: int = 2
+    search: SearchKind = "kcoherence"
+    k: int = 5
+    random_candidates: int = 2
+    alpha: float = 0.5
+    #: k-coherence sets: neighbourhood side and principal components of the k-NN search that builds them.
+    kset_size: int = 7
+    kset_dims: int = 8
+    #: Histogram-matching weight (see :func:`synthesize_source_map`'s ``histogram``): 0 = plain nearest
+    #: neighbour; larger values push the output's label histogram toward its target.
+    histogram_weight: float = 0.0
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """A fixed field that guides the synthesis (the synthesized tensor field of Akl 2014, eq 13).
+
+    ``out_levels``/``ex_levels`` are kernel features (see :func:`tensor_features`), finest first;
+    ``weight`` is ``1 - p``; ``hint_levels`` optional source maps proposing candidates.
+    """
+
+    out_levels: Sequence[np.ndarray]
+    ex_levels: Sequence[np.ndarray]
+    metric: int
+    weight: float
+    size: int
+    hint_levels: Sequence[np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class CandidateWindow:
+    """Per-position restriction of the candidates: classes of exemplar positions and wanted classes.
+
+    A candidate is searched at an output position only when its class lies within ``span`` of the
+    position's wanted class, cyclically modulo ``period`` (the arbitrary-shape method's rotated
+    copies of the exemplar near the local constraint angle). ``ex_levels`` (h_l, w_l) and
+    ``out_levels`` (H_l, W_l) int arrays, finest first; a negative class is never searched.
+    """
+
+    ex_levels: Sequence[np.ndarray]
+    out_levels: Sequence[np.ndarray]
+    period: int
+    span: int
+
+
+@dataclass
+class SynthesisReport:
+    """Numbers measured during a run: mean best-match distance per level and pass."""
+
+    mean_best_distance: dict[str, float]
+
+    def final(self) -> float:
+        return list(self.mean_best_distance.values())[-1]
+
+
+ProgressFn = Callable[[str, float], None]
+
+
+def tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, int]:
+    """Per-position tensor features and the kernel metric code that realises ``metric``.
+
+    ED: ``(S_xx, sqrt2 S_xy, S_yy)`` under SSD (eq 6); FN: the same under its norm (eq 10);
+    LE: the log-tensors under the norm (eq 11); SO: ``(sin O, cos O, C, 1 / C)``, ``C >= 1e-3`` (eqs 7-9).
+    """
+    t = tensors.astype(np.float32)
+    if metric in ("ED", "FN"):
+        feats = np.stack([t[..., 0], np.sqrt(2.0) * t[..., 1], t[..., 2]], axis=-1)
+        code = METRIC_SSD if metric == "ED" else METRIC_NORM
+    elif metric == "LE":
+        lg = log_tensors(t.astype(np.float64))
+        feats = np.stack([lg[..., 0], np.sqrt(2.0) * lg[..., 1], lg[..., 2]], axis=-1)
+        code = METRIC_NORM
+    elif metric == "SO":
+        theta = orientation(t.astype(np.float64))
+        coh = np.maximum(coherence(t), _COHERENCE_FLOOR)
+        # 1 / C is stored so that the kernel's M_coh = max(C1 / C2, C2 / C1) needs no division.
+        feats = np.stack([np.sin(theta), np.cos(theta), coh, 1.0 / coh], axis=-1)
+        code = METRIC_SO
+    else:
+        raise InvalidParameter("metric", metric, "must be one of ED, SO, FN, LE")
+    return np.ascontiguousarray(feats, dtype=np.float32), code
+
+
+def _euclidean_embedding(feats: np.ndarray, code: int) -> np.ndarray:
+    """Features in a space where Euclidean distance approximates the metric (for the k-NN sets)."""
+    if code == METRIC_SO:  # doubled-angle vector scaled by coherence: orientations modulo pi
+        s, c, k = feats[..., 0], feats[..., 1], feats[..., 2]
+        return np.stack([k * (c * c - s * s), k * 2 * s * c], axis=-1)
+    return feats
+
+
+def _typical_distance(feats: np.ndarray, code: int, alpha: float, rng: np.random.Generator) -> float:
+    """Mean position distance between random pairs of positions: the unit of a block's distance."""
+    flat = feats.reshape(-1, feats.shape[-1])
+    i = rng.integers(0, len(flat), 4096)
+    j = rng.integers(0, len(flat), 4096)
+    d = float(np.mean(_metric_reference(flat[i], flat[j], code, alpha)))
+    return d if d > 1e-20 else 1.0
+
+
+def source_map_pyramid(src: np.ndarray, levels: int) -> list[np.ndarray]:
+    """A source map at every pyramid level, finest first: each level takes every other output
+    position and halves its exemplar coordinates (the hints a coarser level's search is offered)."""
+    maps = [np.ascontiguousarray(src)]
+    for _ in range(levels - 1):
+        maps.append(np.ascontiguousarray(maps[-1][::2, ::2] // 2))
+    return maps
+
+
+def level_neighbourhood_size(size: int, level_shape: tuple[int, int]) -> int:
+    """The neighbourhood side used at a coarse pyramid level: ``size``, shrunk (odd, >= 3) to at
+    most a quarter of the level's shorter side.
+
+    Departure, and why: Akl 2014's Table 1 asks for 13x13 neighbourhoods on 4 levels of a 128x128
+    exemplar; its coarsest level is 16x16, where a 13x13 neighbourhood fits at only 4x4 positions and
+    the synthesis degenerates into copying one of 16 tensors. Worse, whatever lies within a
+    neighbourhood radius of the exemplar's border can never be copied, and at level L that band is
+    ``2^L`` times wider in the exemplar: laminae bent near the border disappeared from the output's
+    orientation distribution. Coarse levels carry coarse structure, so a smaller neighbourhood there
+    loses little, keeps the border band under about 12 exemplar pixels and keeps many candidates.
+    """
+    cap = max(3, int(min(level_shape) // _COARSE_DIVISOR))
+    cap -= 1 - cap % 2
+    return int(min(size, cap))
+
+
+def _valid_region(
+    ex_shape: tuple[int, int], radius: int, parent: tuple[tuple[int, int], int] | None, level: int
+) -> np.ndarray:
+    h, w = ex_shape
+    y0, y1, x0, x1 = radius, h - radius, radius, w - radius
+    if parent is not None:
+        (hp, wp), rp = parent
+        y0, x0 = max(y0, 2 * rp), max(x0, 2 * rp)
+        y1, x1 = min(y1, 2 * (hp - 1 - rp) + 2), min(x1, 2 * (wp - 1 - rp) + 2)
+    if y1 <= y0 or x1 <= x0:
+        raise InvalidParameter(
+            "neighbourhood_size",
+            2 * radius + 1,
+            f"no neighbourhood fits inside the exemplar at pyramid level {level} ({h}x{w} pixels): "
+            "use a smaller neighbourhood or fewer levels",
+        )
+    return np.array([y0, y1, x0, x1], dtype=np.int64)
+
+
+def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarray:
+    """Square neighbourhoods (flattened) of every valid position: ``(n_valid, size*size*C)``."""
+    r = size // 2
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    parts = [
+        feats[y0 + dy : y1 + dy, x0 + dx : x1 + dx].reshape(-1, feats.shape[-1])
+        for dy in range(-r, r + 1)
+        for dx in range(-r, r + 1)
+    ]
+    return np.concatenate(parts, axis=1)
+
+
+def _k_coherence_sets(
+    embeds: Sequence[tuple[np.ndarray, float]],
+    size: int,
+    valid: np.ndarray,
+    k: int,
+    mask: np.ndarray,
+    kset_size: int = 7,
+    kset_dims: int = 8,
+) -> np.ndarray:
+    """For every valid exemplar position, its ``k`` most similar other valid positions.
+
+    Neighbourhoods (square, at most ``kset_size``) of the weighted embeddings are projected on their
+    first ``kset_dims`` principal components and queried in a k-d tree; ``-1`` marks positions
+    without a set.
+    """
+    h, w = embeds[0][0].shape[:2]
+    kset = np.full((h, w, k, 2), -1, dtype=np.int64)
+    if k == 0:
+        return kset
+    ks = min(size, kset_size)
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    inside = mask[y0:y1, x0:x1].ravel() != 0
+    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
+    vectors = vectors[inside].astype(np.float64)
+    vectors -= vectors.mean(axis=0)
+    dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
+    # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
+    sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
+    _, eigvec = np.linalg.eigh(sample.T @ sample)
+    projected = vectors @ eigvec[:, ::-1][:, :dims]
+    kk = min(k + 1, len(projected))
+    _, idx = cKDTree(projected).query(projected, k=kk, workers=-1)  # independent queries: same answer
+    idx = idx.reshape(len(projected), kk)
+    # Drop each position itself (wherever the tree put it among equal distances), keep k others.
+    is_self = idx == np.arange(len(projected))[:, None]
+    idx = np.take_along_axis(idx, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k]
+    idx = np.where(
+        np.take_along_axis(is_self, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k], -1, idx
+    )
+    rows, cols = np.divmod(np.flatnonzero(inside), x1 - x0)
+    ys = np.where(idx >= 0, y0 + rows[idx], -1)
+    xs = np.where(idx >= 0, x0 + cols[idx], -1)
+    kset[y0 + rows, x0 + cols, : idx.shape[1], 0] = ys
+    kset[y0 + rows, x0 + cols, : idx.shape[1], 1] = xs
+    return kset
+
+
+def _level_mask(
+    ex_masks: Sequence[np.ndarray] | None, level: int, shape: tuple[int, int], valid: np.ndarray
+) -> np.ndarray:
+    mask = (
+        np.ones(shape, dtype=np.uint8)
+        if ex_masks is None
+        else np.ascontiguousarray(ex_masks[level], dtype=np.uint8)
+    )
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    if not mask[y0:y1, x0:x1].any():
+        raise InvalidParameter(
+            "neighbourhood_size", None, f"no valid exemplar position at pyramid level {level}"
+        )
+    return mask
+
+
+def _initial_sources(
+    shape: tuple[int, int],
+    valid: np.ndarray,
+    mask: np.ndarray,
+    parent_src: np.ndarray | None,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Random valid exemplar positions at the top level; the parent's sources, upsampled, below.
+
+    An upsampled source that is not a valid position is replaced by a random valid one.
+    """
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    allowed = np.zeros_like(mask, dtype=bool)
+    allowed[y0:y1, x0:x1] = mask[y0:y1, x0:x1] != 0
+    positions = np.argwhere(allowed)
+    H, W = shape
+    pick = positions[rng.integers(0, len(positions), size=H * W)].reshape(H, W, 2)
+    if parent_src is None:
+        return np.ascontiguousarray(pick, dtype=np.int64)
+    yy, xx = np.mgrid[0:H, 0:W]
+    up = parent_src[yy // 2, xx // 2]
+    src = np.stack(
+        [np.clip(2 * up[..., 0] + yy % 2, y0, y1 - 1), np.clip(2 * up[..., 1] + xx % 2, x0, x1 - 1)], axis=-1
+    )
+    bad = ~allowed[src[..., 0], src[..., 1]]
+    src[bad] = pick[bad]
+    return np.ascontiguousarray(src, dtype=np.int64)
+
+
+def _histogram_state(
+    histogram: tuple[np.ndarray, np.ndarray] | None, src: np.ndarray, valid: np.ndarray, mask: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The kernel's histogram arrays: a label per exemplar position, the output's count per label
+    (from the initial sources) and the wanted count per label.
+
+    Without ``histogram`` the labels are the positions themselves and the target is a uniform use of
+    every copyable position (Chen & Wang's position histogram); with ``(labels, fractions)`` the
+    target is ``fractions`` of the output's pixels.
+    """
+    h, w = mask.shape
+    n_out = src.shape[0] * src.shape[1]
+    if histogram is None:
+        y0, y1, x0, x1 = (int(v) for v in valid)
+        labels = np.arange(h * w, dtype=np.int64)
+        target = np.full(h * w, n_out / max(1, int(np.count_nonzero(mask[y0:y1, x0:x1]))))
+    else:
+        labels = np.ascontiguousarray(histogram[0], dtype=np.int64).ravel()
+        # A label rarer than one output pixel still has room for one.
+        target = np.maximum(np.asarray(histogram[1], dtype=np.float64) * n_out, 1.0)
+    count = np.bincount(labels[(src[..., 0] * w + src[..., 1]).ravel()], minlength=len(target))
+    return {"labels": labels, "label_count": count.astype(np.int64), "label_target": target}
+
+
+def _window_state(window: CandidateWindow | None, level: int) -> dict[str, object]:
+    """The kernel's class-window arrays at ``level`` (a span of -1 switches the window off)."""
+    if window is None:
+        return {
+            "cls": np.zeros(1, np.int64),
+            "want_cls": np.zeros((1, 1), np.int64),
+            "cls_period": 1,
+            "cls_span": -1,
+        }
+    return {
+        "cls": np.ascontiguousarray(window.ex_levels[level], dtype=np.int64).ravel(),
+        "want_cls": np.ascontiguousarray(window.out_levels[level], dtype=np.int64),
+        "cls_period": int(window.period),
+        "cls_span": int(window.span),
+    }
+
+
+def _empty_features(channels: int) -> np.ndarray:
+    return np.zeros((1, 1, channels), dtype=np.float32)
+
+
+def synthesize_source_map(
+    ex_levels: Sequence[np.ndarray],
+    out_shapes: Sequence[tuple[int, int]],
+    settings: SearchSettings,
+    *,
+    metric: int = METRIC_SSD,
+    p: float = 1.0,
+    guidance: Guidance | None = None,
+    seed: int = 0,
+    progress: ProgressFn | None = None,
+    stage: str = "synthesis",
+    span: tuple[float, float] = (0.0, 1.0),
+    reference: bool = False,
+    ex_masks: Sequence[np.ndarray] | None = None,
+    on_level_done: Callable[[int, dict], None] | None = None,
+    histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+    window: CandidateWindow | None = None,
+) -> tuple[list[np.ndarray], SynthesisReport]:
+    """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
+
+    Parameters
+    ----------
+    ex_levels : list of ndarray (h_l, w_l, C), finest first
+        Exemplar features per level (pixels, or tensor features from :func:`tensor_features`).
+    out_shapes : list of (H_l, W_l), finest first
+    settings : SearchSettings
+    metric : int
+        Kernel metric code of the synthesized features (``METRIC_SSD`` for pixels).
+    p : float
+        Weight of the pixel part against the guidance part (eq 13); ignored without guidance.
+    guidance : Guidance, optional
+    seed : int
+    progress : callable (stage, fraction), optional
+        Called about 64 times per pass with the overall fraction inside ``span``; may raise to cancel.
+    reference : bool
+        Run the plain NumPy reference instead of the numba kernel (tests only: slow).
+    ex_masks : list of ndarray (h_l, w_l) bool, finest first, optional
+        Exemplar positions that may be copied, per level (besides the neighbourhood-fits rectangle).
+        Masked positions' neighbourhoods must lie inside the array; the caller guarantees they are
+        meaningful (e.g. inside a rotated copy of the exemplar).
+    on_level_done : callable (level, state), optional
+        Receives each level's final kernel state (benchmarks use it to compare searches).
+    histogram : list of (labels (h_l, w_l) int, fractions (n_labels,)), finest first, optional
+        With ``settings.histogram_weight > 0``: the label of every exemplar position and the fraction
+        of the output each label should cover (e.g. orientation bins and the exemplar's orientation
+        histogram). Default: Chen & Wang's position histogram (every copyable position used equally).
+    window : CandidateWindow, optional
+        Restricts, per output position, the exemplar positions searched (exact and fast search).
+    """
+    levels = settings.levels
+    if len(ex_levels) != levels or len(out_shapes) != levels:
+        raise InvalidParameter("levels", levels, "exemplar and output pyramids must have that many levels")
+    rng = np.random.default_rng(seed)
+    cand_offs = neighbourhood_offsets(2 * _CANDIDATE_RADIUS + 1, "square")
+    cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
+    if settings.shape == "causal":  # only already-synthesized neighbours propose in a causal scan
+        cand_offs = np.ascontiguousarray(
+            cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))]
+        )
+    chunk_fn = synthesize_chunk_reference if reference else synthesize_chunk
+    work = [settings.iterations * h * w for h, w in out_shapes]
+    total_work = float(sum(work))
+    done_work = 0.0
+    report: dict[str, float] = {}
+    srcs: list[np.ndarray | None] = [None] * levels
+    stamp_size = max(int(np.prod(e.shape[:2])) for e in ex_levels)
+    stamp = np.zeros(stamp_size, dtype=np.int64)
+    counter = np.zeros(1, dtype=np.int64)
+    for level in range(levels - 1, -1, -1):
+        ex = np.ascontiguousarray(ex_levels[level], dtype=np.float32)
+        shape = tuple(out_shapes[level])
+        has_parent = level < levels - 1
+        par_ex = (
+            np.ascontiguousarray(ex_levels[level + 1], dtype=np.float32)
+            if has_parent
+            else _empty_features(ex.shape[2])
+        )
+        # The finest level keeps the requested size (too large is the user's error, said clearly).
+        size = settings.size if level == 0 else level_neighbourhood_size(settings.size, ex.shape[:2])
+        parent_size = level_neighbourhood_size(settings.parent_size, par_ex.shape[:2]) if has_parent else 1
+        offs = neighbourhood_offsets(size, settings.shape)
+        par_offs = parent_offsets(parent_size) if has_parent else np.zeros((0, 2), np.int32)
+        # The guidance (tensor) part has the pixel part's shape, centre included: the field is known there.
+        gui_offs = np.zeros((0, 2), np.int32)
+        if guidance is not None:
+            gui_offs = np.ascontiguousarray(np.vstack([[0, 0], offs]), dtype=np.int32)
+        valid = _valid_region(
+            ex.shape[:2], size // 2, (par_ex.shape[:2], parent_size // 2) if has_parent else None, level
+        )
+        unit = _typical_distance(ex, metric, settings.alpha, rng)
+        n_pix = len(offs) + (len(par_offs) if has_parent else 0)
+        w_pix = (p if guidance is not None else 1.0) / (unit * n_pix)
+        if guidance is not None:
+            gui_out = np.ascontiguousarray(guidance.out_levels[level], dtype=np.float32)
+            gui_ex = np.ascontiguousarray(guidance.ex_levels[level], dtype=np.float32)
+            gunit = _typical_distance(gui_ex, guidance.metric, settings.alpha, rng)
+            w_gui = guidance.weight / (gunit * len(gui_offs))
+            hint = guidance.hint_levels[level] if guidance.hint_levels is not None else None
+        else:
+            gui_out = gui_ex = _empty_features(3)
+            w_gui = 0.0
+            hint = None
+        mask = _level_mask(ex_masks, level, ex.shape[:2], valid)
+        src = _initial_sources(shape, valid, mask, srcs[level + 1] if has_parent else None, rng)
+        exact = settings.search == "exact"
+        embeds = [(_euclidean_embedding(ex, metric), w_pix)]
+        if guidance is not None:
+            embeds.append((_euclidean_embedding(gui_ex, guidance.metric), w_gui))
+        k = 0 if exact else settings.k
+        kset = (
+            _k_coherence_sets(embeds, size, valid, k, mask, settings.kset_size, settings.kset_dims)
+            if not exact
+            else np.full((1, 1, 0, 2), -1, np.int64)
+        )
+        state = {
+            "out": np.ascontiguousarray(ex[src[..., 0], src[..., 1]]),
+            "ex": ex,
+            "offs": offs,
+            "metric": metric,
+            "w_cur": w_pix,
+            "par_out": np.ascontiguousarray(
+                ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]]
+            )
+            if has_parent
+            else _empty_features(ex.shape[2]),
+            "par_ex": par_ex,
+            "par_offs": par_offs,
+            "par_metric": metric,
+            "w_par": w_pix if has_parent else 0.0,
+            "gui_out": gui_out,
+            "gui_ex": gui_ex,
+            "gui_offs": gui_offs,
+            "gui_metric": guidance.metric if guidance is not None else METRIC_SSD,
+            "w_gui": w_gui,
+            "alpha": float(settings.alpha),
+            "src": src,
+            "hint": np.ascontiguousarray(hint, dtype=np.int64) if hint is not None else src,
+            "use_hint": hint is not None,
+            "valid": valid,
+            "mask": mask,
+            "kset": kset,
+            "cand_offs": cand_offs,
+            "exact": exact,
+            "n_random": 0 if exact else settings.random_candidates,
+            "stamp": stamp,
+            "counter": counter,
+            "capacity": candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
+            "best_out": np.zeros(shape, dtype=np.float32),
+            **_histogram_state(histogram[level] if histogram is not None else None, src, valid, mask),
+            "hist_weight": float(settings.histogram_weight),
+            **_window_state(window, level),
+        }
+        n = shape[0] * shape[1]
+        for it in range(settings.iterations):
+            state["order"] = scan_order(shape, settings.scan, rng)
+            state["first_pass"] = it == 0
+            state["done"] = np.zeros(shape, dtype=np.uint8) if it == 0 else state["done"]
+            state["seed_key"] = int(rng.integers(0, 2**63))
+            step = max(1, n // _CHUNKS_PER_PASS)
+            label = f"{stage}: level {level + 1}/{levels}, pass {it + 1}/{settings.iterations}"
+            for start in range(0, n, step):
+                stop = min(n, start + step)
+                chunk_fn(state, start, stop)
+                if progress is not None:
+                    frac = (done_work + (it * n + stop)) / total_work
+                    progress(label, span[0] + (span[1] - span[0]) * frac)
+            report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state["best_out"]))
+        done_work += work[level]
+        srcs[level] = src
+        if on_level_done is not None:
+            on_level_done(level, state)
+    return [s for s in srcs if s is not None], SynthesisReport(report)

@@ -1,0 +1,90 @@
+"""The job record state machine and the reaper, without processes (fast, deterministic)."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from jobs.config import Settings
+from jobs.reaper import reap_once
+from jobs.store import JobStore
+
+DEAD_PID = 2**22 + 12345  # above pid_max on Linux: never a live process
+
+
+@pytest.fixture
+def store(tmp_path) -> JobStore:
+    return JobStore(tmp_path / "jobs.sqlite", tmp_path / "jobs")
+
+
+def _job(store: JobStore) -> str:
+    return store.create_job(
+        method="m", params={"width": 8}, seed=1, inputs={"exemplar": ("e.png", b"x")}, manifest={}
+    ).id
+
+
+def test_duplicate_delivery_of_a_running_job_does_nothing(store):
+    job_id = _job(store)
+    token, _ = store.claim(job_id, pid=1, stale_seconds=10)  # pid 1 is alive
+    assert token
+    again, why = store.claim(job_id, pid=1, stale_seconds=10)
+    assert again is None and why == "running elsewhere"
+
+
+def test_redelivery_after_a_crash_takes_over_and_the_old_run_cannot_commit(store, tmp_path):
+    job_id = _job(store)
+    old, _ = store.claim(job_id, pid=DEAD_PID, stale_seconds=10)
+    new, _ = store.claim(job_id, pid=1, stale_seconds=10)  # the old run's process is gone
+    assert new and new != old and store.get(job_id).attempts == 2
+    assert not store.progress(job_id, old, "x", 0.5)
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    assert not store.commit_success(job_id, old, staging, ["a"], {}, {})
+    assert store.commit_success(job_id, new, staging, ["a"], {}, {})
+    assert store.get(job_id).state == "succeeded" and (store.job_dir(job_id) / "out").is_dir()
+    assert store.claim(job_id, pid=1, stale_seconds=10) == (None, "already succeeded")
+
+
+def test_cancel_stops_progress_and_queued_jobs_never_start(store):
+    running, queued = _job(store), _job(store)
+    token, _ = store.claim(running, pid=1, stale_seconds=10)
+    store.request_cancel(running)
+    assert not store.progress(running, token, "x", 0.5)
+    assert store.request_cancel(queued).state == "cancelled"
+    assert store.claim(queued, pid=1, stale_seconds=10) == (None, "already cancelled")
+
+
+def test_reaper_requeues_a_dead_run_then_gives_up(store):
+    settings = Settings(data_dir=store.jobs_dir.parent, max_attempts=2, stale_seconds=5)
+    job_id = _job(store)
+    sent = []
+    for attempt in (1, 2):
+        token, _ = store.claim(job_id, pid=DEAD_PID, stale_seconds=5)
+        assert token and store.get(job_id).attempts == attempt
+        actions = reap_once(store, settings, sent.append, lambda _: None, set())
+        if attempt == 1:
+            assert actions == [(job_id, "requeued")] and sent == [job_id]
+            assert store.get(job_id).state == "queued"
+    assert actions == [(job_id, "failed")]
+    job = store.get(job_id)
+    assert job.state == "failed" and "2 times" in job.message
+
+
+def test_reaper_settles_an_unanswered_cancel(store):
+    settings = Settings(data_dir=store.jobs_dir.parent, cancel_grace_seconds=0.0, stale_seconds=60)
+    job_id = _job(store)
+    store.claim(job_id, pid=1, stale_seconds=60)
+    store.request_cancel(job_id)
+    terminated: list[str] = []
+    actions = reap_once(store, settings, lambda _: None, terminated.append, set(), now=time.time() + 1)
+    assert terminated == [job_id] and (job_id, "terminate") in actions
+    reap_once(store, settings, lambda _: None, terminated.append, set(), now=time.time() + 10)
+    assert store.get(job_id).state == "cancelled"
+
+
+def test_settings_round_trip_through_the_environment(tmp_path):
+    settings = Settings.from_env({}, data_dir=tmp_path, concurrency=3, extra_methods=("a.b", "c"))
+    again = Settings.from_env(settings.to_env())
+    assert again == settings and again.embedded
+    assert Settings.from_env({"REDIS_URL": "redis://h:1/0", "TEXSYNTH_DATA_DIR": str(tmp_path)}).redis_url

@@ -1,0 +1,297 @@
+"""Arbitrary-shape synthesis (Akl et al., GRETSI): rotated dictionary, constraint following, options."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synth import InvalidInput, InvalidParameter
+from synth.analysis.rotation import build_rotated_dictionary, rotation_candidates
+from synth.analysis.tensor import (
+    coherence,
+    dominant_orientation,
+    orientation,
+    rotate_tensors,
+    structure_tensor,
+    wrap_angle,
+)
+from synth.api import available_methods, synthesize
+from synth.io.patterns import concentric_rings, grating, waves
+from synth.methods.arbitrary_shape import orientation_agreement
+
+# Small and fast: 15-degree steps (M = 24), 7x7 neighbourhoods.
+FAST = {"angular_step": 15.0, "neighbourhood_size": 7}
+
+
+def _fringes(angle_deg: float, shape: tuple[int, int] = (32, 32), seed: int = 0) -> np.ndarray:
+    return grating(shape, np.radians(angle_deg), 6.0, noise=0.1, seed=seed)
+
+
+def _dominant(image: np.ndarray) -> float:
+    return dominant_orientation(structure_tensor(image, 1.0, 3.0))
+
+
+def _angle_between(a: float, b: float) -> float:
+    return float(abs(np.degrees(wrap_angle(a - b))))
+
+
+# ---------------------------------------------------------------- the rotated dictionary
+
+
+@pytest.mark.parametrize(("shape", "turns"), [((31, 34), (0, 6)), ((32, 32), (0, 3, 6, 9))])
+def test_copy_zero_is_the_exemplar_and_to_canvas_finds_every_pixel(shape, turns) -> None:
+    ex = _fringes(20, shape)
+    d = build_rotated_dictionary(ex, 12)
+    pos = np.stack(np.mgrid[0 : shape[0], 0 : shape[1]], axis=-1).reshape(-1, 2)
+    # Half turns (and quarter turns of a square) land on pixels: exact copies.
+    for m in turns:
+        cp = d.to_canvas(pos, np.full(len(pos), m))
+        np.testing.assert_allclose(d.image[cp[:, 0], cp[:, 1], 0], ex[pos[:, 0], pos[:, 1]], atol=1e-6)
+        assert d.area[cp[:, 0], cp[:, 1]].all()
+        assert (d.tile_index[cp[:, 0], cp[:, 1]] == m).all()
+
+
+def test_rotated_copies_turn_orientations_by_their_angle() -> None:
+    ex = _fringes(20, (48, 48))
+    d = build_rotated_dictionary(ex, 8)
+    own = structure_tensor(d.image[..., 0])  # the rotated images' own tensor fields
+    for m in range(8):
+        inside = (d.tile_index == m) & d.area
+        expected = np.radians(20) + d.angles[m]
+        field = wrap_angle(orientation(d.tensors)[inside] - expected)
+        measured = wrap_angle(orientation(own)[inside] - expected)
+        assert np.degrees(np.abs(np.median(field))) < 0.5
+        assert np.degrees(np.median(np.abs(measured))) < 1.5  # rotated field = the copy's own field
+
+
+def test_masks_keep_only_neighbourhoods_inside_a_copy() -> None:
+    d = build_rotated_dictionary(_fringes(0, (24, 24)), 6)
+    masks = d.level_masks([3, 2], [1, 0])
+    ys, xs = np.nonzero(masks[0])
+    assert len(ys) > 0
+    for dy in range(-3, 4):
+        for dx in range(-3, 4):
+            assert d.area[ys + dy, xs + dx].all()
+    # Every copy keeps some positions, and nothing outside the copies is kept.
+    assert set(np.unique(d.tile_index[masks[0] != 0])) == set(range(6))
+    assert masks[1].shape == ((d.area.shape[0] + 1) // 2, (d.area.shape[1] + 1) // 2)
+
+
+def test_rotation_candidates_stay_within_the_window_modulo_pi() -> None:
+    rng = np.random.default_rng(0)
+    target = rng.uniform(-np.pi / 2, np.pi / 2, 2000)
+    step = 2 * np.pi / 72
+    nearest = rotation_candidates(target, 72, 0.0, rng)
+    assert np.all(np.abs(wrap_angle(nearest * step - target)) <= step / 2 + 1e-9)
+    assert {0, 1} <= set((nearest // 36).tolist())  # both the copy and its half-turn twin are used
+    wide = rotation_candidates(target, 72, np.radians(10), rng)
+    assert np.all(np.abs(wrap_angle(wide * step - target)) <= np.radians(10) + 1e-9)
+    assert len(np.unique(wrap_angle(wide * step - target).round(6))) > 5
+
+
+# ---------------------------------------------------------------- the measure
+
+
+def test_orientation_agreement_known_answers() -> None:
+    a = _fringes(30, (64, 64))
+    assert orientation_agreement(a, grating((64, 64), np.radians(30))) < 0.02
+    assert orientation_agreement(a, grating((64, 64), np.radians(120))) > 0.98
+    noise = np.random.default_rng(0).random((64, 64)).astype(np.float32)
+    assert 0.5 < orientation_agreement(noise, concentric_rings((64, 64))) < 0.75
+    with pytest.raises(InvalidInput, match="does not match"):
+        orientation_agreement(a, a[:32])
+
+
+# ---------------------------------------------------------------- the method
+
+
+def _run(exemplar: np.ndarray, constraint: np.ndarray, seed: int = 0, **params: object):
+    return synthesize(
+        "arbitrary-shape", exemplar, constraint=constraint, params={**FAST, **params}, seed=seed
+    )
+
+
+def test_registered_and_needs_a_constraint() -> None:
+    spec = available_methods()["arbitrary-shape"]
+    assert spec.constraint == "required"
+    with pytest.raises(InvalidInput, match="constraint"):
+        synthesize("arbitrary-shape", _fringes(0))
+
+
+def test_constant_angle_constraint_reproduces_the_rotated_exemplar() -> None:
+    ex = _fringes(0)  # vertical fringes: gradient orientation 0
+    con = grating((32, 32), np.radians(50), 8.0)
+    res = _run(ex, con)
+    assert res.image.shape == (32, 32)
+    assert _angle_between(_dominant(res.image), np.radians(50)) < 8
+    assert orientation_agreement(res.image, con) < 0.2
+    # The field that constrained it is the exemplar's, turned by O_con (about 50 degrees) - O_dom.
+    turn = res.extras["constraint_orientation"].astype(np.float64) - _dominant(ex)
+    assert _angle_between(float(np.median(turn)), np.radians(50)) < 1
+    np.testing.assert_allclose(
+        res.tensor_field, rotate_tensors(structure_tensor(ex), turn), rtol=1e-4, atol=1e-7
+    )
+
+
+def test_absolute_reference_adds_the_exemplar_orientation() -> None:
+    ex = _fringes(30)
+    con = grating((32, 32), np.radians(40), 8.0)
+    dominant = _run(ex, con)
+    absolute = _run(ex, con, rotation_reference="absolute")
+    # Within 10 degrees (a 32-pixel output's dominant orientation is a rough estimate).
+    assert _angle_between(_dominant(dominant.image), np.radians(40)) < 10
+    assert _angle_between(_dominant(absolute.image), np.radians(70)) < 10  # the paper, literally
+
+
+def test_rotating_the_constraint_rotates_the_output() -> None:
+    ex = _fringes(10, (32, 32))
+    con = waves((48, 48), period=8.0, amplitude=6.0, wavelength=48.0)
+    turned = np.ascontiguousarray(np.rot90(con))
+    a = _run(ex, con, seed=1)
+    b = _run(ex, turned, seed=1)
+    assert orientation_agreement(a.image, con) < 0.25
+    assert orientation_agreement(b.image, turned) < 0.25
+    # The orientation fields differ by a quarter turn, position by position.
+    assert orientation_agreement(np.ascontiguousarray(np.rot90(a.image)), b.image) < 0.3
+    assert orientation_agreement(a.image, b.image) > 0.6
+
+
+def test_mismatched_sizes_go_through_an_exemplar_like_texture() -> None:
+    ex = _fringes(0, (32, 32))
+    con = grating((40, 48), np.radians(-30), 8.0)
+    res = _run(ex, con)
+    assert res.image.shape == (40, 48)
+    assert res.stats["exemplar_like"]  # the tensor-constrained stage ran
+    assert res.timings["exemplar_like"] > 0
+    assert orientation_agreement(res.image, con) < 0.2
+    # A requested size other than the constraint's resizes the constraint.
+    res = synthesize("arbitrary-shape", ex, constraint=con, size=(36, 36), params=FAST)
+    assert res.image.shape == (36, 36) and res.extras["constraint_orientation"].shape == (36, 36)
+
+
+def test_flat_constraint_is_a_clear_error() -> None:
+    with pytest.raises(InvalidInput, match="featureless"):
+        _run(_fringes(0), np.full((32, 32), 0.5, np.float32))
+
+
+def test_results_carry_the_constraint_fields() -> None:
+    con = concentric_rings((32, 32))
+    res = _run(_fringes(0), con)
+    s_icon = structure_tensor(con)
+    np.testing.assert_allclose(res.extras["constraint_orientation"], orientation(s_icon), atol=1e-6)
+    np.testing.assert_allclose(res.extras["constraint_coherence"], coherence(s_icon), atol=1e-6)
+    np.testing.assert_allclose(res.extras["orientation"], orientation(res.tensor_field), atol=1e-6)
+    np.testing.assert_allclose(res.extras["coherence"], coherence(res.tensor_field), atol=1e-6)
+    assert res.stats["n_rotations"] == 24
+    assert 0.0 <= res.stats["in_window_fraction"] <= 1.0
+    assert res.image.dtype == np.float32 and 0.0 <= res.image.min() <= res.image.max() <= 1.0
+
+
+def test_naive_variant_is_guided_by_the_constraint_own_tensors() -> None:
+    con = concentric_rings((32, 32))
+    res = _run(_fringes(0), con, constraint_tensors="constraint")
+    np.testing.assert_allclose(res.tensor_field, structure_tensor(con), atol=1e-6)
+
+
+def test_restriction_copies_from_the_copies_at_the_local_angle() -> None:
+    ex, con = _fringes(0), concentric_rings((32, 32))
+    # Many copies (M = 72): without the hints, the global search rarely lands at the local angle.
+    on = synthesize("arbitrary-shape", ex, constraint=con, params={"neighbourhood_size": 7})
+    off = synthesize(
+        "arbitrary-shape", ex, constraint=con, params={"neighbourhood_size": 7, "restrict_rotations": False}
+    )
+    assert on.stats["in_window_fraction"] > 0.98 > 0.5 > off.stats["in_window_fraction"]
+
+
+def test_exact_search_with_restriction_searches_only_the_window() -> None:
+    ex = _fringes(0, (16, 16))
+    con = concentric_rings((16, 16))
+    params = {"angular_step": 30.0, "neighbourhood_size": 5, "search": "exact", "rotation_window": 0.0}
+    res = synthesize("arbitrary-shape", ex, constraint=con, params=params)
+    assert res.stats["in_window_fraction"] == 1.0
+
+
+def test_local_reference_aligns_every_tensor_with_the_constraint() -> None:
+    con = concentric_rings((32, 32))
+    res = _run(_fringes(0), con, rotation_reference="local")
+    o_con = res.extras["constraint_orientation"]
+    strong = res.extras["constraint_coherence"] > 0.5
+    assert np.abs(wrap_angle(res.extras["orientation"] - o_con))[strong].max() < 1e-3
+
+
+def test_rgb_exemplar_and_pyramids() -> None:
+    ex = np.stack([_fringes(0), _fringes(0, seed=1), _fringes(0, seed=2)], axis=-1)
+    res = _run(ex, grating((32, 32), np.radians(60), 8.0), levels=2, parent_size=3)
+    assert res.image.shape == (32, 32, 3)
+
+
+@pytest.mark.parametrize(
+    ("params", "name"),
+    [
+        ({"angular_step": 7.0}, "angular_step"),
+        ({"rotation_reference": "paper"}, "rotation_reference"),
+        ({"constraint_tensors": "both"}, "constraint_tensors"),
+    ],
+)
+def test_invalid_parameters_are_named(params: dict, name: str) -> None:
+    with pytest.raises(InvalidParameter, match=name):
+        _run(_fringes(0), grating((32, 32), 0.5), **params)
+
+
+def test_k_sets_over_a_large_dictionary_are_refused() -> None:
+    ex = _fringes(0, (128, 128))
+    with pytest.raises(InvalidParameter, match="'k'"):
+        synthesize("arbitrary-shape", ex, constraint=grating((128, 128), 0.5), params={"k": 5})
+
+
+def test_exact_search_without_restriction() -> None:
+    ex = _fringes(0, (16, 16))
+    con = grating((16, 16), np.radians(90), 8.0)
+    res = synthesize(
+        "arbitrary-shape",
+        ex,
+        constraint=con,
+        params={
+            "angular_step": 45.0,
+            "neighbourhood_size": 5,
+            "search": "exact",
+            "restrict_rotations": False,
+        },
+    )
+    assert res.image.shape == (16, 16)
+
+
+def test_same_seed_same_bytes() -> None:
+    ex, con = _fringes(0), concentric_rings((32, 32))
+    a, b = _run(ex, con, seed=4), _run(ex, con, seed=4)
+    assert a.image.tobytes() == b.image.tobytes()
+    assert _run(ex, con, seed=5).image.tobytes() != a.image.tobytes()
+
+
+def test_window_search_strict_or_hints() -> None:
+    """'strict' copies only from the copies at the local angle; 'hints' lets other copies compete;
+    the default is strict, and hints with the local reference."""
+    ex, con = _fringes(0), concentric_rings((32, 32))
+    base = {"neighbourhood_size": 7}
+    strict = synthesize("arbitrary-shape", ex, constraint=con, params=base | {"window_search": "strict"})
+    hints = synthesize("arbitrary-shape", ex, constraint=con, params=base | {"window_search": "hints"})
+    default = synthesize("arbitrary-shape", ex, constraint=con, params=base)
+    assert strict.stats["in_window_fraction"] > 0.98 > hints.stats["in_window_fraction"]
+    assert default.image.tobytes() == strict.image.tobytes()
+    local = {"rotation_reference": "local"}
+    assert (
+        synthesize("arbitrary-shape", ex, constraint=con, params=base | local).image.tobytes()
+        == synthesize(
+            "arbitrary-shape", ex, constraint=con, params=base | local | {"window_search": "hints"}
+        ).image.tobytes()
+    )
+
+
+def test_square_random_walk_follows_a_constant_angle_too() -> None:
+    """The paper's other configuration (square neighbourhood, random walk), as the weakly oriented
+    recipe of docs/arbitrary-shape.md uses it with the local reference."""
+    con = grating((32, 32), np.radians(50), 8.0)
+    res = _run(_fringes(0), con, neighbourhood="square", iterations=3, rotation_reference="local", w=0.2)
+    assert res.params["scan"] is None and res.params["neighbourhood"] == "square"
+    assert _angle_between(_dominant(res.image), np.radians(50)) < 8
+    assert orientation_agreement(res.image, con) < 0.2

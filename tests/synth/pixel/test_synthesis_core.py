@@ -1,0 +1,481 @@
+"""The shared synthesis machinery: kernel = reference, option semantics, reproducibility."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from synth import Cancelled, InvalidParameter
+from synth.analysis.tensor import structure_tensor
+from synth.api import synthesize
+from synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
+from synth.grid.pyramid import gaussian_pyramid, level_shapes
+from synth.grid.scan import SCAN_ORDERS, hilbert_points, morton_points, scan_order
+from synth.kernels.pixel_search import METRIC_NORM, METRIC_SO, METRIC_SSD, synthesize_chunk
+from synth.pixel.synthesis import (
+    CandidateWindow,
+    Guidance,
+    SearchSettings,
+    synthesize_source_map,
+    tensor_features,
+)
+
+
+def _rng_image(shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
+    from scipy.ndimage import gaussian_filter
+
+    noise = np.random.default_rng(seed).random(shape).astype(np.float32)
+    smooth = gaussian_filter(noise, (1.0, 1.0) + (0,) * (len(shape) - 2))
+    return ((smooth - smooth.min()) / (smooth.max() - smooth.min())).astype(np.float32)
+
+
+# ---------------------------------------------------------------- neighbourhoods and scan orders
+
+
+def test_causal_neighbourhood_is_the_raster_past() -> None:
+    offs = neighbourhood_offsets(5, "causal")
+    assert len(offs) == 12
+    assert all(dy < 0 or (dy == 0 and dx < 0) for dy, dx in offs)
+    assert len(neighbourhood_offsets(5, "square")) == 24
+    assert [0, 0] not in neighbourhood_offsets(5, "square").tolist()
+    assert [0, 0] in parent_offsets(3).tolist() and len(parent_offsets(3)) == 9
+
+
+@pytest.mark.parametrize("size", [4, 1, 0])
+def test_neighbourhood_size_must_be_odd_and_at_least_3(size: int) -> None:
+    with pytest.raises(InvalidParameter, match="neighbourhood_size"):
+        neighbourhood_offsets(size)
+
+
+@pytest.mark.parametrize("kind", SCAN_ORDERS)
+@pytest.mark.parametrize("shape", [(7, 5), (8, 8), (3, 4, 5)])
+def test_every_scan_order_visits_every_position_once(kind: str, shape: tuple[int, ...]) -> None:
+    order = scan_order(shape, kind, np.random.default_rng(0))
+    assert sorted(order.tolist()) == list(range(int(np.prod(shape))))
+
+
+@pytest.mark.parametrize("ndim", [2, 3])
+def test_hilbert_curve_moves_one_step_at_a_time(ndim: int) -> None:
+    pts = hilbert_points(ndim, 3)
+    assert np.abs(np.diff(pts, axis=0)).sum(axis=1).tolist() == [1] * (len(pts) - 1)
+
+
+def test_morton_order_known_answer() -> None:
+    assert morton_points(2, 1).tolist() == [[0, 0], [0, 1], [1, 0], [1, 1]]
+    assert scan_order((4, 4), "morton")[:8].tolist() == [0, 1, 4, 5, 2, 3, 6, 7]
+
+
+def test_random_scan_needs_a_generator() -> None:
+    with pytest.raises(InvalidParameter, match="seeded"):
+        scan_order((4, 4), "random")
+
+
+# ---------------------------------------------------------------- kernel against reference
+
+
+def _run_both(**kwargs: object) -> None:
+    fast, fast_report = synthesize_source_map(**kwargs)  # type: ignore[arg-type]
+    slow, slow_report = synthesize_source_map(reference=True, **kwargs)  # type: ignore[arg-type]
+    for a, b in zip(fast, slow, strict=True):
+        np.testing.assert_array_equal(a, b)
+    for key, value in fast_report.mean_best_distance.items():
+        assert value == pytest.approx(slow_report.mean_best_distance[key], rel=1e-4, abs=1e-7)
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize("shape", ["causal", "square"])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_kernel_matches_reference_on_pixels(search: str, shape: str, channels: int) -> None:
+    ex = _rng_image((22, 20, channels), seed=channels)
+    levels = 2
+    settings = SearchSettings(
+        size=5,
+        shape=shape,
+        scan="lexicographic" if shape == "causal" else "random",
+        levels=levels,
+        parent_size=3,
+        iterations=2,
+        search=search,
+        k=3,
+        random_candidates=2,
+    )
+    _run_both(
+        ex_levels=gaussian_pyramid(ex, levels),
+        out_shapes=level_shapes((14, 12), levels),
+        settings=settings,
+        seed=3,
+    )
+
+
+@pytest.mark.parametrize(
+    ("metric", "code"), [("ED", METRIC_SSD), ("FN", METRIC_NORM), ("LE", METRIC_NORM), ("SO", METRIC_SO)]
+)
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+def test_kernel_matches_reference_with_tensor_guidance(metric: str, code: int, search: str) -> None:
+    ex = _rng_image((24, 24), seed=5)
+    feats, got = tensor_features(structure_tensor(ex), metric)  # type: ignore[arg-type]
+    assert got == code
+    out_tensors = structure_tensor(_rng_image((12, 12), seed=6), mode="wrap")
+    guidance = Guidance(
+        out_levels=[tensor_features(out_tensors, metric)[0]],
+        ex_levels=[feats],
+        metric=code,
+        weight=0.4,
+        size=3,
+        hint_levels=[np.random.default_rng(1).integers(2, 20, (12, 12, 2))],
+    )
+    settings = SearchSettings(
+        size=5, levels=1, iterations=2, search=search, k=2, random_candidates=1, alpha=0.3
+    )
+    _run_both(
+        ex_levels=[ex[..., None]], out_shapes=[(12, 12)], settings=settings, p=0.6, guidance=guidance, seed=2
+    )
+
+
+@pytest.mark.parametrize("metric", ["SO", "LE"])
+def test_kernel_matches_reference_when_synthesizing_tensors(metric: str) -> None:
+    feats, code = tensor_features(structure_tensor(_rng_image((20, 20), seed=8)), metric)  # type: ignore[arg-type]
+    settings = SearchSettings(size=3, levels=2, parent_size=3, iterations=1, search="exact")
+    _run_both(
+        ex_levels=gaussian_pyramid(feats, 2),
+        out_shapes=level_shapes((10, 10), 2),
+        settings=settings,
+        metric=code,
+        seed=4,
+    )
+
+
+# ---------------------------------------------------------------- option semantics
+
+
+def test_causal_first_pass_never_reads_unsynthesized_pixels() -> None:
+    """Unsynthesized output pixels are NaN: reading one would poison a distance and the argmin."""
+    ex = _rng_image((16, 16, 1))
+    offs = neighbourhood_offsets(5, "causal")
+    src = np.full((10, 10, 2), 8, dtype=np.int64)
+    state = {
+        "order": scan_order((10, 10), "lexicographic"),
+        "out": np.full((10, 10, 1), np.nan, np.float32),
+        "ex": ex,
+        "offs": offs,
+        "metric": METRIC_SSD,
+        "w_cur": 1.0,
+        "par_out": np.zeros((1, 1, 1), np.float32),
+        "par_ex": np.zeros((1, 1, 1), np.float32),
+        "par_offs": parent_offsets(3),
+        "par_metric": METRIC_SSD,
+        "w_par": 0.0,
+        "gui_out": np.zeros((1, 1, 3), np.float32),
+        "gui_ex": np.zeros((1, 1, 3), np.float32),
+        "gui_offs": np.zeros((0, 2), np.int32),
+        "gui_metric": METRIC_SSD,
+        "w_gui": 0.0,
+        "alpha": 0.5,
+        "src": src,
+        "hint": src,
+        "use_hint": False,
+        "done": np.zeros((10, 10), np.uint8),
+        "first_pass": True,
+        "valid": np.array([2, 14, 2, 14]),
+        "mask": np.ones((16, 16), np.uint8),
+        "kset": np.full((1, 1, 0, 2), -1, np.int64),
+        "cand_offs": np.zeros((1, 2), np.int32),
+        "exact": True,
+        "n_random": 0,
+        "seed_key": 1,
+        "stamp": np.zeros(256, np.int64),
+        "counter": np.zeros(1, np.int64),
+        "capacity": 4,
+        "best_out": np.zeros((10, 10), np.float32),
+        "labels": np.zeros(256, np.int64),
+        "label_count": np.array([100], np.int64),
+        "label_target": np.array([100.0]),
+        "hist_weight": 0.0,
+        "cls": np.zeros(1, np.int64),
+        "want_cls": np.zeros((1, 1), np.int64),
+        "cls_period": 1,
+        "cls_span": -1,
+    }
+    synthesize_chunk(state, 0, 100)
+    assert np.isfinite(state["best_out"]).all()
+    assert np.isfinite(state["out"]).all()
+    assert (state["src"] >= 2).all() and (state["src"] < 14).all()
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+def test_masked_exemplar_positions_are_never_copied(search: str) -> None:
+    ex = _rng_image((24, 24, 1), seed=9)
+    mask = np.zeros((24, 24), np.uint8)
+    mask[:, 12:] = 1
+    settings = SearchSettings(size=3, levels=1, iterations=2, search=search, k=3)
+    srcs, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask])
+    assert (srcs[0][..., 1] >= 12).all()
+    ref, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask], reference=True)
+    np.testing.assert_array_equal(srcs[0], ref[0])
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+def test_periodic_exemplar_gives_periodic_output(search: str) -> None:
+    tile = _rng_image((8, 8), seed=11)
+    ex = np.tile(tile, (5, 5))
+    r = synthesize(
+        "wei-levoy",
+        ex,
+        size=(32, 24),
+        seed=3,
+        params={"levels": 1, "neighbourhood_size": 5, "search": search, "iterations": 1},
+    )
+    np.testing.assert_array_equal(r.image, np.roll(r.image, 8, axis=0))
+    np.testing.assert_array_equal(r.image, np.roll(r.image, 8, axis=1))
+
+
+@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained"])
+def test_same_seed_same_bytes_other_seed_other_output(method: str) -> None:
+    ex = _rng_image((40, 40))
+    params = {"neighbourhood_size": 7, "parent_size": 3}
+    if method == "tensor-constrained":
+        params |= {"structure_levels": 2}
+    a = synthesize(method, ex, size=(32, 32), params=params, seed=7)
+    b = synthesize(method, ex, size=(32, 32), params=params, seed=7)
+    c = synthesize(method, ex, size=(32, 32), params=params, seed=8)
+    assert a.image.tobytes() == b.image.tobytes()
+    assert a.image.tobytes() != c.image.tobytes()
+
+
+def test_every_tensor_metric_is_selectable_and_matters() -> None:
+    ex = _rng_image((40, 40), seed=2)
+    fields = {}
+    for metric in ("ED", "SO", "FN", "LE"):
+        r = synthesize(
+            "tensor-constrained",
+            ex,
+            size=(24, 24),
+            seed=1,
+            params={"metric": metric, "neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3},
+        )
+        assert r.params["metric"] == metric
+        assert r.tensor_field is not None and r.tensor_field.shape == (24, 24, 3)
+        fields[metric] = r.tensor_field
+    assert len({f.tobytes() for f in fields.values()}) > 1
+
+
+def test_output_copies_exemplar_values() -> None:
+    ex = _rng_image((30, 30, 3))
+    r = synthesize(
+        "wei-levoy", ex, size=(20, 20), params={"neighbourhood_size": 5, "levels": 2, "parent_size": 3}
+    )
+    src = r.extras["source_map"]
+    np.testing.assert_array_equal(r.image, ex[src[..., 0], src[..., 1]])
+    assert r.image.shape == (20, 20, 3) and r.image.dtype == np.float32
+
+
+# ---------------------------------------------------------------- parameters, progress, errors
+
+
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ({"neighbourhood_size": 8}, "neighbourhood_size"),
+        ({"neighbourhood_size": 1}, "neighbourhood_size"),
+        ({"iterations": 0}, "iterations"),
+        ({"neighbourhod": "causal"}, "neighbourhod"),
+        ({"scan": "spiral"}, "scan"),
+        ({"search": "tsvq"}, "search"),
+    ],
+)
+def test_invalid_parameters_fail_before_work_naming_the_field(params: dict, field: str) -> None:
+    with pytest.raises(InvalidParameter, match=field):
+        synthesize("wei-levoy", _rng_image((20, 20)), size=(16, 16), params=params)
+
+
+def test_unknown_metric_and_out_of_range_p_are_named() -> None:
+    with pytest.raises(InvalidParameter, match="metric"):
+        synthesize("tensor-constrained", _rng_image((20, 20)), params={"metric": "XX"})
+    with pytest.raises(InvalidParameter, match="'p'"):
+        synthesize("tensor-constrained", _rng_image((20, 20)), params={"p": 1.5})
+
+
+def test_neighbourhood_larger_than_the_exemplar_is_a_clear_error() -> None:
+    with pytest.raises(InvalidParameter, match="no neighbourhood fits inside the exemplar"):
+        synthesize(
+            "wei-levoy", _rng_image((16, 16)), size=(16, 16), params={"neighbourhood_size": 21, "levels": 1}
+        )
+
+
+def test_unknown_method_and_bad_size_and_seed() -> None:
+    with pytest.raises(InvalidParameter, match="unknown method"):
+        synthesize("nope", _rng_image((16, 16)))
+    with pytest.raises(InvalidParameter, match="size"):
+        synthesize("wei-levoy", _rng_image((16, 16)), size=(4, 4))
+    with pytest.raises(InvalidParameter, match="seed"):
+        synthesize("wei-levoy", _rng_image((16, 16)), seed=-1)
+
+
+def test_progress_reaches_one_often_and_in_order() -> None:
+    seen: list[tuple[str, float]] = []
+    synthesize(
+        "tensor-constrained",
+        _rng_image((32, 32)),
+        size=(32, 32),
+        params={"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3},
+        progress=lambda stage, f: seen.append((stage, f)),
+    )
+    fractions = [f for _, f in seen]
+    assert fractions == sorted(fractions)
+    assert fractions[-1] == 1.0
+    assert max(np.diff([0.0, *fractions])) <= 0.02
+    assert any(s.startswith("structure") for s, _ in seen) and any(s.startswith("texture") for s, _ in seen)
+
+
+def test_a_progress_callback_that_raises_cancels() -> None:
+    def stop(stage: str, fraction: float) -> None:
+        if fraction > 0.1:
+            raise RuntimeError("job cancelled")
+
+    with pytest.raises(Cancelled, match="job cancelled"):
+        synthesize(
+            "wei-levoy", _rng_image((32, 32)), size=(32, 32), params={"neighbourhood_size": 5}, progress=stop
+        )
+
+
+def test_structure_neighbourhood_changes_only_the_structure_stage() -> None:
+    ex = _rng_image((40, 40), seed=4)
+    base = {"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3}
+    causal = synthesize("tensor-constrained", ex, size=(24, 24), seed=1, params=base)
+    square = synthesize(
+        "tensor-constrained", ex, size=(24, 24), seed=1, params=base | {"structure_neighbourhood": "square"}
+    )
+    assert square.params["structure_neighbourhood"] == "square" and square.params["neighbourhood"] == "causal"
+    assert causal.tensor_field.tobytes() != square.tensor_field.tobytes()
+    with pytest.raises(InvalidParameter, match="structure_neighbourhood"):
+        synthesize("tensor-constrained", ex, params={"structure_neighbourhood": "round"})
+
+
+# ---------------------------------------------------------------- histogram matching
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize("labelled", [False, True])
+def test_kernel_matches_reference_with_histogram_matching(search: str, labelled: bool) -> None:
+    ex = _rng_image((22, 20, 1), seed=12)
+    levels = 2
+    settings = SearchSettings(
+        size=5, levels=levels, parent_size=3, iterations=2, search=search, k=2, histogram_weight=3.0
+    )
+    histogram = None
+    if labelled:  # four grey-level bins as labels, wanting equal shares
+        histogram = [
+            (np.minimum((lvl[..., 0] * 4).astype(np.int64), 3), np.full(4, 0.25))
+            for lvl in gaussian_pyramid(ex, levels)
+        ]
+    _run_both(
+        ex_levels=gaussian_pyramid(ex, levels),
+        out_shapes=level_shapes((14, 12), levels),
+        settings=settings,
+        seed=5,
+        histogram=histogram,
+    )
+
+
+def _usage(src: np.ndarray, shape: tuple[int, int], border: int) -> np.ndarray:
+    """How often each copyable exemplar position is copied."""
+    counts = np.bincount((src[..., 0] * shape[1] + src[..., 1]).ravel(), minlength=shape[0] * shape[1])
+    return counts.reshape(shape)[border:-border, border:-border]
+
+
+def test_position_histogram_spreads_the_use_of_exemplar_positions() -> None:
+    """Chen & Wang's position histogram: no exemplar position is copied far more than its share."""
+    ex = _rng_image((20, 20, 1), seed=13)
+    plain = SearchSettings(size=3, levels=1, iterations=2, search="exact")
+    runs = {
+        w: synthesize_source_map([ex], [(36, 36)], replace(plain, histogram_weight=w), seed=2)[0][0]
+        for w in (0.0, 20.0)
+    }
+    share = 36 * 36 / (18 * 18)  # output pixels per copyable position
+    plain_use, matched_use = (_usage(runs[w], (20, 20), 1) for w in (0.0, 20.0))
+    assert plain_use.sum() == matched_use.sum() == 36 * 36
+    assert plain_use.std() > 10 * share  # smooth noise: plain search copies a few positions over and over
+    assert matched_use.std() < share / 2
+    assert (matched_use == 0).mean() < 0.1
+
+
+def test_labelled_histogram_pulls_the_output_toward_the_target_fractions() -> None:
+    """Labels = dark/bright exemplar pixels, target 50/50 although the exemplar is 80% dark."""
+    rng = np.random.default_rng(3)
+    ex = (np.where(rng.random((24, 24)) < 0.8, 0.0, 0.6) + 0.4 * rng.random((24, 24))).astype(np.float32)
+    ex = ex[..., None]
+    labels = (ex[..., 0] > 0.5).astype(np.int64)
+    settings = SearchSettings(size=3, levels=1, iterations=2, search="exact", histogram_weight=50.0)
+    bright = {}
+    for name, s in {"plain": replace(settings, histogram_weight=0.0), "matched": settings}.items():
+        src = synthesize_source_map([ex], [(32, 32)], s, seed=1, histogram=[(labels, np.array([0.5, 0.5]))])[
+            0
+        ][0]
+        bright[name] = float(labels[src[..., 0], src[..., 1]].mean())
+    assert bright["plain"] < 0.3
+    assert 0.4 < bright["matched"] < 0.6
+
+
+def test_structure_histogram_option_selects_the_matching() -> None:
+    ex = _rng_image((40, 40), seed=4)
+    base = {"neighbourhood_size": 5, "structure_levels": 2, "parent_size": 3}
+    fields = {
+        h: synthesize(
+            "tensor-constrained", ex, size=(24, 24), seed=1, params=base | {"structure_histogram": h}
+        )
+        for h in ("none", "position", "orientation")
+    }
+    assert fields["orientation"].params["structure_histogram_weight"] == 10.0
+    assert len({r.tensor_field.tobytes() for r in fields.values()}) == 3
+    unweighted = synthesize(
+        "tensor-constrained", ex, size=(24, 24), seed=1, params=base | {"structure_histogram_weight": 0.0}
+    )
+    assert unweighted.tensor_field.tobytes() == fields["none"].tensor_field.tobytes()
+    with pytest.raises(InvalidParameter, match="structure_histogram"):
+        synthesize("tensor-constrained", ex, params={"structure_histogram": "colour"})
+
+
+def test_orientation_labels_bin_the_field_and_sum_to_one() -> None:
+    from synth.io.patterns import grating
+    from synth.methods.tensor_constrained import orientation_labels
+
+    tensors = structure_tensor(grating((32, 32), period=8, angle=np.pi / 4))
+    labels, fractions = orientation_labels(tensors, bins=36)
+    assert labels.shape == (32, 32) and fractions.sum() == pytest.approx(1.0)
+    assert np.argmax(fractions) in (26, 27)  # gradient at 45 degrees + 90 = 135/5 = bin 27 (edge: 26)
+
+
+# ---------------------------------------------------------------- per-position candidate window
+
+
+def _striped_window(ex_shape: tuple[int, int], out_shape: tuple[int, int], span: int) -> CandidateWindow:
+    """Exemplar columns in 4 classes (stripes of 5), output rows wanting class ``row % 4``."""
+    cls = np.broadcast_to(np.arange(ex_shape[1]) // 5 % 4, ex_shape).copy()
+    cls[:, :5] = -1  # never searched
+    want = np.broadcast_to((np.arange(out_shape[0]) % 4)[:, None], out_shape).copy()
+    return CandidateWindow([cls], [want], period=4, span=span)
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize("span", [0, 1])
+def test_kernel_matches_reference_with_a_candidate_window(search: str, span: int) -> None:
+    ex = _rng_image((22, 22, 1), seed=14)
+    settings = SearchSettings(size=5, levels=1, iterations=2, search=search, k=2, random_candidates=3)
+    _run_both(
+        ex_levels=[ex],
+        out_shapes=[(12, 10)],
+        settings=settings,
+        seed=6,
+        window=_striped_window((22, 22), (12, 10), span),
+    )
+
+
+def test_candidate_window_restricts_every_copied_position() -> None:
+    ex = _rng_image((22, 22, 1), seed=15)
+    window = _striped_window((22, 22), (12, 10), 0)
+    settings = SearchSettings(size=3, levels=1, iterations=2, search="exact")
+    src = synthesize_source_map([ex], [(12, 10)], settings, seed=1, window=window)[0][0]
+    got = window.ex_levels[0][src[..., 0], src[..., 1]]
+    np.testing.assert_array_equal(got, window.out_levels[0])
