@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -17,7 +17,20 @@ import numpy as np
 from synth.errors import InvalidInput, InvalidParameter
 from synth.params import MethodParams, validate_params
 
-__all__ = ["METHODS", "MethodSpec", "Progress", "Result", "available_methods", "synthesize"]
+__all__ = [
+    "METHODS",
+    "PLANES",
+    "MethodSpec",
+    "Progress",
+    "Result",
+    "available_methods",
+    "synthesize",
+]
+
+#: The orthogonal planes of a volume ``(D, H, W) = (z, y, x)`` (ALGORITHMS.md, "Conventions"): ``xy`` is
+#: the slice at fixed ``z`` (``vol[z]``, rows ``y``, columns ``x``), ``xz`` at fixed ``y`` (``vol[:, y]``,
+#: rows ``z``, columns ``x``), ``yz`` at fixed ``x`` (``vol[:, :, x]``, rows ``z``, columns ``y``).
+PLANES: tuple[str, ...] = ("xy", "xz", "yz")
 
 
 class Progress(Protocol):
@@ -53,7 +66,9 @@ Runner = Callable[..., Result]
 class MethodSpec:
     """A registered method: its name, one-line summary, parameter model and runner.
 
-    ``run(exemplar, size=..., params=..., seed=..., progress=..., constraint=...) -> Result``.
+    ``run(exemplar, size=..., params=..., seed=..., progress=..., constraint=...) -> Result``; a method
+    with ``plane_exemplars`` also gets ``exemplars={'xy': ..., 'xz': ..., 'yz': ...}`` (the one
+    exemplar three times when the material is isotropic) and ``exemplar`` is then ``exemplars['xy']``.
     ``constraint`` is ``'none'``, ``'optional'`` or ``'required'``; ``output_ndim`` 2 or 3.
     """
 
@@ -64,9 +79,26 @@ class MethodSpec:
     constraint: str = "none"
     output_ndim: int = 2
     paper: str = ""
+    #: Takes one exemplar per orthogonal plane (``exemplar_xy``, ``exemplar_xz``, ``exemplar_yz``) as
+    #: an alternative to the one exemplar (anisotropic materials).
+    plane_exemplars: bool = False
 
     def schema(self) -> dict[str, Any]:
         return self.params_model.model_json_schema()
+
+    @property
+    def inputs(self) -> dict[str, str]:
+        """The images this method takes, by role: ``'required'``, ``'optional'`` or ``'alternative'``.
+
+        ``'alternative'`` marks the per-plane exemplars: all three together, instead of ``exemplar``.
+        The API, the CLI and the browser page ask for exactly these.
+        """
+        roles = {"exemplar": "required" if not self.plane_exemplars else "alternative"}
+        if self.plane_exemplars:
+            roles.update({f"exemplar_{plane}": "alternative" for plane in PLANES})
+        if self.constraint != "none":
+            roles["constraint"] = self.constraint
+        return roles
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -76,6 +108,9 @@ _METHOD_MODULES: Sequence[str] = (
     "synth.methods.wei_levoy",
     "synth.methods.tensor_constrained",
     "synth.methods.arbitrary_shape",
+    "synth.methods.solid_wei_levoy",
+    "synth.methods.solid_kopf",
+    "synth.methods.solid_chen_wang",
 )
 
 
@@ -105,13 +140,14 @@ def _noop_progress(stage: str, fraction: float) -> None:
 
 def synthesize(
     method: str,
-    exemplar: np.ndarray,
+    exemplar: np.ndarray | None = None,
     *,
     size: tuple[int, ...] | None = None,
     params: dict[str, Any] | MethodParams | None = None,
     seed: int = 0,
     progress: Progress | None = None,
     constraint: np.ndarray | None = None,
+    exemplars: Mapping[str, np.ndarray] | None = None,
 ) -> Result:
     """Run ``method`` on ``exemplar`` and return a :class:`Result`.
 
@@ -132,6 +168,9 @@ def synthesize(
         Called at least every 2% of the work; may raise (e.g. :class:`synth.Cancelled`) to stop.
     constraint : ndarray, optional
         Constraint image of methods that take one.
+    exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray``, optional
+        One grey exemplar per orthogonal plane (:data:`PLANES`), for the solid methods, instead of
+        ``exemplar``: each plane's slices of the volume must look like its own exemplar.
     """
     methods = available_methods()
     if method not in methods:
@@ -140,32 +179,85 @@ def synthesize(
     model = validate_params(spec.params_model, params)
     if not isinstance(seed, int | np.integer) or not 0 <= int(seed) < 2**32:
         raise InvalidParameter("seed", seed, "must be an integer in [0, 2**32)")
-    ex = np.asarray(exemplar)
-    if ex.ndim not in (2, 3) or (ex.ndim == 3 and ex.shape[2] != 3):
-        raise InvalidInput("exemplar", f"shape {ex.shape} is neither (H, W) grey nor (H, W, 3) RGB")
-    ex = np.ascontiguousarray(ex, dtype=np.float32)
+    planes = _plane_exemplars(spec, exemplar, exemplars)
+    ex = planes["xy"] if planes is not None else _checked_image("exemplar", exemplar)
     if spec.constraint == "required" and constraint is None:
         raise InvalidInput("constraint", f"method '{method}' needs a constraint image")
     if spec.constraint == "none" and constraint is not None:
         raise InvalidInput("constraint", f"method '{method}' takes no constraint image")
     con = None if constraint is None else np.ascontiguousarray(constraint, dtype=np.float32)
-    out_size = _output_size(size, ex, con, spec.output_ndim)
+    out_size = _output_size(size, ex, con, spec.output_ndim, planes)
+    extra: dict[str, Any] = {"exemplars": planes} if planes is not None else {}
     start = time.perf_counter()
     result = spec.run(
-        ex, size=out_size, params=model, seed=int(seed), progress=progress or _noop_progress, constraint=con
+        ex,
+        size=out_size,
+        params=model,
+        seed=int(seed),
+        progress=progress or _noop_progress,
+        constraint=con,
+        **extra,
     )
     result.timings.setdefault("total", time.perf_counter() - start)
     return result
 
 
+def _checked_image(role: str, image: np.ndarray | None) -> np.ndarray:
+    if image is None:
+        raise InvalidInput(role, "missing")
+    arr = np.asarray(image)
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
+        raise InvalidInput(role, f"shape {arr.shape} is neither (H, W) grey nor (H, W, 3) RGB")
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def _plane_exemplars(
+    spec: MethodSpec, exemplar: np.ndarray | None, exemplars: Mapping[str, np.ndarray] | None
+) -> dict[str, np.ndarray] | None:
+    """The three per-plane exemplars of a solid method (the one exemplar thrice when isotropic)."""
+    if not spec.plane_exemplars:
+        if exemplars is not None:
+            raise InvalidInput("exemplars", f"method '{spec.name}' takes one exemplar, not one per plane")
+        return None
+    if (exemplar is None) == (exemplars is None):
+        raise InvalidInput(
+            "exemplar", "give either one exemplar or one per plane (exemplar_xy, exemplar_xz, exemplar_yz)"
+        )
+    if exemplar is not None:
+        one = _checked_grey("exemplar", exemplar)
+        return dict.fromkeys(PLANES, one)
+    assert exemplars is not None
+    unknown = sorted(set(exemplars) - set(PLANES))
+    if unknown:
+        raise InvalidInput(f"exemplar_{unknown[0]}", f"unknown plane (known: {', '.join(PLANES)})")
+    missing = [plane for plane in PLANES if plane not in exemplars]
+    if missing:
+        raise InvalidInput(f"exemplar_{missing[0]}", "missing: per-plane exemplars come as all three")
+    return {plane: _checked_grey(f"exemplar_{plane}", exemplars[plane]) for plane in PLANES}
+
+
+def _checked_grey(role: str, image: np.ndarray) -> np.ndarray:
+    arr = _checked_image(role, image)
+    if arr.ndim != 2:
+        raise InvalidInput(role, f"solid methods take grey exemplars; this one has shape {arr.shape}")
+    return arr
+
+
 def _output_size(
-    size: tuple[int, ...] | None, exemplar: np.ndarray, constraint: np.ndarray | None, ndim: int
+    size: tuple[int, ...] | None,
+    exemplar: np.ndarray,
+    constraint: np.ndarray | None,
+    ndim: int,
+    planes: dict[str, np.ndarray] | None = None,
 ) -> tuple[int, ...]:
     if size is None:
         if constraint is not None:
             return tuple(constraint.shape[:2])
-        base = tuple(2 * s for s in exemplar.shape[:2])
-        return base if ndim == 2 else (base[0], *base)
+        if ndim == 3:
+            # The exemplar's own scale: (D, H, W) from the xz rows and the xy image (Kopf: 128^2 -> 128^3).
+            depth = planes["xz"].shape[0] if planes is not None else exemplar.shape[0]
+            return (int(depth), *(int(s) for s in exemplar.shape[:2]))
+        return tuple(2 * s for s in exemplar.shape[:2])
     shape = tuple(int(s) for s in size)
     if len(shape) != ndim:
         raise InvalidParameter("size", size, f"needs {ndim} values for this method")

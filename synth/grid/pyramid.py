@@ -12,17 +12,25 @@ from skimage.transform import pyramid_reduce
 __all__ = ["gaussian_pyramid", "level_shapes"]
 
 
-def gaussian_pyramid(image: np.ndarray, levels: int, *, mode: str = "reflect") -> list[np.ndarray]:
+def gaussian_pyramid(
+    image: np.ndarray, levels: int, *, mode: str = "reflect", volume: bool = False
+) -> list[np.ndarray]:
     """``levels`` arrays, finest first; an ``(H, W, C)`` array is reduced channel by channel.
 
     Uses :func:`skimage.transform.pyramid_reduce` (downscale 2, its default ``sigma = 2/3``).
-    ``mode='wrap'`` for toroidal images. Every level is C-contiguous float32.
+    ``mode='wrap'`` for toroidal images. Every level is C-contiguous float32. With ``volume=True``
+    the array is a volume ``(D, H, W)`` (or ``(D, H, W, C)``) reduced along its three axes.
     """
+    spatial = 3 if volume else 2
     out = [np.ascontiguousarray(image, dtype=np.float32)]
     for _ in range(levels - 1):
         prev = out[-1]
         reduced = pyramid_reduce(
-            prev, downscale=2, channel_axis=-1 if prev.ndim == 3 else None, mode=mode, preserve_range=True
+            prev,
+            downscale=2,
+            channel_axis=-1 if prev.ndim > spatial else None,
+            mode=mode,
+            preserve_range=True,
         )
         out.append(np.ascontiguousarray(reduced, dtype=np.float32))
     return out
