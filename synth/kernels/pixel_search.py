@@ -43,13 +43,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from synth.kernels.options import kernel
 
 __all__ = [
     "METRIC_NORM",
     "METRIC_SO",
     "METRIC_SSD",
     "candidate_capacity",
+    "position_distance",
     "synthesize_chunk",
     "synthesize_chunk_reference",
 ]
@@ -63,7 +65,7 @@ _MIX2 = np.uint64(0x94D049BB133111EB)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@kernel(inline="always")
 def _splitmix(x: np.uint64) -> np.uint64:
     z = x + _GOLDEN
     z = (z ^ (z >> np.uint64(30))) * _MIX1
@@ -71,7 +73,7 @@ def _splitmix(x: np.uint64) -> np.uint64:
     return z ^ (z >> np.uint64(31))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@kernel(inline="always")
 def _query_distance(q, lin, n, exf, base, metric, alpha, limit):
     """Distance between a gathered query block ``q[:n]`` and the exemplar block at ``base``.
 
@@ -107,7 +109,7 @@ def _query_distance(q, lin, n, exf, base, metric, alpha, limit):
     return s
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):
     """Copy the (wrapped) output neighbourhood of ``(oy, ox)`` into ``q``; return its length.
 
@@ -129,7 +131,7 @@ def _gather_query(img, oy, ox, offs, ex_width, done, use_mask, q, lin):
     return n
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _distance(
     q_cur,
     l_cur,
@@ -178,7 +180,7 @@ def candidate_capacity(n_cand_offsets: int, k: int, has_hint: bool, n_random: in
     return n_cand_offsets * (k + 1) * (2 if has_hint else 1) + n_random + 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@kernel(inline="always")
 def _class_allowed(cls, key, want, period, span):
     """Whether exemplar position ``key``'s class lies within ``span`` of ``want`` (cyclic, ``period``);
     always true when ``span < 0`` (no window)."""
@@ -191,7 +193,7 @@ def _class_allowed(cls, key, want, period, span):
     return min(d, period - d) <= span
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w, cls, want, period, span):
     if cy < valid[0] or cy >= valid[1] or cx < valid[2] or cx >= valid[3]:
         return n
@@ -208,7 +210,7 @@ def _add_candidate(cand, n, cy, cx, valid, mask, stamp, tag, w, cls, want, perio
     return n + 1
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _gather_candidates(
     cand,
     oy,
@@ -284,7 +286,7 @@ def _gather_candidates(
     return n
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _valid_positions(valid, mask):
     """Every exemplar position of the ``valid`` rectangle that ``mask`` allows, in raster order."""
     n = 0
@@ -303,7 +305,7 @@ def _valid_positions(valid, mask):
     return out
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@kernel(inline="always")
 def _histogram_factor(count, target, weight):
     """Histogram-matching penalty: a candidate whose label (its exemplar position, Chen & Wang's
     position histogram, or its orientation bin) the output already holds ``count`` times, against
@@ -314,7 +316,7 @@ def _histogram_factor(count, target, weight):
     return 1.0 + weight * excess if excess > 0.0 else 1.0
 
 
-@njit(cache=True, error_model="numpy")
+@kernel
 def _synthesize_chunk_kernel(
     order,
     start,
@@ -543,12 +545,14 @@ def synthesize_chunk(state: dict, start: int, stop: int) -> None:
     )
 
 
-# ----------------------------------------------------------------------------------------------
-# Plain reference: the same algorithm, one position at a time, with NumPy and no early stopping.
+def position_distance(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -> np.ndarray:
+    """Position distances between feature vectors ``a`` and ``b`` of shape ``(..., C)`` (NumPy, float64).
 
-
-def _metric_reference(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -> np.ndarray:
-    """Position distances between ``a`` and ``b`` of shape ``(..., C)``."""
+    The metric the kernel sums over a neighbourhood, in the kernel's feature encoding: squared
+    difference (``METRIC_SSD``), its root (``METRIC_NORM``) or Akl 2014's SO (eq 8) on
+    ``(sin, cos, C, 1/C)`` features (``METRIC_SO``). The driver uses it to normalise distances; the
+    plain reference below uses it for every block.
+    """
     a64 = a.astype(np.float64)
     b64 = b.astype(np.float64)
     if metric == METRIC_SO:
@@ -564,12 +568,16 @@ def _metric_reference(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -
     return np.sqrt(ssd) if metric == METRIC_NORM else ssd
 
 
+# ----------------------------------------------------------------------------------------------
+# Plain reference: the same algorithm, one position at a time, with NumPy and no early stopping.
+
+
 def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):
     H, W = out.shape[:2]
     offs = offs[keep]
     q = out[(oy + offs[:, 0]) % H, (ox + offs[:, 1]) % W]  # (K, C)
     e = ex[cands[:, None, 0] + offs[None, :, 0], cands[:, None, 1] + offs[None, :, 1]]  # (N, K, C)
-    return _metric_reference(q[None], e, metric, alpha).sum(axis=1)
+    return position_distance(q[None], e, metric, alpha).sum(axis=1)
 
 
 def _in_class_window(state: dict, cands: np.ndarray, oy: int, ox: int) -> np.ndarray:

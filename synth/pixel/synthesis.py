@@ -38,8 +38,8 @@ from synth.kernels.pixel_search import (
     METRIC_NORM,
     METRIC_SO,
     METRIC_SSD,
-    _metric_reference,
     candidate_capacity,
+    position_distance,
     synthesize_chunk,
     synthesize_chunk_reference,
 )
@@ -173,7 +173,7 @@ def _typical_distance(feats: np.ndarray, code: int, alpha: float, rng: np.random
     flat = feats.reshape(-1, feats.shape[-1])
     i = rng.integers(0, len(flat), 4096)
     j = rng.integers(0, len(flat), 4096)
-    d = float(np.mean(_metric_reference(flat[i], flat[j], code, alpha)))
+    d = float(np.mean(position_distance(flat[i], flat[j], code, alpha)))
     return d if d > 1e-20 else 1.0
 
 
