@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from synth.errors import SynthError
+from synth.params import parse_assignments
 
 __all__ = ["Client", "ServiceError", "register"]
 
@@ -244,22 +245,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_submit)
 
 
-def _parse_sets(sets: list[str]) -> dict[str, Any]:
-    params = {}
-    for item in sets:
-        name, sep, raw = item.partition("=")
-        if not sep or not name:
-            raise SynthError(f"--set {item!r}: expected NAME=VALUE")
-        try:
-            params[name] = json.loads(raw)
-        except ValueError:
-            params[name] = raw
-    return params
-
-
 def _submit(args: argparse.Namespace) -> int:
     client = Client(args.url)
-    params = _parse_sets(args.sets)
+    params = parse_assignments(args.sets)
     params.update({k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None})
     job = client.submit(
         args.exemplar, method=args.method, params=params, seed=args.seed, constraint=args.constraint

@@ -23,16 +23,16 @@ from jobs.methods import methods
 from jobs.queue import QUEUE, TASK_NAME, create_celery
 from jobs.reaper import Reaper
 from jobs.store import JobRecord, JobStore
-from jobs.uploads import check_upload, decode_image
 from synth import __version__ as synth_version
 from synth.api import MethodSpec
 from synth.errors import InvalidInput, InvalidParameter
+from synth.io.limits import MAX_SIDE, MIN_SIDE, check_output_size
 from synth.params import validate_params
+from synth.pipeline import load_inputs
 
 __all__ = ["SIZE_FIELDS", "JobRequest", "Service", "Upload"]
 
 SIZE_FIELDS = ("width", "height", "depth")
-MIN_SIDE, MAX_SIDE = 8, 8192
 
 
 @dataclass(frozen=True)
@@ -139,11 +139,9 @@ class Service:
             )
         if spec.constraint == "none" and "constraint" in by_role:
             raise InvalidInput("constraint", f"method '{method}' takes no constraint image; leave it out")
-        for upload in by_role.values():
-            check_upload(upload.data, upload.role, self.settings.max_input_pixels)
-            decode_image(
-                upload.data, upload.role, self.settings.max_input_pixels
-            )  # truncated/corrupt -> 422 now, not later
+        # The engine's one judge of images: format from the bytes (415), size from the header before
+        # decoding (413), then a full decode (truncated or corrupt -> 422 now, not in the worker).
+        load_inputs({role: u.data for role, u in by_role.items()}, max_pixels=self.settings.max_input_pixels)
         return JobRequest(
             method=method,
             params={**model.model_dump(mode="json"), **size},
@@ -152,31 +150,17 @@ class Service:
         )
 
     def _validate_size(self, spec: MethodSpec, size: dict[str, Any]) -> dict[str, int]:
-        needed = ("width", "height") if spec.output_ndim == 2 else ("depth", "width", "height")
-        out = {}
-        for name in needed:
-            value = size.get(name, 128 if name != "depth" else 64)
-            if isinstance(value, bool) or not isinstance(value, int | float) or int(value) != value:
-                raise InvalidParameter(name, value, "must be a whole number of pixels")
-            if not MIN_SIDE <= value <= MAX_SIDE:
-                raise InvalidParameter(name, value, f"must lie in [{MIN_SIDE}, {MAX_SIDE}] pixels")
-            out[name] = int(value)
+        needed = ("height", "width") if spec.output_ndim == 2 else ("depth", "height", "width")
         extra = set(size) - set(needed)
         if extra:
             raise InvalidParameter(
                 sorted(extra)[0], size[sorted(extra)[0]], f"method '{spec.name}' makes 2-D images"
             )
-        pixels = 1
-        for v in out.values():
-            pixels *= v
-        if pixels > self.settings.max_output_pixels:
-            raise InvalidParameter(
-                "width",
-                out["width"],
-                f"output of {pixels} pixels is more than this service's "
-                f"limit of {self.settings.max_output_pixels}; ask for a smaller size",
-            )
-        return out
+        values = [size.get(name, 128 if name != "depth" else 64) for name in needed]
+        checked = check_output_size(
+            values, spec.output_ndim, names=needed, max_elements=self.settings.max_output_pixels
+        )
+        return dict(zip(needed, checked, strict=True))
 
     def manifest(self, req: JobRequest) -> dict[str, Any]:
         return {"method": req.method, "params": req.params, "seed": req.seed, "texsynth": synth_version}

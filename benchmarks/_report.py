@@ -14,10 +14,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from tests.paths import SHARED_DATA
+
 DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
-_BESIDE = Path(__file__).resolve().parents[2] / "shared" / "data"
-#: The project's shared test images: ``shared/data`` beside the checkout, else the workplace's.
-DATA = _BESIDE if _BESIDE.is_dir() else Path("/work/shared/data")
+#: The project's shared test images (``$TEXSYNTH_SHARED_DATA``, else ``shared/data`` beside the checkout).
+DATA = SHARED_DATA
 _HEADER = (
     "# Benchmarks\n\nMeasured by `make bench` (or `python -m benchmarks.<name>`); "
     "every figure is a median of several runs.\n"

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks._report import DATA as SHARED_DATA
 from benchmarks._report import median_time, write_section
 from synth.analysis.tensor import dominant_orientation, structure_tensor
 from synth.api import synthesize
@@ -26,7 +27,7 @@ RUNS = 3
 TARGET_SECONDS = 10.0
 TARGET_AGREEMENT = 0.15
 TARGET_KL = 0.05
-DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "hrtem-soot-128.png"
+DATA = SHARED_DATA / "hrtem-soot-128.png"
 DOC_IMG = Path(__file__).resolve().parent.parent / "docs" / "img"
 
 #: Settings for weakly oriented exemplars (HRTEM soot): every tensor of S_con turned to the constraint

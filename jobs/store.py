@@ -37,7 +37,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["STATES", "TERMINAL", "JobRecord", "JobStore", "atomic_write_bytes", "pid_alive"]
+from synth.io.atomic import atomic_write_bytes, atomic_write_json
+
+__all__ = ["STATES", "TERMINAL", "JobRecord", "JobStore", "pid_alive"]
 
 STATES = ("queued", "running", "succeeded", "failed", "cancelled")
 TERMINAL = frozenset({"succeeded", "failed", "cancelled"})
@@ -150,16 +152,6 @@ def pid_alive(pid: int | None) -> bool:
         return True
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that readers see the old file or the new one, never a part."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
 class JobStore:
     """Job, sweep and worker records in one SQLite file, safe across processes (WAL, short writes)."""
 
@@ -227,7 +219,7 @@ class JobStore:
             atomic_write_bytes(folder / "inputs" / names[role], data)
         now = time.time()
         manifest = {**manifest, "job_id": job_id, "inputs": names, "created": now}
-        atomic_write_bytes(folder / "manifest.json", json.dumps(manifest, indent=2).encode())
+        atomic_write_json(folder / "manifest.json", manifest)
         with self._connect() as db:
             db.execute(
                 "INSERT INTO jobs (id, created, method, params, seed, inputs, sweep_id, state, updated)"

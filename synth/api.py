@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from synth.errors import InvalidInput, InvalidParameter
+from synth.io.limits import check_output_size
 from synth.params import MethodParams, validate_params
 
 __all__ = [
@@ -34,7 +35,8 @@ PLANES: tuple[str, ...] = ("xy", "xz", "yz")
 
 
 class Progress(Protocol):
-    """Progress protocol: any callable ``(stage, fraction)``; it may raise to cancel the work."""
+    """Progress protocol: any callable ``(stage, fraction)``; it raises :class:`synth.Cancelled` to stop
+    the work (anything else it raises is a bug and propagates as it is)."""
 
     def __call__(self, stage: str, fraction: float) -> None: ...
 
@@ -165,7 +167,7 @@ def synthesize(
     seed : int
         Same inputs, parameters and seed give the same bytes.
     progress : callable ``(stage, fraction)``, optional
-        Called at least every 2% of the work; may raise (e.g. :class:`synth.Cancelled`) to stop.
+        Called at least every 2% of the work; raises :class:`synth.Cancelled` to stop.
     constraint : ndarray, optional
         Constraint image of methods that take one.
     exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray``, optional
@@ -258,9 +260,4 @@ def _output_size(
             depth = planes["xz"].shape[0] if planes is not None else exemplar.shape[0]
             return (int(depth), *(int(s) for s in exemplar.shape[:2]))
         return tuple(2 * s for s in exemplar.shape[:2])
-    shape = tuple(int(s) for s in size)
-    if len(shape) != ndim:
-        raise InvalidParameter("size", size, f"needs {ndim} values for this method")
-    if any(s < 8 or s > 8192 for s in shape):
-        raise InvalidParameter("size", size, "each side must lie in [8, 8192] pixels")
-    return shape
+    return check_output_size(size, ndim)

@@ -13,6 +13,7 @@ __all__ = [
     "InputTooLarge",
     "InvalidInput",
     "InvalidParameter",
+    "StorageError",
     "SynthError",
     "UnsupportedFormat",
 ]
@@ -54,3 +55,17 @@ class InvalidParameter(SynthError):
 
 class Cancelled(SynthError):
     """Raised through a progress callback to stop a synthesis early (a cancelled job)."""
+
+
+class StorageError(OSError):
+    """A file could not be written (full disk, no permission): the machine's fault, not the input's.
+
+    Not a :class:`SynthError`: the service reports it as an internal error (never a 4xx), the CLI
+    as a failure of the machine (exit code 1). ``file`` is the file's name only, so that messages
+    shown to users carry no server paths.
+    """
+
+    def __init__(self, file: str, reason: str) -> None:
+        self.file = file
+        self.reason = reason
+        super().__init__(f"cannot write {file}: {reason}")

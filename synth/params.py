@@ -6,13 +6,14 @@ nothing about a parameter (bounds, default, meaning) is written twice.
 
 from __future__ import annotations
 
+import json
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from synth.errors import InvalidParameter
 
-__all__ = ["MethodParams", "validate_params"]
+__all__ = ["MethodParams", "parse_assignments", "validate_params"]
 
 
 class MethodParams(BaseModel):
@@ -42,3 +43,21 @@ def validate_params(model: type[P], values: dict[str, Any] | P | None) -> P:
             known = ", ".join(sorted(model.model_fields))
             reason = f"unknown parameter (known: {known})"
         raise InvalidParameter(name, err.get("input"), reason) from None
+
+
+def parse_assignments(items: list[str], option: str = "--set") -> dict[str, Any]:
+    """``['a=1', 'b=ED']`` -> ``{'a': 1, 'b': 'ED'}``: the command lines' ``--set NAME=VALUE``.
+
+    Values parse as JSON when they can (numbers, booleans, lists), else stay strings. The one parser
+    of ``texsynth synthesize`` and ``texsynth submit``; a malformed item names ``option``.
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        if not sep or not name.strip():
+            raise InvalidParameter(option, item, "must look like name=value")
+        try:
+            out[name.strip()] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[name.strip()] = raw
+    return out

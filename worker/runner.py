@@ -18,11 +18,11 @@ from typing import Any
 
 from jobs.config import Settings
 from jobs.methods import methods
-from jobs.store import JobStore, atomic_write_bytes
-from jobs.uploads import decode_image, preview_png
-from synth.api import synthesize
+from jobs.store import JobStore
 from synth.errors import Cancelled, SynthError
-from synth.output.artifacts import write_artifacts
+from synth.io.atomic import atomic_write_bytes
+from synth.output.preview import preview_png
+from synth.pipeline import load_inputs, synthesize_to_folder
 
 __all__ = ["JobProgress", "run_job"]
 
@@ -105,30 +105,25 @@ def run_job(
     try:
         progress("loading inputs", 0.0)
         manifest = json.loads((folder / "manifest.json").read_text())
-        exemplar = decode_image((folder / "inputs" / job.inputs["exemplar"]).read_bytes(), "exemplar")
-        constraint = None
-        if "constraint" in job.inputs:
-            constraint = decode_image(
-                (folder / "inputs" / job.inputs["constraint"]).read_bytes(), "constraint"
-            )
+        images = load_inputs(
+            {role: (folder / "inputs" / name).read_bytes() for role, name in job.inputs.items()}
+        )
         methods(settings)  # registers TEXSYNTH_EXTRA_METHODS in this process
         params = dict(job.params)
         size = tuple(params.pop(k) for k in ("depth", "height", "width") if k in params) or None
-        start = time.time()
-        result = synthesize(
+        manifest["attempt"] = job.attempts
+        outcome = synthesize_to_folder(
             job.method,
-            exemplar,
+            images,
+            staging,
             size=size,
             params=params,
             seed=job.seed,
             progress=progress,
-            constraint=constraint,
+            manifest=manifest,
         )
-        progress("writing artifacts", 1.0)
-        manifest.update(attempt=job.attempts, started=start, finished=time.time())
-        names, metrics = write_artifacts(staging, result, exemplar, constraint, manifest)
-        timings = {k: float(v) for k, v in result.timings.items()}
-        if store.commit_success(job_id, token, staging, names, timings, metrics):
+        timings = {k: float(v) for k, v in outcome.result.timings.items()}
+        if store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics):
             return {"job": job_id, "state": "succeeded"}
         return _stopped(store, job_id, token)
     except Cancelled:

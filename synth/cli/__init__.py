@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from importlib.metadata import entry_points
 
 from synth import __version__
-from synth.errors import SynthError
+from synth.errors import StorageError, SynthError
 
 __all__ = ["build_parser", "main"]
 
@@ -50,6 +50,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SynthError as exc:
         print(f"texsynth {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except StorageError as exc:  # the machine's problem (full disk, permissions), not the input's
+        print(f"texsynth {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"texsynth {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -17,10 +17,7 @@ is what the images show and what a person reads.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -147,20 +144,6 @@ def analyze_image(
     return TensorAnalysis(S, coh, tensor.structure_direction(S), summary)
 
 
-def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(data, fh, indent=2)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _as_float(rendering: np.ndarray) -> np.ndarray:
     """uint8 rendering -> float32 in [0, 1] for :func:`synth.io.save_image` (exact at 8 bits)."""
     return rendering.astype(np.float32) / np.float32(255)
@@ -168,7 +151,11 @@ def _as_float(rendering: np.ndarray) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsynth analyze``: validate, load, analyse, write four files, print one line."""
-    from synth.io import load_image, save_image  # deferred: ``--help`` needs no image codecs
+    from synth.io import (  # deferred: ``--help`` needs no image codecs
+        atomic_write_json,
+        load_image,
+        save_image,
+    )
 
     _check_parameters(args.sigma_d, args.sigma_w, args.bins)
     image = load_image(args.image)
@@ -189,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         for name, rendering in renderings.items():
             save_image(out / name, _as_float(rendering))
-        _write_json_atomic(out / "tensor.json", summary)
+        atomic_write_json(out / "tensor.json", summary)
     except OSError as exc:
         raise InvalidParameter("out", str(out), f"cannot write there ({exc.strerror or exc})") from None
     dominant = summary["dominant_orientation_deg"]

@@ -10,15 +10,15 @@ stderr when it is a terminal.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from synth.errors import InvalidParameter
+from synth.params import parse_assignments
 
-__all__ = ["parse_assignments", "parse_size", "register"]
+__all__ = ["parse_size", "register"]
 
 
 def parse_size(text: str) -> tuple[int, ...]:
@@ -30,20 +30,6 @@ def parse_size(text: str) -> tuple[int, ...]:
     if len(parts) not in (2, 3) or any(p <= 0 for p in parts):
         raise InvalidParameter("size", text, "must look like WxH (e.g. 256x256) or WxHxD for volumes")
     return tuple(reversed(parts))
-
-
-def parse_assignments(items: list[str]) -> dict[str, Any]:
-    """``['a=1', 'b=ED']`` -> ``{'a': 1, 'b': 'ED'}``; values parse as JSON when they can."""
-    out: dict[str, Any] = {}
-    for item in items:
-        name, sep, raw = item.partition("=")
-        if not sep or not name.strip():
-            raise InvalidParameter("--set", item, "must look like name=value")
-        try:
-            out[name.strip()] = json.loads(raw)
-        except json.JSONDecodeError:
-            out[name.strip()] = raw
-    return out
 
 
 class _ProgressBar:
@@ -72,9 +58,8 @@ class _ProgressBar:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from synth.api import available_methods, synthesize
-    from synth.io import load_image
-    from synth.output.artifacts import write_artifacts
+    from synth.api import available_methods
+    from synth.pipeline import load_inputs, synthesize_to_folder
 
     methods = available_methods()
     if args.method not in methods:
@@ -83,32 +68,28 @@ def _run(args: argparse.Namespace) -> int:
         raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
     params = parse_assignments(args.set or [])
     size = parse_size(args.size) if args.size else None
-    exemplar = load_image(args.exemplar)
-    constraint = load_image(args.constraint) if args.constraint else None
+    sources = {"exemplar": args.exemplar, "constraint": args.constraint}
+    sources = {role: path for role, path in sources.items() if path is not None}
+    images = load_inputs(sources)
+    out = Path(args.out)
     bar = _ProgressBar()
     try:
-        result = synthesize(
+        outcome = synthesize_to_folder(
             args.method,
-            exemplar,
+            images,
+            out,
             size=size,
             params=params,
             seed=args.seed,
             progress=bar,
-            constraint=constraint,
+            manifest={role: str(path) for role, path in sources.items()},
+            bit_depth=args.bit_depth,
+            plots=not args.no_plots,
         )
     finally:
         bar.close()
-    out = Path(args.out)
-    names, metrics = write_artifacts(
-        out,
-        result,
-        exemplar,
-        constraint,
-        {"exemplar": str(args.exemplar), "constraint": str(args.constraint) if args.constraint else None},
-        bit_depth=args.bit_depth,
-        plots=not args.no_plots,
-    )
-    summary = metrics.get("summary", {})
+    result, names = outcome.result, outcome.files
+    summary = outcome.metrics.get("summary", {})
     print(
         f"{args.method}: {'x'.join(str(s) for s in reversed(result.image.shape[:2]))} in "
         f"{result.timings.get('total', 0.0):.2f} s -> {out}/ ({len(names)} files)"

@@ -37,7 +37,7 @@ Choices the paper leaves open (all recorded in the ``settings`` of every result)
   values above 3 counted in the last bin). Density = fringes per 10 000 px.
 - **RGB images** are converted to grey before any measure, with the BT.601 luma weights
   ``0.299 R + 0.587 G + 0.114 B`` of :func:`synth.io.load_image` (``mode='grey'``,
-  :data:`synth.io.LUMA_WEIGHTS`), so that evaluating an RGB array and its grey-loaded file agree: the
+  :data:`synth.colour.LUMA_WEIGHTS`), so that evaluating an RGB array and its grey-loaded file agree: the
   study's measures are defined on grey levels, and fringes on grey images.
 - **Moments**: :func:`scipy.stats.skew` and :func:`scipy.stats.kurtosis` (Fisher's, excess: 0 for a
   Gaussian), biased estimators; standard deviation with ``ddof = 0``.
@@ -84,8 +84,9 @@ from synth.analysis.tensor import (
     structure_tensor,
     tensor_dissimilarity,
 )
+from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
-from synth.io import LUMA_WEIGHTS, MIN_SIDE
+from synth.io import MIN_SIDE
 
 __all__ = [
     "COHERENCE_BINS",
@@ -127,13 +128,13 @@ def window_sigma(window: int = WINDOW) -> float:
 def as_grey(image: np.ndarray, name: str = "image") -> np.ndarray:
     """Validate an image and return it grey, float64, shape (H, W).
 
-    RGB ``(H, W, 3)`` becomes BT.601 luma (:data:`synth.io.LUMA_WEIGHTS`, as ``load_image``). Raises
+    RGB ``(H, W, 3)`` becomes BT.601 luma (:data:`synth.colour.LUMA_WEIGHTS`, as ``load_image``). Raises
     :class:`~synth.errors.InvalidInput` naming ``name`` for other shapes, NaN/inf, values outside
     [0, 1] or images smaller than 8 px along a side.
     """
     arr = np.asarray(image)
     if arr.ndim == 3 and arr.shape[-1] == 3:
-        arr = arr.astype(np.float64, copy=False) @ np.asarray(LUMA_WEIGHTS, dtype=np.float64)
+        arr = to_grey(arr, np.float64)
     elif arr.ndim != 2:
         raise InvalidInput(name, f"expected a grey (H, W) or RGB (H, W, 3) image, got shape {arr.shape}")
     arr = arr.astype(np.float64, copy=False)

@@ -4,16 +4,11 @@
 fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints.
 """
 
+from synth.io.atomic import atomic_write_bytes, atomic_write_json
 from synth.io.images import (
-    DEFAULT_MAX_PIXELS,
-    DEFAULT_MAX_VOXELS,
-    LUMA_WEIGHTS,
-    MAX_ASPECT_RATIO,
-    MIN_SIDE,
     SUPPORTED_FORMATS,
     ImageSource,
     LoadMode,
-    atomic_write_bytes,
     image_to_png_bytes,
     load_image,
     load_volume,
@@ -21,17 +16,27 @@ from synth.io.images import (
     save_volume,
     to_uint,
 )
+from synth.io.limits import (
+    DEFAULT_MAX_OUTPUT,
+    DEFAULT_MAX_PIXELS,
+    DEFAULT_MAX_VOXELS,
+    MAX_ASPECT_RATIO,
+    MAX_SIDE,
+    MIN_SIDE,
+)
 
 __all__ = [
+    "DEFAULT_MAX_OUTPUT",
     "DEFAULT_MAX_PIXELS",
     "DEFAULT_MAX_VOXELS",
-    "LUMA_WEIGHTS",
     "MAX_ASPECT_RATIO",
+    "MAX_SIDE",
     "MIN_SIDE",
     "SUPPORTED_FORMATS",
     "ImageSource",
     "LoadMode",
     "atomic_write_bytes",
+    "atomic_write_json",
     "image_to_png_bytes",
     "load_image",
     "load_volume",

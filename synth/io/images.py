@@ -21,11 +21,9 @@ file in the destination directory, then :func:`os.replace`), so a reader never s
 
 from __future__ import annotations
 
-import contextlib
 import io
 import os
 import struct
-import uuid
 import warnings
 import zlib
 from pathlib import Path
@@ -35,18 +33,20 @@ import numpy as np
 import tifffile
 from PIL import Image, UnidentifiedImageError
 
+from synth.colour import to_grey
 from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
+from synth.io.atomic import atomic_write_bytes
+from synth.io.limits import (
+    DEFAULT_MAX_PIXELS,
+    DEFAULT_MAX_VOXELS,
+    check_image_shape,
+    resolve_limit,
+)
 
 __all__ = [
-    "DEFAULT_MAX_PIXELS",
-    "DEFAULT_MAX_VOXELS",
-    "LUMA_WEIGHTS",
-    "MAX_ASPECT_RATIO",
-    "MIN_SIDE",
     "SUPPORTED_FORMATS",
     "ImageSource",
     "LoadMode",
-    "atomic_write_bytes",
     "image_to_png_bytes",
     "load_image",
     "load_volume",
@@ -55,21 +55,9 @@ __all__ = [
     "to_uint",
 ]
 
-#: Largest image accepted by default (width * height); the environment variable
-#: ``TEXSYNTH_MAX_PIXELS`` overrides it, an explicit ``max_pixels`` argument overrides both.
-DEFAULT_MAX_PIXELS = 4096 * 4096
-#: Largest volume accepted by default (depth * height * width, 512 MiB as float32); the
-#: environment variable ``TEXSYNTH_MAX_VOXELS`` overrides it.
-DEFAULT_MAX_VOXELS = 512**3
-#: Longest side / shortest side above which an image is refused: a 1 x 64 strip holds no texture.
-MAX_ASPECT_RATIO = 64
-#: Shortest side (pixels) of a usable image: smaller than the smallest synthesis neighbourhood.
-MIN_SIDE = 8
 #: The formats the loaders accept, as Pillow names them (MPO is Pillow's name for a JPEG that
 #: carries extra pictures, as some cameras write).
 SUPPORTED_FORMATS = ("PNG", "TIFF", "JPEG")
-#: ITU-R BT.601 luma weights (R, G, B), as Pillow's ``convert("L")``; see :func:`load_image`.
-LUMA_WEIGHTS = (0.299, 0.587, 0.114)
 
 ImageSource = str | os.PathLike[str] | bytes | bytearray | memoryview
 LoadMode = Literal["auto", "grey", "rgb"]
@@ -162,7 +150,7 @@ def load_image(
       ``MinIsWhite`` is inverted so that 1 is white.
 
     Grey conversion (``mode='grey'``) uses the ITU-R BT.601 luma ``0.299 R + 0.587 G + 0.114 B``
-    (:data:`LUMA_WEIGHTS`), the weights of Pillow's ``convert("L")`` and ImageJ's weighted
+    (:data:`synth.colour.LUMA_WEIGHTS`), the weights of Pillow's ``convert("L")`` and ImageJ's weighted
     conversion, computed in floating point without rounding to 8 bits. (scikit-image's ``rgb2gray``
     uses the BT.709 weights instead; the difference is small for natural images.)
 
@@ -171,7 +159,7 @@ def load_image(
     """
     if mode not in ("auto", "grey", "rgb"):
         raise InvalidParameter("mode", mode, "must be one of 'auto', 'grey', 'rgb'")
-    limit = _resolve_limit("max_pixels", max_pixels, "TEXSYNTH_MAX_PIXELS", DEFAULT_MAX_PIXELS)
+    limit = resolve_limit("max_pixels", max_pixels, "TEXSYNTH_MAX_PIXELS", DEFAULT_MAX_PIXELS)
     data, label = _read_source(source, name, default_name="image")
     image, fallback_reason = None, None
     if _sniff(data) == "TIFF":
@@ -216,7 +204,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
     Values are converted to [0, 1] as in :func:`load_image` (integers by their full scale, float
     data rescaled from the whole volume's minimum and maximum only if outside [0, 1]).
     """
-    limit = _resolve_limit("max_voxels", max_voxels, "TEXSYNTH_MAX_VOXELS", DEFAULT_MAX_VOXELS)
+    limit = resolve_limit("max_voxels", max_voxels, "TEXSYNTH_MAX_VOXELS", DEFAULT_MAX_VOXELS)
     data, label = _read_source(source, name, default_name="volume")
     fmt = _sniff(data)
     if fmt != "TIFF":
@@ -250,7 +238,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
                     f"{width}x{height}x{depth} = {depth * height * width} voxels is more than the limit "
                     f"of {limit} (set TEXSYNTH_MAX_VOXELS or max_voxels to change it)",
                 )
-            _check_shape(label, height, width, None)
+            check_image_shape(label, height, width, None)
             photometric = page.photometric
             if photometric not in (tifffile.PHOTOMETRIC.MINISBLACK, tifffile.PHOTOMETRIC.MINISWHITE):
                 raise InvalidInput(label, f"TIFF photometric {photometric.name}: a grey stack is needed")
@@ -448,50 +436,12 @@ def _read_source(source: ImageSource, name: str | None, *, default_name: str) ->
     return data, label
 
 
-def _resolve_limit(param: str, value: int | None, env_var: str, default: int) -> int:
-    """An explicit limit, else the environment variable's, else the default; positive integers only."""
-    if value is None:
-        raw = os.environ.get(env_var, "").strip()
-        if not raw:
-            return default
-        try:
-            value = int(raw)
-        except ValueError:
-            raise InvalidParameter(env_var, raw, "must be a positive whole number") from None
-        param = env_var
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value <= 0:
-        raise InvalidParameter(param, value, "must be a positive whole number")
-    return int(value)
-
-
 def _sniff(data: bytes) -> str | None:
     """The allowed format the leading bytes announce, or None."""
     for magic, fmt in _MAGIC.items():
         if data.startswith(magic):
             return fmt
     return None
-
-
-def _check_shape(label: str, height: int, width: int, max_pixels: int | None) -> None:
-    """Refuse zero-size, too large (if ``max_pixels``), tiny and absurdly elongated images."""
-    if height == 0 or width == 0:
-        raise InvalidInput(label, f"the image has zero size ({width}x{height} pixels)")
-    if max_pixels is not None and width * height > max_pixels:
-        raise InputTooLarge(
-            label,
-            f"{width}x{height} = {width * height} pixels is more than the limit of {max_pixels} "
-            "(crop or downscale it, or raise TEXSYNTH_MAX_PIXELS / max_pixels)",
-        )
-    if min(height, width) < MIN_SIDE:
-        raise InvalidInput(
-            label, f"{width}x{height} pixels is too small: at least {MIN_SIDE} pixels are needed on each side"
-        )
-    if max(height, width) > MAX_ASPECT_RATIO * min(height, width):
-        raise InvalidInput(
-            label,
-            f"{width}x{height} pixels is too elongated: the longer side may be at most {MAX_ASPECT_RATIO} "
-            "times the shorter",
-        )
 
 
 def _describe(exc: BaseException) -> str:
@@ -538,7 +488,7 @@ def _decode_tiff_image(data: bytes, label: str, max_pixels: int) -> tuple[np.nda
                 raise InvalidInput(
                     label, f"has {channels} channels; at most 4 (grey, grey+alpha, RGB, RGBA) are supported"
                 )
-            _check_shape(label, height, width, max_pixels)
+            check_image_shape(label, height, width, max_pixels)
             photometric = page.photometric
             palette = photometric == tifffile.PHOTOMETRIC.PALETTE and channels == 1
             if not palette and photometric not in _TIFF_DIRECT_PHOTOMETRIC:
@@ -595,7 +545,7 @@ def _decode_with_pillow(data: bytes, label: str, max_pixels: int, *, tiff_reason
                 fmt = im.format
                 if fmt not in _PILLOW_FORMATS:
                     raise UnsupportedFormat(label, f"{fmt} images are not supported (use {_SUPPORTED_TEXT})")
-                _check_shape(label, im.height, im.width, max_pixels)
+                check_image_shape(label, im.height, im.width, max_pixels)
                 im.verify()
             with Image.open(io.BytesIO(data)) as im:
                 im.load()
@@ -664,10 +614,7 @@ def _apply_mode(image: np.ndarray, mode: LoadMode) -> np.ndarray:
     """Grey/RGB according to ``mode``; C-contiguous float32 clipped to [0, 1]."""
     if image.ndim == 3:
         if mode == "grey":
-            r, g, b = LUMA_WEIGHTS
-            image = (
-                np.float32(r) * image[..., 0] + np.float32(g) * image[..., 1] + np.float32(b) * image[..., 2]
-            )
+            image = to_grey(image)
         elif (
             mode == "auto"
             and np.array_equal(image[..., 0], image[..., 1])
@@ -701,22 +648,3 @@ def _savable_image(image: np.ndarray) -> np.ndarray:
             "image", f"shape {arr.shape}", "must be a non-empty (H, W) grey or (H, W, 3) RGB image"
         )
     return arr
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path``, flush it to disk, then rename over ``path``."""
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
-    created = False
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-        created = True
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        if created:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-        raise InvalidParameter("path", str(path), f"cannot write the file ({exc.strerror or exc})") from None

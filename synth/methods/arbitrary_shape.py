@@ -80,9 +80,9 @@ from synth.analysis.tensor import (
     wrap_angle,
 )
 from synth.api import MethodSpec, Progress, Result, register
+from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.io import LUMA_WEIGHTS
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
 from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
 from synth.pixel.synthesis import (
@@ -188,13 +188,6 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         return round(360.0 / self.angular_step)
 
 
-def _grey(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image, dtype=np.float32)
-    if img.ndim == 3:
-        img = (img @ np.asarray(LUMA_WEIGHTS, dtype=np.float32)).astype(np.float32)
-    return img
-
-
 def orientation_agreement(
     output: np.ndarray,
     constraint: np.ndarray,
@@ -219,7 +212,7 @@ def orientation_agreement(
     >>> round(orientation_agreement(a, grating((64, 64), 0.3 + np.pi / 2)), 2)
     1.0
     """
-    out, con = _grey(output), _grey(constraint)
+    out, con = to_grey(output), to_grey(constraint)
     if out.shape != con.shape or out.ndim != 2:
         raise InvalidInput(
             "output", f"shape {output.shape} does not match the constraint's {constraint.shape}"
@@ -238,7 +231,7 @@ def constraint_field(
     constraint: np.ndarray, shape: tuple[int, int], sigma_d: float, sigma_w: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """The constraint image at ``shape`` (grey) and its tensor field; a flat image is an error."""
-    con = _grey(constraint)
+    con = to_grey(constraint)
     if con.ndim != 2:
         raise InvalidInput("constraint", f"shape {constraint.shape} is neither (H, W) grey nor (H, W, 3) RGB")
     if not np.isfinite(con).all():

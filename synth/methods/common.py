@@ -8,7 +8,6 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from synth.api import Progress
-from synth.errors import Cancelled
 from synth.grid.neighbourhood import Shape
 from synth.grid.scan import ScanOrder
 from synth.params import MethodParams
@@ -80,14 +79,15 @@ def as_features(image: np.ndarray) -> np.ndarray:
 
 
 def checked_progress(progress: Progress):
-    """Wrap a progress callback; whatever it raises to stop the work surfaces as :class:`Cancelled`."""
+    """Wrap a progress callback so that the fractions it sees lie in [0, 1].
+
+    The protocol (:class:`synth.api.Progress`): a callback stops the work by raising
+    :class:`Cancelled`, which passes through unchanged. Anything else it raises is a bug in the
+    caller and propagates as it is, so that a broken callback fails loudly instead of looking like
+    a cancelled job.
+    """
 
     def report(stage: str, fraction: float) -> None:
-        try:
-            progress(stage, min(1.0, max(0.0, fraction)))
-        except Cancelled:
-            raise
-        except Exception as exc:  # a callback that raises means "stop"
-            raise Cancelled(f"cancelled during {stage}: {exc}") from exc
+        progress(stage, min(1.0, max(0.0, fraction)))
 
     return report

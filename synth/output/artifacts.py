@@ -11,7 +11,6 @@ middle slice, and its metrics are the multi-2D ones. Every file is written atomi
 
 from __future__ import annotations
 
-import json
 import platform
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,7 @@ from synth import __version__
 from synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from synth.api import Result
 from synth.evaluate import evaluate_pair, evaluate_volume, to_json_types
-from synth.io import atomic_write_bytes, image_to_png_bytes, save_image, save_volume
+from synth.io import atomic_write_bytes, atomic_write_json, image_to_png_bytes, save_image, save_volume
 from synth.output.plots import write_plots
 from synth.output.render import coherence_image, orientation_image
 
@@ -112,7 +111,7 @@ def write_artifacts(
 
     metrics = to_json_types(evaluate_volume(exemplar, image) if volume else evaluate_pair(exemplar, image))
     doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
-    atomic_write_bytes(folder / "metrics.json", json.dumps(doc, indent=2).encode())
+    atomic_write_json(folder / "metrics.json", doc)
     names.append("metrics.json")
     if plots and not volume:
         plot_dir = folder / "plots"
@@ -129,6 +128,6 @@ def write_artifacts(
         "timings": to_json_types(result.timings),
         "versions": versions(),
     }
-    atomic_write_bytes(folder / "manifest.json", json.dumps(doc, indent=2).encode())
+    atomic_write_json(folder / "manifest.json", doc)
     names.append("manifest.json")
     return names, metrics

@@ -28,8 +28,9 @@ from typing import Literal
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
-from skimage.color import hsv2rgb, rgb2gray
+from skimage.color import hsv2rgb
 
+from synth.colour import to_grey
 from synth.errors import InvalidParameter
 
 __all__ = [
@@ -222,7 +223,7 @@ def composite_image(
     t = _field("theta", theta)
     val = np.asarray(value)
     if val.ndim == 3 and val.shape[2] == 3:
-        val = rgb2gray(np.clip(np.nan_to_num(val.astype(np.float64)), 0.0, 1.0))
+        val = to_grey(np.clip(np.nan_to_num(val.astype(np.float64)), 0.0, 1.0), np.float64)
     v = _unit("value", val, t.shape)
     finite = np.isfinite(t)
     hue = orientation_hue(np.where(finite, t, 0.0))

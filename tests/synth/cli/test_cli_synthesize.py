@@ -11,10 +11,11 @@ import tifffile
 from PIL import Image
 
 from synth.cli import main
-from synth.cli.synthesize import parse_assignments, parse_size
+from synth.cli.synthesize import parse_size
 from synth.errors import InvalidParameter
 from synth.io import save_image
 from synth.io.patterns import undulating_laminae
+from synth.params import parse_assignments
 
 FAST = ["--set", "neighbourhood_size=5", "--set", "parent_size=3", "--no-plots"]
 

@@ -12,9 +12,10 @@ import pytest
 from scipy import ndimage as ndi
 
 from synth.cli import main
+from synth.colour import LUMA_WEIGHTS
 from synth.errors import InvalidInput, InvalidParameter
 from synth.evaluate import HIST_EPSILON, evaluate_pair, evaluate_volume, kl_divergence, window_sigma
-from synth.io import LUMA_WEIGHTS, save_image, save_volume
+from synth.io import save_image, save_volume
 
 
 def _directional(shape: tuple[int, int], seed: int = 1) -> np.ndarray:

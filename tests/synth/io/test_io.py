@@ -11,12 +11,13 @@ import pytest
 import tifffile
 from PIL import Image
 
-from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, UnsupportedFormat
+from synth.colour import LUMA_WEIGHTS
+from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, StorageError, UnsupportedFormat
 from synth.io import (
     DEFAULT_MAX_PIXELS,
-    LUMA_WEIGHTS,
     MAX_ASPECT_RATIO,
     MIN_SIDE,
+    atomic_write_json,
     image_to_png_bytes,
     load_image,
     load_volume,
@@ -274,6 +275,10 @@ def test_bytes_source_and_name(rng):
         load_image(b"hello", name="exemplar")
 
 
+@pytest.mark.skipif(
+    not (DATA / "hrtem-soot-128.png").exists(),
+    reason=f"shared test images not found in {DATA} (set TEXSYNTH_SHARED_DATA)",
+)
 def test_real_hrtem_exemplar_loads():
     image = load_image(DATA / "hrtem-soot-128.png")
     assert_image(image, (128, 128))
@@ -548,9 +553,25 @@ def test_save_is_atomic_and_overwrites(tmp_path, rng):
     np.testing.assert_array_equal(to_uint(load_image(path), 8), to_uint(image, 8))
 
 
-def test_save_into_missing_directory(tmp_path):
-    with pytest.raises(InvalidParameter, match=r"path.*cannot write"):
+def test_save_into_missing_directory_is_a_storage_error_without_the_folders(tmp_path):
+    with pytest.raises(StorageError, match=r"^cannot write dir\.png: No such file or directory$") as info:
         save_image(tmp_path / "no" / "such" / "dir.png", np.zeros((H, W)))
+    assert str(tmp_path) not in str(info.value)
+    assert not isinstance(info.value, ValueError)  # the machine's fault: not an input error (4xx)
+
+
+def test_failed_write_leaves_no_temporary_file_and_keeps_the_old_one(tmp_path, monkeypatch):
+    path = tmp_path / "out.json"
+    atomic_write_json(path, {"a": 1})
+
+    def full_disk(fd: int) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("synth.io.atomic.os.fsync", full_disk)
+    with pytest.raises(StorageError, match=r"cannot write out\.json: No space left on device"):
+        atomic_write_json(path, {"a": 2})
+    assert [p.name for p in tmp_path.iterdir()] == ["out.json"]
+    assert path.read_text() == '{\n  "a": 1\n}\n'
 
 
 def test_save_accepts_trailing_single_channel(tmp_path, rng):

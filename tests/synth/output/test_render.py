@@ -99,9 +99,9 @@ def test_composite_hsv() -> None:
 def test_composite_takes_luminance_of_rgb_value() -> None:
     theta = np.zeros((2, 2))
     rgb = np.zeros((2, 2, 3))
-    rgb[..., 1] = 1.0  # pure green: luminance 0.7152 (ITU-R 709)
+    rgb[..., 1] = 1.0  # pure green: luma 0.587 (ITU-R BT.601, the engine's one grey conversion)
     out = composite_image(theta, np.zeros((2, 2)), rgb)
-    assert out[0, 0].tolist() == [182, 182, 182]
+    assert out[0, 0].tolist() == [150, 150, 150]
 
 
 def test_composite_shapes_must_match() -> None:

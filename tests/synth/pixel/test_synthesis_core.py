@@ -329,14 +329,28 @@ def test_progress_reaches_one_often_and_in_order() -> None:
     assert any(s.startswith("structure") for s, _ in seen) and any(s.startswith("texture") for s, _ in seen)
 
 
-def test_a_progress_callback_that_raises_cancels() -> None:
+def test_a_progress_callback_that_raises_cancelled_stops_the_run() -> None:
     def stop(stage: str, fraction: float) -> None:
         if fraction > 0.1:
-            raise RuntimeError("job cancelled")
+            raise Cancelled("job cancelled")
 
     with pytest.raises(Cancelled, match="job cancelled"):
         synthesize(
             "wei-levoy", _rng_image((32, 32)), size=(32, 32), params={"neighbourhood_size": 5}, progress=stop
+        )
+
+
+def test_a_bug_in_a_progress_callback_is_not_mistaken_for_a_cancel() -> None:
+    def broken(stage: str, fraction: float) -> None:
+        raise KeyError("a bug in the caller")
+
+    with pytest.raises(KeyError, match="a bug in the caller"):
+        synthesize(
+            "wei-levoy",
+            _rng_image((32, 32)),
+            size=(32, 32),
+            params={"neighbourhood_size": 5},
+            progress=broken,
         )
 
 

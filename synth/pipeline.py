@@ -1,0 +1,102 @@
+"""Load inputs -> synthesize -> write every artifact: the one sequence behind ``texsynth synthesize``
+and the service's worker, so that a job and a command line give the same files for the same inputs.
+
+Inputs come by role (:data:`INPUT_ROLES`): ``exemplar``, or the three per-plane exemplars of a solid
+method, and ``constraint``. A role given as bytes is named by its role in error messages (an upload:
+no server path); a role given as a path by the path (a command line: the user's own file).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from synth.api import PLANES, Progress, Result, synthesize
+from synth.errors import InvalidInput
+from synth.io import ImageSource, load_image
+
+__all__ = ["INPUT_ROLES", "Outcome", "load_inputs", "synthesize_to_folder"]
+
+#: Every input image a method may declare (``MethodSpec.inputs``).
+INPUT_ROLES: tuple[str, ...] = ("exemplar", *(f"exemplar_{plane}" for plane in PLANES), "constraint")
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What :func:`synthesize_to_folder` made: the result, the files written, the metrics."""
+
+    result: Result
+    files: list[str]
+    metrics: dict[str, Any]
+
+
+def load_inputs(
+    sources: Mapping[str, ImageSource], *, max_pixels: int | None = None
+) -> dict[str, np.ndarray]:
+    """Decode every input image (float32 in [0, 1]), checking each before any work starts.
+
+    Raises :class:`~synth.errors.InvalidInput` (or its 413/415 kinds) naming the role or the file.
+    """
+    unknown = sorted(set(sources) - set(INPUT_ROLES))
+    if unknown:
+        raise InvalidInput(unknown[0], f"not an input of any method (inputs: {', '.join(INPUT_ROLES)})")
+    images = {}
+    for role, source in sources.items():
+        name = role if isinstance(source, bytes | bytearray | memoryview) else None
+        images[role] = load_image(source, name=name, max_pixels=max_pixels)
+    return images
+
+
+def synthesize_to_folder(
+    method: str,
+    images: Mapping[str, np.ndarray],
+    folder: str | os.PathLike[str],
+    *,
+    size: tuple[int, ...] | None = None,
+    params: dict[str, Any] | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    manifest: dict[str, Any] | None = None,
+    bit_depth: int = 8,
+    plots: bool = True,
+) -> Outcome:
+    """Run ``method`` on decoded ``images`` (by role) and write all artifacts into ``folder``.
+
+    See :func:`synth.api.synthesize` for the arguments and
+    :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
+    the synthesis started and finished (Unix time).
+    """
+    from synth.output.artifacts import write_artifacts  # deferred: matplotlib only when writing
+
+    planes = {plane: images[f"exemplar_{plane}"] for plane in PLANES if f"exemplar_{plane}" in images}
+    started = time.time()
+    result = synthesize(
+        method,
+        images.get("exemplar"),
+        size=size,
+        params=params,
+        seed=seed,
+        progress=progress,
+        constraint=images.get("constraint"),
+        exemplars=planes or None,
+    )
+    manifest = {**(manifest or {}), "started": started, "finished": time.time()}
+    if progress is not None:
+        progress("writing artifacts", 1.0)
+    exemplar = images["exemplar"] if "exemplar" in images else planes["xy"]
+    files, metrics = write_artifacts(
+        Path(folder),
+        result,
+        exemplar,
+        images.get("constraint"),
+        manifest,
+        bit_depth=bit_depth,
+        plots=plots,
+    )
+    return Outcome(result, files, metrics)
