@@ -50,6 +50,7 @@ __all__ = [
     "image_to_png_bytes",
     "load_image",
     "load_volume",
+    "sample_bits",
     "save_image",
     "save_volume",
     "to_uint",
@@ -372,7 +373,14 @@ def save_image(path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: in
     atomic_write_bytes(target, data)
 
 
-def save_volume(path: str | os.PathLike[str], volume: np.ndarray, *, bit_depth: int = 16) -> None:
+def save_volume(
+    path: str | os.PathLike[str],
+    volume: np.ndarray,
+    *,
+    bit_depth: int = 16,
+    voxel_size: float | tuple[float, float, float] | None = None,
+    unit: str = "nm",
+) -> None:
     """Write a ``(D, H, W)`` volume as a multi-page TIFF stack that Fiji opens with D slices, atomically.
 
     Parameters
@@ -383,16 +391,28 @@ def save_volume(path: str | os.PathLike[str], volume: np.ndarray, *, bit_depth: 
         ``(D, H, W)`` grey volume in [0, 1]; values are clipped and rounded.
     bit_depth : {8, 16}
         Bits per voxel.
+    voxel_size : float or (float, float, float), optional
+        The size of a voxel in ``unit``: one value for cubic voxels, or ``(z, y, x)`` in array order.
+        Written as ImageJ calibration, so that Fiji shows lengths in ``unit`` and its 3-D viewers keep
+        the proportions: ``spacing`` (z) in the ImageJ description, ``XResolution``/``YResolution``
+        (pixels per unit, the TIFF tags ImageJ reads) for x and y. ``None`` writes no calibration.
+    unit : str
+        The length unit of ``voxel_size`` (``'nm'`` by default; ``'um'``, ``'micron'``, ...), stored as
+        ImageJ's ``unit``.
 
     Raises
     ------
     InvalidParameter
-        Wrong extension or shape, bit depth other than 8 or 16, NaN/inf, or the file cannot be written.
+        Wrong extension or shape, bit depth other than 8 or 16, a voxel size that is not one or three
+        positive numbers, an empty unit or one holding a line break, NaN/inf, or the file cannot be
+        written.
 
     Notes
     -----
     One page per z-slice, with ImageJ metadata (``images=D, slices=D``, axes ``ZYX``) so that Fiji
     and ImageJ show a z-stack rather than a time series; uncompressed, as ImageJ writes its own.
+    Read the calibration back with :mod:`tifffile`: ``TiffFile.imagej_metadata['spacing']`` and
+    ``['unit']``, and ``TiffPage.resolution`` (pixels per unit along x, y).
     """
     target = Path(path)
     if target.suffix.lower() not in (".tif", ".tiff"):
@@ -401,12 +421,58 @@ def save_volume(path: str | os.PathLike[str], volume: np.ndarray, *, bit_depth: 
     arr = np.asarray(volume)
     if arr.ndim != 3 or 0 in arr.shape:
         raise InvalidParameter("volume", f"shape {arr.shape}", "must be a non-empty (D, H, W) grey volume")
+    metadata: dict[str, object] = {"axes": "ZYX"}
+    options: dict[str, object] = {}
+    if voxel_size is not None:
+        size_z, size_y, size_x = _voxel_size(voxel_size)
+        if not isinstance(unit, str) or not unit.strip() or any(c in unit for c in "\r\n="):
+            raise InvalidParameter("unit", unit, "must be a non-empty length unit such as 'nm' or 'um'")
+        metadata.update(spacing=size_z, unit=unit.strip())
+        options["resolution"] = (1.0 / size_x, 1.0 / size_y)
     buf = io.BytesIO()
     # photometric explicitly: tifffile would store a stack whose last axis is 3 or 4 long as RGB
     tifffile.imwrite(
-        buf, to_uint(arr, bit_depth), imagej=True, photometric="minisblack", metadata={"axes": "ZYX"}
+        buf, to_uint(arr, bit_depth), imagej=True, photometric="minisblack", metadata=metadata, **options
     )
     atomic_write_bytes(target, buf.getvalue())
+
+
+def sample_bits(source: ImageSource, *, name: str | None = None) -> int:
+    """Bits per sample an image file stores (1, 8, 16, 32), read from its header only.
+
+    What a person means by an image's bit depth: an 8-bit PNG says 8, a 16-bit TIFF 16, a float TIFF
+    32. Used to refuse per-plane exemplars of different depths, whose grey levels would not compare.
+    """
+    data, label = _read_source(source, name, default_name="image")
+    if _sniff(data) == "TIFF":
+        try:
+            with tifffile.TiffFile(io.BytesIO(data)) as tif:
+                return int(tif.pages.first.bitspersample)
+        except Exception:
+            pass
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            mode = im.mode
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
+        raise UnsupportedFormat(label, f"not an image format texsynth reads ({_SUPPORTED_TEXT})") from None
+    if mode == "1":
+        return 1
+    if mode.startswith("I;16"):
+        return 16
+    return 32 if mode in ("I", "F") else 8
+
+
+def _voxel_size(voxel_size: float | tuple[float, float, float]) -> tuple[float, float, float]:
+    """``(z, y, x)`` from one size or three; positive and finite, else :class:`InvalidParameter`."""
+    try:
+        values = np.broadcast_to(np.asarray(voxel_size, dtype=np.float64), (3,))
+    except (TypeError, ValueError):
+        values = None
+    if values is None or np.ndim(voxel_size) > 1 or not np.all(np.isfinite(values) & (values > 0)):
+        raise InvalidParameter(
+            "voxel_size", voxel_size, "must be one positive size or three, (z, y, x), in the given unit"
+        )
+    return float(values[0]), float(values[1]), float(values[2])
 
 
 # --------------------------------------------------------------------------------------------

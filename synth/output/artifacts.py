@@ -5,13 +5,19 @@ A 2-D run gives ``output.png`` (8-bit, or 16-bit on request), ``output.tiff`` (1
 when the method has none; ``constraint_*`` of the constraint when there is one), renderings of the
 method's extra maps, ``metrics.json`` (:func:`synth.evaluate.evaluate_pair`: exemplar vs output),
 ``plots/*.png`` (:func:`synth.output.plots.write_plots`) and ``manifest.json`` (method, full parameters, seed,
-versions, timings). A volume gives ``output.tiff`` as a multi-page stack and ``output.png`` as its
-middle slice, and its metrics are the multi-2D ones. Every file is written atomically.
+versions, timings). A volume gives ``output.tiff`` as a multi-page stack (16-bit, with the ImageJ
+voxel size when one is given) and ``output.png`` as its middle ``xy`` slice; ``slices.png`` (the three
+orthogonal mid-slices beside their exemplars), ``cube.png`` (the block and its cut-away corner), the
+mid-slices' ``coherence_{xy,xz,yz}.png`` and ``orientation_{xy,xz,yz}.png``
+(:mod:`synth.output.volume`); its metrics are the multi-2D ones with per-plane exemplars and
+two-point correlations (:func:`synth.evaluate.evaluate_volume`), its plots per plane plus
+``plots/s2.png``. Every file is written atomically.
 """
 
 from __future__ import annotations
 
 import platform
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +28,9 @@ from synth.analysis.tensor import coherence, structure_direction, structure_tens
 from synth.api import Result
 from synth.evaluate import evaluate_pair, evaluate_volume, to_json_types
 from synth.io import atomic_write_bytes, atomic_write_json, image_to_png_bytes, save_image, save_volume
-from synth.output.plots import write_plots
+from synth.output.plots import write_plots, write_s2_plot
 from synth.output.render import coherence_image, orientation_image
+from synth.output.volume import write_volume_images
 
 __all__ = ["versions", "write_artifacts"]
 
@@ -77,11 +84,43 @@ def write_artifacts(
     *,
     bit_depth: int = 8,
     plots: bool = True,
+    exemplars: Mapping[str, np.ndarray] | None = None,
+    voxel_size: float | tuple[float, float, float] | None = None,
+    unit: str = "nm",
 ) -> tuple[list[str], dict[str, Any]]:
     """Write all artifacts of ``result`` into ``folder``; return their names and the metrics.
 
-    ``bit_depth`` (8 or 16) is that of ``output.png``; ``output.tiff`` is always 16-bit.
-    ``manifest`` adds fields (e.g. a job id) to ``manifest.json``.
+    Parameters
+    ----------
+    folder : Path
+        Created if missing.
+    result : Result
+        A 2-D image or a ``(D, H, W)`` volume.
+    exemplar : ndarray
+        The exemplar (for a volume made from per-plane exemplars, the ``xy`` one; ``exemplars`` then
+        gives all three).
+    constraint : ndarray, optional
+        The constraint image, whose tensor field is rendered too.
+    manifest : dict, optional
+        Fields added to ``manifest.json`` (e.g. a job id).
+    bit_depth : {8, 16}
+        That of ``output.png``; ``output.tiff`` is always 16-bit.
+    plots : bool
+        Write the comparison plots under ``plots/``.
+    exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray``, optional
+        A volume's per-plane exemplars: each plane's slices are evaluated against, and drawn beside,
+        their own exemplar. Ignored for 2-D results.
+    voxel_size : float or (float, float, float), optional
+        A volume's voxel size in ``unit`` (one value, or ``(z, y, x)``): ImageJ calibration of
+        ``output.tiff`` (:func:`synth.io.save_volume`); with cubic voxels in nm, fringe lengths are
+        also reported in nm. Ignored for 2-D results.
+    unit : str
+        The unit of ``voxel_size``.
+
+    Returns
+    -------
+    (list of str, dict)
+        The files written (relative to ``folder``) and the metrics.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -90,7 +129,8 @@ def write_artifacts(
     names = ["output.png", "output.tiff"]
     save_image(folder / "output.png", image[image.shape[0] // 2] if volume else image, bit_depth=bit_depth)
     if volume:
-        save_volume(folder / "output.tiff", image, bit_depth=16)
+        save_volume(folder / "output.tiff", image, bit_depth=16, voxel_size=voxel_size, unit=unit)
+        names += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
     else:
         save_image(folder / "output.tiff", image, bit_depth=16)
         tensors = (
@@ -109,14 +149,26 @@ def write_artifacts(
             save_image(folder / f"{key}.png", rendered)
             names.append(f"{key}.png")
 
-    metrics = to_json_types(evaluate_volume(exemplar, image) if volume else evaluate_pair(exemplar, image))
+    if volume:
+        pixel_size = None
+        if voxel_size is not None and unit.strip() == "nm" and len(set(np.broadcast_to(voxel_size, 3))) == 1:
+            pixel_size = float(np.broadcast_to(voxel_size, 3)[0])
+        targets = exemplars if exemplars is not None else exemplar
+        metrics = to_json_types(evaluate_volume(targets, image, pixel_size=pixel_size))
+    else:
+        metrics = to_json_types(evaluate_pair(exemplar, image))
     doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
     atomic_write_json(folder / "metrics.json", doc)
     names.append("metrics.json")
-    if plots and not volume:
+    if plots:
         plot_dir = folder / "plots"
         plot_dir.mkdir(exist_ok=True)
-        names += sorted(f"plots/{Path(p).name}" for p in write_plots(exemplar, image, metrics, plot_dir))
+        targets = exemplars if volume and exemplars is not None else exemplar
+        written = write_plots(targets, image, metrics, plot_dir)
+        if volume:
+            s2_plot = write_s2_plot(metrics, plot_dir)
+            written += [s2_plot] if s2_plot is not None else []
+        names += sorted(f"plots/{Path(p).name}" for p in written)
 
     doc = {
         **(manifest or {}),
@@ -124,6 +176,16 @@ def write_artifacts(
         "params": to_json_types(result.params),
         "seed": result.seed,
         "exemplar_shape": list(np.shape(exemplar)),
+        **(
+            {"exemplar_shapes": {p: list(np.shape(e)) for p, e in exemplars.items()}}
+            if volume and exemplars is not None
+            else {}
+        ),
+        **(
+            {"voxel_size": to_json_types(voxel_size), "unit": unit}
+            if volume and voxel_size is not None
+            else {}
+        ),
         "output_shape": list(image.shape),
         "timings": to_json_types(result.timings),
         "versions": versions(),

@@ -10,7 +10,12 @@
   degrees, so each petal is drawn twice, mirrored through the centre;
 - ``fringe_distributions.png``: fringe length and tortuosity distributions, exemplar vs output;
 - ``fringes_exemplar.png``, ``fringes_output.png``: the extracted fringes, one colour per fringe,
-  over the image (for a volume, the middle slice along axis 0).
+  over the image (for a volume, the middle slice along axis 0, and the ``xy`` exemplar).
+
+A volume compared with one exemplar per plane gets per-plane panels: grey histograms and roses of
+each axis's slices against its own plane's exemplar. :func:`write_s2_plot` draws ``s2.png``, the
+two-point correlation ``S2(r)`` of a volume along ``x``, ``y`` and ``z`` against the exemplars'
+(Torquato, *Random Heterogeneous Materials*, 2002, chapter 2).
 
 Figures are :class:`matplotlib.figure.Figure` objects printed by ``FigureCanvasAgg``: nothing is
 registered with pyplot, so this module is safe in worker processes and threads.
@@ -39,7 +44,7 @@ from synth.analysis.fringes import Fringes, extract_fringes
 from synth.errors import InvalidInput
 from synth.evaluate import as_grey
 
-__all__ = ["fringe_overlay", "save_fringe_overlay", "write_plots"]
+__all__ = ["fringe_overlay", "save_fringe_overlay", "write_plots", "write_s2_plot"]
 
 # Charts are drawn off-screen (FigureCanvasAgg); pyplot, if anyone imports it, gets no GUI either.
 matplotlib.use("Agg")
@@ -115,11 +120,21 @@ def save_fringe_overlay(
 def _blocks(metrics: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any]]]:
     """``(label, block)`` for the output side: one block for a pair, one per axis for a volume."""
     if metrics.get("kind") == "volume":
-        return [(f"slices along axis {k}", block) for k, block in metrics["axes"].items()]
+        return [
+            (f"{block['plane']} slices (axis {k})" if "plane" in block else f"slices along axis {k}", block)
+            for k, block in metrics["axes"].items()
+        ]
     return [("output", metrics)]
 
 
+def _per_plane(metrics: Mapping[str, Any]) -> bool:
+    """Whether a volume was compared with one exemplar per plane (each axis has its own exemplar)."""
+    return metrics.get("kind") == "volume" and not metrics.get("isotropic", True)
+
+
 def _grey_figure(metrics: Mapping[str, Any]) -> Figure:
+    if _per_plane(metrics):
+        return _grey_figure_per_plane(metrics)
     block = metrics["overall"] if metrics.get("kind") == "volume" else metrics
     grey = block["grey"]
     ex = np.asarray(grey["histogram"]["exemplar"])
@@ -144,6 +159,44 @@ def _grey_figure(metrics: Mapping[str, Any]) -> Figure:
     return fig
 
 
+def _grey_figure_per_plane(metrics: Mapping[str, Any]) -> Figure:
+    """One panel per axis: the pooled slices of that axis against the exemplar of their plane."""
+    blocks = _blocks(metrics)
+    fig = Figure(figsize=(4.2 * len(blocks), 3.9))
+    for i, (label, block) in enumerate(blocks):
+        ax = fig.add_subplot(1, len(blocks), i + 1)
+        grey = block["grey"]
+        ex = np.asarray(grey["histogram"]["exemplar"])
+        out = np.asarray(grey["histogram"]["output"])
+        edges = np.linspace(0.0, 1.0, len(ex) + 1)
+        ax.stairs(out, edges, label=label, color=_OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)], linewidth=1.6)
+        ax.stairs(
+            ex,
+            edges,
+            label=f"exemplar {block.get('plane', '')}".strip(),
+            color=_EXEMPLAR_COLOUR,
+            linewidth=1.8,
+            linestyle="--",
+        )
+        m = block["moments"]
+        ax.set_title(
+            f"{label}: KL = {grey['kl']:.4f} nats\n"
+            f"std {m['exemplar']['std']:.3f} vs {m['output']['std']:.3f}, "
+            f"skewness {_fmt(m['exemplar']['skewness'])} vs {_fmt(m['output']['skewness'])}",
+            fontsize=8,
+        )
+        ax.set_xlabel("grey level")
+        if i == 0:
+            ax.set_ylabel("fraction of pixels")
+        ax.legend(fontsize=7)
+    fig.suptitle(
+        "Grey-level histograms per plane (KL(exemplar || slices)); each plane against its own exemplar",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    return fig
+
+
 def _fmt(value: float | None, digits: int = 3) -> str:
     return "n/a" if value is None else f"{value:.{digits}f}"
 
@@ -163,6 +216,27 @@ def _rose(ax: Any, hist: Sequence[float], colour: str, title: str) -> None:
 
 def _orientation_figure(metrics: Mapping[str, Any]) -> Figure:
     blocks = _blocks(metrics)
+    if _per_plane(metrics):
+        # two rows: each plane's exemplar above the pooled slices of that plane
+        fig = Figure(figsize=(3.3 * len(blocks), 7.8))
+        for i, (label, block) in enumerate(blocks):
+            s = block["structure"]
+            ax = fig.add_subplot(2, len(blocks), i + 1, projection="polar")
+            _rose(ax, s["orientation_histogram"]["exemplar"], _EXEMPLAR_COLOUR, f"exemplar {block['plane']}")
+            ax = fig.add_subplot(2, len(blocks), len(blocks) + i + 1, projection="polar")
+            _rose(
+                ax,
+                s["orientation_histogram"]["output"],
+                _OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)],
+                f"{label}\nKL = {s['orientation_kl']:.3f}, LE = {s['log_euclidean']:.3f}",
+            )
+        fig.suptitle(
+            "Fringe-direction roses per plane (energy-weighted structure tensor, 7x7 window;\n"
+            "0 degrees along the slice's columns, 90 degrees up its rows)",
+            fontsize=10,
+        )
+        fig.tight_layout()
+        return fig
     panels = 1 + len(blocks)
     fig = Figure(figsize=(3.2 * panels, 3.8))
     first = blocks[0][1]["structure"]
@@ -216,8 +290,20 @@ def _fringe_figure(metrics: Mapping[str, Any]) -> Figure | None:
                 linewidth=1.4,
             )
         # the exemplar last and dashed, so that an identical output does not hide it
-        values, edges = scaled(blocks[0][1]["fringes"][key], "exemplar")
-        ax.stairs(values, edges, label="exemplar", color=_EXEMPLAR_COLOUR, linewidth=1.8, linestyle="--")
+        if _per_plane(metrics):
+            for i, (_, block) in enumerate(blocks):
+                values, edges = scaled(block["fringes"][key], "exemplar")
+                ax.stairs(
+                    values,
+                    edges,
+                    label=f"exemplar {block['plane']}",
+                    color=_OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)],
+                    linewidth=1.4,
+                    linestyle="--",
+                )
+        else:
+            values, edges = scaled(blocks[0][1]["fringes"][key], "exemplar")
+            ax.stairs(values, edges, label="exemplar", color=_EXEMPLAR_COLOUR, linewidth=1.8, linestyle="--")
         ax.set_xlabel(xlabel)
         if key == "length_histogram":
             ax.set_ylabel("fraction of fringes per nm" if pixel_size else "fraction of fringes per px")
@@ -234,8 +320,89 @@ def _fringe_figure(metrics: Mapping[str, Any]) -> Figure | None:
     return fig
 
 
+_PLANE_COLOURS = {"xy": "#d1495b", "xz": "#2a9d8f", "yz": "#e9a03b"}
+
+
+def _s2_figure(metrics: Mapping[str, Any]) -> Figure | None:
+    """Per physical axis: the volume's S2(r) and that of each exemplar whose plane contains the axis."""
+    s2 = metrics.get("s2")
+    if not s2:
+        return None
+    axes_order = [a for a in ("x", "y", "z") if a in s2["axes"]]
+    one = not _per_plane(metrics)  # one exemplar for every plane: name it once
+    fig = Figure(figsize=(4.3 * len(axes_order), 4.0))
+    for i, axis_name in enumerate(axes_order):
+        ax = fig.add_subplot(1, len(axes_order), i + 1)
+        drawn_ex: list[list[float]] = []
+        drawn_vol: list[list[float]] = []
+        errors = []
+        for plane, comp in s2["axes"][axis_name].items():
+            colour = _PLANE_COLOURS.get(plane, _EXEMPLAR_COLOUR)
+            ex, vol = comp["s2"]["exemplar"], comp["s2"]["volume"]
+            direction = "columns" if comp["exemplar_direction"] == "col" else "rows"
+            if vol not in drawn_vol:
+                label = "volume" if not drawn_vol else f"volume (threshold of {plane})"
+                ax.plot(np.arange(len(vol)), vol, color="black", linewidth=1.6, label=label)
+                drawn_vol.append(vol)
+            if ex not in drawn_ex:
+                ax.plot(
+                    np.arange(len(ex)),
+                    ex,
+                    color=colour,
+                    linewidth=1.6,
+                    linestyle="--",
+                    label=f"exemplar, along its {direction}"
+                    if one
+                    else f"exemplar {plane}, along its {direction}",
+                )
+                drawn_ex.append(ex)
+                length = comp["correlation_length"]["exemplar"]
+                if length is not None:
+                    ax.axvline(length, color=colour, linewidth=0.8, linestyle=":")
+            errors.append(f"{plane} {_fmt(comp['relative_error'], 3)}")
+        if drawn_ex:
+            first = next(iter(s2["axes"][axis_name]))
+            phi = drawn_ex[0][0]
+            label = "phi^2 of the exemplar" if one else f"phi^2 of exemplar {first}"
+            ax.axhline(phi * phi, color="grey", linewidth=0.8, linestyle=":", label=label)
+        ax.set_xlabel(f"lag r along {axis_name} (voxels)")
+        if i == 0:
+            ax.set_ylabel("S2(r): both points in phase 1")
+        ax.set_title(f"along {axis_name}: relative error {', '.join(errors)}", fontsize=9)
+        ax.set_ylim(bottom=0.0)
+        ax.legend(fontsize=7)
+    values = list(s2["thresholds"].values())
+    if all(t == values[0] for t in values):
+        thresholds = f"{values[0]:.3g}"
+    else:
+        thresholds = ", ".join(f"{p} {t:.3g}" for p, t in s2["thresholds"].items())
+    fig.suptitle(
+        f"Two-point correlation, phase 1 = grey >= threshold ({thresholds}); "
+        "dotted: exemplar correlation lengths (the error's window)",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    return fig
+
+
+def write_s2_plot(metrics: Mapping[str, Any], out_dir: str | Path, *, dpi: int = 100) -> Path | None:
+    """Write ``s2.png``, the two-point correlation curves of a volume's metrics; ``None`` without S2.
+
+    One panel per physical axis ``x``, ``y``, ``z``: the volume's ``S2(r)`` (solid) and each exemplar's
+    along the same physical axis (dashed; the ``xy`` exemplar's columns along ``x``, and so on), the
+    exemplars' correlation lengths (dotted) and the relative errors of
+    :func:`synth.evaluate.evaluate_volume`.
+    """
+    fig = _s2_figure(metrics)
+    if fig is None:
+        return None
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return _save(fig, out / "s2.png", dpi)
+
+
 def write_plots(
-    exemplar: np.ndarray,
+    exemplar: np.ndarray | Mapping[str, np.ndarray],
     output: np.ndarray,
     metrics: Mapping[str, Any],
     out_dir: str | Path,
@@ -246,8 +413,8 @@ def write_plots(
 
     Parameters
     ----------
-    exemplar : ndarray, shape (H, W) or (H, W, 3)
-        The exemplar, in [0, 1].
+    exemplar : ndarray, shape (H, W) or (H, W, 3), or mapping ``{'xy', 'xz', 'yz'} -> ndarray``
+        The exemplar, in [0, 1]; a volume's per-plane exemplars (the fringe overlay shows ``'xy'``).
     output : ndarray, shape (H, W), (H, W, 3) or (D, H, W)
         The synthesis output; a volume when ``metrics["kind"] == "volume"``.
     metrics : mapping
@@ -277,7 +444,11 @@ def write_plots(
     settings = metrics.get("settings", {})
     options = dict(settings.get("fringe_options") or {})
     pixel_size = settings.get("pixel_size_nm")
-    ex = as_grey(exemplar, "exemplar")
+    ex = (
+        as_grey(exemplar["xy"], "exemplar_xy")
+        if isinstance(exemplar, Mapping)
+        else as_grey(exemplar, "exemplar")
+    )
     out_img = np.asarray(output)
     name = "output"
     if metrics.get("kind") == "volume":
