@@ -24,10 +24,11 @@ import urllib.error
 import urllib.parse
 import urllib.request
 import uuid
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from synth.cli.inputs import add_plane_arguments, input_sources
 from synth.errors import SynthError
 from synth.params import parse_assignments
 
@@ -102,6 +103,18 @@ class Client:
         path = Path(source)
         return path.name, path.read_bytes()
 
+    @classmethod
+    def _files(
+        cls,
+        exemplar: FileLike | None,
+        constraint: FileLike | None,
+        exemplars: Mapping[str, FileLike] | None,
+    ) -> dict[str, tuple[str, bytes]]:
+        """The multipart files by role: ``exemplar`` or ``exemplar_{xy,xz,yz}``, and ``constraint``."""
+        roles: dict[str, FileLike | None] = {"exemplar": exemplar, "constraint": constraint}
+        roles.update({f"exemplar_{plane}": source for plane, source in (exemplars or {}).items()})
+        return {role: cls._file(source, role) for role, source in roles.items() if source is not None}
+
     def _post_form(self, path: str, fields: dict[str, Any], files: dict[str, tuple[str, bytes]]) -> Any:
         body, ctype = self._multipart({k: str(v) for k, v in fields.items() if v is not None}, files)
         return self._json("POST", path, body, {"Content-Type": ctype})
@@ -121,20 +134,21 @@ class Client:
 
     def submit(
         self,
-        exemplar: FileLike,
+        exemplar: FileLike | None = None,
         *,
         method: str = "wei-levoy",
         params: dict[str, Any] | None = None,
         seed: int | None = None,
         constraint: FileLike | None = None,
+        exemplars: Mapping[str, FileLike] | None = None,
     ) -> dict:
         """Queue a job; returns its record (``id``, ``state``, ...).
 
-        ``params`` holds the method's parameters and the output size as ``width``/``height``.
+        ``params`` holds the method's parameters and the output size as ``width``/``height`` (and
+        ``depth`` for volumes). A solid method takes ``exemplars={'xy': ..., 'xz': ..., 'yz': ...}``
+        instead of ``exemplar`` for an anisotropic material.
         """
-        files = {"exemplar": self._file(exemplar, "exemplar")}
-        if constraint is not None:
-            files["constraint"] = self._file(constraint, "constraint")
+        files = self._files(exemplar, constraint, exemplars)
         return self._post_form(
             "/api/jobs", {"method": method, "params": json.dumps(params or {}), "seed": seed}, files
         )
@@ -189,18 +203,17 @@ class Client:
 
     def sweep(
         self,
-        exemplar: FileLike,
+        exemplar: FileLike | None,
         grid: dict[str, list[Any]],
         *,
         method: str = "wei-levoy",
         params: dict[str, Any] | None = None,
         seed: int | None = None,
         constraint: FileLike | None = None,
+        exemplars: Mapping[str, FileLike] | None = None,
     ) -> dict:
         """Queue one job per point of ``grid``; ``get_sweep`` then gives all their metrics in one table."""
-        files = {"exemplar": self._file(exemplar, "exemplar")}
-        if constraint is not None:
-            files["constraint"] = self._file(constraint, "constraint")
+        files = self._files(exemplar, constraint, exemplars)
         fields = {
             "method": method,
             "grid": json.dumps(grid),
@@ -223,12 +236,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Submit a synthesis job to a running service (texsynth serve), show its "
         "progress and download its artifacts.",
     )
-    p.add_argument("exemplar", help="exemplar image (PNG, TIFF, JPEG)")
+    p.add_argument("exemplar", nargs="?", help="exemplar image (PNG, TIFF, JPEG)")
+    add_plane_arguments(p)
     p.add_argument("--url", help=f"service URL (default: $TEXSYNTH_URL or {DEFAULT_URL})")
     p.add_argument("--method", default="wei-levoy")
     p.add_argument("--constraint", help="constraint image, for methods that take one")
     p.add_argument("--width", type=int)
     p.add_argument("--height", type=int)
+    p.add_argument("--depth", type=int, help="slices of a volume (solid methods)")
     p.add_argument("--seed", type=int)
     p.add_argument(
         "--set",
@@ -248,9 +263,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _submit(args: argparse.Namespace) -> int:
     client = Client(args.url)
     params = parse_assignments(args.sets)
-    params.update({k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None})
+    size = {"width": args.width, "height": args.height, "depth": args.depth}
+    params.update({k: v for k, v in size.items() if v is not None})
+    sources = input_sources(args)
+    planes = {role[len("exemplar_") :]: p for role, p in sources.items() if role.startswith("exemplar_")}
     job = client.submit(
-        args.exemplar, method=args.method, params=params, seed=args.seed, constraint=args.constraint
+        sources.get("exemplar"),
+        method=args.method,
+        params=params,
+        seed=args.seed,
+        constraint=sources.get("constraint"),
+        exemplars=planes or None,
     )
     print(f"job {job['id']} queued: {client.base_url}{job['page']}", file=sys.stderr)
     if args.no_wait:

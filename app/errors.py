@@ -1,7 +1,8 @@
 """One place that turns errors into JSON a person can act on: ``{"detail", "field", "error"}``.
 
 Engine errors map by kind (DESIGN.md): InputTooLarge -> 413, UnsupportedFormat -> 415,
-InvalidInput / InvalidParameter -> 422; a broker that does not answer -> 503.
+InvalidInput / InvalidParameter -> 422; a broker that does not answer -> 503; a file the server
+cannot write (full disk) -> 507, naming the file but none of the server's folders.
 """
 
 from __future__ import annotations
@@ -12,7 +13,14 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
 from app.service import BrokerUnavailable
-from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
+from synth.errors import (
+    InputTooLarge,
+    InvalidInput,
+    InvalidParameter,
+    StorageError,
+    SynthError,
+    UnsupportedFormat,
+)
 
 __all__ = ["install_error_handlers"]
 
@@ -24,6 +32,7 @@ _HTTP_KINDS = {
     415: "unsupported_format",
     422: "invalid_parameter",
     503: "unavailable",
+    507: "insufficient_storage",
 }
 
 
@@ -60,6 +69,15 @@ def install_error_handlers(app: FastAPI) -> None:
         field = ".".join(loc) or None
         return _error(
             422, f"{field or 'request'}: {err.get('msg', 'invalid value')}", field, "invalid_parameter"
+        )
+
+    @app.exception_handler(StorageError)
+    async def _storage(request: Request, exc: StorageError) -> JSONResponse:
+        return _error(
+            507,
+            f"the server could not store the job ({exc}); nothing was queued, try again later",
+            None,
+            "insufficient_storage",
         )
 
     @app.exception_handler(BrokerUnavailable)

@@ -57,6 +57,10 @@ class MethodPublic(BaseModel):
     name: str
     summary: str
     paper: str
+    inputs: dict[str, str] = Field(
+        description="input images by multipart field: required, optional, or alternative (the per-plane "
+        "exemplars exemplar_xy/exemplar_xz/exemplar_yz of solid methods, all three instead of 'exemplar')"
+    )
     constraint: str = Field(description="none, optional or required")
     output_ndim: int
     params_schema: dict[str, Any]

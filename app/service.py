@@ -24,8 +24,8 @@ from jobs.queue import QUEUE, TASK_NAME, create_celery
 from jobs.reaper import Reaper
 from jobs.store import JobRecord, JobStore
 from synth import __version__ as synth_version
-from synth.api import MethodSpec
-from synth.errors import InvalidInput, InvalidParameter
+from synth.api import MethodSpec, check_inputs
+from synth.errors import InvalidParameter
 from synth.io.limits import MAX_SIDE, MIN_SIDE, check_output_size
 from synth.params import validate_params
 from synth.pipeline import load_inputs
@@ -131,14 +131,7 @@ class Service:
         if not 0 <= seed < 2**32:
             raise InvalidParameter("seed", seed, "must be an integer in [0, 2**32)")
         by_role = {u.role: u for u in uploads if u.data or u.filename}
-        if "exemplar" not in by_role:
-            raise InvalidInput("exemplar", "no exemplar image was uploaded (multipart field 'exemplar')")
-        if spec.constraint == "required" and "constraint" not in by_role:
-            raise InvalidInput(
-                "constraint", f"method '{method}' needs a constraint image (field 'constraint')"
-            )
-        if spec.constraint == "none" and "constraint" in by_role:
-            raise InvalidInput("constraint", f"method '{method}' takes no constraint image; leave it out")
+        check_inputs(spec, set(by_role))  # each role is the multipart field of the same name
         # The engine's one judge of images: format from the bytes (415), size from the header before
         # decoding (413), then a full decode (truncated or corrupt -> 422 now, not in the worker).
         load_inputs({role: u.data for role, u in by_role.items()}, max_pixels=self.settings.max_input_pixels)

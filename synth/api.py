@@ -25,6 +25,7 @@ __all__ = [
     "Progress",
     "Result",
     "available_methods",
+    "check_inputs",
     "synthesize",
 ]
 
@@ -136,6 +137,41 @@ def available_methods() -> dict[str, MethodSpec]:
     return dict(METHODS)
 
 
+def check_inputs(spec: MethodSpec, roles: Sequence[str] | set[str]) -> None:
+    """Check which input images were given against what ``spec`` declares (:attr:`MethodSpec.inputs`).
+
+    One rule for the API, the CLI and the service, checked before anything is decoded or queued: the
+    exemplar (or, for solid methods, all three per-plane exemplars instead), the constraint when the
+    method requires one and not when it takes none, and nothing else. Raises
+    :class:`~synth.errors.InvalidInput` naming the input.
+    """
+    given = set(roles)
+    declared = spec.inputs
+    for role in sorted(given - set(declared)):
+        if role == "constraint":
+            raise InvalidInput("constraint", f"method '{spec.name}' takes no constraint image; leave it out")
+        if role.startswith("exemplar_"):
+            raise InvalidInput(
+                role, f"method '{spec.name}' takes one exemplar, not one per plane (it makes 2-D images)"
+            )
+        raise InvalidInput(role, f"not an input of method '{spec.name}' (inputs: {', '.join(declared)})")
+    planes = [f"exemplar_{plane}" for plane in PLANES]
+    given_planes = [role for role in planes if role in given]
+    if spec.plane_exemplars and given_planes:
+        if "exemplar" in given:
+            raise InvalidInput(
+                "exemplar", "give one exemplar or one per plane (exemplar_xy, exemplar_xz, exemplar_yz)"
+            )
+        missing = [role for role in planes if role not in given]
+        if missing:
+            raise InvalidInput(missing[0], "missing: per-plane exemplars come as all three")
+    elif "exemplar" not in given:
+        also = " (or exemplar_xy, exemplar_xz and exemplar_yz)" if spec.plane_exemplars else ""
+        raise InvalidInput("exemplar", f"missing: method '{spec.name}' needs an exemplar image{also}")
+    if spec.constraint == "required" and "constraint" not in given:
+        raise InvalidInput("constraint", f"method '{spec.name}' needs a constraint image")
+
+
 def _noop_progress(stage: str, fraction: float) -> None:
     return None
 
@@ -181,12 +217,11 @@ def synthesize(
     model = validate_params(spec.params_model, params)
     if not isinstance(seed, int | np.integer) or not 0 <= int(seed) < 2**32:
         raise InvalidParameter("seed", seed, "must be an integer in [0, 2**32)")
-    planes = _plane_exemplars(spec, exemplar, exemplars)
+    given = {"exemplar"} if exemplar is not None else set()
+    given |= {f"exemplar_{plane}" for plane in exemplars or {}}
+    check_inputs(spec, given | ({"constraint"} if constraint is not None else set()))
+    planes = _plane_exemplars(exemplar, exemplars) if spec.plane_exemplars else None
     ex = planes["xy"] if planes is not None else _checked_image("exemplar", exemplar)
-    if spec.constraint == "required" and constraint is None:
-        raise InvalidInput("constraint", f"method '{method}' needs a constraint image")
-    if spec.constraint == "none" and constraint is not None:
-        raise InvalidInput("constraint", f"method '{method}' takes no constraint image")
     con = None if constraint is None else np.ascontiguousarray(constraint, dtype=np.float32)
     out_size = _output_size(size, ex, con, spec.output_ndim, planes)
     extra: dict[str, Any] = {"exemplars": planes} if planes is not None else {}
@@ -214,27 +249,12 @@ def _checked_image(role: str, image: np.ndarray | None) -> np.ndarray:
 
 
 def _plane_exemplars(
-    spec: MethodSpec, exemplar: np.ndarray | None, exemplars: Mapping[str, np.ndarray] | None
-) -> dict[str, np.ndarray] | None:
+    exemplar: np.ndarray | None, exemplars: Mapping[str, np.ndarray] | None
+) -> dict[str, np.ndarray]:
     """The three per-plane exemplars of a solid method (the one exemplar thrice when isotropic)."""
-    if not spec.plane_exemplars:
-        if exemplars is not None:
-            raise InvalidInput("exemplars", f"method '{spec.name}' takes one exemplar, not one per plane")
-        return None
-    if (exemplar is None) == (exemplars is None):
-        raise InvalidInput(
-            "exemplar", "give either one exemplar or one per plane (exemplar_xy, exemplar_xz, exemplar_yz)"
-        )
     if exemplar is not None:
-        one = _checked_grey("exemplar", exemplar)
-        return dict.fromkeys(PLANES, one)
-    assert exemplars is not None
-    unknown = sorted(set(exemplars) - set(PLANES))
-    if unknown:
-        raise InvalidInput(f"exemplar_{unknown[0]}", f"unknown plane (known: {', '.join(PLANES)})")
-    missing = [plane for plane in PLANES if plane not in exemplars]
-    if missing:
-        raise InvalidInput(f"exemplar_{missing[0]}", "missing: per-plane exemplars come as all three")
+        return dict.fromkeys(PLANES, _checked_grey("exemplar", exemplar))
+    assert exemplars is not None  # check_inputs saw all three
     return {plane: _checked_grey(f"exemplar_{plane}", exemplars[plane]) for plane in PLANES}
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from synth.api import PLANES, Progress, Result, synthesize
 from synth.errors import InvalidInput
-from synth.io import ImageSource, load_image
+from synth.io import ImageSource, load_image, sample_bits
 
 __all__ = ["INPUT_ROLES", "Outcome", "load_inputs", "synthesize_to_folder"]
 
@@ -41,15 +41,26 @@ def load_inputs(
 ) -> dict[str, np.ndarray]:
     """Decode every input image (float32 in [0, 1]), checking each before any work starts.
 
+    Per-plane exemplars must share one bit depth (an 8-bit and a 16-bit micrograph of one material
+    rarely share a grey scale).
+
     Raises :class:`~synth.errors.InvalidInput` (or its 413/415 kinds) naming the role or the file.
     """
     unknown = sorted(set(sources) - set(INPUT_ROLES))
     if unknown:
         raise InvalidInput(unknown[0], f"not an input of any method (inputs: {', '.join(INPUT_ROLES)})")
-    images = {}
+    images, bits = {}, {}
     for role, source in sources.items():
         name = role if isinstance(source, bytes | bytearray | memoryview) else None
         images[role] = load_image(source, name=name, max_pixels=max_pixels)
+        if role.startswith("exemplar_"):
+            bits[role] = sample_bits(source, name=name)
+    if len(set(bits.values())) > 1:
+        depths = ", ".join(f"{role} {depth}-bit" for role, depth in bits.items())
+        first = next(iter(bits))
+        raise InvalidInput(
+            first, f"per-plane exemplars must share one bit depth, so their grey levels compare ({depths})"
+        )
     return images
 
 
@@ -65,12 +76,14 @@ def synthesize_to_folder(
     manifest: dict[str, Any] | None = None,
     bit_depth: int = 8,
     plots: bool = True,
+    voxel_size: float | None = None,
 ) -> Outcome:
     """Run ``method`` on decoded ``images`` (by role) and write all artifacts into ``folder``.
 
     See :func:`synth.api.synthesize` for the arguments and
     :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
-    the synthesis started and finished (Unix time).
+    the synthesis started and finished (Unix time). A volume is evaluated plane by plane against its
+    per-plane exemplars when given; ``voxel_size`` (nm) calibrates its TIFF stack and its fringe lengths.
     """
     from synth.output.artifacts import write_artifacts  # deferred: matplotlib only when writing
 
@@ -98,5 +111,7 @@ def synthesize_to_folder(
         manifest,
         bit_depth=bit_depth,
         plots=plots,
+        exemplars=planes or None,
+        voxel_size=voxel_size,
     )
     return Outcome(result, files, metrics)

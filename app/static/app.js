@@ -100,10 +100,17 @@ function showMethod() {
   $("#method-summary").textContent = `${m.summary}${m.paper ? " — " + m.paper : ""}`;
   buildFields($("#size-fields"), m.size_schema);
   buildFields($("#param-fields"), m.params_schema);
-  $("#constraint-box").hidden = m.constraint === "none";
-  $("#constraint-need").textContent = m.constraint === "required" ? "(required)" : "(optional)";
-  $("#constraint").required = m.constraint === "required";
+  // The method declares its inputs (role -> required | optional | alternative): ask for exactly those.
+  const inputs = m.inputs || { exemplar: "required" };
+  $("#constraint-box").hidden = !inputs.constraint;
+  $("#constraint-need").textContent = inputs.constraint === "required" ? "(required)" : "(optional)";
+  $("#constraint").required = inputs.constraint === "required";
+  $("#exemplar").required = inputs.exemplar === "required";
+  for (const plane of PLANE_ROLES) $(`#${plane}-box`).hidden = !inputs[plane];
+  $("#inputs-hint").hidden = !PLANE_ROLES.some((plane) => inputs[plane]);
 }
+
+const PLANE_ROLES = ["exemplar_xy", "exemplar_xz", "exemplar_yz"];
 
 function previewFile(input, img) {
   const file = input.files[0];
@@ -115,6 +122,9 @@ async function renderHome() {
   $("#view").replaceChildren($("#tpl-home").content.cloneNode(true));
   $("#exemplar").addEventListener("change", () => previewFile($("#exemplar"), $("#exemplar-preview")));
   $("#constraint").addEventListener("change", () => previewFile($("#constraint"), $("#constraint-preview")));
+  for (const plane of PLANE_ROLES) {
+    $(`#${plane}`).addEventListener("change", () => previewFile($(`#${plane}`), $(`#${plane}-preview`)));
+  }
   $("#method").addEventListener("change", showMethod);
   $("#reset-params").addEventListener("click", showMethod);
   $("#job-form").addEventListener("submit", submitJob);
@@ -150,8 +160,11 @@ async function submitJob(event) {
   const button = $("#submit");
   button.disabled = true;
   const form = new FormData();
-  form.append("exemplar", $("#exemplar").files[0]);
-  if ($("#constraint").files[0] && !$("#constraint-box").hidden) form.append("constraint", $("#constraint").files[0]);
+  for (const role of ["exemplar", "constraint", ...PLANE_ROLES]) {
+    const input = $(`#${role}`);
+    const box = $(`#${role}-box`);
+    if (input.files[0] && !(box && box.hidden)) form.append(role, input.files[0]);
+  }
   form.append("method", $("#method").value);
   form.append("params", JSON.stringify({ ...readFields($("#size-fields")), ...readFields($("#param-fields")) }));
   if ($("#seed").value !== "") form.append("seed", $("#seed").value);

@@ -18,11 +18,12 @@ __all__ = ["describe", "register", "run"]
 
 
 def describe(spec: MethodSpec) -> dict[str, Any]:
-    """A method as a JSON-ready dict: name, summary, paper, constraint, output_ndim, schema."""
+    """A method as a JSON-ready dict: name, summary, paper, inputs, constraint, output_ndim, schema."""
     return {
         "name": spec.name,
         "summary": spec.summary,
         "paper": spec.paper,
+        "inputs": spec.inputs,
         "constraint": spec.constraint,
         "output_ndim": spec.output_ndim,
         "schema": spec.schema(),
@@ -55,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
     for item in described:
         extra = {"required": ", needs a constraint image", "optional": ", optional constraint image"}
         volume = ", output is a volume" if item["output_ndim"] == 3 else ""
+        if "exemplar_xy" in item["inputs"]:
+            volume += " (one exemplar, or --exemplar-xy/-xz/-yz for an anisotropic material)"
         print(f"{item['name']}: {item['summary']}{extra.get(item['constraint'], '')}{volume}")
         if item["paper"]:
             print(f"  paper: {item['paper']}")

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from synth.cli.inputs import add_plane_arguments, input_sources
 from synth.errors import InvalidParameter
 from synth.params import parse_assignments
 
@@ -58,7 +59,7 @@ class _ProgressBar:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from synth.api import available_methods
+    from synth.api import available_methods, check_inputs
     from synth.pipeline import load_inputs, synthesize_to_folder
 
     methods = available_methods()
@@ -66,10 +67,12 @@ def _run(args: argparse.Namespace) -> int:
         raise InvalidParameter("METHOD", args.method, f"unknown method (known: {', '.join(sorted(methods))})")
     if args.bit_depth not in (8, 16):
         raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
+    if args.voxel_size is not None and not 0 < args.voxel_size < 1e6:
+        raise InvalidParameter("--voxel-size", args.voxel_size, "must be a positive size in nm")
     params = parse_assignments(args.set or [])
     size = parse_size(args.size) if args.size else None
-    sources = {"exemplar": args.exemplar, "constraint": args.constraint}
-    sources = {role: path for role, path in sources.items() if path is not None}
+    sources = input_sources(args)
+    check_inputs(methods[args.method], set(sources))  # before any image is decoded
     images = load_inputs(sources)
     out = Path(args.out)
     bar = _ProgressBar()
@@ -85,13 +88,15 @@ def _run(args: argparse.Namespace) -> int:
             manifest={role: str(path) for role, path in sources.items()},
             bit_depth=args.bit_depth,
             plots=not args.no_plots,
+            voxel_size=args.voxel_size,
         )
     finally:
         bar.close()
     result, names = outcome.result, outcome.files
     summary = outcome.metrics.get("summary", {})
+    shape = result.image.shape if methods[args.method].output_ndim == 3 else result.image.shape[:2]
     print(
-        f"{args.method}: {'x'.join(str(s) for s in reversed(result.image.shape[:2]))} in "
+        f"{args.method}: {'x'.join(str(s) for s in reversed(shape))} in "
         f"{result.timings.get('total', 0.0):.2f} s -> {out}/ ({len(names)} files)"
     )
     if summary:
@@ -107,12 +112,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         "field images, metrics, plots and a manifest into DIR.",
     )
     p.add_argument("method", metavar="METHOD", help="method name, e.g. wei-levoy or tensor-constrained")
-    p.add_argument("--exemplar", required=True, type=Path, help="exemplar image (PNG, TIFF or JPEG)")
+    p.add_argument("--exemplar", type=Path, help="exemplar image (PNG, TIFF or JPEG)")
+    add_plane_arguments(p)
     p.add_argument("--constraint", type=Path, help="constraint image, for methods that take one")
-    p.add_argument("--size", help="output size WxH (default: the constraint's, else twice the exemplar's)")
+    p.add_argument(
+        "--size",
+        help="output size WxH, or WxHxD for a volume (default: the constraint's, else twice the exemplar's; "
+        "a volume at the exemplar's scale)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="a method parameter (repeatable)")
     p.add_argument("--bit-depth", type=int, default=8, help="bit depth of output.png: 8 or 16")
     p.add_argument("--no-plots", action="store_true", help="skip the comparison plots")
+    p.add_argument(
+        "--voxel-size",
+        type=float,
+        metavar="NM",
+        help="volumes: the size of a voxel in nm (the exemplar's pixel size), written into output.tiff "
+        "for Fiji and used for fringe lengths",
+    )
     p.add_argument("--out", required=True, type=Path, help="output directory (created)")
     p.set_defaults(func=_run)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
 from fastapi.responses import FileResponse
@@ -22,12 +22,28 @@ _ERRORS = {
 }
 
 
-def read_uploads(exemplar: UploadFile | None, constraint: UploadFile | None) -> list[Upload]:
-    uploads = []
-    for role, upload in (("exemplar", exemplar), ("constraint", constraint)):
-        if upload is not None:
-            uploads.append(Upload(role, upload.filename or "", upload.file.read()))
-    return uploads
+def read_uploads(**files: UploadFile | None) -> list[Upload]:
+    """The uploaded images by role (the multipart field's name: ``exemplar``, ``exemplar_xy``, ...)."""
+    return [
+        Upload(role, upload.filename or "", upload.file.read())
+        for role, upload in files.items()
+        if upload is not None
+    ]
+
+
+def _plane_file(plane: str, fixed: str) -> Any:
+    return Annotated[
+        UploadFile | None,
+        File(
+            description=f"solid methods, instead of 'exemplar' (anisotropic materials): what the {plane} "
+            f"slices (fixed {fixed}) look like; all three per-plane exemplars come together"
+        ),
+    ]
+
+
+ExemplarXY = _plane_file("xy", "z")
+ExemplarXZ = _plane_file("xz", "y")
+ExemplarYZ = _plane_file("yz", "x")
 
 
 @router.post("", status_code=202, response_model=JobPublic, responses=_ERRORS)
@@ -37,15 +53,25 @@ def submit_job(
     exemplar: Annotated[UploadFile | None, File(description="the exemplar image (PNG, TIFF, ...)")] = None,
     method: Annotated[str, Form(description="a method name from GET /api/methods")] = "wei-levoy",
     params: Annotated[
-        str, Form(description='JSON object: the method\'s parameters and "width"/"height"')
+        str, Form(description='JSON object: the method\'s parameters and "width"/"height" (and "depth")')
     ] = "{}",
     seed: Annotated[int | None, Form(description="random seed; same inputs + seed = same output")] = None,
     constraint: Annotated[
         UploadFile | None, File(description="constraint image, for methods that take one")
     ] = None,
+    exemplar_xy: ExemplarXY = None,
+    exemplar_xz: ExemplarXZ = None,
+    exemplar_yz: ExemplarYZ = None,
 ) -> dict:
     """Validate and queue a synthesis job; ``202`` with the job's URL in ``Location``."""
-    request = service.validate(method, params, seed, read_uploads(exemplar, constraint))
+    uploads = read_uploads(
+        exemplar=exemplar,
+        constraint=constraint,
+        exemplar_xy=exemplar_xy,
+        exemplar_xz=exemplar_xz,
+        exemplar_yz=exemplar_yz,
+    )
+    request = service.validate(method, params, seed, uploads)
     job = service.submit(request)
     response.headers["Location"] = f"/api/jobs/{job.id}"
     return service.job_public(job)

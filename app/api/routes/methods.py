@@ -18,6 +18,7 @@ def list_methods(service: ServiceDep) -> dict:
             "name": spec.name,
             "summary": spec.summary,
             "paper": spec.paper,
+            "inputs": spec.inputs,
             "constraint": spec.constraint,
             "output_ndim": spec.output_ndim,
             "params_schema": spec.schema(),

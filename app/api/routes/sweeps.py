@@ -9,7 +9,7 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
 
 from app.api.deps import ServiceDep
-from app.api.routes.jobs import _ERRORS, read_uploads
+from app.api.routes.jobs import _ERRORS, ExemplarXY, ExemplarXZ, ExemplarYZ, read_uploads
 from app.schemas import ErrorPublic, SweepPublic
 
 router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
@@ -27,9 +27,19 @@ def submit_sweep(
     params: Annotated[str, Form(description="JSON: fixed parameters (and width/height) of every run")] = "{}",
     seed: Annotated[int | None, Form()] = None,
     constraint: Annotated[UploadFile | None, File()] = None,
+    exemplar_xy: ExemplarXY = None,
+    exemplar_xz: ExemplarXZ = None,
+    exemplar_yz: ExemplarYZ = None,
 ) -> dict:
     """One job per point of ``grid`` (the product of its lists), sharing the inputs and the seed."""
-    request = service.validate(method, params, seed, read_uploads(exemplar, constraint))
+    uploads = read_uploads(
+        exemplar=exemplar,
+        constraint=constraint,
+        exemplar_xy=exemplar_xy,
+        exemplar_xz=exemplar_xz,
+        exemplar_yz=exemplar_yz,
+    )
+    request = service.validate(method, params, seed, uploads)
     sweep_id = service.submit_sweep(request, grid)
     response.headers["Location"] = f"/api/sweeps/{sweep_id}"
     sweep = service.store.get_sweep(sweep_id)

@@ -1,0 +1,41 @@
+"""The input-image options shared by ``texsynth synthesize`` and ``texsynth submit``.
+
+Solid methods take one exemplar for all three axes, or one per orthogonal plane for an anisotropic
+material: ``--exemplar-xy`` is what the slices at fixed z look like (x to the right, y down),
+``--exemplar-xz`` the slices at fixed y (x to the right, z down), ``--exemplar-yz`` the slices at
+fixed x (y to the right, z down). Volumes are ``(D, H, W) = (z, y, x)``; a TIFF stack has one page
+per z.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from synth.api import PLANES
+
+__all__ = ["PLANE_HELP", "add_plane_arguments", "input_sources"]
+
+PLANE_HELP = {
+    "xy": "what the xy slices (fixed z: x right, y down) look like",
+    "xz": "what the xz slices (fixed y: x right, z down) look like",
+    "yz": "what the yz slices (fixed x: y right, z down) look like",
+}
+
+
+def add_plane_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--exemplar-xy/--exemplar-xz/--exemplar-yz``: per-plane exemplars of solid methods."""
+    for plane in PLANES:
+        parser.add_argument(
+            f"--exemplar-{plane}",
+            type=Path,
+            metavar="PATH",
+            help=f"solid methods, anisotropic material: {PLANE_HELP[plane]} (give all three, no --exemplar)",
+        )
+
+
+def input_sources(args: argparse.Namespace) -> dict[str, Path]:
+    """The input images given on the command line, by role (``exemplar``, ``exemplar_xy``, ...)."""
+    roles = {"exemplar": args.exemplar, "constraint": args.constraint}
+    roles.update({f"exemplar_{plane}": getattr(args, f"exemplar_{plane}") for plane in PLANES})
+    return {role: Path(path) for role, path in roles.items() if path is not None}
