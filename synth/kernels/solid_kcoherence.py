@@ -1,0 +1,724 @@
+"""k-coherence search and discrete solver over the three slice neighbourhoods of a volume (Chen & Wang 2010).
+
+The volume ``(D, H, W) = (z, y, x)`` is synthesized as in Kopf et al. (2007) by alternating two phases,
+each a pass over a scan order:
+
+- **search** (:func:`search_pass`): for every voxel ``v`` and every plane ``p`` in ``xy, xz, yz``, the
+  ``n x n`` slice of the volume through ``v`` in that plane is compared (SSD) with exemplar
+  neighbourhoods of plane ``p``'s exemplar, and the best one's centre is stored in ``match[p, v]``.
+  The candidates are k-coherent (Tong et al. 2002): for each voxel ``u = v + d`` of a small window of
+  the slice, ``match[p, u] - d`` and the ``k`` exemplar positions most similar to ``match[p, u]``, each
+  also shifted by ``-d``. A candidate's distance is multiplied by the **index histogram** factor
+  ``1 + index_weight * max(0, count / target - 1)``, where ``count`` is how many (voxel, plane) pairs
+  already match that exemplar neighbourhood and ``target`` is their number under uniform use.
+  The match's IRLS weight ``(mean squared difference + eps) ** ((r - 2) / 2)`` (Kopf's
+  ``||s - e||^(r - 2)`` per entry, ``r = 0.8``) is stored in ``weight[p, v]``.
+- **solve** (:func:`solve_pass`): every matched neighbourhood that covers ``v`` proposes the exemplar
+  pixel it lays on ``v``: ``3 n^2`` proposals ``e_j`` (pixel values) with weights ``w_j``; the weight of
+  a proposal whose exemplar pixel is over-used is divided by the **position histogram** factor
+  ``h_j = 1 + position_weight * max(0, count / target - 1)`` (``count``: voxels that copy that pixel).
+  The **discrete solver** (Han et al. 2006) gives ``v`` the value of the proposal ``x = e_j`` that
+  minimises the local energy ``E(x) = sum_i w_i / h_i (x - e_i)^2`` times its own position factor
+  ``h_j``: with ``W = sum_i w_i / h_i``, ``E(e_j) / W = (e_j - mean)^2 + var`` (weighted mean and variance
+  of the proposals), so the cost is ``h_j ((e_j - mean)^2 + var)``; ties go to the least used pixel
+  (smallest ``h_j``), then the first. ``origin[v]`` keeps the pixel copied: every voxel value is an
+  exemplar pixel, never an average.
+
+Exemplar storage: the three planes' exemplars are concatenated into one flat ``values`` buffer (a plane
+whose exemplar is the same as an earlier plane's shares its storage, so an isotropic material has one
+position and index histogram); an exemplar position is its *global index* ``offset_p + row * w_p + col``.
+Exemplar neighbourhoods never wrap: matches lie in each plane's ``valid`` rectangle. The volume wraps when
+``periodic`` (a tileable volume); otherwise slice entries outside it are left out.
+
+Every kernel ``_x_kernel`` has a plain NumPy ``x_reference`` with the same arguments and results, which the
+tests compare with; the public ``x_pass`` functions run the kernels on grouped, prepared inputs (built by
+:mod:`synth.methods.solid_chen_wang` from :mod:`synth.pixel.solid`'s offset tables).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from synth.kernels.options import kernel
+from synth.kernels.pixel_search import _histogram_factor, _splitmix
+
+__all__ = [
+    "ExemplarBank",
+    "SliceGeometry",
+    "SolidState",
+    "SolverWeights",
+    "search_pass",
+    "search_reference",
+    "solve_pass",
+    "solve_reference",
+]
+
+#: Added to a match's mean squared difference before the IRLS power (a perfect match keeps a finite weight).
+_WEIGHT_EPS = 1e-4
+
+
+@dataclass(frozen=True)
+class ExemplarBank:
+    """The three planes' exemplars at one pyramid level, in one flat buffer.
+
+    Attributes
+    ----------
+    values : ndarray (N,) float32
+        Every plane's exemplar, raveled and concatenated (shared storage when two planes' are equal).
+    layout : ndarray (3, 3) int64
+        Per plane ``[offset, height, width]`` of its exemplar in ``values``.
+    valid : ndarray (3, 4) int64
+        Per plane ``[y0, y1, x0, x1]``: the neighbourhood centres that fit inside its exemplar.
+    kset : ndarray (N, k) int32
+        Global indices of the ``k`` exemplar positions most similar to each position; ``-1`` for none.
+    features : ndarray (N, d) float32
+        Each valid position's neighbourhood projected on its plane's principal axes (zeros elsewhere).
+    mean : ndarray (3, K) float32
+        Per plane, the mean exemplar neighbourhood (entries in :class:`SliceGeometry` order).
+    basis : ndarray (3, K, d) float32
+        Per plane, the principal axes (columns; zero columns pad a plane that keeps fewer).
+    """
+
+    values: np.ndarray
+    layout: np.ndarray
+    valid: np.ndarray
+    kset: np.ndarray
+    features: np.ndarray
+    mean: np.ndarray
+    basis: np.ndarray
+
+
+@dataclass(frozen=True)
+class SliceGeometry:
+    """The slice neighbourhoods and candidate windows of the three planes, as volume and exemplar offsets.
+
+    Attributes
+    ----------
+    offsets : ndarray (3, K, 3) int64
+        Volume offsets ``(dz, dy, dx)`` of plane ``p``'s ``n x n`` neighbourhood entries (centre included).
+    lin : ndarray (3, K) int64
+        The same entries as linear offsets in plane ``p``'s exemplar (``d_row * w_p + d_col``).
+    cand_offsets : ndarray (3, C, 3) int64
+        Volume offsets of the voxels whose matches propose candidates (the centre first).
+    cand_rc : ndarray (3, C, 2) int64
+        The same as ``(d_row, d_col)`` in plane ``p``'s slices (the shift applied to their matches).
+    periodic : bool
+        Whether the volume wraps (a tileable volume).
+    """
+
+    offsets: np.ndarray
+    lin: np.ndarray
+    cand_offsets: np.ndarray
+    cand_rc: np.ndarray
+    periodic: bool
+
+
+@dataclass
+class SolidState:
+    """The synthesis state at one level (arrays updated in place by the passes).
+
+    Attributes
+    ----------
+    volume : ndarray (D, H, W) float32
+        Voxel values: each is the exemplar pixel ``origin`` names.
+    match : ndarray (3, D, H, W) int32
+        Per plane, the global index of the exemplar neighbourhood centre matched to the slice through each
+        voxel (the per-voxel source map of each plane: what k-coherence propagates).
+    weight : ndarray (3, D, H, W) float32
+        IRLS weight of each match.
+    origin : ndarray (D, H, W) int32
+        Global index of the exemplar pixel each voxel copies; ``-1`` before the first solve.
+    index_count, position_count : ndarray (N,) int64
+        How many (voxel, plane) matches use each exemplar neighbourhood; how many voxels copy each pixel.
+    index_target, position_target : ndarray (N,) float64
+        Their counts under uniform use (positive).
+    """
+
+    volume: np.ndarray
+    match: np.ndarray
+    weight: np.ndarray
+    origin: np.ndarray
+    index_count: np.ndarray
+    index_target: np.ndarray
+    position_count: np.ndarray
+    position_target: np.ndarray
+
+
+@dataclass(frozen=True)
+class SolverWeights:
+    """Histogram weights, IRLS exponent and random candidates of one run.
+
+    ``index_weight`` and ``position_weight`` are the histogram-matching strengths (0 switches one off);
+    ``exponent`` is Kopf's ``r``; ``n_random`` random valid candidates per voxel and plane are added to
+    the k-coherent ones, drawn from ``seed_key`` (a fresh 63-bit key per pass). ``rerank`` > 0: the
+    candidates are ranked by their distance in the principal subspace (times the index factor) and the
+    ``rerank`` best are compared in full; 0: every candidate is compared in full.
+    """
+
+    index_weight: float = 1.0
+    position_weight: float = 1.0
+    exponent: float = 0.8
+    n_random: int = 0
+    seed_key: int = 0
+    rerank: int = 4
+
+
+# ---------------------------------------------------------------------------------------------- kernels
+
+
+@kernel(inline="always")
+def _wrap(i, n):
+    """``i`` wrapped into ``[0, n)`` for ``|i| < 2 n`` without a division (the hot loops' common case)."""
+    if i < 0:
+        i += n
+        if i < 0:
+            i %= n
+    elif i >= n:
+        i -= n
+        if i >= n:
+            i %= n
+    return i
+
+
+@kernel(inline="always")
+def _neighbour(z, y, x, dz, dy, dx, D, H, W, periodic):
+    """Flat index of ``(z + dz, y + dy, x + dx)`` in a ``(D, H, W)`` volume (wrapped), or -1 outside it."""
+    zz = z + dz
+    yy = y + dy
+    xx = x + dx
+    if periodic:
+        zz = _wrap(zz, D)
+        yy = _wrap(yy, H)
+        xx = _wrap(xx, W)
+    elif zz < 0 or zz >= D or yy < 0 or yy >= H or xx < 0 or xx >= W:
+        return -1
+    return (zz * H + yy) * W + xx
+
+
+@kernel(inline="always")
+def _add_shifted(cand, n, g, off, w, dr, dc, y0, y1, x0, x1, stamp, tag):
+    """Append exemplar position ``g`` shifted by ``(-dr, -dc)`` if that lies in ``[y0, y1) x [x0, x1)``
+    and is new (``stamp[key] != tag``)."""
+    local = g - off
+    cy = local // w - dr
+    cx = local % w - dc
+    if cy < y0 or cy >= y1 or cx < x0 or cx >= x1:
+        return n
+    key = off + cy * w + cx
+    if stamp[key] == tag:
+        return n
+    stamp[key] = tag
+    cand[n] = key
+    return n + 1
+
+
+@kernel(inline="always")
+def _ssd(q, ql, n, ex, base, limit):
+    """Sum of squared differences of the query ``q[:n]`` and the exemplar block at ``base``.
+
+    Entries are summed four at a time, ``((t0 + t1) + (t2 + t3))``, then one by one; the sum stops
+    early once it exceeds ``limit`` (checked after every group: the argmin is unchanged).
+    """
+    s = 0.0
+    i = 0
+    while i + 4 <= n:
+        d0 = np.float64(q[i]) - np.float64(ex[base + ql[i]])
+        d1 = np.float64(q[i + 1]) - np.float64(ex[base + ql[i + 1]])
+        d2 = np.float64(q[i + 2]) - np.float64(ex[base + ql[i + 2]])
+        d3 = np.float64(q[i + 3]) - np.float64(ex[base + ql[i + 3]])
+        s += (d0 * d0 + d1 * d1) + (d2 * d2 + d3 * d3)
+        if s > limit:
+            return s
+        i += 4
+    while i < n:
+        d = np.float64(q[i]) - np.float64(ex[base + ql[i]])
+        s += d * d
+        i += 1
+    return s
+
+
+@kernel
+def _search_kernel(
+    order,
+    start,
+    stop,
+    vol,
+    match,
+    weight,
+    index_count,
+    index_target,
+    ex,
+    layout,
+    valid,
+    kset,
+    features,
+    mean,
+    basis,
+    offsets,
+    lin,
+    cand_offsets,
+    cand_rc,
+    periodic,
+    index_weight,
+    exponent,
+    n_random,
+    seed_key,
+    rerank,
+    stamp,
+    counter,
+    acc,
+):
+    D, H, W = vol.shape
+    n_dims = basis.shape[2]
+    proj = np.empty(n_dims, dtype=np.float64)
+    top_d = np.empty(max(rerank, 1), dtype=np.float64)
+    top_g = np.empty(max(rerank, 1), dtype=np.int64)
+    K = offsets.shape[1]
+    C = cand_offsets.shape[1]
+    k = kset.shape[1]
+    volf = vol.ravel()
+    matchf = match.ravel()
+    q = np.empty(K, dtype=np.float32)
+    ql = np.empty(K, dtype=np.int64)
+    cand = np.empty(C * (k + 1) + n_random, dtype=np.int64)
+    power = 0.5 * (exponent - 2.0)
+    for idx in range(start, stop):
+        v = order[idx]
+        z = v // (H * W)
+        y = (v // W) % H
+        x = v % W
+        for p in range(3):
+            off = layout[p, 0]
+            w = layout[p, 2]
+            y0 = valid[p, 0]
+            y1 = valid[p, 1]
+            x0 = valid[p, 2]
+            x1 = valid[p, 3]
+            n = 0
+            for i in range(K):
+                u = _neighbour(
+                    z, y, x, offsets[p, i, 0], offsets[p, i, 1], offsets[p, i, 2], D, H, W, periodic
+                )
+                if u < 0:
+                    continue
+                q[n] = volf[u]
+                ql[n] = lin[p, i]
+                n += 1
+            counter[0] += 1
+            tag = counter[0]
+            nc = 0
+            for c in range(C):
+                u = _neighbour(
+                    z,
+                    y,
+                    x,
+                    cand_offsets[p, c, 0],
+                    cand_offsets[p, c, 1],
+                    cand_offsets[p, c, 2],
+                    D,
+                    H,
+                    W,
+                    periodic,
+                )
+                if u < 0:
+                    continue
+                g = np.int64(matchf[p * D * H * W + u])
+                dr = cand_rc[p, c, 0]
+                dc = cand_rc[p, c, 1]
+                nc = _add_shifted(cand, nc, g, off, w, dr, dc, y0, y1, x0, x1, stamp, tag)
+                for j in range(k):  # Tong et al.: positions similar to u's match, shifted like it
+                    gk = np.int64(kset[g, j])
+                    if gk >= 0:
+                        nc = _add_shifted(cand, nc, gk, off, w, dr, dc, y0, y1, x0, x1, stamp, tag)
+            if n_random > 0:
+                span_y = np.uint64(y1 - y0)
+                span_x = np.uint64(x1 - x0)
+                key = _splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
+                for j in range(n_random):
+                    r = _splitmix(key + np.uint64(j))
+                    gy = y0 + np.int64(r % span_y)
+                    gx = x0 + np.int64((r >> np.uint64(32)) % span_x)
+                    nc = _add_shifted(cand, nc, off + gy * w + gx, off, w, 0, 0, y0, y1, x0, x1, stamp, tag)
+            old = np.int64(match[p, z, y, x])
+            if index_weight > 0.0:
+                index_count[old] -= 1
+            pool = cand
+            n_pool = nc
+            if rerank > 0 and n == K and nc > rerank:
+                # Rank in the principal subspace; keep the ``rerank`` best (stable), compare those in full.
+                for dd in range(n_dims):
+                    proj[dd] = 0.0
+                for i in range(K):
+                    c0 = np.float64(q[i]) - np.float64(mean[p, i])
+                    for dd in range(n_dims):
+                        proj[dd] += c0 * np.float64(basis[p, i, dd])
+                n_top = 0
+                for j in range(nc):
+                    g = cand[j]
+                    s = 0.0
+                    for dd in range(n_dims):
+                        t = proj[dd] - np.float64(features[g, dd])
+                        s += t * t
+                    if index_weight > 0.0:
+                        s *= _histogram_factor(index_count[g], index_target[g], index_weight)
+                    if n_top < rerank:
+                        pos = n_top
+                        n_top += 1
+                    elif s < top_d[rerank - 1]:
+                        pos = rerank - 1
+                    else:
+                        continue
+                    while pos > 0 and top_d[pos - 1] > s:
+                        top_d[pos] = top_d[pos - 1]
+                        top_g[pos] = top_g[pos - 1]
+                        pos -= 1
+                    top_d[pos] = s
+                    top_g[pos] = g
+                pool = top_g
+                n_pool = n_top
+            best = np.inf
+            best_raw = np.inf
+            bg = old
+            for j in range(n_pool):
+                g = pool[j]
+                f = 1.0
+                if index_weight > 0.0:
+                    f = _histogram_factor(index_count[g], index_target[g], index_weight)
+                d = f * _ssd(q, ql, n, ex, g, best / f)
+                if d < best:
+                    best = d
+                    best_raw = d / f
+                    bg = g
+            match[p, z, y, x] = bg
+            if index_weight > 0.0:
+                index_count[bg] += 1
+            msd = best_raw / n
+            weight[p, z, y, x] = (msd + _WEIGHT_EPS) ** power
+            acc[0] += msd
+            acc[1] += 1.0
+            acc[2] += nc
+
+
+@kernel
+def _solve_kernel(
+    order,
+    start,
+    stop,
+    vol,
+    match,
+    weight,
+    origin,
+    position_count,
+    position_target,
+    ex,
+    offsets,
+    lin,
+    periodic,
+    position_weight,
+    acc,
+):
+    D, H, W = vol.shape
+    K = offsets.shape[1]
+    n_vox = D * H * W
+    matchf = match.ravel()
+    weightf = weight.ravel()
+    volf = vol.ravel()
+    originf = origin.ravel()
+    vals = np.empty(3 * K, dtype=np.float64)
+    facs = np.empty(3 * K, dtype=np.float64)
+    wts = np.empty(3 * K, dtype=np.float64)
+    gs = np.empty(3 * K, dtype=np.int64)
+    for idx in range(start, stop):
+        v = order[idx]
+        z = v // (H * W)
+        y = (v // W) % H
+        x = v % W
+        if position_weight > 0.0 and originf[v] >= 0:
+            position_count[originf[v]] -= 1
+        n = 0
+        sw = 0.0
+        swe = 0.0
+        for p in range(3):
+            for i in range(K):
+                # The neighbourhood centred at u = v - offset covers v at that offset.
+                u = _neighbour(
+                    z, y, x, -offsets[p, i, 0], -offsets[p, i, 1], -offsets[p, i, 2], D, H, W, periodic
+                )
+                if u < 0:
+                    continue
+                g = np.int64(matchf[p * n_vox + u]) + lin[p, i]
+                f = 1.0
+                if position_weight > 0.0:
+                    f = _histogram_factor(position_count[g], position_target[g], position_weight)
+                wt = np.float64(weightf[p * n_vox + u]) / f
+                e = np.float64(ex[g])
+                vals[n] = e
+                facs[n] = f
+                wts[n] = wt
+                gs[n] = g
+                n += 1
+                sw += wt
+                swe += wt * e
+        mean = swe / sw
+        var = 0.0
+        for j in range(n):
+            d = vals[j] - mean
+            var += wts[j] * d * d
+        var /= sw
+        best = np.inf
+        best_f = np.inf
+        bj = 0
+        for j in range(n):
+            d = vals[j] - mean
+            c = facs[j] * (d * d + var)
+            if c < best or (c == best and facs[j] < best_f):
+                best = c
+                best_f = facs[j]
+                bj = j
+        volf[v] = vals[bj]
+        originf[v] = gs[bj]
+        if position_weight > 0.0:
+            position_count[gs[bj]] += 1
+        acc[0] += best
+        acc[1] += 1.0
+
+
+# ---------------------------------------------------------------------------------------------- wrappers
+
+
+def search_pass(
+    bank: ExemplarBank,
+    geometry: SliceGeometry,
+    state: SolidState,
+    weights: SolverWeights,
+    order: np.ndarray,
+    start: int,
+    stop: int,
+    scratch: dict[str, np.ndarray],
+) -> None:
+    """Search phase on the voxels ``order[start:stop]``: update ``state.match``, ``weight``, ``index_count``.
+
+    ``scratch`` holds ``stamp`` ((N,) int64, zeros), ``counter`` ((1,) int64) and ``acc`` ((3,) float64:
+    the sums of the matches' mean squared differences, of searches and of candidates), kept across calls.
+    """
+    _search_kernel(
+        order,
+        int(start),
+        int(stop),
+        state.volume,
+        state.match,
+        state.weight,
+        state.index_count,
+        state.index_target,
+        bank.values,
+        bank.layout,
+        bank.valid,
+        bank.kset,
+        bank.features,
+        bank.mean,
+        bank.basis,
+        geometry.offsets,
+        geometry.lin,
+        geometry.cand_offsets,
+        geometry.cand_rc,
+        geometry.periodic,
+        float(weights.index_weight),
+        float(weights.exponent),
+        int(weights.n_random),
+        np.uint64(weights.seed_key),
+        int(weights.rerank),
+        scratch["stamp"],
+        scratch["counter"],
+        scratch["acc"],
+    )
+
+
+def solve_pass(
+    bank: ExemplarBank,
+    geometry: SliceGeometry,
+    state: SolidState,
+    weights: SolverWeights,
+    order: np.ndarray,
+    start: int,
+    stop: int,
+    scratch: dict[str, np.ndarray],
+) -> None:
+    """Discrete-solver phase on ``order[start:stop]``: update ``volume``, ``origin``, ``position_count``.
+
+    ``scratch['acc']`` ((3,) float64) receives the sum of the chosen proposals' squared distance to the
+    weighted mean and their number.
+    """
+    _solve_kernel(
+        order,
+        int(start),
+        int(stop),
+        state.volume,
+        state.match,
+        state.weight,
+        state.origin,
+        state.position_count,
+        state.position_target,
+        bank.values,
+        geometry.offsets,
+        geometry.lin,
+        geometry.periodic,
+        float(weights.position_weight),
+        scratch["acc"],
+    )
+
+
+# ---------------------------------------------------------------------------------------------- references
+# The same algorithms, one voxel at a time, in plain NumPy and without early stopping.
+
+
+def _hist_factor_reference(count: np.ndarray, target: np.ndarray, weight: float) -> np.ndarray:
+    excess = count / target - 1.0
+    return np.where(excess > 0.0, 1.0 + weight * excess, 1.0)
+
+
+def _neighbours_reference(
+    zyx: tuple[int, int, int], offs: np.ndarray, shape: tuple[int, ...], periodic: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices of ``zyx + offs`` and which of the offsets lie inside the volume (or all, wrapped)."""
+    pts = np.asarray(zyx)[None, :] + offs
+    if periodic:
+        pts = pts % np.asarray(shape)
+        inside = np.ones(len(pts), dtype=bool)
+    else:
+        inside = np.all((pts >= 0) & (pts < np.asarray(shape)), axis=1)
+    flat = np.ravel_multi_index(tuple(np.clip(pts, 0, np.asarray(shape) - 1).T), shape)
+    return flat, inside
+
+
+def search_reference(
+    bank: ExemplarBank,
+    geometry: SliceGeometry,
+    state: SolidState,
+    weights: SolverWeights,
+    order: np.ndarray,
+    start: int,
+    stop: int,
+    scratch: dict[str, np.ndarray],
+) -> None:
+    """Slow, obvious NumPy version of :func:`search_pass` (same arguments, same results)."""
+    s, b, g = state, bank, geometry
+    shape = s.volume.shape
+    n_vox = s.volume.size
+    volf = s.volume.ravel()
+    matchf = s.match.reshape(3, n_vox)
+    for v in order[start:stop]:
+        zyx = np.unravel_index(int(v), shape)
+        for p in range(3):
+            off, _, w = (int(t) for t in b.layout[p])
+            y0, y1, x0, x1 = (int(t) for t in b.valid[p])
+            flat, inside = _neighbours_reference(zyx, g.offsets[p], shape, g.periodic)
+            q = volf[flat[inside]].astype(np.float64)
+            ql = g.lin[p][inside]
+            cands: list[int] = []
+            cflat, cin = _neighbours_reference(zyx, g.cand_offsets[p], shape, g.periodic)
+            proposals: list[tuple[int, int, int]] = []
+            for c in np.flatnonzero(cin):
+                m = int(matchf[p, cflat[c]])
+                dr, dc = (int(t) for t in g.cand_rc[p, c])
+                proposals.append((m, dr, dc))
+                proposals.extend((int(kk), dr, dc) for kk in b.kset[m] if kk >= 0)
+            if weights.n_random > 0:
+                key = _splitmix(np.uint64(weights.seed_key) ^ np.uint64(int(v) * 3 + p))
+                for j in range(weights.n_random):
+                    r = int(_splitmix(np.uint64((int(key) + j) & ((1 << 64) - 1))))
+                    gy = y0 + r % (y1 - y0)
+                    gx = x0 + (r >> 32) % (x1 - x0)
+                    proposals.append((off + gy * w + gx, 0, 0))
+            for m, dr, dc in proposals:
+                cy, cx = divmod(m - off, w)
+                cy, cx = cy - dr, cx - dc
+                key_pos = off + cy * w + cx
+                if y0 <= cy < y1 and x0 <= cx < x1 and key_pos not in cands:
+                    cands.append(key_pos)
+            ca = np.asarray(cands, dtype=np.int64)
+            old = int(s.match[p][zyx])
+            if weights.index_weight > 0:
+                s.index_count[old] -= 1
+            n_all = len(ca)
+            if weights.rerank > 0 and len(q) == g.offsets.shape[1] and len(ca) > weights.rerank:
+                proj = np.zeros(b.basis.shape[2])
+                for i in range(len(q)):  # entry by entry: the kernel's order of summation
+                    proj += (q[i] - np.float64(b.mean[p, i])) * b.basis[p, i].astype(np.float64)
+                pd = np.zeros(len(ca))
+                for dd in range(len(proj)):
+                    pd += (proj[dd] - b.features[ca, dd].astype(np.float64)) ** 2
+                if weights.index_weight > 0:
+                    pd *= _hist_factor_reference(s.index_count[ca], s.index_target[ca], weights.index_weight)
+                ca = ca[np.lexsort((np.arange(len(ca)), pd))[: weights.rerank]]
+            t = (q[None, :] - b.values[ca[:, None] + ql[None, :]].astype(np.float64)) ** 2
+            d = np.zeros(len(ca))
+            n4 = len(q) - len(q) % 4
+            for i in range(0, n4, 4):  # the kernel's order of summation
+                d += (t[:, i] + t[:, i + 1]) + (t[:, i + 2] + t[:, i + 3])
+            for i in range(n4, len(q)):
+                d += t[:, i]
+            f = np.ones(len(ca))
+            if weights.index_weight > 0:
+                f = _hist_factor_reference(s.index_count[ca], s.index_target[ca], weights.index_weight)
+            best = int(np.argmin(f * d))
+            s.match[p][zyx] = ca[best]
+            if weights.index_weight > 0:
+                s.index_count[ca[best]] += 1
+            msd = d[best] / len(q)
+            s.weight[p][zyx] = (msd + _WEIGHT_EPS) ** (0.5 * (weights.exponent - 2.0))
+            scratch["acc"][0] += msd
+            scratch["acc"][1] += 1.0
+            scratch["acc"][2] += n_all
+
+
+def solve_reference(
+    bank: ExemplarBank,
+    geometry: SliceGeometry,
+    state: SolidState,
+    weights: SolverWeights,
+    order: np.ndarray,
+    start: int,
+    stop: int,
+    scratch: dict[str, np.ndarray],
+) -> None:
+    """Slow, obvious NumPy version of :func:`solve_pass` (same arguments, same results)."""
+    s, g = state, geometry
+    shape = s.volume.shape
+    n_vox = s.volume.size
+    volf, originf = s.volume.ravel(), s.origin.ravel()
+    matchf, weightf = s.match.reshape(3, n_vox), s.weight.reshape(3, n_vox)
+    pw = weights.position_weight
+    for v in order[start:stop]:
+        zyx = np.unravel_index(int(v), shape)
+        if pw > 0 and originf[v] >= 0:
+            s.position_count[originf[v]] -= 1
+        gs, wts = [], []
+        for p in range(3):
+            flat, inside = _neighbours_reference(zyx, -g.offsets[p], shape, g.periodic)
+            gs.append(matchf[p, flat[inside]].astype(np.int64) + g.lin[p][inside])
+            wts.append(weightf[p, flat[inside]].astype(np.float64))
+        ga, wa = np.concatenate(gs), np.concatenate(wts)
+        f = np.ones(len(ga))
+        if pw > 0:
+            f = _hist_factor_reference(s.position_count[ga], s.position_target[ga], pw)
+        vals = bank.values[ga].astype(np.float64)
+        wa = wa / f
+        sw, swe = 0.0, 0.0
+        for wt, e in zip(wa, vals, strict=True):  # proposal by proposal: the kernel's order of summation
+            sw += wt
+            swe += wt * e
+        mean = swe / sw
+        var = 0.0
+        for wt, e in zip(wa, vals, strict=True):
+            var += wt * (e - mean) * (e - mean)
+        var /= sw
+        cost = f * ((vals - mean) ** 2 + var)
+        best = int(np.lexsort((np.arange(len(cost)), f, cost))[0])
+        volf[v] = vals[best]
+        originf[v] = ga[best]
+        if pw > 0:
+            s.position_count[ga[best]] += 1
+        scratch["acc"][0] += cost[best]
+        scratch["acc"][1] += 1.0

@@ -1,0 +1,721 @@
+"""The hot loops of solid (3D from 2D) synthesis: slice neighbourhoods, nearest neighbours, IRLS update.
+
+A voxel's neighbourhoods are the ``n x n`` squares around it in the three orthogonal slices through
+it (planes ``xy``, ``xz``, ``yz``; see :mod:`synth.pixel.solid`). Three loops do the work:
+
+- :func:`gather_slices`: the neighbourhood vectors of a batch of voxels in one plane (toroidal wrap
+  when the volume is periodic, mirror reflection at its faces otherwise);
+- :func:`nearest_exact` and :func:`rerank`: the exemplar neighbourhood nearest to each query, by
+  squared Euclidean distance, over every exemplar neighbourhood (the definition) or over a short
+  list of candidates proposed by a tree search in PCA space (the fast search);
+- :func:`irls_update`: Kopf et al.'s optimisation step (eqs 2-4): every voxel becomes the weighted
+  average of the exemplar values that the matched neighbourhoods covering it propose, weights
+  ``||s - e||^(r - 2)`` (IRLS) divided by ``1 + gain * sum(max(0, H_s(b) - H_e(b)))`` (histogram
+  matching, with the volume's histogram ``H_s`` kept up to date voxel by voxel in scan order).
+
+Every kernel ``_x_kernel`` sits beside a plain NumPy ``x_reference`` that the tests compare it
+with. Kernels assume what the wrappers prepare: C-contiguous float32 values, int64 indices. Sums
+are accumulated in float64 in a fixed order, so results are the same bytes on every run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from synth.kernels.options import kernel
+
+__all__ = [
+    "CoherenceSets",
+    "HistogramState",
+    "MatchField",
+    "PackedExemplars",
+    "SliceGeometry",
+    "gather_slices",
+    "gather_slices_reference",
+    "histogram_bin",
+    "irls_update",
+    "irls_update_reference",
+    "kcoherence_candidates_reference",
+    "kcoherence_search",
+    "kcoherence_search_reference",
+    "nearest_exact",
+    "nearest_exact_reference",
+    "rerank",
+    "rerank_reference",
+    "splitmix",
+]
+
+
+# ---------------------------------------------------------------------------------------------
+# Slice neighbourhoods
+
+
+@kernel(inline="always")
+def _axis_index(i, n, periodic):
+    """Index ``i`` brought inside ``[0, n)``: wrapped (periodic) or mirrored about the faces."""
+    if periodic:
+        return i % n
+    if i < 0:
+        i = -i
+    if i >= n:
+        i = 2 * n - 2 - i
+    return min(max(i, 0), n - 1)
+
+
+@kernel
+def _gather_slices_kernel(vol, centres, offsets, periodic, out):
+    D, H, W = vol.shape
+    for m in range(centres.shape[0]):
+        z = centres[m, 0]
+        y = centres[m, 1]
+        x = centres[m, 2]
+        for k in range(offsets.shape[0]):
+            zz = _axis_index(z + offsets[k, 0], D, periodic)
+            yy = _axis_index(y + offsets[k, 1], H, periodic)
+            xx = _axis_index(x + offsets[k, 2], W, periodic)
+            out[m, k] = vol[zz, yy, xx]
+
+
+def gather_slices(vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, periodic: bool) -> np.ndarray:
+    """Neighbourhood vectors ``(M, K)`` float32 of the voxels ``centres`` in one plane.
+
+    Parameters
+    ----------
+    vol : ndarray (D, H, W) float32
+    centres : ndarray (M, 3) int64
+        Voxel coordinates ``(z, y, x)``.
+    offsets : ndarray (K, 3) int32
+        The plane's offsets ``(dz, dy, dx)`` in the order of the exemplar vectors
+        (:func:`synth.pixel.solid.plane_offsets`).
+    periodic : bool
+        Wrap around the volume's faces (toroidal volume) or mirror about them.
+    """
+    out = np.empty((centres.shape[0], offsets.shape[0]), dtype=np.float32)
+    _gather_slices_kernel(
+        np.ascontiguousarray(vol, dtype=np.float32),
+        np.ascontiguousarray(centres, dtype=np.int64),
+        np.ascontiguousarray(offsets, dtype=np.int32),
+        bool(periodic),
+        out,
+    )
+    return out
+
+
+def _reference_index(i: np.ndarray, n: int, periodic: bool) -> np.ndarray:
+    if periodic:
+        return np.mod(i, n)
+    i = np.abs(i)
+    i = np.where(i >= n, 2 * n - 2 - i, i)
+    return np.clip(i, 0, n - 1)
+
+
+def gather_slices_reference(
+    vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, periodic: bool
+) -> np.ndarray:
+    """Plain NumPy :func:`gather_slices`."""
+    pos = centres[:, None, :].astype(np.int64) + offsets[None, :, :].astype(np.int64)
+    idx = [_reference_index(pos[..., a], vol.shape[a], periodic) for a in range(3)]
+    return vol[idx[0], idx[1], idx[2]].astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Nearest exemplar neighbourhoods
+
+
+@kernel
+def _nearest_exact_kernel(queries, vectors, best_idx, best_d2):
+    K = queries.shape[1]
+    for m in range(queries.shape[0]):
+        best = np.inf
+        bi = -1
+        for p in range(vectors.shape[0]):
+            s = 0.0
+            for k in range(K):
+                d = np.float64(queries[m, k]) - np.float64(vectors[p, k])
+                s += d * d
+                if s >= best:  # partial sums only grow: this one cannot win (ties keep the first)
+                    break
+            if s < best:
+                best = s
+                bi = p
+        best_idx[m] = bi
+        best_d2[m] = best
+
+
+def nearest_exact(queries: np.ndarray, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index (int64) and squared distance (float64) of each query's nearest row of ``vectors``.
+
+    Exhaustive: the definition every fast search is measured against. Ties go to the lowest index.
+    """
+    m = queries.shape[0]
+    idx = np.empty(m, dtype=np.int64)
+    d2 = np.empty(m, dtype=np.float64)
+    _nearest_exact_kernel(
+        np.ascontiguousarray(queries, dtype=np.float32),
+        np.ascontiguousarray(vectors, dtype=np.float32),
+        idx,
+        d2,
+    )
+    return idx, d2
+
+
+def _squared_distances_reference(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(M, P)`` squared distances, summed over the vector entries in order (the kernels' order)."""
+    d2 = np.zeros((q.shape[0], v.shape[0]), dtype=np.float64)
+    for k in range(q.shape[1]):
+        d2 += (q[:, None, k].astype(np.float64) - v[None, :, k].astype(np.float64)) ** 2
+    return d2
+
+
+def nearest_exact_reference(queries: np.ndarray, vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plain NumPy :func:`nearest_exact`."""
+    d2 = _squared_distances_reference(queries, vectors)
+    idx = np.argmin(d2, axis=1)
+    return idx.astype(np.int64), d2[np.arange(len(idx)), idx]
+
+
+@kernel
+def _rerank_kernel(queries, vectors, candidates, best_idx, best_d2):
+    K = queries.shape[1]
+    P = vectors.shape[0]
+    for m in range(queries.shape[0]):
+        best = np.inf
+        bi = -1
+        for j in range(candidates.shape[1]):
+            p = candidates[m, j]
+            if p < 0 or p >= P:  # a short candidate list is padded (k-d trees pad with P)
+                continue
+            s = 0.0
+            for k in range(K):
+                d = np.float64(queries[m, k]) - np.float64(vectors[p, k])
+                s += d * d
+            if s < best or (s == best and p < bi):
+                best = s
+                bi = p
+        best_idx[m] = bi
+        best_d2[m] = best
+
+
+def rerank(queries: np.ndarray, vectors: np.ndarray, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The best of each query's ``candidates`` (rows of ``vectors``) under the full distance.
+
+    The fast search proposes candidates in a reduced (PCA) space; this picks among them with the
+    exact squared distance, so that the reported distance is the real one. Candidates outside
+    ``[0, P)`` are padding; ties go to the lowest index.
+    """
+    m = queries.shape[0]
+    idx = np.empty(m, dtype=np.int64)
+    d2 = np.empty(m, dtype=np.float64)
+    _rerank_kernel(
+        np.ascontiguousarray(queries, dtype=np.float32),
+        np.ascontiguousarray(vectors, dtype=np.float32),
+        np.ascontiguousarray(candidates, dtype=np.int64),
+        idx,
+        d2,
+    )
+    return idx, d2
+
+
+def rerank_reference(
+    queries: np.ndarray, vectors: np.ndarray, candidates: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plain NumPy :func:`rerank`."""
+    P = vectors.shape[0]
+    idx = np.full(len(queries), -1, dtype=np.int64)
+    d2 = np.full(len(queries), np.inf)
+    for m in range(len(queries)):
+        cands = np.unique(candidates[m][(candidates[m] >= 0) & (candidates[m] < P)])  # sorted: ties -> lowest
+        if len(cands) == 0:
+            continue
+        d = _squared_distances_reference(queries[m : m + 1], vectors[cands])[0]
+        j = int(np.argmin(d))
+        idx[m], d2[m] = cands[j], d[j]
+    return idx, d2
+
+
+# ---------------------------------------------------------------------------------------------
+# k-coherence search (Tong et al. 2002) on slice neighbourhoods
+
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+@kernel(inline="always")
+def _splitmix(x):
+    z = x + _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    return z ^ (z >> np.uint64(31))
+
+
+def splitmix(x: int) -> int:
+    """The kernels' 64-bit hash (SplitMix64 finaliser) in plain Python integers."""
+    mask = (1 << 64) - 1
+    z = (x + 0x9E3779B97F4A7C15) & mask
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+    return z ^ (z >> 31)
+
+
+@dataclass
+class CoherenceSets:
+    """One exemplar's k-coherence data, every array indexed by flat exemplar position ``row * width + col``.
+
+    ``image``: the exemplar, flat float32; ``valid``: 1 where a neighbourhood fits (uint8);
+    ``valid_pos``: those positions (int64); ``kset[s]``: the ``k`` positions whose neighbourhoods are
+    most similar to ``s``'s (``-1`` pads); ``offsets``: the neighbourhood's flat offsets (int64, the
+    query vectors' order); ``width``: the exemplar's width.
+    """
+
+    image: np.ndarray
+    valid: np.ndarray
+    valid_pos: np.ndarray
+    kset: np.ndarray
+    offsets: np.ndarray
+    width: int
+
+
+@dataclass
+class SliceGeometry:
+    """Where the queries sit: volume ``shape`` (int64 (3,)), the plane's volume ``axes`` (row axis,
+    column axis) and whether the volume wraps (``periodic``)."""
+
+    shape: np.ndarray
+    axes: np.ndarray
+    periodic: bool
+
+
+@kernel(inline="always")
+def _candidate_distance(queries, m, image, pos, offsets, limit):
+    s = 0.0
+    for k in range(offsets.shape[0]):
+        d = np.float64(queries[m, k]) - np.float64(image[pos + offsets[k]])
+        s += d * d
+        if s >= limit:
+            return s
+    return s
+
+
+@kernel
+def _kcoherence_kernel(
+    queries,
+    centres,
+    shape,
+    axes,
+    periodic,
+    src,
+    image,
+    valid,
+    valid_pos,
+    kset,
+    offsets,
+    width,
+    n_random,
+    seed_key,
+    index0,
+    stamp,
+    counter,
+    best_pos,
+    best_d2,
+):
+    D = shape[0]
+    H = shape[1]
+    W = shape[2]
+    a = axes[0]
+    b = axes[1]
+    h = image.shape[0] // width
+    k = kset.shape[1]
+    n_valid = valid_pos.shape[0]
+    q = np.empty(3, dtype=np.int64)
+    for m in range(queries.shape[0]):
+        counter[0] += 1
+        tag = counter[0]
+        best = np.inf
+        bp = -1
+        for da in range(-1, 2):
+            for db in range(-1, 2):
+                q[0] = centres[m, 0]
+                q[1] = centres[m, 1]
+                q[2] = centres[m, 2]
+                q[a] += da
+                q[b] += db
+                qz = _axis_index(q[0], D, periodic)
+                qy = _axis_index(q[1], H, periodic)
+                qx = _axis_index(q[2], W, periodic)
+                s = src[(qz * H + qy) * W + qx]
+                for j in range(-1, k):
+                    e = s if j < 0 else kset[s, j]
+                    if e < 0:
+                        continue
+                    er = e // width - da
+                    ec = e % width - db
+                    if er < 0 or er >= h or ec < 0 or ec >= width:
+                        continue
+                    pos = er * width + ec
+                    if valid[pos] == 0 or stamp[pos] == tag:
+                        continue
+                    stamp[pos] = tag
+                    d = _candidate_distance(queries, m, image, pos, offsets, best)
+                    if d < best:
+                        best = d
+                        bp = pos
+        key = _splitmix(seed_key ^ np.uint64(index0 + m))
+        for j in range(n_random):
+            r = _splitmix(key + np.uint64(j))
+            pos = valid_pos[np.int64(r % np.uint64(n_valid))]
+            if stamp[pos] == tag:
+                continue
+            stamp[pos] = tag
+            d = _candidate_distance(queries, m, image, pos, offsets, best)
+            if d < best:
+                best = d
+                bp = pos
+        if bp < 0:  # no proposal was valid (no random candidates): the first valid position
+            bp = valid_pos[0]
+            best = _candidate_distance(queries, m, image, bp, offsets, np.inf)
+        best_pos[m] = bp
+        best_d2[m] = best
+
+
+def kcoherence_search(
+    queries: np.ndarray,
+    centres: np.ndarray,
+    geometry: SliceGeometry,
+    src: np.ndarray,
+    sets: CoherenceSets,
+    n_random: int,
+    seed_key: int,
+    index0: int,
+    stamp: np.ndarray,
+    counter: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Best k-coherent candidate of each query: flat exemplar position (int64) and squared distance.
+
+    Candidates for the neighbourhood centred at voxel ``c`` (Tong et al. 2002, on the slice): for each
+    in-plane neighbour ``q`` of ``c`` within one voxel (``c`` included), the exemplar position
+    ``src[q]`` shifted back by ``q - c``, and the ``k`` positions of ``sets.kset[src[q]]`` shifted the
+    same way, when they are valid; then ``n_random`` random valid positions drawn from the hash of
+    ``(seed_key, index0 + m)`` (so chunking does not change them). The first candidate with the
+    smallest full squared distance wins. ``src`` (N,) holds every voxel's current exemplar position
+    in this plane. ``stamp`` (h * w,) and ``counter`` (1,) int64 are scratch that de-duplicates.
+    """
+    m = queries.shape[0]
+    pos = np.empty(m, dtype=np.int64)
+    d2 = np.empty(m, dtype=np.float64)
+    _kcoherence_kernel(
+        np.ascontiguousarray(queries, dtype=np.float32),
+        np.ascontiguousarray(centres, dtype=np.int64),
+        geometry.shape,
+        geometry.axes,
+        bool(geometry.periodic),
+        src,
+        sets.image,
+        sets.valid,
+        sets.valid_pos,
+        sets.kset,
+        sets.offsets,
+        int(sets.width),
+        int(n_random),
+        np.uint64(seed_key),
+        int(index0),
+        stamp,
+        counter,
+        pos,
+        d2,
+    )
+    return pos, d2
+
+
+def kcoherence_candidates_reference(
+    centre: np.ndarray,
+    geometry: SliceGeometry,
+    src: np.ndarray,
+    sets: CoherenceSets,
+    n_random: int,
+    seed_key: int,
+    index: int,
+) -> list[int]:
+    """The candidate positions of one query, in the kernel's order, without duplicates."""
+    D, H, W = (int(v) for v in geometry.shape)
+    a, b = (int(v) for v in geometry.axes)
+    w = int(sets.width)
+    h = len(sets.image) // w
+    seen: list[int] = []
+    for da in (-1, 0, 1):
+        for db in (-1, 0, 1):
+            q = np.array(centre, dtype=np.int64)
+            q[a] += da
+            q[b] += db
+            qi = [
+                int(_reference_index(np.array(q[i]), n, geometry.periodic)) for i, n in enumerate((D, H, W))
+            ]
+            s = int(src[(qi[0] * H + qi[1]) * W + qi[2]])
+            for e in [s, *(int(v) for v in sets.kset[s])]:
+                if e < 0:
+                    continue
+                er, ec = e // w - da, e % w - db
+                if 0 <= er < h and 0 <= ec < w and sets.valid[er * w + ec] and er * w + ec not in seen:
+                    seen.append(er * w + ec)
+    mask = (1 << 64) - 1
+    key = splitmix((int(seed_key) ^ index) & mask)
+    for j in range(n_random):
+        pos = int(sets.valid_pos[splitmix((key + j) & mask) % len(sets.valid_pos)])
+        if pos not in seen:
+            seen.append(pos)
+    return seen
+
+
+def kcoherence_search_reference(
+    queries: np.ndarray,
+    centres: np.ndarray,
+    geometry: SliceGeometry,
+    src: np.ndarray,
+    sets: CoherenceSets,
+    n_random: int,
+    seed_key: int,
+    index0: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plain NumPy :func:`kcoherence_search`."""
+    pos = np.empty(len(queries), dtype=np.int64)
+    d2 = np.empty(len(queries))
+    for m in range(len(queries)):
+        cands = kcoherence_candidates_reference(
+            centres[m], geometry, src, sets, n_random, seed_key, index0 + m
+        ) or [int(sets.valid_pos[0])]
+        vectors = sets.image[np.array(cands)[:, None] + sets.offsets[None, :]]
+        d = _squared_distances_reference(queries[m : m + 1], vectors)[0]
+        j = int(np.argmin(d))
+        pos[m], d2[m] = cands[j], d[j]
+    return pos, d2
+
+
+# ---------------------------------------------------------------------------------------------
+# Kopf's optimisation step
+
+
+@dataclass
+class MatchField:
+    """The search step's answer, per plane, stored at the neighbourhood centres.
+
+    ``match[p, v]``: flat index (``row * width + col`` in plane ``p``'s exemplar) of the centre of the
+    exemplar neighbourhood matched to the plane-``p`` neighbourhood centred at voxel ``v`` (flat
+    index into the volume), ``-1`` where no neighbourhood is centred (Kopf's sparse grid).
+    ``weight[p, v]``: that neighbourhood's weight (IRLS: ``||s - e||^(r - 2)``).
+    ``offsets[p]``: the plane's volume offsets ``(K, 3)``; ``ex_offsets[p]``: the same offsets as flat
+    exemplar offsets ``row * width + col``.
+    """
+
+    match: np.ndarray  # (3, N) int64
+    weight: np.ndarray  # (3, N) float32
+    offsets: np.ndarray  # (3, K, 3) int32
+    ex_offsets: np.ndarray  # (3, K) int64
+    axes: np.ndarray  # (3, 2) int64: each plane's volume axes (row, column)
+    phase: np.ndarray  # (3, 2) int64: centres lie where those coordinates equal phase modulo stride
+    stride: int = 1  # the kernel skips other voxels without reading match: faster, same answer
+
+
+@dataclass
+class PackedExemplars:
+    """The three planes' exemplars, flattened one after another: plane ``p`` is
+    ``values[start[p] : start[p] + h_p * w_p]`` (they may differ in size)."""
+
+    values: np.ndarray  # (sum h_p w_p,) float32
+    start: np.ndarray  # (3,) int64
+
+    @classmethod
+    def pack(cls, images: list[np.ndarray]) -> PackedExemplars:
+        sizes = [int(im.size) for im in images]
+        start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        values = np.concatenate([np.ascontiguousarray(im, dtype=np.float32).ravel() for im in images])
+        return cls(values=values, start=start)
+
+
+@dataclass
+class HistogramState:
+    """Kopf's histogram matching (eq 4): the volume's grey-level counts ``count`` (kept up to date by
+    the update), the exemplar's expected counts at the volume's size ``target``, and ``gain``
+    (0 switches the matching off). Bins are equal-width on [0, 1]."""
+
+    count: np.ndarray  # (B,) float64
+    target: np.ndarray  # (B,) float64
+    gain: float
+
+    @classmethod
+    def start(cls, vol: np.ndarray, exemplar_values: np.ndarray, bins: int, gain: float) -> HistogramState:
+        count = np.bincount(histogram_bin(vol.ravel(), bins), minlength=bins).astype(np.float64)
+        ex = np.bincount(histogram_bin(exemplar_values.ravel(), bins), minlength=bins).astype(np.float64)
+        return cls(count=count, target=ex / ex.sum() * vol.size, gain=float(gain))
+
+
+def histogram_bin(values: np.ndarray, bins: int) -> np.ndarray:
+    """Bin (int64) of grey values in [0, 1] among ``bins`` equal bins."""
+    return np.clip((np.asarray(values, dtype=np.float64) * bins).astype(np.int64), 0, bins - 1)
+
+
+@kernel(inline="always")
+def _bin(value, bins):
+    b = int(value * bins)
+    return min(max(b, 0), bins - 1)
+
+
+@kernel
+def _irls_update_kernel(
+    vol,
+    order,
+    start,
+    stop,
+    match,
+    weight,
+    offsets,
+    ex_offsets,
+    axes,
+    phase,
+    stride,
+    ex_values,
+    ex_start,
+    periodic,
+    count,
+    target,
+    gain,
+):
+    D, H, W = vol.shape
+    HW = H * W
+    n_total = D * HW
+    bins = count.shape[0]
+    K = offsets.shape[1]
+    for idx in range(start, stop):
+        v = order[idx]
+        z = v // HW
+        y = (v % HW) // W
+        x = v % W
+        old = vol[z, y, x]
+        if gain > 0.0:  # the voxel leaves the histogram while its new value is chosen
+            count[_bin(old, bins)] -= 1.0
+        num = 0.0
+        den = 0.0
+        for p in range(3):
+            for k in range(K):
+                cz = z - offsets[p, k, 0]
+                cy = y - offsets[p, k, 1]
+                cx = x - offsets[p, k, 2]
+                if periodic:
+                    cz %= D
+                    cy %= H
+                    cx %= W
+                elif cz < 0 or cz >= D or cy < 0 or cy >= H or cx < 0 or cx >= W:
+                    continue
+                if stride > 1:
+                    ca = cz if axes[p, 0] == 0 else cy
+                    cb = cy if axes[p, 1] == 1 else cx
+                    if (ca - phase[p, 0]) % stride != 0 or (cb - phase[p, 1]) % stride != 0:
+                        continue
+                u = (cz * H + cy) * W + cx
+                e = match[p, u]
+                if e < 0:
+                    continue
+                val = ex_values[ex_start[p] + e + ex_offsets[p, k]]
+                w = np.float64(weight[p, u])
+                if gain > 0.0:
+                    b = _bin(val, bins)
+                    excess = (count[b] - target[b]) / n_total
+                    if excess > 0.0:
+                        w = w / (1.0 + gain * excess)
+                num += w * val
+                den += w
+        new = np.float32(num / den) if den > 0.0 else old
+        vol[z, y, x] = new
+        if gain > 0.0:
+            count[_bin(new, bins)] += 1.0
+
+
+def irls_update(
+    vol: np.ndarray,
+    order: np.ndarray,
+    start: int,
+    stop: int,
+    field: MatchField,
+    exemplars: PackedExemplars,
+    histogram: HistogramState,
+    periodic: bool,
+) -> None:
+    """Kopf's optimisation step on the voxels ``order[start:stop]``, in that order, in place.
+
+    Each voxel ``v`` becomes ``sum w e / sum w`` over the matched neighbourhoods (all planes) whose
+    window covers it, ``e`` the value the matched exemplar neighbourhood puts at ``v`` and ``w`` its
+    weight, divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (normalised histograms, ``b`` the bin
+    of ``e``) when histogram matching is on; ``histogram.count`` follows every change. A voxel no
+    neighbourhood covers keeps its value. Without ``periodic``, only centres inside the volume count.
+    ``vol`` must be C-contiguous float32; the caller prepares every array once per iteration.
+    """
+    _irls_update_kernel(
+        vol,
+        order,
+        int(start),
+        int(stop),
+        field.match,
+        field.weight,
+        field.offsets,
+        field.ex_offsets,
+        field.axes,
+        field.phase,
+        int(field.stride),
+        exemplars.values,
+        exemplars.start,
+        bool(periodic),
+        histogram.count,
+        histogram.target,
+        float(histogram.gain),
+    )
+
+
+def irls_update_reference(
+    vol: np.ndarray,
+    order: np.ndarray,
+    start: int,
+    stop: int,
+    field: MatchField,
+    exemplars: PackedExemplars,
+    histogram: HistogramState,
+    periodic: bool,
+) -> None:
+    """Plain NumPy :func:`irls_update` (one voxel at a time, the same order of operations)."""
+    D, H, W = vol.shape
+    bins = len(histogram.count)
+    n_total = vol.size
+    gain = histogram.gain
+    count = histogram.count
+    for v in order[start:stop]:
+        z, y, x = np.unravel_index(int(v), vol.shape)
+        old = vol[z, y, x]
+        if gain > 0:
+            count[histogram_bin(old, bins)] -= 1.0
+        num = 0.0
+        den = 0.0
+        for p in range(3):
+            c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
+            if periodic:
+                c = np.mod(c, [D, H, W])
+                inside = np.ones(len(c), dtype=bool)
+            else:
+                inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
+            for k in np.flatnonzero(inside):
+                u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
+                e = field.match[p, u]
+                if e < 0:
+                    continue
+                val = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
+                w = float(field.weight[p, u])
+                if gain > 0:
+                    b = histogram_bin(val, bins)
+                    excess = (count[b] - histogram.target[b]) / n_total
+                    if excess > 0:
+                        w = w / (1.0 + gain * excess)
+                num += w * float(val)
+                den += w
+        new = np.float32(num / den) if den > 0 else old
+        vol[z, y, x] = new
+        if gain > 0:
+            count[histogram_bin(new, bins)] += 1.0

@@ -1,0 +1,505 @@
+"""Solid textures from 2D exemplars: the machinery the slice-based solid methods share.
+
+A voxel of a volume ``(D, H, W) = (z, y, x)`` lies in three orthogonal slices: ``xy`` (rows ``y``,
+columns ``x``), ``xz`` (rows ``z``, columns ``x``) and ``yz`` (rows ``z``, columns ``y``)
+(:data:`synth.api.PLANES`). Its *slice neighbourhoods* are the ``n x n`` squares around it in those
+slices, and each is compared with the neighbourhoods of that plane's own exemplar (the same image
+three times for an isotropic material). This module holds what every such method needs:
+
+- :func:`plane_offsets` / :func:`exemplar_offsets`: one plane's square as volume offsets and as flat
+  exemplar offsets, entry by entry in the same (raster) order, so that a gathered slice
+  neighbourhood and an exemplar neighbourhood are comparable vectors;
+- :class:`ExemplarNeighbourhoods`: every neighbourhood fully inside an exemplar, as vectors, their
+  principal axes, and a k-d tree on the projections: :meth:`ExemplarNeighbourhoods.search` answers
+  nearest-neighbour queries exactly (exhaustive) or fast (PCA + tree, re-ranked exactly);
+- :class:`SolidPlan` (:func:`plan_levels`): exemplar pyramids per plane, the volume's level shapes
+  and the neighbourhood side at each level, validated once (:class:`~synth.errors.InvalidInput`
+  naming the exemplar that is too small);
+- volumes between levels (:func:`initial_volume`, :func:`upsample_volume`, :func:`volume_pyramid`),
+  Kopf's sparse neighbourhood centres (:func:`plane_centres`), and :class:`ProgressMeter`, which
+  turns units of work into ``progress(stage, fraction)`` calls at least every 2% of the run.
+
+Randomness comes only from the ``numpy.random.Generator`` passed in (seeded by the method).
+
+References
+----------
+J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid texture synthesis
+from 2D exemplars", ACM Trans. Graph. 26(3) (SIGGRAPH 2007), article 2.
+L.-Y. Wei, "Texture synthesis from multiple sources", SIGGRAPH 2003 Sketches (and Wei's thesis,
+Stanford 2002, ch. 7): the per-slice neighbourhoods of Wei-Levoy solid synthesis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from synth.errors import InvalidInput
+from synth.grid.pyramid import gaussian_pyramid, level_shapes
+from synth.kernels.solid_search import (
+    CoherenceSets,
+    SliceGeometry,
+    gather_slices,
+    kcoherence_search,
+    nearest_exact,
+    rerank,
+)
+from synth.pixel.synthesis import level_neighbourhood_size
+
+__all__ = [
+    "PLANES",
+    "PLANE_AXES",
+    "ExemplarNeighbourhoods",
+    "ProgressMeter",
+    "SolidPlan",
+    "dense_sources",
+    "exemplar_neighbourhoods",
+    "exemplar_offsets",
+    "gather_plane",
+    "initial_volume",
+    "match_histogram",
+    "plan_levels",
+    "plane_centres",
+    "plane_offsets",
+    "slice_geometry",
+    "upsample_sources",
+    "upsample_volume",
+    "volume_pyramid",
+]
+
+#: The planes in the order every per-plane array uses (index 0, 1, 2), as :data:`synth.api.PLANES`.
+PLANES: tuple[str, ...] = ("xy", "xz", "yz")
+#: The volume axes ``(row axis, column axis)`` of each plane's slices.
+PLANE_AXES: dict[str, tuple[int, int]] = {"xy": (1, 2), "xz": (0, 2), "yz": (0, 1)}
+
+#: The coarsest pyramid level keeps exemplars at least this many pixels on a side ...
+MIN_EXEMPLAR_SIDE = 8
+#: ... and the volume at least this many voxels on a side.
+MIN_VOLUME_SIDE = 4
+#: Principal components of the k-d tree that builds the k-coherence sets and seeds the coarsest level.
+PCA_DIMS = 8
+#: The tree search re-ranks this many tree neighbours with the full distance ...
+TREE_CANDIDATES = 8
+#: ... found within this relative error (``cKDTree.query``'s ``eps``: an approximate, faster tree search).
+TREE_EPS = 1.0
+#: k-coherence: similar exemplar positions precomputed for every exemplar position.
+COHERENCE_K = 8
+#: Each progress step covers at most this fraction of the run (the contract: every 2%).
+PROGRESS_STEP = 0.01
+
+
+# ---------------------------------------------------------------------------------------------
+# Offsets
+
+
+def _square(size: int, centre: bool) -> np.ndarray:
+    r = size // 2
+    rows, cols = np.mgrid[-r : r + 1, -r : r + 1]
+    rc = np.stack([rows.ravel(), cols.ravel()], axis=1)
+    if not centre:
+        rc = rc[(rc[:, 0] != 0) | (rc[:, 1] != 0)]
+    return rc
+
+
+def plane_offsets(plane: str, size: int, *, centre: bool = True) -> np.ndarray:
+    """Volume offsets ``(K, 3)`` int32 ``(dz, dy, dx)`` of the ``size x size`` square in ``plane``.
+
+    Entries follow the raster order of the plane's (row, column) offsets, as
+    :func:`exemplar_offsets`; ``centre=False`` leaves the centre out (Wei-Levoy's non-causal square).
+
+    >>> plane_offsets("xz", 3)[:2].tolist()
+    [[-1, 0, -1], [-1, 0, 0]]
+    """
+    rc = _square(size, centre)
+    out = np.zeros((len(rc), 3), dtype=np.int32)
+    a, b = PLANE_AXES[plane]
+    out[:, a] = rc[:, 0]
+    out[:, b] = rc[:, 1]
+    return out
+
+
+def exemplar_offsets(size: int, width: int, *, centre: bool = True) -> np.ndarray:
+    """Flat offsets ``(K,)`` int64 ``d_row * width + d_col`` of the square, in :func:`plane_offsets` order."""
+    rc = _square(size, centre)
+    return (rc[:, 0] * width + rc[:, 1]).astype(np.int64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Exemplar neighbourhoods and their search
+
+
+@dataclass(frozen=True)
+class ExemplarNeighbourhoods:
+    """Every neighbourhood fully inside one exemplar (one pyramid level), ready to be searched.
+
+    ``centres[i]`` is the flat position (``row * width + col``) of neighbourhood ``i``'s centre,
+    ``vectors[i]`` its values in :func:`exemplar_offsets` order. ``mean`` and ``basis`` (``(K, d)``,
+    the leading principal axes) project a vector for the k-d ``tree``; ``sets`` holds the
+    k-coherence data (each position's :data:`COHERENCE_K` most similar positions).
+    Every search answers flat exemplar positions and squared distances over the full vectors.
+    """
+
+    image: np.ndarray
+    size: int
+    centre_included: bool
+    centres: np.ndarray
+    vectors: np.ndarray
+    mean: np.ndarray
+    basis: np.ndarray
+    tree: cKDTree
+    sets: CoherenceSets
+
+    @property
+    def width(self) -> int:
+        return int(self.image.shape[1])
+
+    def values(self, positions: np.ndarray) -> np.ndarray:
+        """The exemplar's values at flat ``positions``."""
+        return self.image.ravel()[positions]
+
+    def search(self, queries: np.ndarray, *, exact: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest exemplar neighbourhood of each query ``(M, K)``: flat positions, squared distances.
+
+        ``exact``: every neighbourhood is compared (the definition). Otherwise the
+        :data:`TREE_CANDIDATES` nearest in PCA space (approximate k-d tree, :data:`TREE_EPS`) are
+        re-ranked with the full distance.
+        """
+        if exact or len(self.centres) <= TREE_CANDIDATES:
+            idx, d2 = nearest_exact(queries, self.vectors)
+        else:
+            proj = (queries - self.mean) @ self.basis
+            # Independent queries: the answer does not depend on how the tree splits the work.
+            _, cand = self.tree.query(proj.astype(np.float64), k=TREE_CANDIDATES, eps=TREE_EPS, workers=-1)
+            idx, d2 = rerank(
+                queries, self.vectors, np.asarray(cand, dtype=np.int64).reshape(len(queries), -1)
+            )
+        return self.centres[idx], d2
+
+    def search_coherent(
+        self,
+        queries: np.ndarray,
+        centres: np.ndarray,
+        geometry: SliceGeometry,
+        src: np.ndarray,
+        *,
+        n_random: int,
+        seed_key: int,
+        index0: int,
+        scratch: tuple[np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """k-coherence search (:func:`synth.kernels.solid_search.kcoherence_search`) of the queries
+        centred at voxels ``centres``, from the plane's current per-voxel positions ``src``."""
+        stamp, counter = scratch
+        return kcoherence_search(
+            queries, centres, geometry, src, self.sets, n_random, seed_key, index0, stamp, counter
+        )
+
+
+def exemplar_neighbourhoods(
+    image: np.ndarray, size: int, *, centre: bool = True, role: str = "exemplar"
+) -> ExemplarNeighbourhoods:
+    """The neighbourhoods of ``image`` (``(h, w)`` float32) fully inside it, with PCA, k-d tree and k-sets.
+
+    Principal axes: eigenvectors of the covariance of all neighbourhood vectors (deterministic), the
+    :data:`PCA_DIMS` leading ones. The k-coherence sets come from the tree (approximate, then
+    re-ranked). Raises :class:`~synth.errors.InvalidInput` (``role``) when no neighbourhood fits.
+    """
+    img = np.ascontiguousarray(image, dtype=np.float32)
+    h, w = img.shape
+    r = size // 2
+    if h < size or w < size:
+        raise InvalidInput(
+            role,
+            f"{h}x{w} pixels is smaller than the {size}x{size} neighbourhood: use a smaller neighbourhood",
+        )
+    rows, cols = np.mgrid[r : h - r, r : w - r]
+    centres = (rows * w + cols).ravel().astype(np.int64)
+    offs = exemplar_offsets(size, w, centre=centre)
+    vectors = np.ascontiguousarray(img.ravel()[centres[:, None] + offs[None, :]], dtype=np.float32)
+    mean = vectors.mean(axis=0, dtype=np.float64)
+    centred = vectors.astype(np.float64) - mean
+    _, evecs = np.linalg.eigh(centred.T @ centred)
+    dims = min(PCA_DIMS, vectors.shape[1])
+    basis = np.ascontiguousarray(evecs[:, ::-1][:, :dims], dtype=np.float32)
+    proj = ((vectors - mean.astype(np.float32)) @ basis).astype(np.float64)
+    tree = cKDTree(proj)
+    # k-coherence sets: each position's nearest others (tree candidates, re-ranked on full vectors).
+    k = min(COHERENCE_K, len(centres) - 1)
+    kset = np.full((h * w, max(k, 1)), -1, dtype=np.int64)
+    if k > 0:
+        kk = min(len(centres), 2 * k + 1)
+        _, cand = tree.query(proj, k=kk, eps=TREE_EPS, workers=-1)
+        cand = np.asarray(cand, dtype=np.int64).reshape(len(centres), kk)
+        diff = vectors[np.minimum(cand, len(centres) - 1)] - vectors[:, None, :]
+        d2 = np.einsum("mkj,mkj->mk", diff, diff, dtype=np.float64)
+        d2[(cand == np.arange(len(centres))[:, None]) | (cand >= len(centres))] = np.inf  # not itself
+        best = np.argsort(d2, axis=1, kind="stable")[:, :k]
+        chosen = np.take_along_axis(cand, best, axis=1)
+        chosen = np.where(
+            np.take_along_axis(d2, best, axis=1) < np.inf, centres[np.minimum(chosen, len(centres) - 1)], -1
+        )
+        kset[centres] = chosen
+    valid = np.zeros(h * w, dtype=np.uint8)
+    valid[centres] = 1
+    sets = CoherenceSets(image=img.ravel(), valid=valid, valid_pos=centres, kset=kset, offsets=offs, width=w)
+    return ExemplarNeighbourhoods(
+        image=img,
+        size=int(size),
+        centre_included=centre,
+        centres=centres,
+        vectors=vectors,
+        mean=mean.astype(np.float32),
+        basis=basis,
+        tree=tree,
+        sets=sets,
+    )
+
+
+def slice_geometry(shape: tuple[int, int, int], plane: str, periodic: bool) -> SliceGeometry:
+    """The kernels' description of ``plane``'s slices in a volume of ``shape``."""
+    return SliceGeometry(
+        shape=np.asarray(shape, dtype=np.int64),
+        axes=np.asarray(PLANE_AXES[plane], dtype=np.int64),
+        periodic=periodic,
+    )
+
+
+def dense_sources(
+    match: np.ndarray,
+    shape: tuple[int, int, int],
+    plane: str,
+    stride: int,
+    phase: tuple[int, int],
+    ex_shape: tuple[int, int],
+) -> np.ndarray:
+    """Every voxel's exemplar position ``(N,)`` int64 in ``plane``, from matches on a sparse grid.
+
+    ``match`` (N,) holds the matched centre position at the grid's centres (:func:`plane_centres` with
+    ``stride``, ``phase``). A voxel takes the position its grid centre (the one at or before it along
+    each plane axis, else after it) matched, shifted by its offset from that centre and clamped
+    inside the exemplar: the coherent proposal of Tong et al. for the next search.
+    """
+    a, b = PLANE_AXES[plane]
+    h, w = ex_shape
+    grids = np.meshgrid(*[np.arange(s, dtype=np.int64) for s in shape], indexing="ij")
+    cen = [g.copy() for g in grids]
+    for axis, ph in ((a, phase[0]), (b, phase[1])):
+        snapped = grids[axis] - (grids[axis] - ph % stride) % stride
+        snapped = np.where(snapped < 0, snapped + stride, snapped)
+        cen[axis] = np.minimum(snapped, shape[axis] - 1 - (shape[axis] - 1 - ph % stride) % stride)
+    flat = np.ravel_multi_index(tuple(cen), shape).ravel()
+    m = match[flat]
+    row = m // w + (grids[a] - cen[a]).ravel()
+    col = m % w + (grids[b] - cen[b]).ravel()
+    out = np.clip(row, 0, h - 1) * w + np.clip(col, 0, w - 1)
+    return np.ascontiguousarray(np.where(m >= 0, out, 0), dtype=np.int64)
+
+
+def upsample_sources(
+    src: np.ndarray,
+    coarse_shape: tuple[int, int, int],
+    shape: tuple[int, int, int],
+    plane: str,
+    ex_shape: tuple[int, int],
+    coarse_ex_shape: tuple[int, int],
+) -> np.ndarray:
+    """A plane's per-voxel exemplar positions at the next finer level (Wei-Levoy/Lefebvre-Hoppe
+    coordinate upsampling): voxel ``v`` takes ``2 * src(v // 2) + (v mod 2)`` along the plane's axes."""
+    a, b = PLANE_AXES[plane]
+    h, w = ex_shape
+    grids = np.meshgrid(*[np.arange(s, dtype=np.int64) for s in shape], indexing="ij")
+    parent = np.ravel_multi_index(
+        tuple(np.minimum(g // 2, cs - 1) for g, cs in zip(grids, coarse_shape, strict=True)), coarse_shape
+    )
+    s = src[parent.ravel()]
+    cw = coarse_ex_shape[1]
+    row = 2 * (s // cw) + (grids[a] % 2).ravel()
+    col = 2 * (s % cw) + (grids[b] % 2).ravel()
+    return np.ascontiguousarray(np.clip(row, 0, h - 1) * w + np.clip(col, 0, w - 1), dtype=np.int64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Levels
+
+
+@dataclass(frozen=True)
+class SolidPlan:
+    """The pyramid of one solid synthesis, finest level first.
+
+    ``exemplars[p][l]``: plane ``p``'s exemplar at level ``l`` (:data:`PLANES` order);
+    ``shapes[l]``: the volume's shape; ``sizes[l]``: the neighbourhood side; ``roles[p]``: the name
+    to blame in messages (``'exemplar'`` when one image serves the three planes).
+    """
+
+    levels: int
+    shapes: list[tuple[int, int, int]]
+    sizes: list[int]
+    exemplars: list[list[np.ndarray]]
+    roles: list[str]
+
+    def neighbourhoods(self, level: int, *, centre: bool = True) -> list[ExemplarNeighbourhoods]:
+        """The three planes' :class:`ExemplarNeighbourhoods` at ``level`` (built once per distinct image)."""
+        built: dict[int, ExemplarNeighbourhoods] = {}
+        out = []
+        for p in range(3):
+            img = self.exemplars[p][level]
+            key = id(img)
+            if key not in built:
+                built[key] = exemplar_neighbourhoods(
+                    img, self.sizes[level], centre=centre, role=self.roles[p]
+                )
+            out.append(built[key])
+        return out
+
+
+def plan_levels(
+    exemplars: Mapping[str, np.ndarray], size: tuple[int, int, int], levels: int, neighbourhood_size: int
+) -> SolidPlan:
+    """Validate the exemplars against the neighbourhood and build the pyramids.
+
+    The number of levels is ``levels`` or fewer: the coarsest level keeps every exemplar at least
+    :data:`MIN_EXEMPLAR_SIDE` pixels and the volume at least :data:`MIN_VOLUME_SIDE` voxels on a side
+    (Kopf: "fewer levels if the exemplar is small"). The finest level uses ``neighbourhood_size``;
+    coarser levels shrink it to at most a quarter of the exemplar's shorter side
+    (:func:`synth.pixel.synthesis.level_neighbourhood_size`) and to the volume's shorter side.
+    """
+    images = [np.ascontiguousarray(exemplars[p], dtype=np.float32) for p in PLANES]
+    same = all(images[p] is images[0] or exemplars[PLANES[p]] is exemplars["xy"] for p in range(3))
+    roles = ["exemplar" if same else f"exemplar_{p}" for p in PLANES]
+    n = int(neighbourhood_size)
+    for img, role in zip(images, roles, strict=True):
+        if img.ndim != 2:
+            raise InvalidInput(role, f"solid methods take grey exemplars; this one has shape {img.shape}")
+        if min(img.shape) < n:
+            h, w = img.shape
+            raise InvalidInput(
+                role, f"{h}x{w} pixels is smaller than the {n}x{n} neighbourhood: use a smaller neighbourhood"
+            )
+    min_ex = min(min(img.shape) for img in images)
+    min_vol = min(size)
+    used = 1
+    while used < levels and min_ex / 2**used >= MIN_EXEMPLAR_SIDE and min_vol / 2**used >= MIN_VOLUME_SIDE:
+        used += 1
+    pyramids: dict[int, list[np.ndarray]] = {}
+    ex_levels = []
+    for img in images:
+        if id(img) not in pyramids:  # one pyramid per distinct image: planes sharing it share arrays
+            pyramids[id(img)] = gaussian_pyramid(img, used, mode="reflect")
+        ex_levels.append(pyramids[id(img)])
+    shapes = [tuple(int(s) for s in sh) for sh in level_shapes(size, used)]  # type: ignore[arg-type]
+    sizes = []
+    for level in range(used):
+        if level == 0:
+            sizes.append(n)
+            continue
+        side = min(level_neighbourhood_size(n, ex[level].shape) for ex in ex_levels)
+        side = min(side, min(shapes[level]) - (1 - min(shapes[level]) % 2))
+        sizes.append(max(3, side))
+    return SolidPlan(levels=used, shapes=shapes, sizes=sizes, exemplars=ex_levels, roles=roles)  # type: ignore[arg-type]
+
+
+def initial_volume(
+    shape: tuple[int, int, int], images: Sequence[np.ndarray], rng: np.random.Generator
+) -> np.ndarray:
+    """A volume of grey levels drawn at random (``rng``) from the pixels of ``images`` pooled."""
+    pool = np.concatenate([np.asarray(im, dtype=np.float32).ravel() for im in images])
+    return np.ascontiguousarray(pool[rng.integers(0, len(pool), size=shape)], dtype=np.float32)
+
+
+def match_histogram(vol: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``vol`` with its grey levels replaced, rank for rank, by the quantiles of ``values``.
+
+    Exact histogram specification: the voxel of rank ``i`` (ties by position, a stable sort, so the
+    result is deterministic) takes the value of rank ``i * n / N`` among the ``n`` sorted ``values``.
+    The volume's histogram becomes the exemplar's while its order (its structure) is kept.
+    """
+    flat = vol.ravel()
+    ranks = np.argsort(flat, kind="stable")
+    ref = np.sort(np.asarray(values, dtype=np.float32).ravel())
+    out = np.empty_like(flat)
+    out[ranks] = ref[(np.arange(flat.size, dtype=np.int64) * ref.size) // flat.size]
+    return out.reshape(vol.shape)
+
+
+def _upsample_axis(arr: np.ndarray, axis: int, n_out: int, periodic: bool) -> np.ndarray:
+    """Linear 2:1 upsampling along ``axis``: fine sample ``i`` sits at coarse ``(i + 0.5) / 2 - 0.5``."""
+    n = arr.shape[axis]
+    i = np.arange(n_out)
+    pos = (i + 0.5) / 2.0 - 0.5
+    lo = np.floor(pos).astype(np.int64)
+    t = (pos - lo).astype(np.float32)
+    hi = lo + 1
+    if periodic:
+        lo, hi = lo % n, hi % n
+    else:
+        lo, hi = np.clip(lo, 0, n - 1), np.clip(hi, 0, n - 1)
+    shape = [1] * arr.ndim
+    shape[axis] = n_out
+    t = t.reshape(shape)
+    return np.take(arr, lo, axis=axis) * (1 - t) + np.take(arr, hi, axis=axis) * t
+
+
+def upsample_volume(vol: np.ndarray, shape: tuple[int, int, int], periodic: bool) -> np.ndarray:
+    """The coarse volume ``vol`` at the finer level's ``shape`` (trilinear, 2:1; wrapped if ``periodic``)."""
+    out = vol.astype(np.float32)
+    for axis in range(3):
+        out = _upsample_axis(out, axis, shape[axis], periodic)
+    return np.ascontiguousarray(out, dtype=np.float32)
+
+
+def volume_pyramid(vol: np.ndarray, levels: int, periodic: bool) -> list[np.ndarray]:
+    """Gaussian pyramid of a volume, finest first (:func:`synth.grid.pyramid.gaussian_pyramid`)."""
+    return gaussian_pyramid(vol, levels, volume=True, mode="wrap" if periodic else "reflect")
+
+
+def plane_centres(
+    shape: tuple[int, int, int], plane: str, stride: int = 1, phase: tuple[int, int] = (0, 0)
+) -> np.ndarray:
+    """Voxels ``(M, 3)`` int64 ``(z, y, x)`` whose ``plane`` neighbourhoods are searched.
+
+    ``stride`` 1: every voxel. ``stride`` s: Kopf's sparse grid, every s-th voxel along the plane's two
+    axes (from ``phase``), every voxel along the third: each voxel is still covered by about
+    ``(n / s)^2`` neighbourhoods of each plane. Raster order.
+    """
+    a, b = PLANE_AXES[plane]
+    ranges = [np.arange(s, dtype=np.int64) for s in shape]
+    ranges[a] = ranges[a][phase[0] % stride :: stride]
+    ranges[b] = ranges[b][phase[1] % stride :: stride]
+    grid = np.meshgrid(*ranges, indexing="ij")
+    return np.ascontiguousarray(np.stack([g.ravel() for g in grid], axis=1))
+
+
+def gather_plane(
+    vol: np.ndarray, centres: np.ndarray, plane: str, size: int, periodic: bool, *, centre: bool = True
+):
+    """Slice neighbourhood vectors ``(M, K)`` float32 of ``centres`` in ``plane`` (kernel-gathered)."""
+    return gather_slices(vol, centres, plane_offsets(plane, size, centre=centre), periodic)
+
+
+# ---------------------------------------------------------------------------------------------
+# Progress
+
+
+class ProgressMeter:
+    """Turns units of work into ``progress(stage, fraction)`` calls.
+
+    The caller declares the run's ``total`` units, asks :meth:`chunk` how many items of a given
+    unit cost to do between two reports (at most :data:`PROGRESS_STEP` of the run), and calls
+    :meth:`advance` after each chunk. ``progress`` may raise (e.g. :class:`~synth.errors.Cancelled`).
+    """
+
+    def __init__(self, progress: Callable[[str, float], None], total: float) -> None:
+        self.progress = progress
+        self.total = max(float(total), 1.0)
+        self.done = 0.0
+
+    def chunk(self, unit_cost: float = 1.0) -> int:
+        """Items of cost ``unit_cost`` that fit in one progress step (at least 1)."""
+        return max(1, int(PROGRESS_STEP * self.total / max(unit_cost, 1e-12)))
+
+    def advance(self, units: float, stage: str) -> None:
+        self.done += units
+        self.progress(stage, min(1.0, self.done / self.total))

@@ -1,0 +1,238 @@
+"""Solid machinery (synth.pixel.solid) and its kernels (synth.kernels.solid_search) against references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synth.errors import InvalidInput
+from synth.grid.scan import scan_order
+from synth.kernels.solid_search import (
+    HistogramState,
+    MatchField,
+    PackedExemplars,
+    gather_slices,
+    gather_slices_reference,
+    irls_update,
+    irls_update_reference,
+    kcoherence_search_reference,
+    nearest_exact,
+    nearest_exact_reference,
+    rerank,
+    rerank_reference,
+)
+from synth.pixel.solid import (
+    PLANE_AXES,
+    PLANES,
+    dense_sources,
+    exemplar_neighbourhoods,
+    exemplar_offsets,
+    gather_plane,
+    match_histogram,
+    plan_levels,
+    plane_centres,
+    plane_offsets,
+    slice_geometry,
+    upsample_sources,
+    upsample_volume,
+)
+
+
+def _exemplar(shape=(20, 22), seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.random(shape, dtype=np.float32)
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+@pytest.mark.parametrize("plane", PLANES)
+def test_gather_slices_equals_reference(periodic: bool, plane: str) -> None:
+    rng = np.random.default_rng(1)
+    vol = rng.random((6, 7, 9), dtype=np.float32)
+    centres = np.stack([rng.integers(0, s, 40) for s in vol.shape], axis=1).astype(np.int64)
+    offs = plane_offsets(plane, 5)
+    np.testing.assert_array_equal(
+        gather_slices(vol, centres, offs, periodic), gather_slices_reference(vol, centres, offs, periodic)
+    )
+
+
+@pytest.mark.parametrize("plane", PLANES)
+def test_slice_neighbourhoods_are_exemplar_neighbourhoods(plane: str) -> None:
+    """A volume made of one exemplar along a plane gives that exemplar's vectors, entry for entry."""
+    ex = _exemplar((12, 12))
+    a, b = PLANE_AXES[plane]
+    other = ({0, 1, 2} - {a, b}).pop()
+    vol = np.ascontiguousarray(np.expand_dims(ex, other).repeat(5, axis=other))
+    nb = exemplar_neighbourhoods(ex, 3)
+    rows, cols = np.divmod(nb.centres, 12)
+    centres = np.zeros((len(rows), 3), dtype=np.int64)
+    centres[:, a], centres[:, b], centres[:, other] = rows, cols, 2
+    np.testing.assert_array_equal(gather_plane(vol, centres, plane, 3, False), nb.vectors)
+    offs = exemplar_offsets(3, 12, centre=False)
+    np.testing.assert_array_equal(
+        gather_plane(vol, centres, plane, 3, True, centre=False), ex.ravel()[nb.centres[:, None] + offs[None]]
+    )
+
+
+def test_nearest_exact_and_rerank_equal_references() -> None:
+    rng = np.random.default_rng(2)
+    vectors = rng.random((300, 25), dtype=np.float32)
+    queries = rng.random((50, 25), dtype=np.float32)
+    queries[:5] = vectors[[3, 7, 7, 299, 0]]  # exact hits
+    i1, d1 = nearest_exact(queries, vectors)
+    i2, d2 = nearest_exact_reference(queries, vectors)
+    np.testing.assert_array_equal(i1, i2)
+    np.testing.assert_array_equal(d1, d2)
+    assert list(i1[:5]) == [3, 7, 7, 299, 0] and np.all(d1[:5] == 0)
+    cands = rng.integers(-1, 301, (50, 6))  # -1 and 300 are padding
+    r1, e1 = rerank(queries, vectors, cands)
+    r2, e2 = rerank_reference(queries, vectors, cands)
+    np.testing.assert_array_equal(r1, r2)
+    np.testing.assert_array_equal(e1, e2)
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_kcoherence_search_equals_reference(periodic: bool) -> None:
+    ex = _exemplar((16, 18), seed=3)
+    nb = exemplar_neighbourhoods(ex, 5)
+    shape = (6, 7, 8)
+    rng = np.random.default_rng(4)
+    vol = rng.random(shape, dtype=np.float32)
+    src = nb.centres[rng.integers(0, len(nb.centres), int(np.prod(shape)))]
+    for plane in PLANES:
+        centres = plane_centres(shape, plane, 2, (1, 0))
+        queries = gather_plane(vol, centres, plane, 5, periodic)
+        geometry = slice_geometry(shape, plane, periodic)
+        scratch = (np.zeros(ex.size, dtype=np.int64), np.zeros(1, dtype=np.int64))
+        pos, d2 = nb.search_coherent(
+            queries, centres, geometry, src, n_random=3, seed_key=99, index0=7, scratch=scratch
+        )
+        ref_pos, ref_d2 = kcoherence_search_reference(queries, centres, geometry, src, nb.sets, 3, 99, 7)
+        np.testing.assert_array_equal(pos, ref_pos)
+        np.testing.assert_array_equal(d2, ref_d2)
+        assert np.all(nb.sets.valid[pos] == 1)
+
+
+def _field(shape, n, ex_widths, stride, rng) -> MatchField:
+    N = int(np.prod(shape))
+    phase = rng.integers(0, stride, (3, 2)).astype(np.int64)
+    match = np.full((3, N), -1, dtype=np.int64)
+    for p, plane in enumerate(PLANES):
+        c = plane_centres(shape, plane, stride, tuple(phase[p]))
+        flat = np.ravel_multi_index(tuple(c.T), shape)
+        r = n // 2
+        w = ex_widths[p]
+        match[p, flat] = (rng.integers(r, w - r, len(flat)) * w + rng.integers(r, w - r, len(flat))).astype(
+            np.int64
+        )
+    return MatchField(
+        match=match,
+        weight=rng.random((3, N), dtype=np.float32) + 0.1,
+        offsets=np.stack([plane_offsets(p, n) for p in PLANES]).astype(np.int32),
+        ex_offsets=np.stack([exemplar_offsets(n, w) for w in ex_widths]),
+        axes=np.array([PLANE_AXES[p] for p in PLANES], dtype=np.int64),
+        phase=phase,
+        stride=stride,
+    )
+
+
+@pytest.mark.parametrize(("periodic", "gain", "stride"), [(True, 0.0, 1), (True, 50.0, 2), (False, 5.0, 2)])
+def test_irls_update_equals_reference(periodic: bool, gain: float, stride: int) -> None:
+    rng = np.random.default_rng(5)
+    shape = (5, 6, 7)
+    images = [_exemplar((10, 10), 1), _exemplar((9, 12), 2), _exemplar((11, 10), 3)]
+    field = _field(shape, 3, [im.shape[1] for im in images], stride, rng)
+    packed = PackedExemplars.pack(images)
+    vol = rng.random(shape, dtype=np.float32)
+    pooled = np.concatenate([im.ravel() for im in images])
+    order = scan_order(shape, "random", rng)
+    a, b = vol.copy(), vol.copy()
+    ha = HistogramState.start(a, pooled, 8, gain)
+    hb = HistogramState.start(b, pooled, 8, gain)
+    irls_update(a, order, 0, 100, field, packed, ha, periodic)
+    irls_update(a, order, 100, len(order), field, packed, ha, periodic)
+    irls_update_reference(b, order, 0, len(order), field, packed, hb, periodic)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(ha.count, hb.count)
+    assert not np.array_equal(a, vol)
+    if gain > 0:  # the running histogram is the volume's
+        np.testing.assert_array_equal(
+            ha.count, np.bincount(np.clip((a.ravel().astype(np.float64) * 8).astype(int), 0, 7), minlength=8)
+        )
+
+
+def test_irls_update_is_a_weighted_average_of_proposals() -> None:
+    """One matched neighbourhood of constant value c covering a voxel: the voxel becomes c."""
+    shape = (4, 4, 4)
+    ex = np.full((5, 5), 0.25, dtype=np.float32)
+    rng = np.random.default_rng(0)
+    field = _field(shape, 3, [5, 5, 5], 1, rng)
+    vol = rng.random(shape, dtype=np.float32)
+    hist = HistogramState.start(vol, ex, 4, 0.0)
+    irls_update(vol, np.arange(vol.size), 0, vol.size, field, PackedExemplars.pack([ex] * 3), hist, True)
+    np.testing.assert_allclose(vol, 0.25, atol=1e-7)
+
+
+def test_match_histogram_takes_the_exemplar_values_in_rank_order() -> None:
+    rng = np.random.default_rng(6)
+    vol = rng.random((6, 6, 6), dtype=np.float32)
+    values = rng.beta(0.5, 0.5, 6**3).astype(np.float32)
+    out = match_histogram(vol, values)
+    np.testing.assert_array_equal(np.sort(out.ravel()), np.sort(values))
+    assert np.all(np.argsort(out.ravel(), kind="stable") == np.argsort(vol.ravel(), kind="stable"))
+
+
+def test_plane_centres_cover_every_voxel_and_dense_sources_follow_them() -> None:
+    shape = (5, 6, 7)
+    ex_shape = (30, 30)
+    for plane in PLANES:
+        a, b = PLANE_AXES[plane]
+        c = plane_centres(shape, plane, 2, (1, 0))
+        assert np.all(c[:, a] % 2 == 1) and np.all(c[:, b] % 2 == 0)
+        assert len(c) == np.prod(shape) // shape[a] // shape[b] * len(range(1, shape[a], 2)) * len(
+            range(0, shape[b], 2)
+        )
+        match = np.full(int(np.prod(shape)), -1, dtype=np.int64)
+        flat = np.ravel_multi_index(tuple(c.T), shape)
+        match[flat] = 15 * 30 + 15
+        src = dense_sources(match, shape, plane, 2, (1, 0), ex_shape)
+        np.testing.assert_array_equal(src[flat], match[flat])
+        rows, cols = np.divmod(src, 30)
+        assert np.all(np.abs(rows - 15) <= 1) and np.all(np.abs(cols - 15) <= 1)
+        up = upsample_sources(src, shape, (10, 12, 14), plane, (60, 60), ex_shape)
+        r2, c2 = np.divmod(up, 60)
+        assert np.all(np.abs(r2 - 30) <= 3) and np.all(np.abs(c2 - 30) <= 3)
+
+
+def test_upsample_volume_keeps_constants_and_doubles_sizes() -> None:
+    vol = np.full((3, 4, 5), 0.3, dtype=np.float32)
+    for periodic in (True, False):
+        up = upsample_volume(vol, (6, 8, 9), periodic)
+        assert up.shape == (6, 8, 9) and up.dtype == np.float32
+        np.testing.assert_allclose(up, 0.3, atol=1e-6)
+
+
+def test_plan_levels_shrinks_levels_and_names_small_exemplars() -> None:
+    ex = _exemplar((32, 32))
+    plan = plan_levels(dict.fromkeys(PLANES, ex), (16, 16, 16), 5, 7)
+    assert plan.levels == 3 and plan.sizes[0] == 7 and all(s % 2 == 1 for s in plan.sizes)
+    assert plan.shapes == [(16, 16, 16), (8, 8, 8), (4, 4, 4)]
+    with pytest.raises(InvalidInput, match=r"exemplar: 5x5 pixels is smaller than the 7x7 neighbourhood"):
+        plan_levels(dict.fromkeys(PLANES, _exemplar((5, 5))), (16, 16, 16), 3, 7)
+    planes = {"xy": ex, "xz": _exemplar((6, 20)), "yz": ex}
+    with pytest.raises(InvalidInput, match=r"exemplar_xz: 6x20 pixels is smaller than the 7x7"):
+        plan_levels(planes, (16, 16, 16), 3, 7)
+
+
+def test_tree_search_is_as_good_as_exact_search() -> None:
+    """The PCA + tree search's best matches are within 5% of the exhaustive search's (mean distance)."""
+    ex = _exemplar((40, 40), seed=7)
+    from scipy.ndimage import gaussian_filter
+
+    ex = gaussian_filter(ex, 1.0, mode="wrap").astype(np.float32)
+    nb = exemplar_neighbourhoods(ex, 7)
+    other = exemplar_neighbourhoods(np.ascontiguousarray(ex.T[::-1]), 7)  # realistic, unseen queries
+    queries = other.vectors[:: max(1, len(other.vectors) // 500)]
+    _, d_fast = nb.search(queries)
+    _, d_exact = nb.search(queries, exact=True)
+    assert np.all(d_fast >= d_exact - 1e-12)
+    assert d_fast.mean() <= 1.05 * d_exact.mean()
