@@ -249,10 +249,39 @@ async function renderJob(id) {
   poll();
 }
 
+// A volume's slices, one at a time: the plane (xy = fixed z, xz = fixed y, yz = fixed x) and a slider.
+function showVolumeViewer(job) {
+  const depth = job.params.depth;
+  $("#volume-viewer").hidden = !depth;
+  if (!depth) return;
+  const count = { xy: depth, xz: job.params.height, yz: job.params.width };
+  const axis = { xy: "z", xz: "y", yz: "x" };
+  const slider = $("#slice-index");
+  const show = () => {
+    const plane = $("#slice-plane").value;
+    const index = Math.min(parseInt(slider.value, 10), count[plane] - 1);
+    $("#slice-label").textContent = `${axis[plane]} = ${index} of ${count[plane] - 1}`;
+    $("#slice-image").src = `/api/jobs/${job.id}/slices/${plane}/${index}.png`;
+    $("#slice-caption").textContent = `${plane} slice at ${axis[plane]} = ${index}`;
+  };
+  const reset = () => {
+    const plane = $("#slice-plane").value;
+    slider.max = count[plane] - 1;
+    slider.value = Math.floor(count[plane] / 2);
+    show();
+  };
+  $("#slice-plane").onchange = reset;
+  slider.oninput = show;
+  reset();
+}
+
 function showResults(job) {
   const a = job.artifacts;
   $("#results").hidden = false;
-  const captions = { "output.png": "output", "coherence.png": "coherence (output)", "orientation.png": "orientation (output)",
+  showVolumeViewer(job);
+  const captions = { "output.png": job.params.depth ? "output (middle xy slice)" : "output",
+    "cube.png": "the volume: outer faces and a corner cut away", "slices.png": "mid-slices beside their exemplars",
+    "coherence.png": "coherence (output)", "orientation.png": "orientation (output)",
     "constraint_coherence.png": "coherence (constraint)", "constraint_orientation.png": "orientation (constraint)" };
   const images = $("#result-images");
   images.replaceChildren();

@@ -60,3 +60,33 @@ register(
         constraint="optional",
     )
 )
+
+
+class StackParams(MethodParams):
+    delay: float = Field(0.0, ge=0.0, le=10.0, description="seconds of sleep before returning")
+
+
+def _run_stack(
+    exemplar, *, size, params: StackParams, seed, progress, constraint=None, exemplars=None
+) -> Result:
+    """A volume whose xy slices repeat the xy exemplar (tiled), each z-slice shifted by one pixel."""
+    depth, height, width = size
+    xy = exemplars["xy"]
+    reps = [int(np.ceil(s / e)) for s, e in zip((height, width), xy.shape, strict=True)]
+    plane = np.tile(xy, reps)[:height, :width]
+    volume = np.stack([np.roll(plane, z, axis=1) for z in range(depth)]).astype(np.float32)
+    time.sleep(params.delay)
+    progress("stacking", 1.0)
+    return Result("test-stack", volume, params.model_dump(), seed, {"stack": 0.0})
+
+
+register(
+    MethodSpec(
+        name="test-stack",
+        summary="Stack shifted copies of the xy exemplar into a volume (service tests only)",
+        params_model=StackParams,
+        run=_run_stack,
+        output_ndim=3,
+        plane_exemplars=True,
+    )
+)

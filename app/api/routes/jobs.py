@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import contextlib
+from functools import lru_cache
 from typing import Annotated, Any
 
+import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
 from fastapi.responses import FileResponse
 
@@ -12,6 +14,7 @@ from app.api.deps import ServiceDep
 from app.schemas import ErrorPublic, JobPublic, JobsPublic
 from app.service import Upload
 from jobs.store import STATES
+from synth.io import image_to_png_bytes, load_volume
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
@@ -129,6 +132,36 @@ def get_artifact(service: ServiceDep, job_id: str, name: str) -> FileResponse:
         raise HTTPException(404, f"job {job_id} has no artifact {name!r}; artifacts: {listed}")
     path = service.store.job_dir(job_id) / "out" / name
     return FileResponse(path, filename=path.name if not name.endswith(".png") else None)
+
+
+_PLANE_AXIS = {"xy": 0, "xz": 1, "yz": 2}
+
+
+@lru_cache(maxsize=4)
+def _stack(path: str, mtime_ns: int) -> np.ndarray:
+    """A finished job's ``output.tiff`` as a float volume (cached: a viewer asks for many slices)."""
+    return load_volume(path, name="output.tiff", max_voxels=2**31 - 1)
+
+
+@router.get(
+    "/{job_id}/slices/{plane}/{index}.png",
+    responses={404: {"model": ErrorPublic}, 422: {"model": ErrorPublic}},
+)
+def get_slice(service: ServiceDep, job_id: str, plane: str, index: int) -> Response:
+    """Slice ``index`` of a volume job's output in ``plane`` (``xy``: fixed z, ``xz``: fixed y,
+    ``yz``: fixed x) as an 8-bit PNG, for the job page's slice viewer."""
+    job = _job(service, job_id)
+    if plane not in _PLANE_AXIS:
+        raise HTTPException(422, f"plane must be one of {', '.join(_PLANE_AXIS)}, not {plane!r}")
+    if "output.tiff" not in job.artifacts or job.params.get("depth") is None:
+        raise HTTPException(404, f"job {job_id} has no volume (it is {job.state}; 2-D jobs have no slices)")
+    path = service.store.job_dir(job_id) / "out" / "output.tiff"
+    volume = _stack(str(path), path.stat().st_mtime_ns)
+    axis = _PLANE_AXIS[plane]
+    if not 0 <= index < volume.shape[axis]:
+        raise HTTPException(422, f"index must lie in [0, {volume.shape[axis] - 1}] for plane {plane}")
+    data = image_to_png_bytes(np.take(volume, index, axis=axis))
+    return Response(data, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
 @router.get("/{job_id}/inputs/{role}", responses={404: {"model": ErrorPublic}})
