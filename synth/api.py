@@ -114,6 +114,9 @@ _METHOD_MODULES: Sequence[str] = (
     "synth.methods.solid_wei_levoy",
     "synth.methods.solid_kopf",
     "synth.methods.solid_chen_wang",
+    "synth.methods.quilting",
+    "synth.methods.gaussian_patch",
+    "synth.methods.random_phase",
 )
 
 
