@@ -88,3 +88,41 @@ def test_upload_submit_watch_progress_see_result(browser, embedded, exemplar_png
     # the recent-jobs list shows the job we ran
     assert page.locator("#jobs-table tbody tr").count() >= 1
     page.close()
+
+
+def test_a_volume_from_per_plane_exemplars_and_its_slice_viewer(browser, embedded, exemplar_png, tmp_path):
+    paths = {}
+    for plane in ("xy", "xz", "yz"):
+        paths[plane] = tmp_path / f"{plane}.png"
+        paths[plane].write_bytes(exemplar_png)
+    page = browser.new_page(viewport={"width": 1200, "height": 1400})
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.goto(embedded.url + "/")
+    page.wait_for_selector("#method option[value='test-stack']", state="attached")
+    # a 2-D method asks for one exemplar; a solid one also offers the three planes, and a depth
+    assert page.is_hidden("#exemplar_xy-box")
+    page.select_option("#method", "test-stack")
+    for plane in ("xy", "xz", "yz"):
+        assert page.is_visible(f"#exemplar_{plane}-box")
+        page.set_input_files(f"#exemplar_{plane}", str(paths[plane]))
+    assert page.is_visible("#inputs-hint")
+    page.fill("#param-width", "40")
+    page.fill("#param-height", "32")
+    page.fill("#param-depth", "24")
+    page.click("#submit")
+    page.wait_for_url("**/#/jobs/*")
+    page.wait_for_selector("#job-state.succeeded", timeout=60_000)
+    page.wait_for_selector("#volume-viewer:not([hidden])")
+    # the viewer starts mid-volume in the xy plane, and follows the plane choice and the slider
+    page.wait_for_function("() => document.querySelector('#slice-image').naturalWidth === 40")
+    assert page.inner_text("#slice-label") == "z = 12 of 23"
+    page.select_option("#slice-plane", "yz")
+    page.wait_for_function("() => document.querySelector('#slice-image').naturalWidth === 32")
+    page.fill("#slice-index", "3")
+    page.dispatch_event("#slice-index", "input")
+    assert page.inner_text("#slice-label") == "x = 3 of 39"
+    assert page.locator("#result-images figcaption", has_text="corner cut away").count() == 1
+    page.screenshot(path=str(tmp_path / "volume-page.png"), full_page=True)
+    assert not errors, errors
+    page.close()

@@ -7,7 +7,7 @@ from functools import lru_cache
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
+from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Response, UploadFile
 from fastapi.responses import FileResponse
 
 from app.api.deps import ServiceDep
@@ -25,15 +25,6 @@ _ERRORS = {
 }
 
 
-def read_uploads(**files: UploadFile | None) -> list[Upload]:
-    """The uploaded images by role (the multipart field's name: ``exemplar``, ``exemplar_xy``, ...)."""
-    return [
-        Upload(role, upload.filename or "", upload.file.read())
-        for role, upload in files.items()
-        if upload is not None
-    ]
-
-
 def _plane_file(plane: str, fixed: str) -> Any:
     return Annotated[
         UploadFile | None,
@@ -44,36 +35,46 @@ def _plane_file(plane: str, fixed: str) -> Any:
     ]
 
 
-ExemplarXY = _plane_file("xy", "z")
-ExemplarXZ = _plane_file("xz", "y")
-ExemplarYZ = _plane_file("yz", "x")
+def read_uploads(
+    exemplar: Annotated[UploadFile | None, File(description="the exemplar image (PNG, TIFF, JPEG)")] = None,
+    constraint: Annotated[
+        UploadFile | None, File(description="constraint image, for methods that take one")
+    ] = None,
+    exemplar_xy: _plane_file("xy", "z") = None,
+    exemplar_xz: _plane_file("xz", "y") = None,
+    exemplar_yz: _plane_file("yz", "x") = None,
+) -> list[Upload]:
+    """The uploaded images by role: each multipart field's name is its role (a FastAPI dependency of
+    every route that takes a job's inputs, so they all accept the same fields)."""
+    files = {
+        "exemplar": exemplar,
+        "constraint": constraint,
+        "exemplar_xy": exemplar_xy,
+        "exemplar_xz": exemplar_xz,
+        "exemplar_yz": exemplar_yz,
+    }
+    return [
+        Upload(role, upload.filename or "", upload.file.read())
+        for role, upload in files.items()
+        if upload is not None
+    ]
+
+
+UploadsDep = Annotated[list[Upload], Depends(read_uploads)]
 
 
 @router.post("", status_code=202, response_model=JobPublic, responses=_ERRORS)
 def submit_job(
     service: ServiceDep,
     response: Response,
-    exemplar: Annotated[UploadFile | None, File(description="the exemplar image (PNG, TIFF, ...)")] = None,
+    uploads: UploadsDep,
     method: Annotated[str, Form(description="a method name from GET /api/methods")] = "wei-levoy",
     params: Annotated[
         str, Form(description='JSON object: the method\'s parameters and "width"/"height" (and "depth")')
     ] = "{}",
     seed: Annotated[int | None, Form(description="random seed; same inputs + seed = same output")] = None,
-    constraint: Annotated[
-        UploadFile | None, File(description="constraint image, for methods that take one")
-    ] = None,
-    exemplar_xy: ExemplarXY = None,
-    exemplar_xz: ExemplarXZ = None,
-    exemplar_yz: ExemplarYZ = None,
 ) -> dict:
     """Validate and queue a synthesis job; ``202`` with the job's URL in ``Location``."""
-    uploads = read_uploads(
-        exemplar=exemplar,
-        constraint=constraint,
-        exemplar_xy=exemplar_xy,
-        exemplar_xz=exemplar_xz,
-        exemplar_yz=exemplar_yz,
-    )
     request = service.validate(method, params, seed, uploads)
     job = service.submit(request)
     response.headers["Location"] = f"/api/jobs/{job.id}"

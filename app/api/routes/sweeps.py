@@ -6,10 +6,10 @@ import csv
 import io
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, Query, Response, UploadFile
+from fastapi import APIRouter, Form, HTTPException, Query, Response
 
 from app.api.deps import ServiceDep
-from app.api.routes.jobs import _ERRORS, ExemplarXY, ExemplarXZ, ExemplarYZ, read_uploads
+from app.api.routes.jobs import _ERRORS, UploadsDep
 from app.schemas import ErrorPublic, SweepPublic
 
 router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
@@ -19,26 +19,15 @@ router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
 def submit_sweep(
     service: ServiceDep,
     response: Response,
-    exemplar: Annotated[UploadFile | None, File()] = None,
+    uploads: UploadsDep,
     method: Annotated[str, Form()] = "wei-levoy",
     grid: Annotated[
         str, Form(description='JSON: parameter -> list of values, e.g. {"neighbourhood": [5, 9]}')
     ] = "{}",
     params: Annotated[str, Form(description="JSON: fixed parameters (and width/height) of every run")] = "{}",
     seed: Annotated[int | None, Form()] = None,
-    constraint: Annotated[UploadFile | None, File()] = None,
-    exemplar_xy: ExemplarXY = None,
-    exemplar_xz: ExemplarXZ = None,
-    exemplar_yz: ExemplarYZ = None,
 ) -> dict:
     """One job per point of ``grid`` (the product of its lists), sharing the inputs and the seed."""
-    uploads = read_uploads(
-        exemplar=exemplar,
-        constraint=constraint,
-        exemplar_xy=exemplar_xy,
-        exemplar_xz=exemplar_xz,
-        exemplar_yz=exemplar_yz,
-    )
     request = service.validate(method, params, seed, uploads)
     sweep_id = service.submit_sweep(request, grid)
     response.headers["Location"] = f"/api/sweeps/{sweep_id}"
