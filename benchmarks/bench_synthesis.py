@@ -15,6 +15,7 @@ import resource
 import statistics
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -24,7 +25,7 @@ import synth.methods.wei_levoy as wl
 from benchmarks._report import DATA, median_time, write_section
 from synth.api import synthesize
 from synth.io import load_image
-from synth.kernels.pixel_search import synthesize_chunk
+from synth.kernels.pixel_search import SearchState, synthesize_chunk
 
 # Akl 2014, Table 1: (figure, exemplar, output side, params)
 TABLE1: list[tuple[str, str, int, dict[str, Any]]] = [
@@ -81,23 +82,29 @@ def exemplar(spec: str) -> np.ndarray:
     return img
 
 
-def frozen_search_comparison(state: dict, n_positions: int, seed: int = 0) -> dict[str, float]:
+def frozen_search_comparison(state: SearchState, n_positions: int, seed: int = 0) -> dict[str, float]:
     """Best distance of k-coherence vs exhaustive search on the same frozen neighbourhoods."""
-    H, W = state["best_out"].shape
+    H, W = state.run.best_out.shape
     rng = np.random.default_rng(seed)
     positions = rng.choice(H * W, size=min(n_positions, H * W), replace=False)
     # The nearest-neighbour question only: histogram matching (which trades distance for balance) is off.
-    base = dict(state, first_pass=False, hist_weight=0.0, label_count=state["label_count"].copy())
-    base["done"] = np.ones((H, W), dtype=np.uint8)
+    hist = state.hist._replace(count=state.hist.count.copy(), weight=0.0)
+    run = state.run._replace(first_pass=False, done=np.ones((H, W), dtype=np.uint8))
+    src, out = state.cands.src, state.cur.out
     fast, exact = [], []
     for p in positions:
         y, x = divmod(int(p), W)
-        keep_src, keep_out = state["src"][y, x].copy(), state["out"][y, x].copy()
+        keep_src, keep_out = src[y, x].copy(), out[y, x].copy()
         for is_exact, sink in ((False, fast), (True, exact)):
-            trial = dict(base, order=np.array([p], dtype=np.int64), exact=is_exact)
+            trial = replace(
+                state,
+                hist=hist,
+                cands=state.cands._replace(exact=is_exact),
+                run=run._replace(order=np.array([p], dtype=np.int64)),
+            )
             synthesize_chunk(trial, 0, 1)
-            sink.append(float(trial["best_out"][y, x]))
-            state["src"][y, x], state["out"][y, x] = keep_src, keep_out
+            sink.append(float(trial.run.best_out[y, x]))
+            src[y, x], out[y, x] = keep_src, keep_out
     f, e = np.asarray(fast), np.asarray(exact)
     return {
         "ratio": float(f.mean() / e.mean()),
@@ -106,10 +113,10 @@ def frozen_search_comparison(state: dict, n_positions: int, seed: int = 0) -> di
     }
 
 
-def _capture_states(module: Any) -> tuple[list[dict], Callable[[], None]]:
+def _capture_states(module: Any) -> tuple[list[SearchState], Callable[[], None]]:
     """Wrap ``module.synthesize_source_map`` so the finest level's final state of every stage is kept."""
     original = module.synthesize_source_map
-    states: list[dict] = []
+    states: list[SearchState] = []
 
     def wrapped(*args: Any, **kwargs: Any) -> Any:
         kwargs["on_level_done"] = lambda level, state: states.append(state) if level == 0 else None

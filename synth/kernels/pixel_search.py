@@ -25,22 +25,27 @@ are k-coherent (Tong et al. 2002): for every neighbour ``q`` in ``cand_offsets``
 from an optional ``hint`` source map, and ``n_random`` seeded random positions. In the first pass
 unsynthesized output pixels (``done == 0``) are left out of the ``cur`` block.
 
-Histogram matching (optional, ``hist_weight > 0``): every exemplar position carries a label (its
+Histogram matching (optional, ``hist.weight > 0``): every exemplar position carries a label (its
 position, or e.g. its orientation bin); the output's count per label is kept up to date while the
 weight is positive, and a candidate's distance is multiplied by
-``1 + hist_weight * max(0, count / target - 1)`` for its label.
+``1 + weight * max(0, count / target - 1)`` for its label.
 
-Class window (optional, ``cls_span >= 0``): every exemplar position has a class (e.g. the rotated
+Class window (optional, ``win.span >= 0``): every exemplar position has a class (e.g. the rotated
 copy of the exemplar it lies in) and every output position a wanted class; a candidate counts only
-when its class is within ``cls_span`` of the wanted one, cyclically modulo ``cls_period``. When no
+when its class is within ``span`` of the wanted one, cyclically modulo ``period``. When no
 proposal qualifies, the position keeps its current source.
 
-``synthesize_chunk_reference`` is the plain NumPy version the tests compare the kernel with.
+The kernel's inputs come in named groups (:class:`SearchState`: three :class:`Part` blocks,
+:class:`Candidates`, :class:`Histogram`, :class:`ClassWindow` and the current :class:`Pass`), numba
+named tuples that the driver builds once per level. ``synthesize_chunk_reference`` is the plain
+NumPy version the tests compare the kernel with; it takes the same state.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -50,6 +55,12 @@ __all__ = [
     "METRIC_NORM",
     "METRIC_SO",
     "METRIC_SSD",
+    "Candidates",
+    "ClassWindow",
+    "Histogram",
+    "Part",
+    "Pass",
+    "SearchState",
     "candidate_capacity",
     "position_distance",
     "synthesize_chunk",
@@ -59,6 +70,88 @@ __all__ = [
 METRIC_SSD = 0
 METRIC_NORM = 1
 METRIC_SO = 2
+
+
+class Part(NamedTuple):
+    """One part of a neighbourhood distance: the output's features against the exemplar's.
+
+    Three parts make a distance (Akl 2014, eq 13): the level's own pixels (``cur``), the parent
+    level's square neighbourhood at half the position (``par``, Wei & Levoy 2000), and the guidance
+    field (``gui``: tensors). A part with ``weight == 0`` is skipped.
+    """
+
+    out: np.ndarray  # (H, W, C) float32: the output's features (NaN where not yet synthesized)
+    ex: np.ndarray  # (h, w, C) float32: the exemplar's features
+    offsets: np.ndarray  # (K, 2) int32: (dy, dx) of the neighbourhood's entries
+    metric: int  # METRIC_SSD | METRIC_NORM | METRIC_SO
+    weight: float  # the part's weight, already divided by its typical distance and size
+
+
+class Candidates(NamedTuple):
+    """Where the search looks: exhaustive, or k-coherent candidates (Tong et al. 2002)."""
+
+    src: np.ndarray  # (H, W, 2) int64: the exemplar position each output pixel copies (updated)
+    hint: np.ndarray  # (H, W, 2) int64: a second source map proposing candidates (used if use_hint)
+    use_hint: bool
+    valid: np.ndarray  # (4,) y0, y1, x0, x1: exemplar positions whose neighbourhoods fit
+    mask: np.ndarray  # (h, w) uint8: exemplar positions that may be copied
+    kset: np.ndarray  # (h, w, k, 2) int64: each exemplar position's k most similar positions (-1: none)
+    cand_offs: np.ndarray  # (M, 2) int32: neighbours whose sources propose candidates
+    exact: bool  # compare every valid position (the definition) instead
+    n_random: int  # random positions added per pixel
+    capacity: int  # size of the candidate buffer (candidate_capacity)
+
+
+class Histogram(NamedTuple):
+    """Histogram matching in the search: a label per exemplar position and the output's count per
+    label; a candidate whose label is over-represented has its distance multiplied by
+    ``1 + weight * excess`` (Chen & Wang 2010's position histogram when the labels are positions)."""
+
+    labels: np.ndarray  # (h * w,) int64
+    count: np.ndarray  # (n_labels,) int64: the output's use of each label (updated)
+    target: np.ndarray  # (n_labels,) float64: the wanted count
+    weight: float  # 0 switches it off
+
+
+class ClassWindow(NamedTuple):
+    """Per-position candidate window: exemplar positions carry a class (e.g. the rotation of their
+    copy), output positions a wanted class; only classes within ``span`` (cyclic, ``period``) count."""
+
+    cls: np.ndarray  # (h * w,) int64: class of each exemplar position (-1: none)
+    want: np.ndarray  # (H, W) int64: wanted class per output position
+    period: int
+    span: int  # -1 switches the window off
+
+
+class Pass(NamedTuple):
+    """One pass over the output: its scan order and the state it updates."""
+
+    order: np.ndarray  # (H * W,) int64: flat output positions in scan order
+    first_pass: bool  # unsynthesized pixels (done == 0) are left out of the neighbourhoods
+    done: np.ndarray  # (H, W) uint8: synthesized in this level (updated)
+    seed_key: np.uint64  # the pass's random key (candidates' random positions)
+    stamp: np.ndarray  # (h * w,) int64: scratch, de-duplicates candidates
+    counter: np.ndarray  # (1,) int64: scratch, the stamp's current value
+    best_out: np.ndarray  # (H, W) float32: each pixel's best distance (updated)
+
+
+@dataclass
+class SearchState:
+    """Everything the search kernel reads and updates for one pyramid level, in named groups.
+
+    The driver (:func:`synth.pixel.synthesis.synthesize_source_map`) builds one per level and a new
+    :class:`Pass` per pass; :func:`synthesize_chunk` and :func:`synthesize_chunk_reference` take it.
+    """
+
+    cur: Part
+    par: Part
+    gui: Part
+    alpha: float  # SO metric exponent (Akl 2014, eq 8)
+    cands: Candidates
+    hist: Histogram
+    win: ClassWindow
+    run: Pass
+
 
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
@@ -317,51 +410,15 @@ def _histogram_factor(count, target, weight):
 
 
 @kernel
-def _synthesize_chunk_kernel(
-    order,
-    start,
-    stop,
-    out,
-    ex,
-    offs,
-    metric,
-    w_cur,
-    par_out,
-    par_ex,
-    par_offs,
-    par_metric,
-    w_par,
-    gui_out,
-    gui_ex,
-    gui_offs,
-    gui_metric,
-    w_gui,
-    alpha,
-    src,
-    hint,
-    use_hint,
-    done,
-    first_pass,
-    valid,
-    mask,
-    kset,
-    cand_offs,
-    exact,
-    n_random,
-    seed_key,
-    stamp,
-    counter,
-    best_out,
-    capacity,
-    labels,
-    label_count,
-    label_target,
-    hist_weight,
-    cls,
-    want_cls,
-    cls_period,
-    cls_span,
-):
+def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win, run):
+    # Unpacked once, so the loop below reads as the algorithm (see SearchState for each name).
+    out, ex, offs, metric, w_cur = cur
+    par_out, par_ex, par_offs, par_metric, w_par = par
+    gui_out, gui_ex, gui_offs, gui_metric, w_gui = gui
+    src, hint, use_hint, valid, mask, kset, cand_offs, exact, n_random, capacity = cands
+    labels, label_count, label_target, hist_weight = hist
+    cls, want_cls, cls_period, cls_span = win
+    order, first_pass, done, seed_key, stamp, counter, best_out = run
     W = out.shape[1]
     w = ex.shape[1]
     C = out.shape[2]
@@ -490,59 +547,14 @@ def _synthesize_chunk_kernel(
         best_out[oy, ox] = best_raw
 
 
-def synthesize_chunk(state: dict, start: int, stop: int) -> None:
-    """Run the kernel on ``state['order'][start:stop]``; ``state`` holds the prepared arrays.
+def synthesize_chunk(state: SearchState, start: int, stop: int) -> None:
+    """Run the kernel on ``state.run.order[start:stop]``: search, copy, update, in place.
 
-    The keys are those of :func:`synthesize_chunk_reference`'s arguments; every array must be
-    C-contiguous, features float32, maps int64 (the caller, :mod:`synth.pixel.synthesis`, prepares
-    them once per pass).
+    Every array must be C-contiguous, features float32, maps int64 (the caller,
+    :mod:`synth.pixel.synthesis`, prepares them once per level and pass).
     """
     s = state
-    _synthesize_chunk_kernel(
-        s["order"],
-        start,
-        stop,
-        s["out"],
-        s["ex"],
-        s["offs"],
-        s["metric"],
-        s["w_cur"],
-        s["par_out"],
-        s["par_ex"],
-        s["par_offs"],
-        s["par_metric"],
-        s["w_par"],
-        s["gui_out"],
-        s["gui_ex"],
-        s["gui_offs"],
-        s["gui_metric"],
-        s["w_gui"],
-        s["alpha"],
-        s["src"],
-        s["hint"],
-        s["use_hint"],
-        s["done"],
-        s["first_pass"],
-        s["valid"],
-        s["mask"],
-        s["kset"],
-        s["cand_offs"],
-        s["exact"],
-        s["n_random"],
-        np.uint64(s["seed_key"]),
-        s["stamp"],
-        s["counter"],
-        s["best_out"],
-        s["capacity"],
-        s["labels"],
-        s["label_count"],
-        s["label_target"],
-        float(s["hist_weight"]),
-        s["cls"],
-        s["want_cls"],
-        int(s["cls_period"]),
-        int(s["cls_span"]),
-    )
+    _synthesize_chunk_kernel(start, stop, s.cur, s.par, s.gui, float(s.alpha), s.cands, s.hist, s.win, s.run)
 
 
 def position_distance(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -> np.ndarray:
@@ -580,106 +592,106 @@ def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):
     return position_distance(q[None], e, metric, alpha).sum(axis=1)
 
 
-def _in_class_window(state: dict, cands: np.ndarray, oy: int, ox: int) -> np.ndarray:
+def _in_class_window(state: SearchState, cands: np.ndarray, oy: int, ox: int) -> np.ndarray:
     """Which candidates ``(N, 2)`` the class window of output position ``(oy, ox)`` allows."""
     s = state
-    if s["cls_span"] < 0:
+    if s.win.span < 0:
         return np.ones(len(cands), dtype=bool)
-    k = s["cls"][cands[:, 0] * s["ex"].shape[1] + cands[:, 1]]
-    d = (k - s["want_cls"][oy, ox]) % s["cls_period"]
-    return (k >= 0) & (np.minimum(d, s["cls_period"] - d) <= s["cls_span"])
+    k = s.win.cls[cands[:, 0] * s.cur.ex.shape[1] + cands[:, 1]]
+    d = (k - s.win.want[oy, ox]) % s.win.period
+    return (k >= 0) & (np.minimum(d, s.win.period - d) <= s.win.span)
 
 
-def _candidates_reference(state: dict, oy: int, ox: int, key: int) -> np.ndarray:
+def _candidates_reference(state: SearchState, oy: int, ox: int, key: int) -> np.ndarray:
     s = state
-    y0, y1, x0, x1 = (int(v) for v in s["valid"])
-    H, W = s["src"].shape[:2]
+    y0, y1, x0, x1 = (int(v) for v in s.cands.valid)
+    H, W = s.cands.src.shape[:2]
     seen: list[tuple[int, int]] = []
 
     def add(cy: int, cx: int) -> None:
-        inside = y0 <= cy < y1 and x0 <= cx < x1 and s["mask"][cy, cx]
+        inside = y0 <= cy < y1 and x0 <= cx < x1 and s.cands.mask[cy, cx]
         if inside and (cy, cx) not in seen and _in_class_window(s, np.array([[cy, cx]]), oy, ox)[0]:
             seen.append((cy, cx))
 
-    maps = [s["src"], s["hint"]] if s["use_hint"] else [s["src"]]
+    maps = [s.cands.src, s.cands.hint] if s.cands.use_hint else [s.cands.src]
     for smap in maps:
-        for dy, dx in s["cand_offs"]:
+        for dy, dx in s.cands.cand_offs:
             ay, ax = (int(v) for v in smap[(oy + dy) % H, (ox + dx) % W])
             add(ay - dy, ax - dx)
-            for ky, kx in s["kset"][ay, ax]:
+            for ky, kx in s.cands.kset[ay, ax]:
                 if ky >= 0:
                     add(int(ky) - dy, int(kx) - dx)
     mask = (1 << 64) - 1
-    for j in range(s["n_random"]):
+    for j in range(s.cands.n_random):
         r = int(_splitmix(np.uint64((key + j) & mask)))
         add(y0 + r % (y1 - y0), x0 + (r >> 32) % (x1 - x0))
     if not seen:  # every proposal fell outside the class window: the current source
-        seen.append((int(s["src"][oy, ox, 0]), int(s["src"][oy, ox, 1])))
+        seen.append((int(s.cands.src[oy, ox, 0]), int(s.cands.src[oy, ox, 1])))
     return np.array(seen, dtype=np.int64).reshape(-1, 2)
 
 
-def synthesize_chunk_reference(state: dict, start: int, stop: int) -> None:
+def synthesize_chunk_reference(state: SearchState, start: int, stop: int) -> None:
     """Slow, obvious NumPy version of :func:`synthesize_chunk` (same arguments, same results)."""
     s = state
-    out, ex, src, done = s["out"], s["ex"], s["src"], s["done"]
+    out, ex, src, done = s.cur.out, s.cur.ex, s.cands.src, s.run.done
     H, W = out.shape[:2]
-    y0, y1, x0, x1 = (int(v) for v in s["valid"])
-    for p in s["order"][start:stop]:
+    y0, y1, x0, x1 = (int(v) for v in s.cands.valid)
+    for p in s.run.order[start:stop]:
         oy, ox = divmod(int(p), W)
-        keep = np.ones(len(s["offs"]), dtype=bool)
-        if s["first_pass"]:
-            keep = done[(oy + s["offs"][:, 0]) % H, (ox + s["offs"][:, 1]) % W] != 0
-            if s["w_par"] == 0.0 and s["w_gui"] == 0.0 and not keep.any():  # nothing to compare yet
+        keep = np.ones(len(s.cur.offsets), dtype=bool)
+        if s.run.first_pass:
+            keep = done[(oy + s.cur.offsets[:, 0]) % H, (ox + s.cur.offsets[:, 1]) % W] != 0
+            if s.par.weight == 0.0 and s.gui.weight == 0.0 and not keep.any():  # nothing to compare yet
                 out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
                 done[oy, ox] = 1
-                s["best_out"][oy, ox] = 0.0
+                s.run.best_out[oy, ox] = 0.0
                 continue
-        if s["exact"]:
+        if s.cands.exact:
             gy, gx = np.mgrid[y0:y1, x0:x1]
             cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
-            cands = cands[s["mask"][cands[:, 0], cands[:, 1]] != 0]
+            cands = cands[s.cands.mask[cands[:, 0], cands[:, 1]] != 0]
             cands = cands[_in_class_window(s, cands, oy, ox)]
             if len(cands) == 0:  # an empty class window: keep the source and its distance
                 out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
                 done[oy, ox] = 1
                 continue
         else:
-            key = int(_splitmix(np.uint64(s["seed_key"]) ^ np.uint64(p)))
+            key = int(_splitmix(np.uint64(s.run.seed_key) ^ np.uint64(p)))
             cands = _candidates_reference(s, oy, ox, key)
         d = np.zeros(len(cands))
-        if s["w_cur"] > 0:
-            d += s["w_cur"] * _block_reference(
-                out, oy, ox, ex, cands, s["offs"], s["metric"], s["alpha"], keep
+        if s.cur.weight > 0:
+            d += s.cur.weight * _block_reference(
+                out, oy, ox, ex, cands, s.cur.offsets, s.cur.metric, s.alpha, keep
             )
-        if s["w_par"] > 0:
-            full = np.ones(len(s["par_offs"]), dtype=bool)
-            d += s["w_par"] * _block_reference(
-                s["par_out"],
+        if s.par.weight > 0:
+            full = np.ones(len(s.par.offsets), dtype=bool)
+            d += s.par.weight * _block_reference(
+                s.par.out,
                 oy // 2,
                 ox // 2,
-                s["par_ex"],
+                s.par.ex,
                 cands // 2,
-                s["par_offs"],
-                s["par_metric"],
-                s["alpha"],
+                s.par.offsets,
+                s.par.metric,
+                s.alpha,
                 full,
             )
-        if s["w_gui"] > 0:
-            full = np.ones(len(s["gui_offs"]), dtype=bool)
-            d += s["w_gui"] * _block_reference(
-                s["gui_out"], oy, ox, s["gui_ex"], cands, s["gui_offs"], s["gui_metric"], s["alpha"], full
+        if s.gui.weight > 0:
+            full = np.ones(len(s.gui.offsets), dtype=bool)
+            d += s.gui.weight * _block_reference(
+                s.gui.out, oy, ox, s.gui.ex, cands, s.gui.offsets, s.gui.metric, s.alpha, full
             )
-        labels, count, ew = s["labels"], s["label_count"], ex.shape[1]
+        labels, count, ew = s.hist.labels, s.hist.count, ex.shape[1]
         factor = np.ones(len(cands))
-        if s["hist_weight"] > 0:  # counts are kept only while they matter
+        if s.hist.weight > 0:  # counts are kept only while they matter
             count[labels[src[oy, ox, 0] * ew + src[oy, ox, 1]]] -= 1
             lab = labels[cands[:, 0] * ew + cands[:, 1]]
-            factor = 1.0 + s["hist_weight"] * np.maximum(count[lab] / s["label_target"][lab] - 1.0, 0.0)
+            factor = 1.0 + s.hist.weight * np.maximum(count[lab] / s.hist.target[lab] - 1.0, 0.0)
         best = int(np.argmin(d * factor))
         by, bx = cands[best]
         src[oy, ox] = (by, bx)
-        if s["hist_weight"] > 0:
+        if s.hist.weight > 0:
             count[labels[by * ew + bx]] += 1
         out[oy, ox] = ex[by, bx]
         done[oy, ox] = 1
-        s["best_out"][oy, ox] = d[best]
+        s.run.best_out[oy, ox] = d[best]

@@ -38,6 +38,12 @@ from synth.kernels.pixel_search import (
     METRIC_NORM,
     METRIC_SO,
     METRIC_SSD,
+    Candidates,
+    ClassWindow,
+    Histogram,
+    Part,
+    Pass,
+    SearchState,
     candidate_capacity,
     position_distance,
     synthesize_chunk,
@@ -327,8 +333,12 @@ def _initial_sources(
 
 
 def _histogram_state(
-    histogram: tuple[np.ndarray, np.ndarray] | None, src: np.ndarray, valid: np.ndarray, mask: np.ndarray
-) -> dict[str, np.ndarray]:
+    histogram: tuple[np.ndarray, np.ndarray] | None,
+    src: np.ndarray,
+    valid: np.ndarray,
+    mask: np.ndarray,
+    weight: float,
+) -> Histogram:
     """The kernel's histogram arrays: a label per exemplar position, the output's count per label
     (from the initial sources) and the wanted count per label.
 
@@ -347,24 +357,19 @@ def _histogram_state(
         # A label rarer than one output pixel still has room for one.
         target = np.maximum(np.asarray(histogram[1], dtype=np.float64) * n_out, 1.0)
     count = np.bincount(labels[(src[..., 0] * w + src[..., 1]).ravel()], minlength=len(target))
-    return {"labels": labels, "label_count": count.astype(np.int64), "label_target": target}
+    return Histogram(labels, count.astype(np.int64), target, weight)
 
 
-def _window_state(window: CandidateWindow | None, level: int) -> dict[str, object]:
-    """The kernel's class-window arrays at ``level`` (a span of -1 switches the window off)."""
+def _window_state(window: CandidateWindow | None, level: int) -> ClassWindow:
+    """The kernel's class window at ``level`` (a span of -1 switches the window off)."""
     if window is None:
-        return {
-            "cls": np.zeros(1, np.int64),
-            "want_cls": np.zeros((1, 1), np.int64),
-            "cls_period": 1,
-            "cls_span": -1,
-        }
-    return {
-        "cls": np.ascontiguousarray(window.ex_levels[level], dtype=np.int64).ravel(),
-        "want_cls": np.ascontiguousarray(window.out_levels[level], dtype=np.int64),
-        "cls_period": int(window.period),
-        "cls_span": int(window.span),
-    }
+        return ClassWindow(np.zeros(1, np.int64), np.zeros((1, 1), np.int64), 1, -1)
+    return ClassWindow(
+        np.ascontiguousarray(window.ex_levels[level], dtype=np.int64).ravel(),
+        np.ascontiguousarray(window.out_levels[level], dtype=np.int64),
+        int(window.period),
+        int(window.span),
+    )
 
 
 def _empty_features(channels: int) -> np.ndarray:
@@ -485,50 +490,59 @@ def synthesize_source_map(
             if not exact
             else np.full((1, 1, 0, 2), -1, np.int64)
         )
-        state = {
-            "out": np.ascontiguousarray(ex[src[..., 0], src[..., 1]]),
-            "ex": ex,
-            "offs": offs,
-            "metric": metric,
-            "w_cur": w_pix,
-            "par_out": np.ascontiguousarray(
-                ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]]
-            )
+        par_out = (
+            np.ascontiguousarray(ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]])
             if has_parent
-            else _empty_features(ex.shape[2]),
-            "par_ex": par_ex,
-            "par_offs": par_offs,
-            "par_metric": metric,
-            "w_par": w_pix if has_parent else 0.0,
-            "gui_out": gui_out,
-            "gui_ex": gui_ex,
-            "gui_offs": gui_offs,
-            "gui_metric": guidance.metric if guidance is not None else METRIC_SSD,
-            "w_gui": w_gui,
-            "alpha": float(settings.alpha),
-            "src": src,
-            "hint": np.ascontiguousarray(hint, dtype=np.int64) if hint is not None else src,
-            "use_hint": hint is not None,
-            "valid": valid,
-            "mask": mask,
-            "kset": kset,
-            "cand_offs": cand_offs,
-            "exact": exact,
-            "n_random": 0 if exact else settings.random_candidates,
-            "stamp": stamp,
-            "counter": counter,
-            "capacity": candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
-            "best_out": np.zeros(shape, dtype=np.float32),
-            **_histogram_state(histogram[level] if histogram is not None else None, src, valid, mask),
-            "hist_weight": float(settings.histogram_weight),
-            **_window_state(window, level),
-        }
+            else _empty_features(ex.shape[2])
+        )
+        gui_metric = guidance.metric if guidance is not None else METRIC_SSD
+        best_out = np.zeros(shape, dtype=np.float32)
+        state = SearchState(
+            cur=Part(np.ascontiguousarray(ex[src[..., 0], src[..., 1]]), ex, offs, metric, w_pix),
+            par=Part(par_out, par_ex, par_offs, metric, w_pix if has_parent else 0.0),
+            gui=Part(gui_out, gui_ex, gui_offs, gui_metric, float(w_gui)),
+            alpha=float(settings.alpha),
+            cands=Candidates(
+                src=src,
+                hint=np.ascontiguousarray(hint, dtype=np.int64) if hint is not None else src,
+                use_hint=hint is not None,
+                valid=valid,
+                mask=mask,
+                kset=kset,
+                cand_offs=cand_offs,
+                exact=exact,
+                n_random=0 if exact else settings.random_candidates,
+                capacity=candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
+            ),
+            hist=_histogram_state(
+                histogram[level] if histogram is not None else None,
+                src,
+                valid,
+                mask,
+                float(settings.histogram_weight),
+            ),
+            win=_window_state(window, level),
+            run=Pass(
+                scan_order(shape, "lexicographic"),
+                True,
+                np.zeros(shape, np.uint8),
+                np.uint64(0),
+                stamp,
+                counter,
+                best_out,
+            ),
+        )
         n = shape[0] * shape[1]
         for it in range(settings.iterations):
-            state["order"] = scan_order(shape, settings.scan, rng)
-            state["first_pass"] = it == 0
-            state["done"] = np.zeros(shape, dtype=np.uint8) if it == 0 else state["done"]
-            state["seed_key"] = int(rng.integers(0, 2**63))
+            state.run = Pass(
+                order=scan_order(shape, settings.scan, rng),
+                first_pass=it == 0,
+                done=np.zeros(shape, dtype=np.uint8) if it == 0 else state.run.done,
+                seed_key=np.uint64(int(rng.integers(0, 2**63))),
+                stamp=stamp,
+                counter=counter,
+                best_out=best_out,
+            )
             step = max(1, n // _CHUNKS_PER_PASS)
             label = f"{stage}: level {level + 1}/{levels}, pass {it + 1}/{settings.iterations}"
             for start in range(0, n, step):
@@ -537,7 +551,7 @@ def synthesize_source_map(
                 if progress is not None:
                     frac = (done_work + (it * n + stop)) / total_work
                     progress(label, span[0] + (span[1] - span[0]) * frac)
-            report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state["best_out"]))
+            report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state.run.best_out))
         done_work += work[level]
         srcs[level] = src
         if on_level_done is not None:

@@ -13,7 +13,18 @@ from synth.api import synthesize
 from synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.grid.scan import SCAN_ORDERS, hilbert_points, morton_points, scan_order
-from synth.kernels.pixel_search import METRIC_NORM, METRIC_SO, METRIC_SSD, synthesize_chunk
+from synth.kernels.pixel_search import (
+    METRIC_NORM,
+    METRIC_SO,
+    METRIC_SSD,
+    Candidates,
+    ClassWindow,
+    Histogram,
+    Part,
+    Pass,
+    SearchState,
+    synthesize_chunk,
+)
 from synth.pixel.synthesis import (
     CandidateWindow,
     Guidance,
@@ -155,53 +166,46 @@ def test_causal_first_pass_never_reads_unsynthesized_pixels() -> None:
     ex = _rng_image((16, 16, 1))
     offs = neighbourhood_offsets(5, "causal")
     src = np.full((10, 10, 2), 8, dtype=np.int64)
-    state = {
-        "order": scan_order((10, 10), "lexicographic"),
-        "out": np.full((10, 10, 1), np.nan, np.float32),
-        "ex": ex,
-        "offs": offs,
-        "metric": METRIC_SSD,
-        "w_cur": 1.0,
-        "par_out": np.zeros((1, 1, 1), np.float32),
-        "par_ex": np.zeros((1, 1, 1), np.float32),
-        "par_offs": parent_offsets(3),
-        "par_metric": METRIC_SSD,
-        "w_par": 0.0,
-        "gui_out": np.zeros((1, 1, 3), np.float32),
-        "gui_ex": np.zeros((1, 1, 3), np.float32),
-        "gui_offs": np.zeros((0, 2), np.int32),
-        "gui_metric": METRIC_SSD,
-        "w_gui": 0.0,
-        "alpha": 0.5,
-        "src": src,
-        "hint": src,
-        "use_hint": False,
-        "done": np.zeros((10, 10), np.uint8),
-        "first_pass": True,
-        "valid": np.array([2, 14, 2, 14]),
-        "mask": np.ones((16, 16), np.uint8),
-        "kset": np.full((1, 1, 0, 2), -1, np.int64),
-        "cand_offs": np.zeros((1, 2), np.int32),
-        "exact": True,
-        "n_random": 0,
-        "seed_key": 1,
-        "stamp": np.zeros(256, np.int64),
-        "counter": np.zeros(1, np.int64),
-        "capacity": 4,
-        "best_out": np.zeros((10, 10), np.float32),
-        "labels": np.zeros(256, np.int64),
-        "label_count": np.array([100], np.int64),
-        "label_target": np.array([100.0]),
-        "hist_weight": 0.0,
-        "cls": np.zeros(1, np.int64),
-        "want_cls": np.zeros((1, 1), np.int64),
-        "cls_period": 1,
-        "cls_span": -1,
-    }
+    empty = np.zeros((1, 1, 1), np.float32)
+    state = SearchState(
+        cur=Part(np.full((10, 10, 1), np.nan, np.float32), ex, offs, METRIC_SSD, 1.0),
+        par=Part(empty, empty, parent_offsets(3), METRIC_SSD, 0.0),
+        gui=Part(
+            np.zeros((1, 1, 3), np.float32),
+            np.zeros((1, 1, 3), np.float32),
+            np.zeros((0, 2), np.int32),
+            METRIC_SSD,
+            0.0,
+        ),
+        alpha=0.5,
+        cands=Candidates(
+            src=src,
+            hint=src,
+            use_hint=False,
+            valid=np.array([2, 14, 2, 14]),
+            mask=np.ones((16, 16), np.uint8),
+            kset=np.full((1, 1, 0, 2), -1, np.int64),
+            cand_offs=np.zeros((1, 2), np.int32),
+            exact=True,
+            n_random=0,
+            capacity=4,
+        ),
+        hist=Histogram(np.zeros(256, np.int64), np.array([100], np.int64), np.array([100.0]), 0.0),
+        win=ClassWindow(np.zeros(1, np.int64), np.zeros((1, 1), np.int64), 1, -1),
+        run=Pass(
+            order=scan_order((10, 10), "lexicographic"),
+            first_pass=True,
+            done=np.zeros((10, 10), np.uint8),
+            seed_key=np.uint64(1),
+            stamp=np.zeros(256, np.int64),
+            counter=np.zeros(1, np.int64),
+            best_out=np.zeros((10, 10), np.float32),
+        ),
+    )
     synthesize_chunk(state, 0, 100)
-    assert np.isfinite(state["best_out"]).all()
-    assert np.isfinite(state["out"]).all()
-    assert (state["src"] >= 2).all() and (state["src"] < 14).all()
+    assert np.isfinite(state.run.best_out).all()
+    assert np.isfinite(state.cur.out).all()
+    assert (state.cands.src >= 2).all() and (state.cands.src < 14).all()
 
 
 @pytest.mark.parametrize("search", ["exact", "kcoherence"])
