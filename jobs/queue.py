@@ -1,14 +1,16 @@
 """Celery configuration from :class:`Settings`: one function used by the API and by the workers.
 
 With ``REDIS_URL`` the broker and result backend are Redis; without, the embedded default needs no
-server: Celery's filesystem transport and an SQLite result backend, both under the data directory
-(DESIGN.md, "Queue and storage", measured facts).
+server: Celery's filesystem transport (with atomic messages and a reader that sets malformed ones
+aside, :mod:`jobs.broker`) and an SQLite result backend, both under the data directory (DESIGN.md,
+"Queue and storage", measured facts).
 """
 
 from __future__ import annotations
 
 from celery import Celery
 
+from jobs.broker import SCHEME
 from jobs.config import Settings
 
 __all__ = ["QUEUE", "TASK_NAME", "create_celery"]
@@ -27,7 +29,7 @@ def create_celery(settings: Settings) -> Celery:
         transport = {"visibility_timeout": settings.hard_time_limit + 600}
     else:
         broker, backend = (
-            "filesystem://localhost/",
+            f"{SCHEME}://localhost/",  # kombu's filesystem transport, made safe (jobs.broker)
             f"db+sqlite:///{settings.data_dir / 'celery-results.sqlite'}",
         )
         queue = str(settings.broker_dir / "queue")

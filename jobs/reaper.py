@@ -4,8 +4,10 @@ Runs in the API process every couple of seconds (:class:`Reaper`). A run is dead
 is gone on this machine or its heartbeat is older than ``stale_seconds``. A dead run is re-queued
 (at-least-once: the task is idempotent) until ``max_attempts`` runs were lost or the hard time
 limit was reached; then the job fails with a message that says why. A queued job whose message was
-taken by a worker main process that died (the filesystem transport loses it) is sent again. A
-cancel that the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
+taken by a worker main process that died (the filesystem transport loses it) is sent again, and so
+is a queued job that no worker received within ``resend_seconds`` while the workers have room (its
+message was lost or set aside as unreadable): the embedded queue must not lose work. A cancel that
+the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
 """
 
 from __future__ import annotations
@@ -16,11 +18,37 @@ import time
 from collections.abc import Callable
 
 from jobs.config import Settings
-from jobs.store import JobStore, pid_alive
+from jobs.store import JobRecord, JobStore, pid_alive
 
-__all__ = ["Reaper", "reap_once"]
+__all__ = ["Reaper", "reap_once", "stranded"]
 
 log = logging.getLogger(__name__)
+
+
+def stranded(store: JobStore, settings: Settings, now: float | None = None) -> list[JobRecord]:
+    """Queued jobs that no worker received within ``resend_seconds`` although the workers have room.
+
+    Room: the live workers' processes (``concurrency`` each) less the jobs they run or hold. A job
+    waiting behind busy workers is not stranded; one waiting while workers idle is (its message was
+    lost). At most as many as there is room for, oldest first, so a worker between two jobs causes
+    at most one duplicate message (harmless: a run claims its job once).
+    """
+    now = time.time() if now is None else now
+    workers = store.workers(fresh_within=max(10.0, settings.stale_seconds))
+    active = store.active()
+    busy = sum(1 for job in active if job.state == "running" or job.received_pid)
+    room = len(workers) * settings.concurrency - busy
+    if room <= 0:
+        return []
+    waiting = [
+        job
+        for job in active
+        if job.state == "queued"
+        and not job.received_pid
+        and not job.cancel_requested
+        and now - job.updated > settings.resend_seconds
+    ]
+    return sorted(waiting, key=lambda job: job.updated)[:room]
 
 
 def reap_once(
@@ -75,6 +103,10 @@ def reap_once(
             and job.received_host == store.host
             and not pid_alive(job.received_pid)
         ) and store.requeue(job.id, "the worker holding this job stopped; re-queued"):
+            send(job.id)
+            actions.append((job.id, "resent"))
+    for job in stranded(store, settings, now):
+        if store.requeue(job.id, "no worker received this job; sent again"):
             send(job.id)
             actions.append((job.id, "resent"))
     for job_id, action in actions:

@@ -88,3 +88,36 @@ def test_settings_round_trip_through_the_environment(tmp_path):
     again = Settings.from_env(settings.to_env())
     assert again == settings and again.embedded
     assert Settings.from_env({"REDIS_URL": "redis://h:1/0", "TEXSYNTH_DATA_DIR": str(tmp_path)}).redis_url
+
+
+def _backdate(store: JobStore, job_id: str, seconds: float) -> None:
+    with store._connect() as db:
+        db.execute("UPDATE jobs SET updated = updated - ? WHERE id = ?", (seconds, job_id))
+
+
+def test_reaper_resends_a_job_no_worker_received_while_workers_idle(store):
+    settings = Settings(data_dir=store.jobs_dir.parent, concurrency=2, resend_seconds=30)
+    old, fresh = _job(store), _job(store)
+    _backdate(store, old, 31)
+    store.worker_heartbeat("w1", pid=1, started=time.time())  # a live, idle worker (pid 1 is alive)
+    sent: list[str] = []
+    assert reap_once(store, settings, sent.append, lambda j: None, set()) == [(old, "resent")]
+    assert sent == [old] and store.get(old).state == "queued"
+    # the re-send restarts its clock, and the fresh job is not stranded yet
+    assert reap_once(store, settings, sent.append, lambda j: None, set()) == []
+
+
+def test_a_job_waiting_behind_busy_workers_is_not_resent(store):
+    settings = Settings(data_dir=store.jobs_dir.parent, concurrency=1, resend_seconds=30)
+    busy, waiting = _job(store), _job(store)
+    store.worker_heartbeat("w1", pid=1, started=time.time())
+    store.claim(busy, pid=1, stale_seconds=10)
+    _backdate(store, waiting, 300)
+    assert reap_once(store, settings, lambda j: None, lambda j: None, set()) == []
+
+
+def test_no_resend_without_a_live_worker(store):
+    settings = Settings(data_dir=store.jobs_dir.parent, resend_seconds=30)
+    job_id = _job(store)
+    _backdate(store, job_id, 300)
+    assert reap_once(store, settings, lambda j: None, lambda j: None, set()) == []

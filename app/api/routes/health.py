@@ -6,6 +6,8 @@ from fastapi import APIRouter, Response
 
 from app.api.deps import ServiceDep
 from app.schemas import HealthPublic
+from jobs.broker import SCHEME
+from jobs.reaper import stranded
 
 router = APIRouter(prefix="/api/health", tags=["health"])
 
@@ -18,13 +20,19 @@ def health(service: ServiceDep, response: Response) -> dict:
     _, queued = service.store.list(state="queued", limit=1)
     _, running = service.store.list(state="running", limit=1)
     problems = []
+    waiting = stranded(service.store, service.settings)
+    if waiting:
+        problems.append(
+            f"{len(waiting)} queued job(s) not received by any worker although workers are idle; "
+            "the reaper sends them again"
+        )
     if not broker:
         problems.append("the broker is unreachable (check REDIS_URL / the data directory)")
     if not workers:
         problems.append("no worker is running (start one with `texsynth worker`)")
-    if problems:
+    if not broker or not workers:
         response.status_code = 503
-    url = service.settings.redis_url or "filesystem://" + str(service.settings.broker_dir)
+    url = service.settings.redis_url or f"{SCHEME}:// (embedded, in the data directory)"
     return {
         "status": "ok" if not problems else "degraded",
         "api": True,
