@@ -105,6 +105,7 @@ def test_reaper_resends_a_job_no_worker_received_while_workers_idle(store):
     assert sent == [old] and store.get(old).state == "queued"
     # the re-send restarts its clock, and the fresh job is not stranded yet
     assert reap_once(store, settings, sent.append, lambda j: None, set()) == []
+    assert fresh not in sent
 
 
 def test_a_job_waiting_behind_busy_workers_is_not_resent(store):

@@ -1,0 +1,694 @@
+"""Bucketed chamfer matching of curvilinear features (Wu & Yu 2004, section 2.1, eqs 1-2).
+
+Feature-guided patch synthesis compares the feature pixels of the output's L-shaped context region
+(``f_out``, ``m`` of them) with those of the input feature map under the same region translated to a
+candidate position (``f_in``, ``n`` of them), and later aligns them by deformation
+(:mod:`synth.analysis.warp`). This module holds the matching cost and the correspondences.
+
+The symbols of the paper
+------------------------
+- ``f_i^out``, ``i = 1..m``: positions of the feature pixels in the context region (output);
+  ``f_j^in``, ``j = 1..n``: positions of the input feature pixels in the overlapping region, i.e.
+  the context region translated by ``T = (dx, dy)`` into the input feature map.
+- ``v_i^out``, ``v_j^in``: the unit tangent vectors at those pixels. Tangents are orientations
+  (``v`` and ``-v`` are the same tangent), so ``|v_out - v_in|`` is taken between the two unit
+  vectors pointing into the same half-plane: ``min(|v1 - v2|, |v1 + v2|) = 2 sin(d / 2)`` where
+  ``d`` in ``[0, pi/2]`` is the angle between the two orientations (modulo pi). It is 0 for parallel
+  tangents and ``sqrt(2)`` for perpendicular ones (:func:`tangent_difference`).
+- **eq 1**: ``gdist(f_i^out, f_j^in) = |f_i^out - f_j^in|_2 + tau |v_i^out - v_j^in|_2``, distances
+  in pixels; ``tau = 0.1`` for matching, ``tau = 10`` for the correspondences of the deformation.
+- **buckets** ``C_l``, ``l = 0..3``: tangent orientations quantised uniformly into four intervals
+  of 45 degrees, centred on 0 (horizontal), 45, 90 (vertical) and -45 degrees (y up):
+  ``l = floor((theta + pi/8) / (pi/4)) mod 4`` (:func:`orientation_bucket`). Adjacent buckets have
+  adjacent intervals, and ``C_0`` and ``C_3`` are adjacent.
+- ``W_f(f_i^out)``: the corresponding input feature. Of the nearest (Euclidean) input features
+  ``f_{i_0}``, ``f_{i_-1}``, ``f_{i_1}`` in the buckets ``l_i``, ``l_i - 1`` and ``l_i + 1`` (the
+  perpendicular bucket ``l_i + 2`` is never a candidate), the one of least ``gdist``: the paper's
+  approximation of the exact argmin over all ``n`` features, found in constant time per feature from
+  one distance transform per bucket with a pointer to the nearest feature pixel.
+- ``B_f(f_j^in)``: the number of context features ``f_i^out`` that ``W_f`` maps onto ``f_j^in``
+  (0, 1 or more); ``|B_f - 1|`` measures how far ``W_f`` is from one-to-one.
+- **eq 2**: the matching cost ``(1/m) sum_i gdist(f_i^out, W_f(f_i^out)) + beta (1/n) sum_j
+  |B_f(f_j^in) - 1|``, with ``beta = 0.3`` (distances in pixels).
+
+Choices where the paper is silent
+---------------------------------
+- The distance transforms cover the **whole** input feature map, as the paper precomputes them: a
+  context feature may match an input feature just outside the overlapping region. Such a match
+  counts in the first term and in no ``B_f`` of the region (``sum_j`` runs over the region's
+  features only). :func:`feature_correspondences`, by contrast, matches within the chosen patch.
+- A context feature with no input feature in its three buckets gets ``gdist`` =
+  :func:`unmatched_penalty` (the diagonal of the input map plus ``tau sqrt(2)``: worse than any real
+  match, finite so that costs stay comparable).
+- An empty sum contributes 0: ``m = 0`` makes the first term 0, ``n = 0`` the second.
+- Ties: among the three buckets, the first of least ``gdist`` in the order ``l, l - 1, l + 1``; among
+  equally near features of one bucket, the one :func:`scipy.ndimage.distance_transform_edt` points at.
+
+References
+----------
+Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on
+Graphics 23(3) (Proc. SIGGRAPH 2004), pp. 364-367, section 2.1 (eqs 1-2) and 2.2.
+G. Borgefors, "Hierarchical chamfer matching: a parametric edge matching algorithm", IEEE TPAMI
+10(6), 1988, pp. 849-865.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage as ndi
+from scipy.signal import correlate
+
+from synth.analysis.tensor import wrap_angle
+from synth.errors import InvalidInput, InvalidParameter
+from synth.kernels.options import kernel
+
+__all__ = [
+    "BETA",
+    "MATCH_TAU",
+    "N_BUCKETS",
+    "WARP_TAU",
+    "ContextFeatures",
+    "Correspondences",
+    "FeatureIndex",
+    "build_feature_index",
+    "context_features",
+    "feature_correspondences",
+    "match_features",
+    "match_features_reference",
+    "matching_cost",
+    "matching_cost_reference",
+    "matching_costs",
+    "orientation_bucket",
+    "tangent_difference",
+    "unmatched_penalty",
+]
+
+N_BUCKETS = 4
+#: tau of eq 1 for the matching cost (paper, section 2.1).
+MATCH_TAU = 0.1
+#: tau of eq 1 for the correspondences of the deformation step (paper, section 2.2).
+WARP_TAU = 10.0
+#: beta of eq 2 (paper, section 2.1, distances in pixels).
+BETA = 0.3
+#: Order in which the three candidate buckets are tried (own bucket first): bucket offsets.
+_BUCKET_STEPS = (0, -1, 1)
+
+
+def orientation_bucket(theta: np.ndarray | float) -> np.ndarray:
+    """Bucket ``l`` in ``0..3`` of tangent orientations: 45-degree intervals centred on 0, 45, 90, -45 deg.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> orientation_bucket(np.radians([0.0, 30.0, 45.0, 90.0, -89.0, -45.0])).tolist()
+    [0, 1, 1, 2, 2, 3]
+    """
+    t = wrap_angle(np.asarray(theta, dtype=np.float64))
+    return (np.floor((t + np.pi / 8) / (np.pi / 4)).astype(np.int64) % N_BUCKETS).astype(np.int8)
+
+
+def tangent_difference(t1: np.ndarray | float, t2: np.ndarray | float) -> np.ndarray:
+    """``|v1 - v2|`` of the unit tangents of two orientations, modulo pi: ``2 sin(d / 2)``, ``d <= pi/2``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tangent_difference(np.radians([0.0, 0.0, 89.0]), np.radians([180.0, 90.0, -89.0])).round(6).tolist()
+    [0.0, 1.414214, 0.034905]
+    """
+    d = np.abs(wrap_angle(np.asarray(t1, dtype=np.float64) - np.asarray(t2, dtype=np.float64)))
+    return 2.0 * np.sin(d / 2.0)
+
+
+def unmatched_penalty(shape: tuple[int, int], tau: float) -> float:
+    """``gdist`` given to a context feature that has no candidate in its three buckets."""
+    return float(np.hypot(*shape) + tau * np.sqrt(2.0))
+
+
+def _check_tau_beta(tau: float, beta: float | None = None) -> None:
+    if not (isinstance(tau, int | float) and np.isfinite(tau) and tau >= 0):
+        raise InvalidParameter(
+            "tau", tau, "must be a finite number >= 0 (weight of tangent differences, eq 1)"
+        )
+    if beta is not None and not (isinstance(beta, int | float) and np.isfinite(beta) and beta >= 0):
+        raise InvalidParameter("beta", beta, "must be a finite number >= 0 (weight of bijectivity, eq 2)")
+
+
+def _mask_and_tangent(role: str, mask: np.ndarray, tangent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    m = np.asarray(mask)
+    t = np.asarray(tangent, dtype=np.float64)
+    if m.ndim != 2 or m.size == 0:
+        raise InvalidInput(role, f"feature mask must be a non-empty (H, W) array, got shape {m.shape}")
+    if m.dtype != bool:
+        raise InvalidInput(role, f"feature mask must be boolean, got {m.dtype}")
+    if t.shape != m.shape:
+        raise InvalidInput(role, f"tangent shape {t.shape} does not match mask shape {m.shape}")
+    if not np.isfinite(t[m]).all():
+        raise InvalidInput(role, "has feature pixels without a finite tangent")
+    return m, t
+
+
+@dataclass(frozen=True)
+class FeatureIndex:
+    """The input feature map prepared for constant-time nearest-feature queries per bucket.
+
+    Attributes
+    ----------
+    shape : (int, int)
+        ``(H, W)`` of the feature map.
+    rows, cols : ndarray of int64, shape (n_total,)
+        Feature pixels, raster order; a feature is referred to by its position in these arrays.
+    tangent : ndarray of float64, shape (n_total,)
+        Their tangent orientations.
+    bucket : ndarray of int8, shape (n_total,)
+        Their buckets (:func:`orientation_bucket`).
+    nearest : ndarray of int32, shape (4, H, W)
+        ``nearest[l, r, c]``: the feature of bucket ``l`` nearest to pixel ``(r, c)``, or -1 when the
+        bucket is empty (the distance transforms' pointers).
+    mask : ndarray of bool, shape (H, W)
+        The feature mask.
+    unit : ndarray of float64, shape (n_total, 2)
+        Unit tangent vectors ``(cos, sin)`` (for the kernel).
+    """
+
+    shape: tuple[int, int]
+    rows: np.ndarray
+    cols: np.ndarray
+    tangent: np.ndarray
+    bucket: np.ndarray
+    nearest: np.ndarray = field(repr=False)
+    mask: np.ndarray = field(repr=False)
+    unit: np.ndarray = field(repr=False)
+
+    @property
+    def count(self) -> int:
+        """Number of feature pixels."""
+        return len(self.rows)
+
+
+def build_feature_index(mask: np.ndarray, tangent: np.ndarray) -> FeatureIndex:
+    """One Euclidean distance transform per orientation bucket, with pointers to the nearest feature.
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (H, W)
+        Feature pixels (e.g. :attr:`synth.analysis.features.FeatureMap.mask`).
+    tangent : ndarray of float, shape (H, W)
+        Tangent orientations, finite at feature pixels.
+
+    Returns
+    -------
+    FeatureIndex
+    """
+    m, t = _mask_and_tangent("feature map", mask, tangent)
+    rows, cols = np.nonzero(m)
+    tangents = t[rows, cols]
+    buckets = orientation_bucket(tangents)
+    label = np.full(m.shape, -1, dtype=np.int32)
+    label[rows, cols] = np.arange(len(rows), dtype=np.int32)
+    nearest = np.full((N_BUCKETS, *m.shape), -1, dtype=np.int32)
+    for b in range(N_BUCKETS):
+        sel = buckets == b
+        if not sel.any():
+            continue
+        background = np.ones(m.shape, dtype=bool)
+        background[rows[sel], cols[sel]] = False
+        _, (ir, ic) = ndi.distance_transform_edt(background, return_distances=True, return_indices=True)
+        nearest[b] = label[ir, ic]
+    return FeatureIndex(
+        shape=(int(m.shape[0]), int(m.shape[1])),
+        rows=rows.astype(np.int64),
+        cols=cols.astype(np.int64),
+        tangent=tangents,
+        bucket=buckets,
+        nearest=nearest,
+        mask=m,
+        unit=np.stack([np.cos(tangents), np.sin(tangents)], axis=1),
+    )
+
+
+@dataclass(frozen=True)
+class ContextFeatures:
+    """The context region's feature pixels, in window coordinates, ready to be matched.
+
+    Attributes
+    ----------
+    shape : (int, int)
+        ``(h, w)`` of the window (the patch).
+    region : ndarray of bool, shape (h, w)
+        The overlap (context) region within the window.
+    rows, cols : ndarray of int64, shape (m,)
+        Context feature pixels inside ``region``.
+    tangent : ndarray of float64, shape (m,)
+    bucket : ndarray of int8, shape (m,)
+    unit : ndarray of float64, shape (m, 2)
+        Unit tangent vectors ``(cos, sin)``.
+    """
+
+    shape: tuple[int, int]
+    region: np.ndarray = field(repr=False)
+    rows: np.ndarray = field(repr=False)
+    cols: np.ndarray = field(repr=False)
+    tangent: np.ndarray = field(repr=False)
+    bucket: np.ndarray = field(repr=False)
+    unit: np.ndarray = field(repr=False)
+
+    @property
+    def count(self) -> int:
+        """``m``, the number of context features."""
+        return len(self.rows)
+
+
+def context_features(
+    mask: np.ndarray, tangent: np.ndarray, region: np.ndarray | None = None
+) -> ContextFeatures:
+    """Collect the feature pixels of a window's overlap region (the output side of eq 2).
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (h, w)
+        Feature pixels of the output window (already synthesised part).
+    tangent : ndarray of float, shape (h, w)
+        Their tangents.
+    region : ndarray of bool, shape (h, w), optional
+        The overlap region (L-shaped for raster-order patches); default the whole window.
+    """
+    m, t = _mask_and_tangent("context", mask, tangent)
+    reg = np.ones(m.shape, dtype=bool) if region is None else np.asarray(region)
+    if reg.shape != m.shape or reg.dtype != bool:
+        raise InvalidInput(
+            "region", f"must be a boolean array of shape {m.shape}, got {reg.dtype} {reg.shape}"
+        )
+    rows, cols = np.nonzero(m & reg)
+    tangents = t[rows, cols]
+    return ContextFeatures(
+        shape=(int(m.shape[0]), int(m.shape[1])),
+        region=reg,
+        rows=rows.astype(np.int64),
+        cols=cols.astype(np.int64),
+        tangent=tangents,
+        bucket=orientation_bucket(tangents),
+        unit=np.stack([np.cos(tangents), np.sin(tangents)], axis=1),
+    )
+
+
+def _offsets(context: ContextFeatures, index: FeatureIndex, offsets: np.ndarray) -> np.ndarray:
+    off = np.asarray(offsets)
+    if off.ndim == 1:
+        off = off[None, :]
+    if off.ndim != 2 or off.shape[1] != 2 or not np.issubdtype(off.dtype, np.integer):
+        raise InvalidParameter(
+            "offsets", f"array of shape {off.shape}", "must be integer (row, col) pairs, (k, 2)"
+        )
+    h, w = context.shape
+    H, W = index.shape
+    bad = (off[:, 0] < 0) | (off[:, 1] < 0) | (off[:, 0] + h > H) | (off[:, 1] + w > W)
+    if bad.any():
+        first = tuple(int(v) for v in off[np.argmax(bad)])
+        raise InvalidParameter(
+            "offsets", first, f"the {h}x{w} window must lie inside the {H}x{W} input feature map"
+        )
+    return off.astype(np.int64)
+
+
+def _match(
+    context: ContextFeatures, index: FeatureIndex, off: np.ndarray, tau: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Matches ``(k, m)`` (indices into the index's features, -1 for none) and their gdist ``(k, m)``."""
+    qr = off[:, 0:1] + context.rows[None, :]
+    qc = off[:, 1:2] + context.cols[None, :]
+    best = np.full(qr.shape, -1, dtype=np.int64)
+    best_g = np.full(qr.shape, unmatched_penalty(index.shape, tau))
+    for step in _BUCKET_STEPS:
+        b = (context.bucket.astype(np.int64) + step) % N_BUCKETS
+        cand = index.nearest[b[None, :], qr, qc].astype(np.int64)
+        ok = cand >= 0
+        c = np.where(ok, cand, 0)
+        if index.count == 0:
+            continue
+        g = np.hypot(index.rows[c] - qr, index.cols[c] - qc) + tau * tangent_difference(
+            index.tangent[c], context.tangent[None, :]
+        )
+        better = ok & (g < best_g)
+        best = np.where(better, cand, best)
+        best_g = np.where(better, g, best_g)
+    return best, best_g
+
+
+def match_features(
+    context: ContextFeatures,
+    index: FeatureIndex,
+    offset: tuple[int, int] | np.ndarray = (0, 0),
+    *,
+    tau: float = MATCH_TAU,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The mapping ``W_f`` for one candidate position (paper, section 2.1).
+
+    Parameters
+    ----------
+    context : ContextFeatures
+        The output's context features, window coordinates.
+    index : FeatureIndex
+        The input feature map.
+    offset : (int, int)
+        Row and column of the window's top-left corner in the input map (the translation ``T``).
+    tau : float
+        Weight of the tangent difference in eq 1.
+
+    Returns
+    -------
+    match : ndarray of int64, shape (m,)
+        ``W_f(f_i^out)`` as an index into ``index.rows`` / ``index.cols``; -1 when no candidate.
+    gdist : ndarray of float64, shape (m,)
+        ``gdist(f_i^out, W_f(f_i^out))`` (eq 1), pixels.
+    """
+    _check_tau_beta(tau)
+    off = _offsets(context, index, np.asarray(offset))
+    best, g = _match(context, index, off, float(tau))
+    return best[0], g[0]
+
+
+def _region_counts(context: ContextFeatures, index: FeatureIndex, off: np.ndarray) -> np.ndarray:
+    """``n`` per candidate: input features inside the region at each offset."""
+    h, w = context.shape
+    if len(off) <= 16:
+        return np.array(
+            [np.count_nonzero(index.mask[r : r + h, c : c + w] & context.region) for r, c in off],
+            dtype=np.int64,
+        )
+    counts = correlate(index.mask.astype(np.float64), context.region.astype(np.float64), mode="valid")
+    return np.rint(counts[off[:, 0], off[:, 1]]).astype(np.int64)
+
+
+@kernel
+def _matching_costs_kernel(
+    ctx_rows: np.ndarray,
+    ctx_cols: np.ndarray,
+    ctx_cos: np.ndarray,
+    ctx_sin: np.ndarray,
+    ctx_bucket: np.ndarray,
+    region: np.ndarray,
+    nearest: np.ndarray,
+    f_rows: np.ndarray,
+    f_cols: np.ndarray,
+    f_cos: np.ndarray,
+    f_sin: np.ndarray,
+    offsets: np.ndarray,
+    n_region: np.ndarray,
+    tau: float,
+    beta: float,
+    penalty: float,
+) -> np.ndarray:  # pragma: no cover - compiled; compared with matching_cost_reference in the tests
+    """Eq 2 at every offset: O(m) per candidate with one hit counter per input feature."""
+    k = offsets.shape[0]
+    m = ctx_rows.shape[0]
+    h, w = region.shape
+    out = np.empty(k, dtype=np.float64)
+    hits = np.zeros(f_rows.shape[0], dtype=np.int64)
+    counted = np.empty(m, dtype=np.int64)
+    for q in range(k):
+        r0 = offsets[q, 0]
+        c0 = offsets[q, 1]
+        total = 0.0
+        m_in = 0
+        d_in = 0
+        for i in range(m):
+            qr = r0 + ctx_rows[i]
+            qc = c0 + ctx_cols[i]
+            best = -1
+            best_g = penalty
+            for s in range(3):
+                step = 0 if s == 0 else (-1 if s == 1 else 1)
+                b = (ctx_bucket[i] + step + N_BUCKETS) % N_BUCKETS
+                j = nearest[b, qr, qc]
+                if j < 0:
+                    continue
+                # |v_out - v_in| with v_in flipped into v_out's half-plane (tangents modulo pi)
+                sign = 1.0 if ctx_cos[i] * f_cos[j] + ctx_sin[i] * f_sin[j] >= 0.0 else -1.0
+                dv = math.hypot(ctx_cos[i] - sign * f_cos[j], ctx_sin[i] - sign * f_sin[j])
+                g = math.hypot(f_rows[j] - qr, f_cols[j] - qc) + tau * dv
+                if g < best_g:
+                    best = j
+                    best_g = g
+            total += best_g
+            counted[i] = -1
+            if best >= 0:
+                lr = f_rows[best] - r0
+                lc = f_cols[best] - c0
+                if 0 <= lr < h and 0 <= lc < w and region[lr, lc]:
+                    m_in += 1
+                    if hits[best] == 0:
+                        d_in += 1
+                    hits[best] += 1
+                    counted[i] = best
+        for i in range(m):
+            if counted[i] >= 0:
+                hits[counted[i]] = 0
+        first = total / m if m > 0 else 0.0
+        n = n_region[q]
+        second = (n - 2 * d_in + m_in) / n if n > 0 else 0.0
+        out[q] = first + beta * second
+    return out
+
+
+def matching_costs(
+    context: ContextFeatures,
+    index: FeatureIndex,
+    offsets: np.ndarray,
+    *,
+    tau: float = MATCH_TAU,
+    beta: float = BETA,
+) -> np.ndarray:
+    """Matching cost of eq 2 at many candidate positions (a numba kernel, O(m) per candidate).
+
+    Parameters
+    ----------
+    context : ContextFeatures
+        ``f^out``: the context features and the overlap region, window coordinates.
+    index : FeatureIndex
+        The input feature map with its per-bucket distance transforms.
+    offsets : ndarray of int, shape (k, 2)
+        Top-left ``(row, col)`` of each candidate window in the input map (the translations ``T``);
+        every window must lie inside the map.
+    tau, beta : float
+        Weights of eqs 1 and 2 (paper: 0.1 and 0.3).
+
+    Returns
+    -------
+    ndarray of float64, shape (k,)
+        ``(1/m) sum_i gdist(f_i^out, W_f(f_i^out)) + beta (1/n) sum_j |B_f(f_j^in) - 1|``; the sum
+        over ``j`` runs over the input features inside the region at that offset.
+
+    Notes
+    -----
+    With ``M`` the context features mapped into the region and ``D`` the distinct region features
+    they hit, ``sum_j |B_f - 1| = (n - D) + (M - D)``: unmatched region features count 1 each, a
+    feature hit ``B`` times counts ``B - 1``. The kernel keeps one counter per input feature (the
+    paper's "counter indicating the number of features to which it corresponds") and resets only
+    the ones it touched, so a candidate costs O(m). :func:`matching_cost_reference` is the
+    brute-force spelling the tests compare it with.
+    """
+    _check_tau_beta(tau, beta)
+    off = _offsets(context, index, offsets)
+    n = _region_counts(context, index, off)
+    return _matching_costs_kernel(
+        context.rows,
+        context.cols,
+        context.unit[:, 0],
+        context.unit[:, 1],
+        context.bucket,
+        context.region,
+        index.nearest,
+        index.rows,
+        index.cols,
+        index.unit[:, 0],
+        index.unit[:, 1],
+        off,
+        n,
+        float(tau),
+        float(beta),
+        unmatched_penalty(index.shape, float(tau)),
+    )
+
+
+def matching_cost(
+    context: ContextFeatures,
+    index: FeatureIndex,
+    offset: tuple[int, int] | np.ndarray,
+    *,
+    tau: float = MATCH_TAU,
+    beta: float = BETA,
+) -> float:
+    """Matching cost of eq 2 for one candidate ``offset = (row, col)``: see :func:`matching_costs`."""
+    return float(matching_costs(context, index, np.asarray(offset)[None, :], tau=tau, beta=beta)[0])
+
+
+# --- brute-force references -------------------------------------------------------------------
+
+
+def match_features_reference(
+    context_points: np.ndarray,
+    context_tangents: np.ndarray,
+    feature_points: np.ndarray,
+    feature_tangents: np.ndarray,
+    *,
+    tau: float = MATCH_TAU,
+    penalty: float = np.inf,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``W_f`` by brute force, O(mn): the slow, obvious spelling of :func:`match_features`.
+
+    For each context feature and each of its three buckets (order ``l, l - 1, l + 1``), scan every
+    input feature for the nearest one of that bucket (first of least distance in the given order);
+    keep the candidate of least ``gdist`` (eq 1). Points are ``(row, col)`` pairs in one frame.
+
+    Returns ``(match, gdist)``: indices into ``feature_points`` (-1 for none, with ``gdist =
+    penalty``) and the distances.
+    """
+    cp = np.asarray(context_points, dtype=np.float64).reshape(-1, 2)
+    fp = np.asarray(feature_points, dtype=np.float64).reshape(-1, 2)
+    cb = orientation_bucket(np.asarray(context_tangents, dtype=np.float64)).reshape(-1)
+    fb = orientation_bucket(np.asarray(feature_tangents, dtype=np.float64)).reshape(-1)
+    ct = np.asarray(context_tangents, dtype=np.float64).reshape(-1)
+    ft = np.asarray(feature_tangents, dtype=np.float64).reshape(-1)
+    match = np.full(len(cp), -1, dtype=np.int64)
+    gdist = np.full(len(cp), penalty, dtype=np.float64)
+    for i in range(len(cp)):
+        for step in _BUCKET_STEPS:
+            bucket = (int(cb[i]) + step) % N_BUCKETS
+            nearest, nearest_d = -1, np.inf
+            for j in range(len(fp)):
+                if fb[j] != bucket:
+                    continue
+                d = float(np.hypot(fp[j, 0] - cp[i, 0], fp[j, 1] - cp[i, 1]))
+                if d < nearest_d:
+                    nearest, nearest_d = j, d
+            if nearest < 0:
+                continue
+            g = nearest_d + tau * float(tangent_difference(ft[nearest], ct[i]))
+            if g < gdist[i]:
+                match[i], gdist[i] = nearest, g
+    return match, gdist
+
+
+def matching_cost_reference(
+    context_points: np.ndarray,
+    context_tangents: np.ndarray,
+    feature_points: np.ndarray,
+    feature_tangents: np.ndarray,
+    in_region: np.ndarray,
+    *,
+    tau: float = MATCH_TAU,
+    beta: float = BETA,
+    penalty: float = np.inf,
+) -> float:
+    """Eq 2 by brute force: :func:`match_features_reference`, then ``B_f`` counted feature by feature.
+
+    ``feature_points`` are all the input features that may be matched (the whole input map, in the
+    context's frame); ``in_region[j]`` says whether feature ``j`` lies in the overlapping region (the
+    ``n`` features that the second term sums over).
+    """
+    match, gdist = match_features_reference(
+        context_points, context_tangents, feature_points, feature_tangents, tau=tau, penalty=penalty
+    )
+    region = np.asarray(in_region, dtype=bool).reshape(-1)
+    first = float(np.mean(gdist)) if len(gdist) else 0.0
+    hits: dict[int, int] = {}
+    for j in match:
+        if j >= 0:
+            hits[int(j)] = hits.get(int(j), 0) + 1
+    n = int(region.sum())
+    second = sum(abs(hits.get(j, 0) - 1) for j in np.flatnonzero(region)) / n if n else 0.0
+    return first + beta * second
+
+
+# --- correspondences for the deformation ------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Correspondences:
+    """One-to-one feature correspondences ``(x_i, x'_i)`` between the context and a patch (section 2.2).
+
+    Attributes
+    ----------
+    targets : ndarray of float64, shape (k, 2)
+        ``x_i``: context feature pixels, ``(row, col)`` in window coordinates.
+    sources : ndarray of float64, shape (k, 2)
+        ``x'_i``: the corresponding patch feature pixels, same frame.
+    gdist : ndarray of float64, shape (k,)
+        Their ``gdist`` (eq 1, with the ``tau`` used).
+    """
+
+    targets: np.ndarray
+    sources: np.ndarray
+    gdist: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """Number of pairs."""
+        return len(self.gdist)
+
+
+def feature_correspondences(
+    context_mask: np.ndarray,
+    context_tangent: np.ndarray,
+    patch_mask: np.ndarray,
+    patch_tangent: np.ndarray,
+    region: np.ndarray | None = None,
+    *,
+    tau: float = WARP_TAU,
+    max_distance: float | None = None,
+) -> Correspondences:
+    """The mapping ``W'_f`` of section 2.2, made one-to-one: context feature -> patch feature.
+
+    Parameters
+    ----------
+    context_mask, context_tangent : ndarray, shape (h, w)
+        Feature pixels and tangents of the output window (the context).
+    patch_mask, patch_tangent : ndarray, shape (h, w)
+        Feature pixels and tangents of the chosen input patch, same window frame.
+    region : ndarray of bool, shape (h, w), optional
+        The overlap region; both sides' features are taken inside it (default: the whole window).
+    tau : float
+        Weight of tangents in eq 1; the paper uses 10 here "to emphasize tangents".
+    max_distance : float, optional
+        Drop pairs farther apart than this many pixels (the paper keeps all).
+
+    Returns
+    -------
+    Correspondences
+        Pairs with distinct patch features: when ``W'_f`` maps several context features onto one
+        patch feature, the one of least ``gdist`` is kept ("we enforce a one-to-one mapping by
+        removing extraneous corresponding features from the context region"); ties go to the
+        first context feature in raster order.
+
+    Notes
+    -----
+    ``W'_f`` is the bucketed approximation of :func:`match_features`, with the distance transforms
+    of the patch's own features inside the region, so every source lies on a patch feature.
+    """
+    _check_tau_beta(tau)
+    if max_distance is not None and not (
+        isinstance(max_distance, int | float) and np.isfinite(max_distance) and max_distance >= 0
+    ):
+        raise InvalidParameter("max_distance", max_distance, "must be a finite number of pixels >= 0")
+    context = context_features(context_mask, context_tangent, region)
+    pm, pt = _mask_and_tangent("patch", patch_mask, patch_tangent)
+    if pm.shape != context.shape:
+        raise InvalidInput("patch", f"shape {pm.shape} does not match the context window {context.shape}")
+    index = build_feature_index(pm & context.region, np.where(pm & context.region, pt, np.nan))
+    match, g = match_features(context, index, (0, 0), tau=tau)
+    keep = match >= 0
+    if max_distance is not None:
+        c = np.where(keep, match, 0)
+        dist = np.hypot(index.rows[c] - context.rows, index.cols[c] - context.cols)
+        keep &= dist <= max_distance
+    order = np.lexsort((np.arange(len(g)), g))  # by gdist, then raster order
+    order = order[keep[order]]
+    _, first = np.unique(match[order], return_index=True)
+    chosen = np.sort(order[first])
+    targets = np.stack([context.rows[chosen], context.cols[chosen]], axis=1).astype(np.float64)
+    sources = np.stack([index.rows[match[chosen]], index.cols[match[chosen]]], axis=1).astype(np.float64)
+    return Correspondences(targets=targets.reshape(-1, 2), sources=sources.reshape(-1, 2), gdist=g[chosen])

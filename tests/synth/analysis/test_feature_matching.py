@@ -1,0 +1,166 @@
+"""Bucketed chamfer matching (synth.analysis.feature_matching; Wu & Yu 2004, eqs 1-2) against brute force."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from synth.analysis.feature_matching import (
+    build_feature_index,
+    context_features,
+    feature_correspondences,
+    match_features,
+    match_features_reference,
+    matching_cost,
+    matching_cost_reference,
+    matching_costs,
+    orientation_bucket,
+    tangent_difference,
+    unmatched_penalty,
+)
+from synth.errors import InvalidInput, InvalidParameter
+
+
+def _random_features(rng: np.random.Generator, shape: tuple[int, int], density: float):
+    mask = rng.random(shape) < density
+    return mask, np.where(mask, rng.uniform(-np.pi / 2, np.pi / 2, shape), np.nan)
+
+
+def _l_region(w: int, k: int) -> np.ndarray:
+    region = np.zeros((w, w), dtype=bool)
+    region[:k] = True
+    region[:, :k] = True
+    return region
+
+
+def _tied(cp: np.ndarray, cb: np.ndarray, fp: np.ndarray, fb: np.ndarray) -> np.ndarray:
+    """Context points whose nearest feature in one of their buckets is not unique."""
+    tied = np.zeros(len(cp), dtype=bool)
+    for i in range(len(cp)):
+        for step in (0, -1, 1):
+            sel = fb == (cb[i] + step) % 4
+            if sel.sum() >= 2:
+                d = np.sort(np.hypot(*(fp[sel] - cp[i]).T))
+                tied[i] |= d[1] - d[0] < 1e-9
+    return tied
+
+
+def test_buckets_and_tangent_differences_known_answers():
+    deg = np.radians([0.0, 22.0, 23.0, 45.0, 67.0, 68.0, 90.0, -90.0, -67.0, -45.0, -23.0, -22.0, 180.0])
+    assert orientation_bucket(deg).tolist() == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 0, 0]
+    t = tangent_difference(np.radians([10.0, 0.0, 80.0]), np.radians([10.0 + 180.0, 90.0, -80.0]))
+    np.testing.assert_allclose(t, [0.0, np.sqrt(2.0), 2 * np.sin(np.radians(10.0))], atol=1e-12)
+
+
+def test_bucketed_cost_equals_the_brute_force_reference_on_random_feature_sets():
+    rng = np.random.default_rng(7)
+    H = W = 24
+    w = 10
+    region = _l_region(w, 3)
+    compared = points_compared = 0
+    for _ in range(60):
+        index = build_feature_index(*_random_features(rng, (H, W), 0.08))
+        context = context_features(*_random_features(rng, (w, w), 0.15), region)
+        off = np.array([rng.integers(0, H - w + 1), rng.integers(0, W - w + 1)])
+        fp = np.stack([index.rows - off[0], index.cols - off[1]], axis=1)
+        cp = np.stack([context.rows, context.cols], axis=1)
+        inside = (fp[:, 0] >= 0) & (fp[:, 0] < w) & (fp[:, 1] >= 0) & (fp[:, 1] < w)
+        in_region = inside.copy()
+        in_region[inside] = region[fp[inside, 0], fp[inside, 1]]
+        penalty = unmatched_penalty(index.shape, 0.1)
+        tied = _tied(cp, context.bucket, fp, index.bucket)
+        # W_f point by point (NumPy path) wherever the nearest features are unique
+        match, g = match_features(context, index, off)
+        ref_match, ref_g = match_features_reference(cp, context.tangent, fp, index.tangent, penalty=penalty)
+        np.testing.assert_array_equal(match[~tied], ref_match[~tied])
+        np.testing.assert_allclose(g[~tied], ref_g[~tied], rtol=0, atol=1e-9)
+        points_compared += int((~tied).sum())
+        # eq 2 (numba kernel) on the trials without ties
+        if not tied.any():
+            ref = matching_cost_reference(cp, context.tangent, fp, index.tangent, in_region, penalty=penalty)
+            assert matching_cost(context, index, off) == pytest.approx(ref, abs=1e-9)
+            compared += 1
+    assert compared >= 15 and points_compared >= 300
+
+
+def test_batched_costs_equal_single_costs():
+    rng = np.random.default_rng(3)
+    index = build_feature_index(*_random_features(rng, (40, 40), 0.1))
+    context = context_features(*_random_features(rng, (16, 16), 0.1), _l_region(16, 4))
+    offsets = np.stack(np.meshgrid(np.arange(25), np.arange(25), indexing="ij"), -1).reshape(-1, 2)
+    batch = matching_costs(context, index, offsets)
+    for k in (0, 7, 300, 624):
+        assert batch[k] == pytest.approx(matching_cost(context, index, offsets[k]), abs=1e-12)
+
+
+def test_identical_features_cost_zero_and_correspond_to_themselves():
+    rng = np.random.default_rng(5)
+    mask, tangent = _random_features(rng, (64, 64), 0.1)
+    index = build_feature_index(mask, tangent)
+    region = _l_region(32, 8)
+    window = (slice(20, 52), slice(12, 44))
+    context = context_features(mask[window], tangent[window], region)
+    assert context.count > 0
+    assert matching_cost(context, index, (20, 12)) == 0.0
+    assert matching_cost(context, index, (21, 12)) > 0.0
+    pairs = feature_correspondences(mask[window], tangent[window], mask[window], tangent[window], region)
+    assert pairs.count == context.count
+    np.testing.assert_array_equal(pairs.sources, pairs.targets)
+
+
+def test_correspondences_follow_a_shifted_line_one_to_one():
+    mask = np.zeros((24, 24), dtype=bool)
+    mask[6, :] = True
+    tangent = np.where(mask, 0.0, np.nan)
+    patch_mask = np.roll(mask, 2, axis=0)  # the patch's line is 2 rows lower
+    patch_tangent = np.where(patch_mask, 0.0, np.nan)
+    extra = mask.copy()
+    extra[7, :] = True  # a doubled context line: both rows map onto the same patch pixels
+    pairs = feature_correspondences(
+        extra, np.where(extra, 0.0, np.nan), patch_mask, np.where(patch_mask, 0.0, np.nan)
+    )
+    assert pairs.count == 24  # one-to-one: each patch pixel used once
+    assert len({tuple(p) for p in pairs.sources}) == 24
+    np.testing.assert_array_equal(pairs.targets[:, 0], 7.0)  # the nearer context row wins
+    np.testing.assert_array_equal(pairs.sources[:, 0], 8.0)
+    np.testing.assert_array_equal(pairs.sources[:, 1], pairs.targets[:, 1])
+    # perpendicular tangents are never matched (bucket l + 2)
+    vertical = feature_correspondences(mask, np.where(mask, np.pi / 2, np.nan), patch_mask, patch_tangent)
+    assert vertical.count == 0
+    assert feature_correspondences(mask, tangent, patch_mask, patch_tangent, max_distance=1.0).count == 0
+
+
+def test_candidate_cost_is_well_under_a_millisecond():
+    rng = np.random.default_rng(11)
+    index = build_feature_index(*_random_features(rng, (128, 128), 0.1))
+    context = context_features(*_random_features(rng, (64, 64), 0.1), _l_region(64, 11))
+    offsets = np.stack(np.meshgrid(np.arange(65), np.arange(65), indexing="ij"), -1).reshape(-1, 2)
+    matching_costs(context, index, offsets[:2])  # compile / load the cached kernel
+    start = time.process_time()
+    matching_costs(context, index, offsets)
+    per_candidate = (time.process_time() - start) / len(offsets)
+    assert per_candidate < 1e-3
+
+
+def test_bad_inputs_are_named():
+    mask = np.zeros((16, 16), dtype=bool)
+    mask[4, :] = True
+    tangent = np.where(mask, 0.0, np.nan)
+    index = build_feature_index(mask, tangent)
+    context = context_features(mask[:8, :8], tangent[:8, :8])
+    with pytest.raises(InvalidParameter, match="tau"):
+        matching_cost(context, index, (0, 0), tau=-1.0)
+    with pytest.raises(InvalidParameter, match="beta"):
+        matching_cost(context, index, (0, 0), beta=float("nan"))
+    with pytest.raises(InvalidParameter, match=r"offsets.*inside"):
+        matching_cost(context, index, (9, 0))
+    with pytest.raises(InvalidInput, match="boolean"):
+        build_feature_index(mask.astype(np.uint8), tangent)
+    with pytest.raises(InvalidInput, match="finite tangent"):
+        build_feature_index(mask, np.full((16, 16), np.nan))
+    with pytest.raises(InvalidInput, match="region"):
+        context_features(mask, tangent, np.ones((4, 4), dtype=bool))
+    with pytest.raises(InvalidParameter, match="max_distance"):
+        feature_correspondences(mask, tangent, mask, tangent, max_distance=-1)
