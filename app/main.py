@@ -17,6 +17,7 @@ from fastapi.staticfiles import StaticFiles
 from app.api.routes import health, jobs, methods, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
+from app.security import SecurityHeadersMiddleware
 from app.service import Service
 from jobs.config import Settings
 from synth import __version__
@@ -45,6 +46,7 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     )
     app.state.service = service
     app.add_middleware(BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes)
+    app.add_middleware(SecurityHeadersMiddleware)
     install_error_handlers(app)
     for module in (jobs, methods, sweeps, health):
         app.include_router(module.router)

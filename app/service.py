@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import random
 import threading
 import time
@@ -26,6 +27,7 @@ from jobs.store import JobRecord, JobStore
 from synth import __version__ as synth_version
 from synth.api import MethodSpec, check_inputs
 from synth.errors import InvalidParameter
+from synth.io import FORMAT_FILES, sniff_format
 from synth.io.limits import MAX_SIDE, MIN_SIDE, check_output_size
 from synth.params import validate_params
 from synth.pipeline import load_inputs
@@ -139,7 +141,11 @@ class Service:
             method=method,
             params={**model.model_dump(mode="json"), **size},
             seed=int(seed),
-            inputs={role: (u.filename or role, u.data) for role, u in by_role.items()},
+            # stored under a name from the sniffed format, never the client's (no evil.html)
+            inputs={
+                role: (f"{role}.{FORMAT_FILES[sniff_format(u.data) or 'PNG'][0]}", u.data)
+                for role, u in by_role.items()
+            },
         )
 
     def _validate_size(self, spec: MethodSpec, size: dict[str, Any]) -> dict[str, int]:
@@ -302,14 +308,36 @@ class BrokerUnavailable(RuntimeError):
 
 
 def _parse_json(value: str | dict, field: str) -> Any:
+    """Strict JSON: ``NaN``, ``Infinity`` and numbers beyond float range (``1e400``) are refused,
+    naming the field (they would pass some parameter bounds and break the job record)."""
     if isinstance(value, dict):
-        return value
-    try:
-        return json.loads(value or "{}")
-    except json.JSONDecodeError as exc:
-        raise InvalidParameter(
-            field, value[:80], f"is not valid JSON ({exc.msg} at position {exc.pos})"
-        ) from None
+        document = value
+    else:
+        try:
+            document = json.loads(value or "{}", parse_constant=_no_constant)
+        except json.JSONDecodeError as exc:
+            raise InvalidParameter(
+                field, value[:80], f"is not valid JSON ({exc.msg} at position {exc.pos})"
+            ) from None
+        except ValueError as exc:
+            raise InvalidParameter(field, value[:80], str(exc)) from None
+    _check_finite(document, field)
+    return document
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number JSON allows; give a finite number")
+
+
+def _check_finite(value: Any, field: str) -> None:
+    if isinstance(value, float) and not math.isfinite(value):
+        raise InvalidParameter(field, str(value), "must be a finite number")
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _check_finite(item, f"{field}.{key}" if field != "params" else str(key))
+    elif isinstance(value, list):
+        for item in value:
+            _check_finite(item, field)
 
 
 def _parse_params(value: str | dict) -> dict[str, Any]:

@@ -6,6 +6,7 @@ fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints.
 
 from synth.io.atomic import atomic_write_bytes, atomic_write_json
 from synth.io.images import (
+    FORMAT_FILES,
     SUPPORTED_FORMATS,
     ImageSource,
     LoadMode,
@@ -15,6 +16,7 @@ from synth.io.images import (
     sample_bits,
     save_image,
     save_volume,
+    sniff_format,
     to_uint,
 )
 from synth.io.limits import (
@@ -30,6 +32,7 @@ __all__ = [
     "DEFAULT_MAX_OUTPUT",
     "DEFAULT_MAX_PIXELS",
     "DEFAULT_MAX_VOXELS",
+    "FORMAT_FILES",
     "MAX_ASPECT_RATIO",
     "MAX_SIDE",
     "MIN_SIDE",
@@ -44,5 +47,6 @@ __all__ = [
     "sample_bits",
     "save_image",
     "save_volume",
+    "sniff_format",
     "to_uint",
 ]

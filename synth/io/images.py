@@ -44,6 +44,7 @@ from synth.io.limits import (
 )
 
 __all__ = [
+    "FORMAT_FILES",
     "SUPPORTED_FORMATS",
     "ImageSource",
     "LoadMode",
@@ -56,6 +57,12 @@ __all__ = [
     "to_uint",
 ]
 
+#: File extension and media type of each format, for storing and serving uploads.
+FORMAT_FILES: dict[str, tuple[str, str]] = {
+    "PNG": ("png", "image/png"),
+    "TIFF": ("tiff", "image/tiff"),
+    "JPEG": ("jpg", "image/jpeg"),
+}
 #: The formats the loaders accept, as Pillow names them (MPO is Pillow's name for a JPEG that
 #: carries extra pictures, as some cameras write).
 SUPPORTED_FORMATS = ("PNG", "TIFF", "JPEG")
@@ -163,7 +170,7 @@ def load_image(
     limit = resolve_limit("max_pixels", max_pixels, "TEXSYNTH_MAX_PIXELS", DEFAULT_MAX_PIXELS)
     data, label = _read_source(source, name, default_name="image")
     image, fallback_reason = None, None
-    if _sniff(data) == "TIFF":
+    if sniff_format(data) == "TIFF":
         image, fallback_reason = _decode_tiff_image(data, label, limit)
     if image is None:
         image = _decode_with_pillow(data, label, limit, tiff_reason=fallback_reason)
@@ -207,7 +214,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
     """
     limit = resolve_limit("max_voxels", max_voxels, "TEXSYNTH_MAX_VOXELS", DEFAULT_MAX_VOXELS)
     data, label = _read_source(source, name, default_name="volume")
-    fmt = _sniff(data)
+    fmt = sniff_format(data)
     if fmt != "TIFF":
         what = f"a {fmt} image" if fmt else "not a TIFF file"
         raise UnsupportedFormat(label, f"{what}: volumes are read from multi-page TIFF stacks")
@@ -444,7 +451,7 @@ def sample_bits(source: ImageSource, *, name: str | None = None) -> int:
     32. Used to refuse per-plane exemplars of different depths, whose grey levels would not compare.
     """
     data, label = _read_source(source, name, default_name="image")
-    if _sniff(data) == "TIFF":
+    if sniff_format(data) == "TIFF":
         try:
             with tifffile.TiffFile(io.BytesIO(data)) as tif:
                 return int(tif.pages.first.bitspersample)
@@ -502,8 +509,12 @@ def _read_source(source: ImageSource, name: str | None, *, default_name: str) ->
     return data, label
 
 
-def _sniff(data: bytes) -> str | None:
-    """The allowed format the leading bytes announce, or None."""
+def sniff_format(data: bytes) -> str | None:
+    """The format (``'PNG'``, ``'TIFF'``, ``'JPEG'``) the leading bytes announce, or None.
+
+    Judged from the bytes, never from a file name or a client's content type: the service stores
+    and serves uploads by this (issue 14: an ``evil.html`` upload must not come back as a page).
+    """
     for magic, fmt in _MAGIC.items():
         if data.startswith(magic):
             return fmt
@@ -625,14 +636,14 @@ def _decode_with_pillow(data: bytes, label: str, max_pixels: int, *, tiff_reason
     except UnidentifiedImageError:
         if tiff_reason:
             raise UnsupportedFormat(label, f"cannot decode this TIFF ({tiff_reason})") from None
-        announced = _sniff(data)
+        announced = sniff_format(data)
         if announced:
             raise InvalidInput(
                 label, f"corrupt or truncated {announced} data (the header cannot be read)"
             ) from None
         raise UnsupportedFormat(label, f"not an image in a supported format ({_SUPPORTED_TEXT})") from None
     except _DECODE_ERRORS as exc:
-        what = fmt or _sniff(data) or "image"
+        what = fmt or sniff_format(data) or "image"
         raise InvalidInput(label, f"corrupt or truncated {what} data ({_describe(exc)})") from None
 
 

@@ -116,3 +116,33 @@ class TestRejected:
             data={"method": "test-blur", "grid": json.dumps({"steps": [1, 0]})},
         )
         assert r.status_code == 422 and r.json()["field"] == "grid.steps"
+
+
+@pytest.mark.usefixtures("nothing_queued")
+class TestNonFiniteAndHuge:
+    """Requests that gave 500s (issue 14, item 4) answer 4xx and name the field."""
+
+    @pytest.mark.parametrize(
+        ("raw", "field", "detail"),
+        [
+            ('{"sigma": NaN}', "params", "NaN is not a number JSON allows"),
+            ('{"sigma": Infinity}', "params", "Infinity is not a number JSON allows"),
+            ('{"sigma": 1e400}', "sigma", "must be a finite number"),
+        ],
+    )
+    def test_non_finite_params_422(self, embedded, exemplar_png, raw, field, detail):
+        r = _post(embedded, exemplar_png, method="test-blur", params=raw)
+        assert r.status_code == 422, r.text
+        assert r.json()["field"] == field and detail in r.json()["detail"]
+
+    def test_non_finite_sweep_grid_422(self, embedded, exemplar_png):
+        r = httpx.post(
+            embedded.url + "/api/sweeps",
+            files={"exemplar": ("e.png", exemplar_png, "image/png")},
+            data={"method": "test-blur", "grid": '{"sigma": [1.0, NaN]}'},
+        )
+        assert r.status_code == 422 and r.json()["field"] == "grid"
+
+    def test_huge_offset_422(self, embedded):
+        r = httpx.get(embedded.url + "/api/jobs", params={"offset": 2**63})
+        assert r.status_code == 422 and r.json()["field"] == "offset"

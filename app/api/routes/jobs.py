@@ -14,7 +14,7 @@ from app.api.deps import ServiceDep
 from app.schemas import ErrorPublic, JobPublic, JobsPublic
 from app.service import Upload
 from jobs.store import STATES
-from synth.io import image_to_png_bytes, load_volume
+from synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
@@ -86,7 +86,7 @@ def list_jobs(
     service: ServiceDep,
     state: Annotated[str | None, Query(description=f"one of {', '.join(STATES)}")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
 ) -> dict:
     """Jobs, newest first."""
     if state is not None and state not in STATES:
@@ -170,7 +170,11 @@ def get_input(service: ServiceDep, job_id: str, role: str) -> FileResponse:
     job = _job(service, job_id)
     if role not in job.inputs:
         raise HTTPException(404, f"job {job_id} has no {role!r} input; inputs: {', '.join(job.inputs)}")
-    return FileResponse(service.store.job_dir(job_id) / "inputs" / job.inputs[role])
+    path = service.store.job_dir(job_id) / "inputs" / job.inputs[role]
+    with open(path, "rb") as fh:  # the type from the bytes, whatever name an older record kept
+        fmt = sniff_format(fh.read(16))
+    media_type = FORMAT_FILES[fmt][1] if fmt else "application/octet-stream"
+    return FileResponse(path, media_type=media_type)
 
 
 @router.get("/{job_id}/preview.png", responses={404: {"model": ErrorPublic}})
