@@ -13,6 +13,8 @@ BENCHMARKS = (
     "benchmarks.bench_evaluate",
     "benchmarks.bench_synthesis",
     "benchmarks.bench_arbitrary_shape",
+    "benchmarks.bench_patch",
+    "benchmarks.bench_solid",
     "benchmarks.bench_service",
     "benchmarks.claim_tensor_constrained",
 )

@@ -31,9 +31,18 @@ from synth.evaluate.measures import (
     to_json_types,
     window_sigma,
 )
+from synth.evaluate.patches import (
+    COPY_PATCH,
+    COPY_THRESHOLD,
+    copy_map,
+    copy_share,
+    seam_visibility,
+)
 
 __all__ = [
     "COHERENCE_BINS",
+    "COPY_PATCH",
+    "COPY_THRESHOLD",
     "GREY_BINS",
     "HIST_EPSILON",
     "ORIENTATION_BINS",
@@ -42,6 +51,8 @@ __all__ = [
     "WINDOW",
     "as_grey",
     "compare_s2",
+    "copy_map",
+    "copy_share",
     "correlation_length",
     "evaluate_pair",
     "evaluate_volume",
@@ -51,6 +62,7 @@ __all__ = [
     "level_cut_s2",
     "moments",
     "otsu_threshold",
+    "seam_visibility",
     "to_json_types",
     "two_point_correlation",
     "volume_s2",

@@ -64,11 +64,21 @@ def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list
     return names
 
 
-def _render_extra(arr: np.ndarray) -> np.ndarray | None:
-    """A viewable image of an extra map: grey/RGB rescaled to [0, 1]; a 2-channel map (e.g. the
-    source coordinates of each pixel) as red = first, green = second channel; ``None`` otherwise."""
+#: Extra maps rendered on a fixed scale ``(black, white)`` instead of their own min-max, so that maps of
+#: different runs compare: ``copy_map`` is the RMS distance to the nearest exemplar patch
+#: (:func:`synth.evaluate.copy_map`): black = verbatim copy, white = 0.05 or more away.
+FIXED_RANGES: dict[str, tuple[float, float]] = {"copy_map": (0.0, 0.05)}
+
+
+def _render_extra(arr: np.ndarray, value_range: tuple[float, float] | None = None) -> np.ndarray | None:
+    """A viewable image of an extra map: grey/RGB rescaled to [0, 1] (from ``value_range`` when given,
+    else its own min-max); a 2-channel map (e.g. the source coordinates of each pixel) as red = first,
+    green = second channel; ``None`` otherwise."""
     if not np.isfinite(arr).all() or arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (2, 3)):
         return None
+    if value_range is not None:
+        lo_v, hi_v = value_range
+        return np.clip((arr - lo_v) / (hi_v - lo_v), 0.0, 1.0).astype(np.float32)
     if arr.ndim == 3 and arr.shape[2] == 2:
         arr = np.concatenate([arr, np.zeros_like(arr[..., :1])], axis=2)
     lo, hi = arr.min(axis=(0, 1)), arr.max(axis=(0, 1))
@@ -144,7 +154,7 @@ def write_artifacts(
     for key, extra in sorted(result.extras.items()):
         if key in ("coherence", "orientation"):  # already rendered above, with legends
             continue
-        rendered = _render_extra(np.asarray(extra, dtype=np.float32))
+        rendered = _render_extra(np.asarray(extra, dtype=np.float32), FIXED_RANGES.get(key))
         if rendered is not None:
             save_image(folder / f"{key}.png", rendered)
             names.append(f"{key}.png")

@@ -1,0 +1,149 @@
+"""Measures of patch-based outputs: seam visibility and verbatim copies.
+
+- **Seam visibility** (:func:`seam_visibility`): the mean squared grey-level difference across the patch
+  boundaries (vertical differences in the horizontal overlap strips, horizontal differences in the
+  vertical ones, the strip and the pixel pair just before it), divided by the same mean over the pixel pairs
+  outside the strips. 1 = boundaries look like the interior; a visible seam raises it. The boundaries come
+  from the layout a patch method reports in ``Result.stats['layout']``
+  (:meth:`synth.patch.layout.PatchLayout.describe`).
+- **Verbatim copies** (:func:`copy_map`): for each output pixel, the RMS grey-level distance (per pixel,
+  [0, 1] units) from the ``p x p`` patch around it to the nearest exemplar patch; :func:`copy_share` is the
+  share of pixels below a small threshold (:data:`COPY_THRESHOLD`). The nearest patch is found in the
+  first :data:`PCA_DIMS` principal components of the exemplar's patches with a k-d tree
+  (:class:`scipy.spatial.cKDTree`, :data:`CANDIDATES` candidates), then its exact distance is computed: an
+  exact copy (distance 0) is always found, and any other distance is an upper bound of the true one. Large
+  outputs are measured on a grid of stride ``s`` (at most :data:`MAX_QUERIES` patches) and each pixel takes
+  its nearest grid value. Colour images are measured on their grey (BT.601) levels.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.spatial import cKDTree
+
+from synth.colour import to_grey
+from synth.errors import InvalidInput, InvalidParameter
+
+__all__ = [
+    "CANDIDATES",
+    "COPY_PATCH",
+    "COPY_THRESHOLD",
+    "MAX_QUERIES",
+    "PCA_DIMS",
+    "copy_map",
+    "copy_share",
+    "seam_visibility",
+]
+
+#: Side of the patches compared by :func:`copy_map`, pixels.
+COPY_PATCH = 7
+#: RMS distance below which a pixel's patch counts as a verbatim copy (about 2.5 grey levels of 255).
+COPY_THRESHOLD = 0.01
+#: Principal components of the k-d tree search.
+PCA_DIMS = 8
+#: Candidates per query whose exact distance is computed.
+CANDIDATES = 2
+#: At most this many output patches are compared (a stride is chosen above it).
+MAX_QUERIES = 128 * 128
+
+
+def _grey(image: np.ndarray, role: str) -> np.ndarray:
+    arr = np.asarray(image)
+    if arr.ndim == 3 and arr.shape[2] == 3:
+        arr = to_grey(arr, np.float64)
+    if arr.ndim != 2:
+        raise InvalidInput(role, f"expected a grey (H, W) or RGB (H, W, 3) image, got shape {arr.shape}")
+    return arr.astype(np.float64, copy=False)
+
+
+def seam_visibility(image: np.ndarray, layout: dict[str, Any]) -> dict[str, float]:
+    """Gradient energy across patch boundaries over the interior's.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, 3)
+        A patch method's output.
+    layout : dict
+        ``Result.stats['layout']``: ``overlap``, ``seam_rows``, ``seam_cols``.
+
+    Returns
+    -------
+    dict
+        ``ratio`` (boundary / interior), ``boundary`` and ``interior`` mean squared differences.
+    """
+    grey = _grey(image, "image")
+    overlap = int(layout["overlap"])
+    dy = np.diff(grey, axis=0) ** 2  # dy[r] = pair (r, r + 1)
+    dx = np.diff(grey, axis=1) ** 2
+    in_y = np.zeros(dy.shape[0], dtype=bool)
+    for r in layout["seam_rows"]:
+        in_y[max(0, r - 1) : min(dy.shape[0], r + max(overlap, 1))] = True
+    in_x = np.zeros(dx.shape[1], dtype=bool)
+    for c in layout["seam_cols"]:
+        in_x[max(0, c - 1) : min(dx.shape[1], c + max(overlap, 1))] = True
+    boundary = np.concatenate([dy[in_y].ravel(), dx[:, in_x].ravel()])
+    interior = np.concatenate([dy[~in_y].ravel(), dx[:, ~in_x].ravel()])
+    b = float(boundary.mean()) if boundary.size else float("nan")
+    i = float(interior.mean()) if interior.size else float("nan")
+    return {"ratio": b / i if i > 0 else float("nan"), "boundary": b, "interior": i}
+
+
+def copy_map(
+    output: np.ndarray,
+    exemplar: np.ndarray,
+    patch: int = COPY_PATCH,
+    max_queries: int = MAX_QUERIES,
+) -> np.ndarray:
+    """RMS distance from the patch around each output pixel to its nearest exemplar patch.
+
+    Parameters
+    ----------
+    output, exemplar : ndarray, shape (H, W) or (H, W, 3)
+        Images in [0, 1] (colour is compared on grey levels).
+    patch : int
+        Side of the compared patches.
+    max_queries : int
+        At most this many output patches are compared; a stride is used beyond it.
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W)
+        0 where the output copies the exemplar verbatim; larger is further from any exemplar patch.
+    """
+    out, ex = _grey(output, "output"), _grey(exemplar, "exemplar")
+    if patch < 1 or patch > min(*ex.shape, *out.shape):
+        raise InvalidParameter(
+            "patch", patch, f"must be between 1 and the images' smallest side ({ex.shape})"
+        )
+    ex_patches = sliding_window_view(ex, (patch, patch)).reshape(-1, patch * patch)
+    mean = ex_patches.mean(axis=0)
+    centred = ex_patches - mean
+    dims = min(PCA_DIMS, patch * patch, len(ex_patches))
+    _, vecs = np.linalg.eigh(centred.T @ centred)  # principal axes, ascending eigenvalues
+    basis = np.ascontiguousarray(vecs[:, ::-1][:, :dims])
+    tree = cKDTree(centred @ basis)
+    valid = (out.shape[0] - patch + 1, out.shape[1] - patch + 1)
+    stride = max(1, int(np.ceil(np.sqrt(valid[0] * valid[1] / max_queries))))
+    ys, xs = np.arange(0, valid[0], stride), np.arange(0, valid[1], stride)
+    windows = sliding_window_view(out, (patch, patch))[ys][:, xs].reshape(-1, patch * patch)
+    k = min(CANDIDATES, len(ex_patches))
+    dist = np.empty(len(windows))
+    for start in range(0, len(windows), 8192):
+        q = windows[start : start + 8192]
+        _, idx = tree.query((q - mean) @ basis, k=k)
+        idx = idx.reshape(len(q), k)
+        d = ((ex_patches[idx] - q[:, None, :]) ** 2).mean(axis=2)
+        dist[start : start + len(q)] = np.sqrt(d.min(axis=1))
+    grid = dist.reshape(len(ys), len(xs))
+    half = patch // 2
+    iy = np.clip(np.rint((np.arange(out.shape[0]) - half) / stride).astype(int), 0, len(ys) - 1)
+    ix = np.clip(np.rint((np.arange(out.shape[1]) - half) / stride).astype(int), 0, len(xs) - 1)
+    return grid[np.ix_(iy, ix)].astype(np.float32)
+
+
+def copy_share(distances: np.ndarray, threshold: float = COPY_THRESHOLD) -> float:
+    """Share of pixels of a :func:`copy_map` closer than ``threshold`` to an exemplar patch."""
+    return float(np.mean(np.asarray(distances) < threshold))

@@ -1,0 +1,290 @@
+"""Conditional locally Gaussian patch synthesis (Raad, Desolneux & Morel 2015): LG, CLG and RCLG.
+
+Patches of side ``w`` are synthesized in raster order with overlap (sec. 2, Fig. 1;
+:class:`synth.patch.layout.PatchLayout`). For each new patch, the ``N`` exemplar patches nearest to the
+output on the overlap (L2, eq. 1 and the text below eq. 2; FFT correlation,
+:class:`synth.patch.search.PatchSearcher`) give ``mu`` and ``Sigma`` (eq. 1); the patch is then
+
+- ``model='lg'``: a draw from ``N(mu, Sigma)``, ignoring the overlap (the LG model of Raad et al. 2014);
+- ``model='clg'``: the conditional mean given the overlap ``y0`` (eq. 4), with ``Sigma + sigma^2 I``;
+- ``model='rclg'``: the minimiser of eq. 5, closed form eq. 7 with ``G = Sigma + sigma^2 I``,
+
+solved in the ``N``-dimensional span of the neighbours (:mod:`synth.patch.gaussian`: one ``N x N``
+Cholesky per patch, no explicit inverse). Colour patches stack the three channels in one vector. With
+``blending='boundary-cut'`` the patch is stitched along the Efros-Freeman minimum-error cut of the overlap
+(the paper's Fig. 3); with ``'none'`` it is pasted over the overlap (Fig. 2).
+
+References
+----------
+L. Raad, A. Desolneux, J.-M. Morel, "Conditional Gaussian models for texture synthesis", SSVM 2015,
+LNCS 9087, pp. 474-485, doi:10.1007/978-3-319-18461-6_38. L. Raad, A. Desolneux, J.-M. Morel, "Locally
+Gaussian exemplar-based texture synthesis", ICIP 2014 (the LG model). A. A. Efros, W. T. Freeman, "Image
+quilting for texture synthesis and transfer", SIGGRAPH 2001 (the boundary cut).
+
+Departures
+----------
+- ``sigma`` and ``theta`` have no values in the paper ("a low value" for sigma); the defaults (0.05 and
+  0.05, grey levels in [0, 1]) are ours, measured in docs/patch.md: with sigma = 0.01 CLG extrapolates
+  (``A1 c`` with large ``c``) into saturated garbage on the brick exemplar; theta above 0.1 pulls the
+  overlap toward the model mean and moves the seam to the overlap's outer edge.
+- The overlap is not stated in the paper (Fig. 1 shows it); the default is a quarter of the patch.
+- The first patch has no overlap to condition on: it is an exemplar patch drawn uniformly (for every model).
+- ``estimate='draw'`` (not the paper; its sec. 3.1 proposes it): CLG/RCLG patches drawn from the conditional
+  law (:func:`synth.patch.gaussian.rclg_draw`) instead of its mode. Measured in docs/patch.md: it barely
+  differs from the mode, since ``k >> N`` overlap values pin the ``N`` coefficients of the model.
+- Gaussian patches can leave [0, 1]; the output is clipped at the end (``stats['clipped_share']``).
+- ``scales > 1`` (the paper's sec. 4 outlook, after Raad et al., JMIV 2016, in a simpler form): the
+  exemplar is reduced ``scales - 1`` times by 2 (anti-aliased), the coarsest output synthesized as above,
+  and each finer scale's neighbours chosen on the overlap *and* on the whole patch of the coarser output
+  upsampled (against the coarser exemplar upsampled alike; the two parts weighted equally per pixel
+  count); the Gaussian model and the conditioning are those of a single scale. Measured in docs/patch.md:
+  in this form it does not help (it smooths further).
+- Measured limits (docs/patch.md): on textures whose overlap says little about the rest of a patch (gravel,
+  grass, HRTEM soot at w = 30, N = 20) CLG and RCLG fall toward the neighbours' mean patch after patch and
+  lose about half the grey-level spread; the paper reports the smoothing ("at the cost of losing finer
+  details").
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, ValidationInfo, field_validator
+from skimage.transform import rescale, resize
+
+from synth.api import MethodSpec, Progress, Result, register
+from synth.errors import InvalidParameter
+from synth.evaluate.patches import copy_map, copy_share
+from synth.methods.common import checked_progress
+from synth.methods.quilting import check_patch_geometry
+from synth.params import MethodParams
+from synth.patch.cut import boundary_cut_mask, error_surface
+from synth.patch.gaussian import GaussianPatchModel, lg_patch, rclg_draw, rclg_patch
+from synth.patch.layout import PatchLayout, overlap_mask
+from synth.patch.search import PatchSearcher, k_nearest
+
+__all__ = ["GaussianPatchParams", "run_gaussian_patch", "synthesize_gaussian_patches"]
+
+
+class GaussianPatchParams(MethodParams):
+    """Parameters of the locally Gaussian patch models (Raad, Desolneux & Morel 2015)."""
+
+    model: Literal["lg", "clg", "rclg"] = Field(
+        "rclg",
+        description="'lg': a draw from N(mu, Sigma), overlap ignored; 'clg': conditional mean given the "
+        "overlap (eq. 4); 'rclg': regularised conditional (eq. 7), the overlap may move by about theta.",
+    )
+    # (w, N) = (30, 20): the first example of the paper's Figs 2 and 3 (w 10-40, N 10-50 in the paper).
+    patch_size: int = Field(30, ge=4, le=128, description="Side w of the square patches, pixels.")
+    overlap: int | None = Field(
+        None,
+        ge=1,
+        le=127,
+        description="Overlap between neighbouring patches, pixels; default a quarter of w.",
+    )
+    neighbours: int = Field(
+        20, ge=1, le=500, description="N: exemplar patches nearest on the overlap that define mu and Sigma."
+    )
+    # The paper gives no value for sigma or theta: 0.05 / 0.05 are ours (docs/patch.md: sigma = 0.01 lets
+    # CLG extrapolate into saturated garbage on brick; a larger theta moves the seam to the overlap's edge).
+    sigma: float = Field(
+        0.05,
+        gt=0.0,
+        le=1.0,
+        description="Added noise: the model is N(mu, Sigma + sigma^2 I) (grey levels in [0, 1]).",
+    )
+    theta: float = Field(
+        0.05,
+        ge=0.0,
+        le=10.0,
+        description="RCLG: allowed deviation from the overlap's values (eq. 5); 0 = CLG.",
+    )
+    blending: Literal["none", "boundary-cut"] = Field(
+        "none",
+        description="'none': paste over the overlap (paper, Fig. 2); 'boundary-cut': stitch along the "
+        "Efros-Freeman minimum-error cut (paper, Fig. 3).",
+    )
+    estimate: Literal["mean", "draw"] = Field(
+        "mean",
+        description="CLG/RCLG: 'mean' = the most probable patch (the paper); 'draw' = a random draw from the "
+        "same conditional law (the paper's suggested remedy for its smoothing; docs/patch.md: close to the "
+        "mean when the overlap pins the rank-N model).",
+    )
+    scales: int = Field(
+        1,
+        ge=1,
+        le=4,
+        description="1 = the paper; > 1: coarse to fine, each scale's neighbours chosen also on the coarser "
+        "scale's output.",
+    )
+
+    @field_validator("overlap")
+    @classmethod
+    def _overlap_below_patch(cls, overlap: int | None, info: ValidationInfo) -> int | None:
+        patch = info.data.get("patch_size")
+        if overlap is not None and patch is not None and overlap >= patch:
+            raise ValueError(f"must be smaller than patch_size ({patch})")
+        return overlap
+
+    def resolved_overlap(self) -> int:
+        return self.overlap if self.overlap is not None else max(1, self.patch_size // 4)
+
+
+def _check(exemplar: np.ndarray, params: GaussianPatchParams) -> None:
+    overlap = params.resolved_overlap()
+    h, w = exemplar.shape[:2]
+    for s in range(params.scales):
+        shape = (round(h / 2**s), round(w / 2**s))
+        role = "exemplar" if s == 0 else f"exemplar reduced {2**s} times (scale {s + 1} of {params.scales})"
+        check_patch_geometry(np.empty(shape), params.patch_size, overlap, role)
+        count = (shape[0] - params.patch_size + 1) * (shape[1] - params.patch_size + 1)
+        if params.neighbours > count:
+            raise InvalidParameter(
+                "neighbours",
+                params.neighbours,
+                f"larger than the number of {params.patch_size} x {params.patch_size} patches in the {role} "
+                f"({count})",
+            )
+
+
+def synthesize_gaussian_patches(
+    exemplar: np.ndarray,
+    size: tuple[int, int],
+    params: GaussianPatchParams,
+    rng: np.random.Generator,
+    report=None,
+    guide: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, PatchLayout]:
+    """One scale of the synthesis: ``(H, W, C)`` float64 (unclipped) and its layout.
+
+    ``guide = (exemplar_guide, output_guide)``: images of the same shapes as the exemplar and the output
+    (the coarser scale upsampled) whose whole patch joins the overlap in the neighbour search.
+    """
+    w, overlap = params.patch_size, params.resolved_overlap()
+    ex = exemplar[..., None] if exemplar.ndim == 2 else exemplar
+    channels = ex.shape[2]
+    layout = PatchLayout(size, w, overlap)
+    gh, gw = layout.grown_shape
+    if guide is not None:
+        ex_guide, out_guide = (g[..., None] if g.ndim == 2 else g for g in guide)
+        search_image = np.concatenate([ex, ex_guide], axis=2)
+        out_guide = np.pad(
+            out_guide, ((0, gh - out_guide.shape[0]), (0, gw - out_guide.shape[1]), (0, 0)), mode="reflect"
+        )
+    else:
+        search_image, out_guide = ex, None
+    searcher = PatchSearcher(search_image, w)
+    out = np.zeros((gh, gw, channels), dtype=np.float64)
+    n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
+    masks = {kind: overlap_mask(w, overlap, kind) for kind in ("none", "left", "top", "L")}
+    report_every = max(1, len(layout) // 50)
+    for n, (_, _, y, x, kind) in enumerate(layout.patches()):
+        region = out[y : y + w, x : x + w]
+        mask = masks[kind]
+        if out_guide is None and kind == "none":
+            region[...] = searcher.patch(
+                *np.unravel_index(int(rng.integers(n_pos)), searcher.positions_shape)
+            )
+            continue
+        template = region
+        weights = np.repeat(mask[..., None].astype(np.float64), channels, axis=2)
+        if out_guide is not None:
+            template = np.concatenate([region, out_guide[y : y + w, x : x + w]], axis=2)
+            share = mask.sum() / mask.size if kind != "none" else 1.0
+            weights = np.concatenate([weights, np.full((w, w, channels), share)], axis=2)
+        nearest = k_nearest(searcher.ssd(template, weights), params.neighbours)
+        model = GaussianPatchModel.from_patches(searcher.patches(nearest)[..., :channels])
+        if kind == "none":
+            patch = lg_patch(model, rng) if params.model == "lg" else model.mu
+        elif params.model == "lg":
+            patch = lg_patch(model, rng)
+        else:
+            known = np.repeat(mask[..., None], channels, axis=2).ravel()
+            theta = params.theta if params.model == "rclg" else 0.0
+            y0 = region.ravel()[known]
+            if params.estimate == "draw":
+                patch = rclg_draw(model, known, y0, params.sigma, theta, rng)
+            else:
+                patch = rclg_patch(model, known, y0, params.sigma, theta)
+        patch = patch.reshape(w, w, channels)
+        if params.blending == "boundary-cut" and kind != "none":
+            new_mask = boundary_cut_mask(error_surface(region, patch), overlap, kind)
+            region[new_mask] = patch[new_mask]
+        else:
+            region[...] = patch
+        if report is not None and n % report_every == 0:
+            report("patches", n / len(layout))
+    return out[: size[0], : size[1]], layout
+
+
+def run_gaussian_patch(
+    exemplar: np.ndarray,
+    *,
+    size: tuple[int, int],
+    params: GaussianPatchParams,
+    seed: int,
+    progress: Progress,
+    constraint: np.ndarray | None = None,
+) -> Result:
+    _check(exemplar, params)
+    report = checked_progress(progress)
+    start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    size = (int(size[0]), int(size[1]))
+    channel_axis = 2 if exemplar.ndim == 3 else None
+    guide = None
+    out = None
+    layout = None
+    ex_prev = exemplar
+    for s in range(params.scales - 1, -1, -1):
+        factor = 2**s
+        ex_s = (
+            exemplar
+            if s == 0
+            else rescale(exemplar, 1 / factor, anti_aliasing=True, channel_axis=channel_axis)
+        )
+        size_s = (
+            max(params.patch_size, round(size[0] / factor)),
+            max(params.patch_size, round(size[1] / factor)),
+        )
+        if out is not None:
+            ex_coarse = resize(ex_prev, ex_s.shape, order=1, anti_aliasing=False)
+            out_coarse = resize(out, (*size_s, *out.shape[2:]), order=1, anti_aliasing=False)
+            guide = (ex_coarse, out_coarse)
+
+        def level_report(stage: str, fraction: float, s: int = s) -> None:
+            done = params.scales - 1 - s
+            report(f"scale {done + 1}/{params.scales}", (done + fraction) / params.scales)
+
+        out, layout = synthesize_gaussian_patches(ex_s, size_s, params, rng, level_report, guide)
+        ex_prev = ex_s
+    assert out is not None and layout is not None
+    raw = out[..., 0] if exemplar.ndim == 2 else out
+    clipped = float(np.mean((raw < 0) | (raw > 1)))
+    image = np.clip(raw, 0.0, 1.0).astype(np.float32)
+    t_synth = time.perf_counter() - start
+    cmap = copy_map(image, exemplar)
+    report("done", 1.0)
+    return Result(
+        method="gaussian-patch",
+        image=image,
+        params=params.model_dump(),
+        seed=seed,
+        timings={"synthesis": t_synth, "copy_map": time.perf_counter() - start - t_synth},
+        extras={"copy_map": cmap},
+        stats={"layout": layout.describe(), "clipped_share": clipped, "copy_share": copy_share(cmap)},
+    )
+
+
+SPEC = register(
+    MethodSpec(
+        name="gaussian-patch",
+        summary="Locally Gaussian patch synthesis, LG / conditional CLG / regularised RCLG "
+        "(Raad, Desolneux & Morel 2015).",
+        params_model=GaussianPatchParams,
+        run=run_gaussian_patch,
+        paper="Raad, Desolneux & Morel, SSVM 2015",
+    )
+)

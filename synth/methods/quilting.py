@@ -1,0 +1,173 @@
+"""Image quilting (Efros & Freeman 2001): patches in raster order, stitched by a minimum-error cut.
+
+For every patch position of the layout (:class:`synth.patch.layout.PatchLayout`: side ``w``, overlap a
+sixth of it), the masked SSD of the output's overlap (L-shaped, top or left) against every exemplar patch
+is computed by FFT correlation (:class:`synth.patch.search.PatchSearcher`); one patch is chosen uniformly
+at random among those whose error is within ``(1 + tolerance)`` of the best (sec. 2.1: "within 0.1 times
+the error of the best match"), and stitched along the minimum-error boundary cut of the overlap error
+surface (sec. 2.1, dynamic programming; the vertical and horizontal cuts of an L meet at their cheapest
+common point, :mod:`synth.patch.cut`) or, with ``blending='graph-cut'``, along the Kwatra et al. 2003
+graph-cut seam (:mod:`synth.patch.graphcut`).
+
+References
+----------
+A. A. Efros, W. T. Freeman, "Image quilting for texture synthesis and transfer", SIGGRAPH 2001,
+pp. 341-346. V. Kwatra, A. Schödl, I. Essa, G. Turk, A. Bobick, "Graphcut textures: image and video
+synthesis using graph cuts", ACM TOG 22(3), 2003, pp. 277-286 (eq. 1, for ``blending='graph-cut'``).
+
+Departures
+----------
+- The first patch is drawn uniformly among all exemplar patches (the paper: "randomly picked").
+- The output is grown to a whole number of patches and cropped to ``size`` (the paper does not say).
+- The overlap error is the SSD summed over colour channels; exemplar patches wrap nowhere (only patches
+  fully inside the exemplar are candidates).
+- ``copy_map`` (extras) is the verbatim-copy map of :func:`synth.evaluate.copy_map`; ``source_map`` the
+  exemplar position each output pixel was copied from (row, column).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, ValidationInfo, field_validator
+
+from synth.api import MethodSpec, Progress, Result, register
+from synth.errors import InvalidParameter
+from synth.evaluate.patches import copy_map, copy_share
+from synth.methods.common import checked_progress
+from synth.params import MethodParams
+from synth.patch.cut import boundary_cut_mask, error_surface
+from synth.patch.graphcut import graph_cut_mask
+from synth.patch.layout import PatchLayout, overlap_mask
+from synth.patch.search import PatchSearcher, candidates_within
+
+__all__ = ["QuiltingParams", "check_patch_geometry", "run_quilting"]
+
+
+class QuiltingParams(MethodParams):
+    """Parameters of image quilting (Efros & Freeman 2001)."""
+
+    # Efros & Freeman choose the block "big enough to capture the relevant structures"; 32 px suits the
+    # 128 -> 256 exemplars of their figures (and ours).
+    patch_size: int = Field(32, ge=4, le=256, description="Side w of the square patches, pixels.")
+    overlap: int | None = Field(
+        None,
+        ge=1,
+        le=255,
+        description="Overlap between neighbouring patches, pixels; default a sixth of the patch (the paper).",
+    )
+    tolerance: float = Field(
+        0.1,
+        ge=0.0,
+        le=10.0,
+        description="A patch is drawn among those whose overlap error is within (1 + tolerance) of the best.",
+    )
+    blending: Literal["boundary-cut", "graph-cut"] = Field(
+        "boundary-cut",
+        description="'boundary-cut': minimum-error cut by dynamic programming (Efros & Freeman); "
+        "'graph-cut': minimum s-t cut over the overlap (Kwatra et al. 2003).",
+    )
+
+    @field_validator("overlap")
+    @classmethod
+    def _overlap_below_patch(cls, overlap: int | None, info: ValidationInfo) -> int | None:
+        patch = info.data.get("patch_size")
+        if overlap is not None and patch is not None and overlap >= patch:
+            raise ValueError(f"must be smaller than patch_size ({patch})")
+        return overlap
+
+    def resolved_overlap(self) -> int:
+        return self.overlap if self.overlap is not None else max(1, self.patch_size // 6)
+
+
+def check_patch_geometry(exemplar: np.ndarray, patch_size: int, overlap: int, role: str = "exemplar") -> None:
+    """Errors before any work: the patch must fit in the exemplar and the overlap in the patch."""
+    h, w = exemplar.shape[:2]
+    if patch_size > min(h, w):
+        raise InvalidParameter(
+            "patch_size", patch_size, f"larger than the {role} ({h} x {w}); use at most {min(h, w)}"
+        )
+    if overlap >= patch_size:
+        raise InvalidParameter("overlap", overlap, f"must be smaller than patch_size ({patch_size})")
+
+
+def run_quilting(
+    exemplar: np.ndarray,
+    *,
+    size: tuple[int, int],
+    params: QuiltingParams,
+    seed: int,
+    progress: Progress,
+    constraint: np.ndarray | None = None,
+) -> Result:
+    overlap = params.resolved_overlap()
+    check_patch_geometry(exemplar, params.patch_size, overlap)
+    report = checked_progress(progress)
+    start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    w = params.patch_size
+    layout = PatchLayout((int(size[0]), int(size[1])), w, overlap)
+    searcher = PatchSearcher(exemplar, w)
+    ex = searcher.exemplar
+    gh, gw = layout.grown_shape
+    out = np.zeros((gh, gw, ex.shape[2]), dtype=np.float64)
+    source = np.zeros((gh, gw, 2), dtype=np.int32)
+    n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
+    masks = {kind: overlap_mask(w, overlap, kind) for kind in ("left", "top", "L")}
+    offsets = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int32)
+    errors = []
+    report_every = max(1, len(layout) // 50)
+    for n, (_, _, y, x, kind) in enumerate(layout.patches()):
+        region = out[y : y + w, x : x + w]
+        if kind == "none":
+            choice = int(rng.integers(n_pos))
+            new_mask = np.ones((w, w), dtype=bool)
+        else:
+            mask = masks[kind]
+            ssd = searcher.ssd(region, mask)
+            pool = candidates_within(ssd, params.tolerance)
+            choice = int(pool[rng.integers(len(pool))])
+            errors.append(float(ssd.ravel()[choice]) / (mask.sum() * ex.shape[2]))
+        py, px = np.unravel_index(choice, searcher.positions_shape)
+        patch = searcher.patch(py, px)
+        if kind != "none":
+            if params.blending == "graph-cut":
+                new_mask = graph_cut_mask(region, patch, masks[kind])
+            else:
+                new_mask = boundary_cut_mask(error_surface(region, patch), overlap, kind)
+        region[new_mask] = patch[new_mask]
+        source[y : y + w, x : x + w][new_mask] = (offsets + np.array([py, px], dtype=np.int32))[new_mask]
+        if n % report_every == 0:
+            report("quilting", n / len(layout))
+    h, wd = layout.size
+    image = np.clip(out[:h, :wd], 0.0, 1.0).astype(np.float32)
+    image = image[..., 0] if exemplar.ndim == 2 else image
+    t_synth = time.perf_counter() - start
+    cmap = copy_map(image, exemplar)
+    report("done", 1.0)
+    return Result(
+        method="quilting",
+        image=image,
+        params=params.model_dump(),
+        seed=seed,
+        timings={"synthesis": t_synth, "copy_map": time.perf_counter() - start - t_synth},
+        extras={"copy_map": cmap, "source_map": source[:h, :wd]},
+        stats={
+            "layout": layout.describe(),
+            "mean_overlap_error": float(np.mean(errors)) if errors else 0.0,
+            "copy_share": copy_share(cmap),
+        },
+    )
+
+
+SPEC = register(
+    MethodSpec(
+        name="quilting",
+        summary="Image quilting: raster patches stitched along minimum-error cuts (Efros & Freeman 2001).",
+        params_model=QuiltingParams,
+        run=run_quilting,
+        paper="Efros & Freeman, SIGGRAPH 2001",
+    )
+)

@@ -1,0 +1,154 @@
+"""Efros-Freeman minimum-error boundary cut over a patch's overlap (Efros & Freeman 2001, sec. 2.1).
+
+The error surface ``e = ||old - new||^2`` (summed over channels) over a vertical overlap strip (``rows x
+overlap``) is crossed top to bottom by the 8-connected path of least total error (dynamic programming:
+``E(i, j) = e(i, j) + min(E(i-1, j-1), E(i-1, j), E(i-1, j+1))``); pixels left of the path keep the old
+values, the path and the pixels right of it take the new patch's. A horizontal cut is the vertical cut of
+the transposed strip. For an L-shaped overlap, the two cuts meet at the corner pixel where the sum of
+their costs-to-go (counting the shared pixel once) is least, and each is traced from there.
+
+:func:`min_cut_reference` is the plain NumPy DP that the tests compare with the numba kernels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.kernels.options import kernel
+
+__all__ = ["boundary_cut_mask", "cut_cost", "error_surface", "min_cut", "min_cut_reference"]
+
+
+@kernel
+def _cost_to_go_kernel(errors: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+    """``C[i, j]``: least error of an 8-connected path from ``(i, j)`` down to the last row."""
+    rows, cols = errors.shape
+    cost = np.empty((rows, cols), dtype=np.float64)
+    for j in range(cols):
+        cost[rows - 1, j] = errors[rows - 1, j]
+    for i in range(rows - 2, -1, -1):
+        for j in range(cols):
+            best = cost[i + 1, j]
+            if j > 0 and cost[i + 1, j - 1] < best:
+                best = cost[i + 1, j - 1]
+            if j + 1 < cols and cost[i + 1, j + 1] < best:
+                best = cost[i + 1, j + 1]
+            cost[i, j] = errors[i, j] + best
+    return cost
+
+
+@kernel
+def _min_cut_kernel(errors: np.ndarray, row0: int, col0: int) -> np.ndarray:  # pragma: no cover - numba
+    """The least-error 8-connected path from ``(row0, col0)`` to the last row (``col0 < 0``: the best start
+    in ``row0``): ``path[i]`` = its column in row ``i >= row0`` (``-1`` above ``row0``)."""
+    rows, cols = errors.shape
+    cost = _cost_to_go_kernel(errors)
+    path = np.full(rows, -1, dtype=np.int64)
+    j = col0
+    if j < 0:
+        j = 0
+        for c in range(1, cols):
+            if cost[row0, c] < cost[row0, j]:
+                j = c
+    path[row0] = j
+    for i in range(row0 + 1, rows):
+        best = j
+        if j > 0 and cost[i, j - 1] < cost[i, best]:
+            best = j - 1
+        if j + 1 < cols and cost[i, j + 1] < cost[i, best]:
+            best = j + 1
+        j = best
+        path[i] = j
+    return path
+
+
+def min_cut_reference(errors: np.ndarray) -> np.ndarray:
+    """Plain NumPy DP of the vertical minimum-error cut (top-down accumulation, then backtrack).
+
+    Parameters
+    ----------
+    errors : ndarray, shape (rows, cols)
+        Error surface of a vertical overlap strip.
+
+    Returns
+    -------
+    ndarray of int, shape (rows,)
+        The cut's column in every row.
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    rows, cols = e.shape
+    acc = e.copy()
+    for i in range(1, rows):
+        prev = acc[i - 1]
+        left = np.concatenate(([np.inf], prev[:-1]))
+        right = np.concatenate((prev[1:], [np.inf]))
+        acc[i] += np.minimum(np.minimum(left, prev), right)
+    path = np.empty(rows, dtype=np.int64)
+    path[-1] = int(np.argmin(acc[-1]))
+    for i in range(rows - 2, -1, -1):
+        j = path[i + 1]
+        lo, hi = max(0, j - 1), min(cols, j + 2)
+        path[i] = lo + int(np.argmin(acc[i, lo:hi]))
+    return path
+
+
+def min_cut(errors: np.ndarray) -> np.ndarray:
+    """The vertical minimum-error cut of ``errors`` (rows x cols): its column in every row (numba)."""
+    return _min_cut_kernel(np.ascontiguousarray(errors, dtype=np.float64), 0, -1)
+
+
+def cut_cost(errors: np.ndarray, path: np.ndarray) -> float:
+    """Total error along a vertical ``path`` (entries ``< 0`` are skipped)."""
+    rows = np.flatnonzero(np.asarray(path) >= 0)
+    return float(np.asarray(errors, dtype=np.float64)[rows, np.asarray(path)[rows]].sum())
+
+
+def error_surface(old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """``||old - new||^2`` per pixel, summed over channels, float64 ``(h, w)``."""
+    d = np.asarray(old, dtype=np.float64) - np.asarray(new, dtype=np.float64)
+    return (d * d).sum(axis=2) if d.ndim == 3 else d * d
+
+
+def boundary_cut_mask(errors: np.ndarray, overlap: int, kind: str) -> np.ndarray:
+    """Where the new patch wins: boolean ``(w, w)`` mask after the minimum-error boundary cut.
+
+    Parameters
+    ----------
+    errors : ndarray, shape (w, w)
+        ``||old - new||^2`` over the whole patch (only the overlap is read).
+    overlap : int
+        Overlap width.
+    kind : {'none', 'left', 'top', 'L'}
+        Which borders overlap earlier patches.
+
+    Returns
+    -------
+    ndarray of bool, shape (w, w)
+        True where the output takes the new patch (the cut itself included).
+    """
+    e = np.ascontiguousarray(errors, dtype=np.float64)
+    w = e.shape[0]
+    new = np.ones((w, w), dtype=bool)
+    cols = np.arange(w)
+    if kind == "none" or overlap == 0:
+        return new
+    if kind == "left":
+        path = _min_cut_kernel(np.ascontiguousarray(e[:, :overlap]), 0, -1)
+        return cols[None, :] >= path[:, None]
+    if kind == "top":
+        path = _min_cut_kernel(np.ascontiguousarray(e[:overlap, :].T), 0, -1)
+        return cols[:, None] >= path[None, :]
+    # L: vertical strip (w x overlap) and horizontal strip (overlap x w) share the overlap x overlap corner.
+    vert = np.ascontiguousarray(e[:, :overlap])
+    horiz = np.ascontiguousarray(e[:overlap, :].T)  # transposed: rows = patch columns
+    cv = _cost_to_go_kernel(vert)
+    ch = _cost_to_go_kernel(horiz)
+    corner = cv[:overlap, :overlap] + ch[:overlap, :overlap].T - e[:overlap, :overlap]
+    i0, j0 = (int(v) for v in np.unravel_index(int(np.argmin(corner)), corner.shape))
+    pv = _min_cut_kernel(vert, i0, j0)  # rows i0.. : column of the vertical cut
+    ph = _min_cut_kernel(horiz, j0, i0)  # patch columns j0.. : row of the horizontal cut
+    rows = np.arange(w)
+    v_side = np.where(rows[:, None] >= i0, cols[None, :] >= pv[:, None], cols[None, :] >= j0)
+    h_side = np.where(cols[None, :] >= j0, rows[:, None] >= ph[None, :], rows[:, None] >= i0)
+    new &= v_side & h_side
+    return new

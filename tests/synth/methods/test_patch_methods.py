@@ -1,0 +1,165 @@
+"""The patch family end to end: quilting, gaussian-patch (LG/CLG/RCLG), random-phase, and their measures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import fft as sfft
+
+from synth.api import synthesize
+from synth.errors import InvalidParameter
+from synth.evaluate import copy_map, copy_share, seam_visibility
+from synth.methods.random_phase import periodic_component, random_phase_noise
+from synth.patch.layout import PatchLayout
+
+
+def _tile(period: int, reps: int, channels: int = 0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    tile = rng.random((period, period, channels) if channels else (period, period)).astype(np.float32)
+    reps_shape = (reps, reps, 1) if channels else (reps, reps)
+    return tile, np.tile(tile, reps_shape)
+
+
+def _is_shifted_tiling(image: np.ndarray, tile: np.ndarray) -> bool:
+    p = tile.shape[0]
+    h, w = image.shape[:2]
+    for dy in range(p):
+        for dx in range(p):
+            ref = tile[(np.arange(h)[:, None] + dy) % p, (np.arange(w)[None, :] + dx) % p]
+            if np.allclose(image, ref, atol=1e-6):
+                return True
+    return False
+
+
+@pytest.mark.parametrize("channels", [0, 3])
+@pytest.mark.parametrize(
+    ("method", "params"),
+    [
+        ("quilting", {"patch_size": 20, "overlap": 4}),
+        ("quilting", {"patch_size": 20, "overlap": 4, "blending": "graph-cut"}),
+        ("gaussian-patch", {"model": "clg", "patch_size": 20, "overlap": 4, "neighbours": 5}),
+        ("gaussian-patch", {"model": "rclg", "patch_size": 20, "overlap": 4, "neighbours": 5}),
+    ],
+)
+def test_periodic_exemplar_comes_back_shifted(method, params, channels):
+    """Period 8 divides the step 16: every overlap has exact matches, all of the same phase."""
+    tile, ex = _tile(8, 8, channels)
+    out = synthesize(method, ex, size=(70, 90), params=params, seed=3).image
+    assert out.shape == (70, 90, 3) if channels else (70, 90)
+    assert _is_shifted_tiling(out, tile)
+
+
+@pytest.mark.parametrize("channels", [0, 3])
+@pytest.mark.parametrize(
+    ("method", "params"),
+    [
+        ("quilting", {"patch_size": 12}),
+        ("quilting", {"patch_size": 12, "blending": "graph-cut"}),
+        ("gaussian-patch", {"model": "lg", "patch_size": 12, "neighbours": 8}),
+        ("gaussian-patch", {"model": "clg", "patch_size": 12, "neighbours": 8, "blending": "boundary-cut"}),
+        ("gaussian-patch", {"model": "rclg", "patch_size": 12, "neighbours": 8}),
+        ("gaussian-patch", {"model": "rclg", "patch_size": 12, "neighbours": 8, "scales": 2}),
+        ("gaussian-patch", {"model": "rclg", "patch_size": 12, "neighbours": 8, "estimate": "draw"}),
+        ("random-phase", {}),
+    ],
+)
+def test_same_seed_same_bytes_grey_and_colour(method, params, channels):
+    rng = np.random.default_rng(5)
+    ex = rng.random((40, 44, 3) if channels else (40, 44)).astype(np.float32)
+    a = synthesize(method, ex, size=(50, 60), params=params, seed=7)
+    b = synthesize(method, ex, size=(50, 60), params=params, seed=7)
+    c = synthesize(method, ex, size=(50, 60), params=params, seed=8)
+    assert a.image.dtype == np.float32 and a.image.shape == ((50, 60, 3) if channels else (50, 60))
+    assert a.image.min() >= 0.0 and a.image.max() <= 1.0
+    assert a.image.tobytes() == b.image.tobytes()
+    assert a.image.tobytes() != c.image.tobytes()
+    assert a.extras["copy_map"].shape == (50, 60)
+    assert a.params == synthesize(method, ex, size=(50, 60), params=params, seed=7).params
+
+
+@pytest.mark.parametrize(
+    ("method", "params", "match"),
+    [
+        ("quilting", {"patch_size": 48}, "patch_size.*larger than the exemplar"),
+        ("quilting", {"patch_size": 16, "overlap": 16}, "overlap.*must be smaller than patch_size"),
+        ("gaussian-patch", {"patch_size": 48}, "patch_size.*larger than the exemplar"),
+        ("gaussian-patch", {"patch_size": 10, "overlap": 12}, "overlap.*must be smaller than patch_size"),
+        ("gaussian-patch", {"patch_size": 30, "neighbours": 200}, "neighbours.*larger than the number of"),
+        (
+            "gaussian-patch",
+            {"patch_size": 30, "neighbours": 5, "scales": 2},
+            "larger than the exemplar reduced",
+        ),
+    ],
+)
+def test_errors_before_any_work(method, params, match):
+    ex = np.zeros((40, 40), dtype=np.float32)
+    calls = []
+    with pytest.raises(InvalidParameter, match=match):
+        synthesize(method, ex, size=(64, 64), params=params, progress=lambda s, f: calls.append(s))
+    assert calls == []
+
+
+def test_random_phase_keeps_the_power_spectrum():
+    rng = np.random.default_rng(0)
+    ex = rng.random((48, 40, 3))
+    ex[:, :, 1] += np.linspace(0, 1, 40)[None, :]  # a ramp: a strong border cross without the periodic part
+    out = random_phase_noise(ex, (48, 40), np.random.default_rng(1))
+    p = periodic_component(ex)
+    f_out = sfft.fft2(out - out.mean(axis=(0, 1)), axes=(0, 1))
+    f_p = sfft.fft2(p - p.mean(axis=(0, 1)), axes=(0, 1))
+    np.testing.assert_allclose(np.abs(f_out), np.abs(f_p), atol=1e-3)
+    # Same phase for the three channels: the cross-spectra are kept too.
+    np.testing.assert_allclose(
+        f_out[..., 0] * np.conj(f_out[..., 1]), f_p[..., 0] * np.conj(f_p[..., 1]), atol=1e-2
+    )
+    np.testing.assert_allclose(out.mean(axis=(0, 1)), ex.mean(axis=(0, 1)), atol=1e-5)
+
+
+def test_periodic_component_removes_the_border_cross():
+    y, x = np.mgrid[0:64, 0:64]
+    ramp = (x + 0.5 * y) / 100.0
+    p = periodic_component(ramp)
+    assert abs(p.mean() - ramp.mean()) < 1e-12
+    # A ramp is smooth: its periodic component is almost flat, so no cross is left in the spectrum.
+    assert p.std() < 0.1 * ramp.std()
+
+
+def test_random_phase_larger_output_keeps_the_variance():
+    rng = np.random.default_rng(2)
+    ex = rng.random((32, 32))
+    out = random_phase_noise(ex, (128, 96), np.random.default_rng(3))
+    p = periodic_component(ex)
+    assert out.shape == (128, 96)
+    assert out.std() == pytest.approx(p.std(), rel=0.1)
+    assert out.mean() == pytest.approx(ex.mean(), abs=1e-5)
+
+
+def test_seam_visibility_sees_jumps_at_the_layout():
+    rng = np.random.default_rng(0)
+    layout = PatchLayout((96, 96), 20, 4)
+    smooth = rng.random((96, 96)) * 0.1 + 0.4
+    jumpy = smooth.copy()
+    for r in layout.describe()["seam_rows"]:
+        jumpy[r:] += rng.choice([-0.2, 0.2])
+    jumpy = np.clip(jumpy, 0, 1)
+    assert seam_visibility(smooth, layout.describe())["ratio"] == pytest.approx(1.0, abs=0.1)
+    assert seam_visibility(jumpy, layout.describe())["ratio"] > 2.0
+
+
+def test_copy_map_finds_verbatim_copies():
+    rng = np.random.default_rng(0)
+    ex = rng.random((40, 40))
+    copied = np.tile(ex, (2, 2))
+    assert copy_share(copy_map(copied, ex)) > 0.7
+    assert copy_share(copy_map(rng.random((80, 80)), ex)) == 0.0
+
+
+def test_quilting_is_mostly_copies_and_rclg_is_not():
+    y, x = np.mgrid[0:64, 0:64]
+    ex = 0.5 + 0.25 * np.sin(x / 3.0 + np.sin(y / 7.0)) + 0.05 * np.random.default_rng(0).random((64, 64))
+    ex = ex.astype(np.float32)
+    q = synthesize("quilting", ex, size=(96, 96), params={"patch_size": 16}, seed=0)
+    g = synthesize("gaussian-patch", ex, size=(96, 96), params={"patch_size": 16, "neighbours": 10}, seed=0)
+    assert q.stats["copy_share"] > 0.5 > g.stats["copy_share"]
+    assert set(q.stats["layout"]) >= {"seam_rows", "seam_cols", "overlap"}

@@ -1,0 +1,74 @@
+"""Gaussian patch models against dense NumPy/SciPy references (explicit Gaussian conditioning)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import linalg
+
+from synth.patch.gaussian import GaussianPatchModel, clg_patch, lg_patch, rclg_draw, rclg_patch
+from synth.patch.layout import overlap_mask
+
+
+def _case(seed: int = 0, n: int = 8, w: int = 5, channels: int = 1):
+    rng = np.random.default_rng(seed)
+    patches = rng.random((n, w, w, channels))
+    model = GaussianPatchModel.from_patches(patches)
+    known = np.repeat(overlap_mask(w, 2, "L")[..., None], channels, axis=2).ravel()
+    y0 = rng.random(int(known.sum()))
+    return patches, model, known, y0
+
+
+def test_model_is_eq1():
+    patches, model, _, _ = _case()
+    P = patches.reshape(len(patches), -1)
+    np.testing.assert_allclose(model.mu, P.mean(axis=0))
+    np.testing.assert_allclose(model.covariance(), np.cov(P.T, bias=True), atol=1e-12)
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_clg_is_the_dense_conditional_mean(channels):
+    _, model, known, y0 = _case(channels=channels)
+    sigma = 0.05
+    G = model.covariance(sigma)
+    S = ~known
+    want = model.mu[S] + G[np.ix_(S, known)] @ linalg.solve(G[np.ix_(known, known)], y0 - model.mu[known])
+    got = clg_patch(model, known, y0, sigma)
+    np.testing.assert_allclose(got[S], want, atol=1e-10)
+    np.testing.assert_array_equal(got[known], y0)
+
+
+def test_rclg_is_eq7():
+    _, model, known, y0 = _case(seed=2)
+    sigma, theta = 0.05, 0.2
+    G = model.covariance(sigma)
+    M = np.eye(G.shape[0])[known]
+    Ginv_mu = linalg.solve(G, model.mu)
+    lhs = theta**2 * linalg.solve(G, np.eye(G.shape[0])) + M.T @ M
+    want = linalg.solve(lhs, M.T @ y0 + theta**2 * Ginv_mu)
+    np.testing.assert_allclose(rclg_patch(model, known, y0, sigma, theta), want, atol=1e-9)
+
+
+def test_rclg_limits():
+    _, model, known, y0 = _case(seed=3)
+    clg = clg_patch(model, known, y0, 0.05)
+    np.testing.assert_allclose(rclg_patch(model, known, y0, 0.05, 1e-6), clg, atol=1e-8)
+    np.testing.assert_allclose(rclg_patch(model, known, y0, 0.05, 1e6), model.mu, atol=1e-8)
+
+
+def test_lg_draws_have_the_model_statistics():
+    _, model, _, _ = _case(n=6)
+    rng = np.random.default_rng(0)
+    draws = np.array([lg_patch(model, rng) for _ in range(20000)])
+    np.testing.assert_allclose(draws.mean(axis=0), model.mu, atol=0.01)
+    np.testing.assert_allclose(np.cov(draws.T, bias=True), model.covariance(), atol=0.01)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.3])
+def test_conditional_draws_average_to_the_most_probable_patch(theta):
+    _, model, known, y0 = _case(seed=4, n=6)
+    rng = np.random.default_rng(0)
+    draws = np.array([rclg_draw(model, known, y0, 0.1, theta, rng) for _ in range(4000)])
+    np.testing.assert_allclose(draws.mean(axis=0), rclg_patch(model, known, y0, 0.1, theta), atol=0.025)
+    if theta == 0.0:
+        np.testing.assert_allclose(draws[:, known], np.broadcast_to(y0, draws[:, known].shape), atol=1e-12)
