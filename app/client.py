@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from synth.cli.inputs import add_plane_arguments, input_sources
-from synth.errors import SynthError
+from synth.errors import InvalidInput, SynthError
 from synth.params import parse_assignments
 
 __all__ = ["Client", "ServiceError", "register"]
@@ -70,9 +70,12 @@ class Client:
             raw = exc.read()
             try:
                 err = json.loads(raw)
-                raise ServiceError(exc.code, str(err.get("detail")), err.get("field")) from None
-            except (ValueError, AttributeError):
-                raise ServiceError(exc.code, raw.decode(errors="replace")[:200] or exc.reason) from None
+            except ValueError:
+                err = None
+            # (ServiceError is a ValueError: raised outside the try, or it would be caught as bad JSON)
+            if isinstance(err, dict) and "detail" in err:
+                raise ServiceError(exc.code, str(err["detail"]), err.get("field")) from None
+            raise ServiceError(exc.code, raw.decode(errors="replace")[:200] or exc.reason) from None
         except urllib.error.URLError as exc:
             raise ServiceError(0, f"cannot reach the service at {self.base_url} ({exc.reason})") from None
 
@@ -101,7 +104,10 @@ class Client:
         if isinstance(source, bytes):
             return f"{role}.png", source
         path = Path(source)
-        return path.name, path.read_bytes()
+        try:
+            return path.name, path.read_bytes()
+        except OSError as exc:
+            raise InvalidInput(role, f"cannot read {path} ({exc.strerror or exc})") from None
 
     @classmethod
     def _files(

@@ -169,6 +169,12 @@ def load_image(
         raise InvalidParameter("mode", mode, "must be one of 'auto', 'grey', 'rgb'")
     limit = resolve_limit("max_pixels", max_pixels, "TEXSYNTH_MAX_PIXELS", DEFAULT_MAX_PIXELS)
     data, label = _read_source(source, name, default_name="image")
+    if sniff_format(data) == "PNG" and len(data) >= 24 and data[12:16] == b"IHDR":
+        # Pillow cannot open a PNG that declares zero width or height ("not an image", 415): it is
+        # an image with no pixels, which is the input's problem (422)
+        width, height = struct.unpack(">II", data[16:24])
+        if width == 0 or height == 0:
+            raise InvalidInput(label, f"the image has zero size ({width}x{height} pixels)")
     image, fallback_reason = None, None
     if sniff_format(data) == "TIFF":
         image, fallback_reason = _decode_tiff_image(data, label, limit)

@@ -146,3 +146,22 @@ class TestNonFiniteAndHuge:
     def test_huge_offset_422(self, embedded):
         r = httpx.get(embedded.url + "/api/jobs", params={"offset": 2**63})
         assert r.status_code == 422 and r.json()["field"] == "offset"
+
+
+@pytest.mark.usefixtures("nothing_queued")
+def test_an_empty_method_is_refused_not_replaced(embedded, exemplar_png):
+    r = _post(embedded, exemplar_png, method="")
+    assert r.status_code == 422 and r.json()["field"] == "method"
+
+
+def test_submit_prints_the_service_message_not_json_and_names_a_missing_file(embedded, tmp_path, capsys):
+    from synth.cli import main
+
+    assert main(["submit", str(tmp_path / "missing.png"), "--url", embedded.url]) == 2
+    err = capsys.readouterr().err
+    assert "exemplar: cannot read" in err and "missing.png" in err and "Traceback" not in err
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not an image at all")
+    assert main(["submit", str(bad), "--url", embedded.url, "--method", "test-blur"]) == 2
+    err = capsys.readouterr().err
+    assert "HTTP 415: exemplar:" in err and "{" not in err

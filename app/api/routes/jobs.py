@@ -68,7 +68,7 @@ def submit_job(
     service: ServiceDep,
     response: Response,
     uploads: UploadsDep,
-    method: Annotated[str, Form(description="a method name from GET /api/methods")] = "wei-levoy",
+    method: Annotated[str, Form(min_length=1, description="a method name from GET /api/methods")],
     params: Annotated[
         str, Form(description='JSON object: the method\'s parameters and "width"/"height" (and "depth")')
     ] = "{}",

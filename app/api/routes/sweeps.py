@@ -20,7 +20,7 @@ def submit_sweep(
     service: ServiceDep,
     response: Response,
     uploads: UploadsDep,
-    method: Annotated[str, Form()] = "wei-levoy",
+    method: Annotated[str, Form(min_length=1, description="a method name from GET /api/methods")],
     grid: Annotated[
         str, Form(description='JSON: parameter -> list of values, e.g. {"neighbourhood": [5, 9]}')
     ] = "{}",

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import io
+import struct
 import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -588,3 +590,15 @@ def test_png_bytes_are_deterministic_png(rng):
     grey16 = image_to_png_bytes(image[..., 0], bit_depth=16)
     with Image.open(io.BytesIO(grey16)) as im:
         assert im.mode == "I;16" and im.size == (W, H)
+
+
+def test_a_png_declaring_zero_pixels_is_an_invalid_input_not_an_unknown_format():
+    def chunk(kind: bytes, payload: bytes) -> bytes:
+        crc = struct.pack(">I", zlib.crc32(kind + payload))
+        return struct.pack(">I", len(payload)) + kind + payload + crc
+
+    header = struct.pack(">IIBBBBB", 0, 16, 8, 0, 0, 0, 0)
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IEND", b"")
+    with pytest.raises(InvalidInput, match=r"^upload: the image has zero size \(0x16 pixels\)$") as info:
+        load_image(png, name="upload")
+    assert not isinstance(info.value, UnsupportedFormat)
