@@ -14,7 +14,7 @@ from fastapi import FastAPI
 from fastapi.responses import FileResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api.routes import health, jobs, methods, sweeps
+from app.api.routes import health, jobs, methods, metrics, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
 from app.security import SecurityHeadersMiddleware
@@ -48,7 +48,7 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     app.add_middleware(BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes)
     app.add_middleware(SecurityHeadersMiddleware)
     install_error_handlers(app)
-    for module in (jobs, methods, sweeps, health):
+    for module in (jobs, methods, metrics, sweeps, health):
         app.include_router(module.router)
 
     @app.get("/", include_in_schema=False)

@@ -233,7 +233,10 @@ async function renderJob(id) {
     $("#job-summary").textContent = `${job.method}, ${sizeText}, seed ${job.seed} — submitted ${fmtTime(job.created)}` +
       (job.elapsed ? `, ${job.elapsed.toFixed(1)} s` : "") + (job.attempts > 1 ? `, run ${job.attempts}` : "");
     $("#progress").value = job.state === "succeeded" ? 1 : job.fraction;
-    $("#progress-text").textContent = `${Math.round(100 * (job.state === "succeeded" ? 1 : job.fraction))}% ${job.stage}`;
+    $("#progress").classList.toggle("failed", job.state === "failed");
+    $("#progress-text").textContent = job.state === "failed"
+      ? `failed during ${job.stage || "the run"}`
+      : `${Math.round(100 * (job.state === "succeeded" ? 1 : job.fraction))}% ${job.stage}`;
     $("#cancel").hidden = !["queued", "running"].includes(job.state);
     $("#job-message").hidden = !job.message;
     $("#job-message").textContent = job.message;
@@ -241,6 +244,7 @@ async function renderJob(id) {
     if (job.preview) $("#preview").src = job.preview;
     if (!shownInputs) {
       for (const [role, url] of Object.entries(job.inputs)) $("#inputs").append(figure(url, role));
+      showParams(job);
       shownInputs = true;
     }
     if (job.state === "succeeded") showResults(job);
@@ -275,6 +279,50 @@ function showVolumeViewer(job) {
   reset();
 }
 
+// The parameters the job ran with, the method's defaults marked (from its schema).
+async function showParams(job) {
+  let schema = {};
+  try {
+    const m = (await api("/api/methods")).data.find((x) => x.name === job.method);
+    schema = (m && m.params_schema.properties) || {};
+  } catch (err) { /* the table still lists the values */ }
+  const rows = Object.entries(job.params).map(([name, value]) => {
+    const known = schema[name];
+    const isDefault = known && JSON.stringify(known.default) === JSON.stringify(value);
+    return el("tr", {}, el("th", { text: name, title: (known && known.description) || "" }),
+      el("td", { text: typeof value === "object" ? JSON.stringify(value) : String(value) }),
+      el("td", { class: "hint", text: known ? (isDefault ? "default" : `default ${JSON.stringify(known.default)}`) : "" }));
+  });
+  $("#job-params tbody").replaceChildren(...rows);
+}
+
+let glossary = null;
+async function measures() {
+  if (!glossary) {
+    try { glossary = await api("/api/metrics"); } catch (err) { glossary = {}; }
+  }
+  return glossary;
+}
+
+// One row per headline measure: value, a verdict against the documented threshold, and its meaning.
+async function showMetrics(summary) {
+  const g = await measures();
+  const rows = [];
+  for (const [name, value] of Object.entries(summary || {})) {
+    if (typeof value !== "number") continue;
+    const m = g[name];
+    let verdict = "";
+    if (m && m.good_below !== null && m.good_below !== undefined) {
+      verdict = Math.abs(value) < m.good_below ? `good (< ${m.good_below})` : `off (target < ${m.good_below})`;
+    }
+    const cls = verdict.startsWith("good") ? "verdict good" : verdict ? "verdict off" : "verdict";
+    rows.push(el("tr", {}, el("th", { text: m ? m.label : name }), el("td", { text: fmtNum(value) }),
+      el("td", {}, el("span", { class: cls, text: verdict })),
+      el("td", { class: "hint", text: m ? `${m.meaning}; ${m.better} is better` : "" })));
+  }
+  $("#metrics tbody").replaceChildren(...rows);
+}
+
 function showResults(job) {
   const a = job.artifacts;
   $("#results").hidden = false;
@@ -293,8 +341,7 @@ function showResults(job) {
   }
   const metrics = Object.entries(flatten(job.metrics)).filter(([k]) => !k.startsWith("settings."));
   const row = ([k, v]) => el("tr", {}, el("th", { text: k }), el("td", { text: fmtNum(v) }));
-  const summary = metrics.filter(([k]) => k.startsWith("summary."));
-  $("#metrics tbody").replaceChildren(...(summary.length ? summary : metrics).map(row));
+  showMetrics((job.metrics && job.metrics.summary) || Object.fromEntries(metrics));
   $("#all-metrics tbody").replaceChildren(...metrics.map(row));
   $("#plots").replaceChildren(...Object.keys(a).filter((n) => n.startsWith("plots/"))
     .map((n) => figure(a[n], n.slice(6).replace(".png", "").replaceAll("_", " "))));

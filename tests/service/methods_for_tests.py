@@ -15,6 +15,7 @@ from scipy import ndimage as ndi
 
 from synth.analysis.tensor import structure_tensor
 from synth.api import MethodSpec, Result, register
+from synth.errors import InvalidParameter
 from synth.params import MethodParams
 
 
@@ -22,6 +23,7 @@ class BlurParams(MethodParams):
     steps: int = Field(10, ge=1, le=1000, description="blur steps (one progress report each)")
     delay: float = Field(0.05, ge=0.0, le=10.0, description="seconds of sleep per step")
     sigma: float = Field(0.5, gt=0.0, le=10.0, description="Gaussian blur per step, in pixels")
+    fail: str = Field("", max_length=200, description="when set, the run fails after one step with this")
 
 
 def _run(exemplar, *, size, params: BlurParams, seed, progress, constraint=None) -> Result:
@@ -38,6 +40,8 @@ def _run(exemplar, *, size, params: BlurParams, seed, progress, constraint=None)
             time.sleep(params.delay)
         kwargs = {"preview": image} if accepts_preview else {}
         progress(f"blur step {step + 1}/{params.steps}", (step + 1) / params.steps, **kwargs)
+        if params.fail:
+            raise InvalidParameter("fail", params.fail, "the test method was asked to fail")
     image = np.ascontiguousarray(image, dtype=np.float32)
     grey = image.mean(axis=2) if image.ndim == 3 else image
     return Result(

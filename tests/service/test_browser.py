@@ -126,3 +126,39 @@ def test_a_volume_from_per_plane_exemplars_and_its_slice_viewer(browser, embedde
     page.screenshot(path=str(tmp_path / "volume-page.png"), full_page=True)
     assert not errors, errors
     page.close()
+
+
+def test_job_page_explains_parameters_metrics_and_failures(browser, embedded, exemplar_png, tmp_path):
+    client = embedded.client()
+    done = client.wait(
+        client.submit(exemplar_png, method="test-blur", params={"width": 48, "height": 48, "steps": 3})["id"],
+        timeout=60,
+    )
+    failed = client.wait(
+        client.submit(exemplar_png, method="test-blur", params={"steps": 5, "fail": "boom"})["id"], timeout=60
+    )
+    assert failed["state"] == "failed"
+    page = browser.new_page(viewport={"width": 1200, "height": 1000})
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.goto(f"{embedded.url}/#/jobs/{done['id']}")
+    page.wait_for_selector("#job-state.succeeded")
+    # the parameters used, defaults marked
+    page.wait_for_selector("#job-params tbody tr", state="attached")
+    page.click("#job-params-box summary")
+    params = page.inner_text("#job-params")
+    assert "steps" in params and "default 10" in params and "sigma" in params and "default" in params
+    # each headline measure with its meaning and a verdict against the documented threshold
+    page.wait_for_selector("#metrics tbody tr")
+    metrics = page.inner_text("#metrics")
+    assert "grey-level KL" in metrics and "lower is better" in metrics
+    assert "target < 0.05" in metrics or "good (< 0.05)" in metrics
+    page.screenshot(path=str(tmp_path / "explained.png"), full_page=True)
+    # a failed job: the reason in words, and a red bar
+    page.goto(f"{embedded.url}/#/jobs/{failed['id']}")
+    page.wait_for_selector("#job-state.failed")
+    assert "the test method was asked to fail" in page.inner_text("#job-message")
+    assert page.inner_text("#progress-text").startswith("failed during")
+    assert page.evaluate("() => document.querySelector('#progress').classList.contains('failed')")
+    assert not errors, errors
+    page.close()
