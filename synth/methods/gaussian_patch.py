@@ -33,6 +33,12 @@ Departures
   law (:func:`synth.patch.gaussian.rclg_draw`) instead of its mode. Measured in docs/patch.md: it barely
   differs from the mode, since ``k >> N`` overlap values pin the ``N`` coefficients of the model.
 - Gaussian patches can leave [0, 1]; the output is clipped at the end (``stats['clipped_share']``).
+- ``contrast='restore'`` (the default; not the paper): each CLG/RCLG patch's new part keeps the
+  neighbours' mean standard deviation (:func:`synth.patch.gaussian.restore_contrast`). The paper's
+  conditional mean averages the neighbours' continuations, and the next patch conditioned on that
+  average finds flatter neighbours, so contrast decays patch after patch. Measured on hrtem-soot-128
+  -> 256, seed 0: RCLG grey-level KL 0.88 -> 0.04, std 0.067 -> 0.134 (exemplar 0.162), orientation KL
+  0.010 -> 0.015; CLG 0.70 -> 0.009. ``contrast='none'`` is the paper literally.
 - ``scales > 1`` (the paper's sec. 4 outlook, after Raad et al., JMIV 2016, in a simpler form): the
   exemplar is reduced ``scales - 1`` times by 2 (anti-aliased), the coarsest output synthesized as above,
   and each finer scale's neighbours chosen on the overlap *and* on the whole patch of the coarser output
@@ -61,7 +67,7 @@ from synth.methods.common import checked_progress
 from synth.methods.quilting import check_patch_geometry
 from synth.params import MethodParams
 from synth.patch.cut import boundary_cut_mask, error_surface
-from synth.patch.gaussian import GaussianPatchModel, lg_patch, rclg_draw, rclg_patch
+from synth.patch.gaussian import GaussianPatchModel, lg_patch, rclg_draw, rclg_patch, restore_contrast
 from synth.patch.layout import PatchLayout, overlap_mask
 from synth.patch.search import PatchSearcher, k_nearest
 
@@ -111,6 +117,12 @@ class GaussianPatchParams(MethodParams):
         description="CLG/RCLG: 'mean' = the most probable patch (the paper); 'draw' = a random draw from the "
         "same conditional law (the paper's suggested remedy for its smoothing; docs/patch.md: close to the "
         "mean when the overlap pins the rank-N model).",
+    )
+    contrast: Literal["restore", "none"] = Field(
+        "restore",
+        description="CLG/RCLG: 'restore' scales each new patch's spread to its neighbours' (not the paper; "
+        "without it the conditional mean blurs and contrast decays patch after patch, docs/patch.md); "
+        "'none' = the paper literally.",
     )
     scales: int = Field(
         1,
@@ -208,6 +220,8 @@ def synthesize_gaussian_patches(
                 patch = rclg_draw(model, known, y0, params.sigma, theta, rng)
             else:
                 patch = rclg_patch(model, known, y0, params.sigma, theta)
+            if params.contrast == "restore":
+                patch = restore_contrast(model, known, patch)
         patch = patch.reshape(w, w, channels)
         if params.blending == "boundary-cut" and kind != "none":
             new_mask = boundary_cut_mask(error_surface(region, patch), overlap, kind)

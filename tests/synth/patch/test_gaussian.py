@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from synth.patch.gaussian import GaussianPatchModel, clg_patch, lg_patch, rclg_draw, rclg_patch
+from synth.patch.gaussian import (
+    GaussianPatchModel,
+    clg_patch,
+    lg_patch,
+    rclg_draw,
+    rclg_patch,
+    restore_contrast,
+)
 from synth.patch.layout import overlap_mask
 
 
@@ -72,3 +79,21 @@ def test_conditional_draws_average_to_the_most_probable_patch(theta):
     np.testing.assert_allclose(draws.mean(axis=0), rclg_patch(model, known, y0, 0.1, theta), atol=0.025)
     if theta == 0.0:
         np.testing.assert_allclose(draws[:, known], np.broadcast_to(y0, draws[:, known].shape), atol=1e-12)
+
+
+def test_restore_contrast_gives_the_new_part_the_neighbours_spread_and_keeps_the_overlap():
+    rng = np.random.default_rng(4)
+    patches = rng.random((12, 6, 6))
+    model = GaussianPatchModel.from_patches(patches)
+    known = np.zeros(36, dtype=bool)
+    known[:12] = True  # the first two rows are the overlap
+    blurred = model.mu.copy()  # the conditional mean's typical failure: the neighbours' average
+    out = restore_contrast(model, known, blurred)
+    np.testing.assert_array_equal(out[known], blurred[known])
+    want = patches.reshape(12, 36)[:, ~known].std(axis=1).mean()
+    assert out[~known].std() == pytest.approx(want, rel=1e-12)
+    assert out[~known].mean() == pytest.approx(blurred[~known].mean(), rel=1e-12)
+    # a flat estimate stays flat (nothing to scale), and a patch with no new part is returned as is
+    flat = np.full(36, 0.5)
+    np.testing.assert_array_equal(restore_contrast(model, known, flat), flat)
+    np.testing.assert_array_equal(restore_contrast(model, np.ones(36, bool), blurred), blurred)
