@@ -321,6 +321,23 @@ async function showMetrics(summary) {
       el("td", { class: "hint", text: m ? `${m.meaning}; ${m.better} is better` : "" })));
   }
   $("#metrics tbody").replaceChildren(...rows);
+  // A volume: the same measures per axis (the slices normal to z, y and x: the xy, xz and yz planes).
+  const perAxis = summary && summary.per_axis;
+  $("#axis-metrics").hidden = !perAxis;
+  if (!perAxis) return;
+  const axes = [["0", "xy slices"], ["1", "xz slices"], ["2", "yz slices"]].filter(([a]) => perAxis[a]);
+  $("#axis-metrics thead").replaceChildren(el("tr", {}, el("th", { text: "measure" }),
+    ...axes.map(([, label]) => el("th", { text: label }))));
+  const names = Object.keys(perAxis[axes[0][0]]).filter((n) => typeof perAxis[axes[0][0]][n] === "number");
+  $("#axis-metrics tbody").replaceChildren(...names.map((name) => {
+    const m = g[name];
+    return el("tr", {}, el("th", { text: m ? m.label : name, title: m ? m.meaning : "" }),
+      ...axes.map(([a]) => {
+        const v = perAxis[a][name];
+        const off = m && m.good_below != null && typeof v === "number" && Math.abs(v) >= m.good_below;
+        return el("td", { class: off ? "verdict off" : "", text: fmtNum(v) });
+      }));
+  }));
 }
 
 function showResults(job) {

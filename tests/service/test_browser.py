@@ -123,6 +123,11 @@ def test_a_volume_from_per_plane_exemplars_and_its_slice_viewer(browser, embedde
     page.dispatch_event("#slice-index", "input")
     assert page.inner_text("#slice-label") == "x = 3 of 39"
     assert page.locator("#result-images figcaption", has_text="corner cut away").count() == 1
+    # per-axis metrics of the volume, one column per plane
+    page.wait_for_selector("#axis-metrics:not([hidden]) tbody tr")
+    header = page.inner_text("#axis-metrics thead")
+    assert "xy slices" in header and "xz slices" in header and "yz slices" in header
+    assert "orientation KL" in page.inner_text("#axis-metrics tbody")
     page.screenshot(path=str(tmp_path / "volume-page.png"), full_page=True)
     assert not errors, errors
     page.close()
