@@ -8,25 +8,41 @@ it (planes ``xy``, ``xz``, ``yz``; see :mod:`synth.pixel.solid`). Three loops do
 - :func:`nearest_exact` and :func:`rerank`: the exemplar neighbourhood nearest to each query, by
   squared Euclidean distance, over every exemplar neighbourhood (the definition) or over a short
   list of candidates proposed by a tree search in PCA space (the fast search);
+- :func:`kcoherence_search`: the best of the k-coherent candidates (Tong et al. 2002) on the slice;
 - :func:`irls_update`: Kopf et al.'s optimisation step (eqs 2-4): every voxel becomes the weighted
   average of the exemplar values that the matched neighbourhoods covering it propose, weights
-  ``||s - e||^(r - 2)`` (IRLS) divided by ``1 + gain * sum(max(0, H_s(b) - H_e(b)))`` (histogram
-  matching, with the volume's histogram ``H_s`` kept up to date voxel by voxel in scan order).
+  ``||s - e||^(r - 2)`` (IRLS) divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (histogram
+  matching, with the volume's histogram ``H_s`` brought up to date after every block of voxels in
+  scan order).
 
 Every kernel ``_x_kernel`` sits beside a plain NumPy ``x_reference`` that the tests compare it
 with. Kernels assume what the wrappers prepare: C-contiguous float32 values, int64 indices. Sums
 are accumulated in float64 in a fixed order, so results are the same bytes on every run.
+
+Parallelism (numba ``prange``, ``parallel=True``): every parallel loop writes only its own slots
+(a query's answer, a voxel's value) and reads nothing another iteration writes; sums stay inside one
+iteration, in a fixed order; the k-coherence de-duplication stamps are per block of queries, a fixed
+number of blocks (:data:`KCOHERENCE_BLOCKS`) whatever the threads; the histogram counts change only
+between blocks of voxels, sequentially. So ``NUMBA_NUM_THREADS=1`` and ``2`` give the same bytes
+(tested in a subprocess).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 
+import numba
 import numpy as np
+from numba import prange
 
 from synth.kernels.options import kernel
 
 __all__ = [
+    "KCOHERENCE_BLOCKS",
+    "UPDATE_BLOCK",
     "CoherenceSets",
     "HistogramState",
     "MatchField",
@@ -48,6 +64,25 @@ __all__ = [
 ]
 
 
+#: Below this many items (queries, voxels) a kernel runs on the calling thread only: waking the thread
+#: pool costs more than it saves (on a loaded machine, the tests ran 3x slower with 2 threads).
+PARALLEL_MIN_ITEMS = 16384
+
+
+@contextmanager
+def _threads_for(items: int) -> Iterator[None]:
+    """Run the enclosed kernel on one thread when ``items`` is small (same bytes either way)."""
+    if items >= PARALLEL_MIN_ITEMS:
+        yield
+        return
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
 # ---------------------------------------------------------------------------------------------
 # Slice neighbourhoods
 
@@ -64,10 +99,10 @@ def _axis_index(i, n, periodic):
     return min(max(i, 0), n - 1)
 
 
-@kernel
+@kernel(parallel=True)
 def _gather_slices_kernel(vol, centres, offsets, periodic, out):
     D, H, W = vol.shape
-    for m in range(centres.shape[0]):
+    for m in prange(centres.shape[0]):
         z = centres[m, 0]
         y = centres[m, 1]
         x = centres[m, 2]
@@ -93,13 +128,14 @@ def gather_slices(vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, per
         Wrap around the volume's faces (toroidal volume) or mirror about them.
     """
     out = np.empty((centres.shape[0], offsets.shape[0]), dtype=np.float32)
-    _gather_slices_kernel(
-        np.ascontiguousarray(vol, dtype=np.float32),
-        np.ascontiguousarray(centres, dtype=np.int64),
-        np.ascontiguousarray(offsets, dtype=np.int32),
-        bool(periodic),
-        out,
-    )
+    with _threads_for(centres.shape[0]):
+        _gather_slices_kernel(
+            np.ascontiguousarray(vol, dtype=np.float32),
+            np.ascontiguousarray(centres, dtype=np.int64),
+            np.ascontiguousarray(offsets, dtype=np.int32),
+            bool(periodic),
+            out,
+        )
     return out
 
 
@@ -124,10 +160,10 @@ def gather_slices_reference(
 # Nearest exemplar neighbourhoods
 
 
-@kernel
+@kernel(parallel=True)
 def _nearest_exact_kernel(queries, vectors, best_idx, best_d2):
     K = queries.shape[1]
-    for m in range(queries.shape[0]):
+    for m in prange(queries.shape[0]):
         best = np.inf
         bi = -1
         for p in range(vectors.shape[0]):
@@ -152,12 +188,13 @@ def nearest_exact(queries: np.ndarray, vectors: np.ndarray) -> tuple[np.ndarray,
     m = queries.shape[0]
     idx = np.empty(m, dtype=np.int64)
     d2 = np.empty(m, dtype=np.float64)
-    _nearest_exact_kernel(
-        np.ascontiguousarray(queries, dtype=np.float32),
-        np.ascontiguousarray(vectors, dtype=np.float32),
-        idx,
-        d2,
-    )
+    with _threads_for(m):
+        _nearest_exact_kernel(
+            np.ascontiguousarray(queries, dtype=np.float32),
+            np.ascontiguousarray(vectors, dtype=np.float32),
+            idx,
+            d2,
+        )
     return idx, d2
 
 
@@ -176,11 +213,11 @@ def nearest_exact_reference(queries: np.ndarray, vectors: np.ndarray) -> tuple[n
     return idx.astype(np.int64), d2[np.arange(len(idx)), idx]
 
 
-@kernel
+@kernel(parallel=True)
 def _rerank_kernel(queries, vectors, candidates, best_idx, best_d2):
     K = queries.shape[1]
     P = vectors.shape[0]
-    for m in range(queries.shape[0]):
+    for m in prange(queries.shape[0]):
         best = np.inf
         bi = -1
         for j in range(candidates.shape[1]):
@@ -208,13 +245,14 @@ def rerank(queries: np.ndarray, vectors: np.ndarray, candidates: np.ndarray) -> 
     m = queries.shape[0]
     idx = np.empty(m, dtype=np.int64)
     d2 = np.empty(m, dtype=np.float64)
-    _rerank_kernel(
-        np.ascontiguousarray(queries, dtype=np.float32),
-        np.ascontiguousarray(vectors, dtype=np.float32),
-        np.ascontiguousarray(candidates, dtype=np.int64),
-        idx,
-        d2,
-    )
+    with _threads_for(m):
+        _rerank_kernel(
+            np.ascontiguousarray(queries, dtype=np.float32),
+            np.ascontiguousarray(vectors, dtype=np.float32),
+            np.ascontiguousarray(candidates, dtype=np.int64),
+            idx,
+            d2,
+        )
     return idx, d2
 
 
@@ -299,7 +337,91 @@ def _candidate_distance(queries, m, image, pos, offsets, limit):
     return s
 
 
-@kernel
+#: Queries of one k-coherence call are split into this many blocks, run in parallel, each with its own
+#: de-duplication stamps: a fixed number, so the split (and the answer) does not depend on the threads.
+KCOHERENCE_BLOCKS = 16
+
+
+@kernel(inline="always")
+def _kcoherence_one(
+    queries,
+    m,
+    centres,
+    D,
+    H,
+    W,
+    a,
+    b,
+    periodic,
+    src,
+    image,
+    valid,
+    valid_pos,
+    kset,
+    offsets,
+    width,
+    n_random,
+    seed_key,
+    index0,
+    stamp,
+    tag,
+):
+    h = image.shape[0] // width
+    k = kset.shape[1]
+    n_valid = valid_pos.shape[0]
+    best = np.inf
+    bp = -1
+    for da in range(-1, 2):
+        for db in range(-1, 2):
+            qz = centres[m, 0]
+            qy = centres[m, 1]
+            qx = centres[m, 2]
+            if a == 0:
+                qz += da
+            else:
+                qy += da
+            if b == 1:
+                qy += db
+            else:
+                qx += db
+            qz = _axis_index(qz, D, periodic)
+            qy = _axis_index(qy, H, periodic)
+            qx = _axis_index(qx, W, periodic)
+            s = src[(qz * H + qy) * W + qx]
+            for j in range(-1, k):
+                e = s if j < 0 else kset[s, j]
+                if e < 0:
+                    continue
+                er = e // width - da
+                ec = e % width - db
+                if er < 0 or er >= h or ec < 0 or ec >= width:
+                    continue
+                pos = er * width + ec
+                if valid[pos] == 0 or stamp[pos] == tag:
+                    continue
+                stamp[pos] = tag
+                d = _candidate_distance(queries, m, image, pos, offsets, best)
+                if d < best:
+                    best = d
+                    bp = pos
+    key = _splitmix(seed_key ^ np.uint64(index0 + m))
+    for j in range(n_random):
+        r = _splitmix(key + np.uint64(j))
+        pos = valid_pos[np.int64(r % np.uint64(n_valid))]
+        if stamp[pos] == tag:
+            continue
+        stamp[pos] = tag
+        d = _candidate_distance(queries, m, image, pos, offsets, best)
+        if d < best:
+            best = d
+            bp = pos
+    if bp < 0:  # no proposal was valid (no random candidates): the first valid position
+        bp = valid_pos[0]
+        best = _candidate_distance(queries, m, image, bp, offsets, np.inf)
+    return bp, best
+
+
+@kernel(parallel=True)
 def _kcoherence_kernel(
     queries,
     centres,
@@ -317,7 +439,7 @@ def _kcoherence_kernel(
     seed_key,
     index0,
     stamp,
-    counter,
+    tag0,
     best_pos,
     best_d2,
 ):
@@ -326,58 +448,36 @@ def _kcoherence_kernel(
     W = shape[2]
     a = axes[0]
     b = axes[1]
-    h = image.shape[0] // width
-    k = kset.shape[1]
-    n_valid = valid_pos.shape[0]
-    q = np.empty(3, dtype=np.int64)
-    for m in range(queries.shape[0]):
-        counter[0] += 1
-        tag = counter[0]
-        best = np.inf
-        bp = -1
-        for da in range(-1, 2):
-            for db in range(-1, 2):
-                q[0] = centres[m, 0]
-                q[1] = centres[m, 1]
-                q[2] = centres[m, 2]
-                q[a] += da
-                q[b] += db
-                qz = _axis_index(q[0], D, periodic)
-                qy = _axis_index(q[1], H, periodic)
-                qx = _axis_index(q[2], W, periodic)
-                s = src[(qz * H + qy) * W + qx]
-                for j in range(-1, k):
-                    e = s if j < 0 else kset[s, j]
-                    if e < 0:
-                        continue
-                    er = e // width - da
-                    ec = e % width - db
-                    if er < 0 or er >= h or ec < 0 or ec >= width:
-                        continue
-                    pos = er * width + ec
-                    if valid[pos] == 0 or stamp[pos] == tag:
-                        continue
-                    stamp[pos] = tag
-                    d = _candidate_distance(queries, m, image, pos, offsets, best)
-                    if d < best:
-                        best = d
-                        bp = pos
-        key = _splitmix(seed_key ^ np.uint64(index0 + m))
-        for j in range(n_random):
-            r = _splitmix(key + np.uint64(j))
-            pos = valid_pos[np.int64(r % np.uint64(n_valid))]
-            if stamp[pos] == tag:
-                continue
-            stamp[pos] = tag
-            d = _candidate_distance(queries, m, image, pos, offsets, best)
-            if d < best:
-                best = d
-                bp = pos
-        if bp < 0:  # no proposal was valid (no random candidates): the first valid position
-            bp = valid_pos[0]
-            best = _candidate_distance(queries, m, image, bp, offsets, np.inf)
-        best_pos[m] = bp
-        best_d2[m] = best
+    M = queries.shape[0]
+    blocks = stamp.shape[0]
+    per = (M + blocks - 1) // blocks
+    for blk in prange(blocks):
+        for m in range(blk * per, min(M, (blk + 1) * per)):
+            bp, best = _kcoherence_one(
+                queries,
+                m,
+                centres,
+                D,
+                H,
+                W,
+                a,
+                b,
+                periodic,
+                src,
+                image,
+                valid,
+                valid_pos,
+                kset,
+                offsets,
+                width,
+                n_random,
+                seed_key,
+                index0,
+                stamp[blk],
+                tag0 + m + 1,
+            )
+            best_pos[m] = bp
+            best_d2[m] = best
 
 
 def kcoherence_search(
@@ -391,6 +491,7 @@ def kcoherence_search(
     index0: int,
     stamp: np.ndarray,
     counter: np.ndarray,
+    k: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Best k-coherent candidate of each query: flat exemplar position (int64) and squared distance.
 
@@ -405,27 +506,31 @@ def kcoherence_search(
     m = queries.shape[0]
     pos = np.empty(m, dtype=np.int64)
     d2 = np.empty(m, dtype=np.float64)
-    _kcoherence_kernel(
-        np.ascontiguousarray(queries, dtype=np.float32),
-        np.ascontiguousarray(centres, dtype=np.int64),
-        geometry.shape,
-        geometry.axes,
-        bool(geometry.periodic),
-        src,
-        sets.image,
-        sets.valid,
-        sets.valid_pos,
-        sets.kset,
-        sets.offsets,
-        int(sets.width),
-        int(n_random),
-        np.uint64(seed_key),
-        int(index0),
-        stamp,
-        counter,
-        pos,
-        d2,
-    )
+    stamps = stamp if stamp.ndim == 2 else stamp[None, :]
+    tag0 = int(counter[0])
+    counter[0] += m + 1  # tags only grow: stamps never need clearing
+    with _threads_for(m):
+        _kcoherence_kernel(
+            np.ascontiguousarray(queries, dtype=np.float32),
+            np.ascontiguousarray(centres, dtype=np.int64),
+            geometry.shape,
+            geometry.axes,
+            bool(geometry.periodic),
+            src,
+            sets.image,
+            sets.valid,
+            sets.valid_pos,
+            sets.kset if k is None or k >= sets.kset.shape[1] else np.ascontiguousarray(sets.kset[:, :k]),
+            sets.offsets,
+            int(sets.width),
+            int(n_random),
+            np.uint64(seed_key),
+            int(index0),
+            stamps,
+            tag0,
+            pos,
+            d2,
+        )
     return pos, d2
 
 
@@ -437,6 +542,7 @@ def kcoherence_candidates_reference(
     n_random: int,
     seed_key: int,
     index: int,
+    k: int | None = None,
 ) -> list[int]:
     """The candidate positions of one query, in the kernel's order, without duplicates."""
     D, H, W = (int(v) for v in geometry.shape)
@@ -453,7 +559,7 @@ def kcoherence_candidates_reference(
                 int(_reference_index(np.array(q[i]), n, geometry.periodic)) for i, n in enumerate((D, H, W))
             ]
             s = int(src[(qi[0] * H + qi[1]) * W + qi[2]])
-            for e in [s, *(int(v) for v in sets.kset[s])]:
+            for e in [s, *(int(v) for v in sets.kset[s][:k])]:
                 if e < 0:
                     continue
                 er, ec = e // w - da, e % w - db
@@ -477,13 +583,14 @@ def kcoherence_search_reference(
     n_random: int,
     seed_key: int,
     index0: int,
+    k: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Plain NumPy :func:`kcoherence_search`."""
     pos = np.empty(len(queries), dtype=np.int64)
     d2 = np.empty(len(queries))
     for m in range(len(queries)):
         cands = kcoherence_candidates_reference(
-            centres[m], geometry, src, sets, n_random, seed_key, index0 + m
+            centres[m], geometry, src, sets, n_random, seed_key, index0 + m, k
         ) or [int(sets.valid_pos[0])]
         vectors = sets.image[np.array(cands)[:, None] + sets.offsets[None, :]]
         d = _squared_distances_reference(queries[m : m + 1], vectors)[0]
@@ -504,6 +611,7 @@ class MatchField:
     exemplar neighbourhood matched to the plane-``p`` neighbourhood centred at voxel ``v`` (flat
     index into the volume), ``-1`` where no neighbourhood is centred (Kopf's sparse grid).
     ``weight[p, v]``: that neighbourhood's weight (IRLS: ``||s - e||^(r - 2)``).
+    ``active[p]``: 0 for a plane left out (Kopf with two views); its matches are never read.
     ``offsets[p]``: the plane's volume offsets ``(K, 3)``; ``ex_offsets[p]``: the same offsets as flat
     exemplar offsets ``row * width + col``.
     """
@@ -514,7 +622,8 @@ class MatchField:
     ex_offsets: np.ndarray  # (3, K) int64
     axes: np.ndarray  # (3, 2) int64: each plane's volume axes (row, column)
     phase: np.ndarray  # (3, 2) int64: centres lie where those coordinates equal phase modulo stride
-    stride: int = 1  # the kernel skips other voxels without reading match: faster, same answer
+    stride: int = 1  # the kernel visits only the grid's centres
+    active: np.ndarray = field(default_factory=lambda: np.ones(3, dtype=np.uint8))  # (3,) planes in use
 
 
 @dataclass
@@ -561,19 +670,33 @@ def _bin(value, bins):
     return min(max(b, 0), bins - 1)
 
 
-@kernel
-def _irls_update_kernel(
+#: The optimisation step updates voxels in blocks of this many (in scan order), in parallel within a block;
+#: the volume's histogram is brought up to date between blocks.
+UPDATE_BLOCK = 4096
+
+
+@kernel(inline="always")
+def _centre_coordinate(c, n, periodic):
+    """A centre coordinate ``c`` (at most one side away) inside ``[0, n)``, wrapped when periodic, or -1
+    when it lies outside a non-periodic volume."""
+    if c < 0:
+        return c + n if periodic else -1
+    if c >= n:
+        return c - n if periodic else -1
+    return c
+
+
+@kernel(inline="always")
+def _irls_voxel(
     vol,
-    order,
-    start,
-    stop,
+    v,
     match,
     weight,
-    offsets,
     ex_offsets,
     axes,
-    phase,
-    stride,
+    on_grid,
+    active,
+    size,
     ex_values,
     ex_start,
     periodic,
@@ -585,50 +708,119 @@ def _irls_update_kernel(
     HW = H * W
     n_total = D * HW
     bins = count.shape[0]
-    K = offsets.shape[1]
-    for idx in range(start, stop):
-        v = order[idx]
-        z = v // HW
-        y = (v % HW) // W
-        x = v % W
-        old = vol[z, y, x]
-        if gain > 0.0:  # the voxel leaves the histogram while its new value is chosen
-            count[_bin(old, bins)] -= 1.0
-        num = 0.0
-        den = 0.0
-        for p in range(3):
-            for k in range(K):
-                cz = z - offsets[p, k, 0]
-                cy = y - offsets[p, k, 1]
-                cx = x - offsets[p, k, 2]
-                if periodic:
-                    cz %= D
-                    cy %= H
-                    cx %= W
-                elif cz < 0 or cz >= D or cy < 0 or cy >= H or cx < 0 or cx >= W:
+    r = size // 2
+    z = v // HW
+    y = (v % HW) // W
+    x = v % W
+    num = 0.0
+    den = 0.0
+    for p in range(3):
+        if active[p] == 0:
+            continue
+        a = axes[p, 0]
+        b = axes[p, 1]
+        # (row, column, fixed) coordinates of the voxel in this plane's slices, and the slice sides
+        if a == 1:  # xy: rows y, columns x, fixed z
+            pa, na, pb, nb, c = y, H, x, W, z
+        elif b == 2:  # xz: rows z, columns x, fixed y
+            pa, na, pb, nb, c = z, D, x, W, y
+        else:  # yz: rows z, columns y, fixed x
+            pa, na, pb, nb, c = z, D, y, H, x
+        for i in range(size):  # raster order of the offsets: voxel = centre + (i - r, j - r)
+            ca = _centre_coordinate(pa - (i - r), na, periodic)
+            if ca < 0 or on_grid[p, 0, ca] == 0:
+                continue
+            for j in range(size):
+                cb = _centre_coordinate(pb - (j - r), nb, periodic)
+                if cb < 0 or on_grid[p, 1, cb] == 0:
                     continue
-                if stride > 1:
-                    ca = cz if axes[p, 0] == 0 else cy
-                    cb = cy if axes[p, 1] == 1 else cx
-                    if (ca - phase[p, 0]) % stride != 0 or (cb - phase[p, 1]) % stride != 0:
-                        continue
-                u = (cz * H + cy) * W + cx
+                if a == 1:
+                    u = (c * H + ca) * W + cb
+                elif b == 2:
+                    u = (ca * H + c) * W + cb
+                else:
+                    u = (ca * H + cb) * W + c
                 e = match[p, u]
                 if e < 0:
                     continue
-                val = ex_values[ex_start[p] + e + ex_offsets[p, k]]
+                val = ex_values[ex_start[p] + e + ex_offsets[p, i * size + j]]
                 w = np.float64(weight[p, u])
                 if gain > 0.0:
-                    b = _bin(val, bins)
-                    excess = (count[b] - target[b]) / n_total
+                    bb = _bin(val, bins)
+                    excess = (count[bb] - target[bb]) / n_total
                     if excess > 0.0:
                         w = w / (1.0 + gain * excess)
                 num += w * val
                 den += w
-        new = np.float32(num / den) if den > 0.0 else old
-        vol[z, y, x] = new
-        if gain > 0.0:
-            count[_bin(new, bins)] += 1.0
+    return num, den
+
+
+@kernel(parallel=True)
+def _irls_update_kernel(
+    vol,
+    order,
+    start,
+    stop,
+    match,
+    weight,
+    ex_offsets,
+    axes,
+    on_grid,
+    active,
+    size,
+    ex_values,
+    ex_start,
+    periodic,
+    count,
+    target,
+    gain,
+    block,
+):
+    flat = vol.reshape(-1)
+    bins = count.shape[0]
+    old = np.empty(block, dtype=np.float32)
+    lo = start
+    while lo < stop:
+        hi = min(stop, (lo // block + 1) * block)  # blocks aligned on multiples of ``block`` in ``order``
+        voxels = np.sort(order[lo:hi])  # the block's voxels in memory order: same answer, fewer misses
+        for idx in prange(lo, hi):
+            v = voxels[idx - lo]
+            num, den = _irls_voxel(
+                vol,
+                v,
+                match,
+                weight,
+                ex_offsets,
+                axes,
+                on_grid,
+                active,
+                size,
+                ex_values,
+                ex_start,
+                periodic,
+                count,
+                target,
+                gain,
+            )
+            old[idx - lo] = flat[v]
+            if den > 0.0:
+                flat[v] = np.float32(num / den)
+        if gain > 0.0:  # the histogram follows the block's changes, in scan order
+            for idx in range(lo, hi):
+                count[_bin(old[idx - lo], bins)] -= 1.0
+                count[_bin(flat[voxels[idx - lo]], bins)] += 1.0
+        lo = hi
+
+
+def _grid_tables(shape: tuple[int, ...], field: MatchField) -> np.ndarray:
+    """``(3, 2, max side)`` uint8: 1 where a coordinate along plane ``p``'s row (0) or column (1) axis
+    is a neighbourhood centre of the sparse grid (``phase`` modulo ``stride``)."""
+    out = np.zeros((3, 2, max(shape)), dtype=np.uint8)
+    for p in range(3):
+        for t in range(2):
+            side = shape[int(field.axes[p, t])]
+            out[p, t, :side] = (np.arange(side) - field.phase[p, t]) % field.stride == 0
+    return out
 
 
 def irls_update(
@@ -640,35 +832,47 @@ def irls_update(
     exemplars: PackedExemplars,
     histogram: HistogramState,
     periodic: bool,
+    *,
+    block: int = UPDATE_BLOCK,
 ) -> None:
-    """Kopf's optimisation step on the voxels ``order[start:stop]``, in that order, in place.
+    """Kopf's optimisation step on the voxels ``order[start:stop]``, in place.
 
-    Each voxel ``v`` becomes ``sum w e / sum w`` over the matched neighbourhoods (all planes) whose
-    window covers it, ``e`` the value the matched exemplar neighbourhood puts at ``v`` and ``w`` its
-    weight, divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (normalised histograms, ``b`` the bin
-    of ``e``) when histogram matching is on; ``histogram.count`` follows every change. A voxel no
-    neighbourhood covers keeps its value. Without ``periodic``, only centres inside the volume count.
-    ``vol`` must be C-contiguous float32; the caller prepares every array once per iteration.
+    Each voxel ``v`` becomes ``sum w e / sum w`` over the matched neighbourhoods of the active planes
+    whose window covers it, ``e`` the value the matched exemplar neighbourhood puts at ``v`` and ``w``
+    its weight, divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (normalised histograms, ``b`` the
+    bin of ``e``) when histogram matching is on. A voxel no neighbourhood covers keeps its value.
+    Without ``periodic``, only centres inside the volume count.
+
+    The voxels are taken in blocks of ``block`` consecutive entries of ``order`` (aligned on multiples
+    of ``block``, so splitting a run at such a multiple changes nothing): a voxel's new value depends
+    only on the matches and on the histogram, never on other voxels, so a block is computed in
+    parallel from the histogram as it was at the block's start; then ``histogram.count`` takes the
+    block's changes. Sums run in a fixed order (plane, offset row, offset column): the same bytes
+    whatever the number of threads. Only the centres on each plane's grid (``field.stride``,
+    ``field.phase``) are visited. ``vol`` must be C-contiguous float32.
     """
-    _irls_update_kernel(
-        vol,
-        order,
-        int(start),
-        int(stop),
-        field.match,
-        field.weight,
-        field.offsets,
-        field.ex_offsets,
-        field.axes,
-        field.phase,
-        int(field.stride),
-        exemplars.values,
-        exemplars.start,
-        bool(periodic),
-        histogram.count,
-        histogram.target,
-        float(histogram.gain),
-    )
+    size = math.isqrt(field.ex_offsets.shape[1])
+    with _threads_for(int(stop) - int(start)):
+        _irls_update_kernel(
+            vol,
+            order,
+            int(start),
+            int(stop),
+            field.match,
+            field.weight,
+            field.ex_offsets,
+            field.axes,
+            _grid_tables(vol.shape, field),
+            field.active,
+            size,
+            exemplars.values,
+            exemplars.start,
+            bool(periodic),
+            histogram.count,
+            histogram.target,
+            float(histogram.gain),
+            int(block),
+        )
 
 
 def irls_update_reference(
@@ -680,6 +884,8 @@ def irls_update_reference(
     exemplars: PackedExemplars,
     histogram: HistogramState,
     periodic: bool,
+    *,
+    block: int = UPDATE_BLOCK,
 ) -> None:
     """Plain NumPy :func:`irls_update` (one voxel at a time, the same order of operations)."""
     D, H, W = vol.shape
@@ -687,35 +893,49 @@ def irls_update_reference(
     n_total = vol.size
     gain = histogram.gain
     count = histogram.count
-    for v in order[start:stop]:
-        z, y, x = np.unravel_index(int(v), vol.shape)
-        old = vol[z, y, x]
-        if gain > 0:
-            count[histogram_bin(old, bins)] -= 1.0
-        num = 0.0
-        den = 0.0
-        for p in range(3):
-            c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
-            if periodic:
-                c = np.mod(c, [D, H, W])
-                inside = np.ones(len(c), dtype=bool)
-            else:
-                inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
-            for k in np.flatnonzero(inside):
-                u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
-                e = field.match[p, u]
-                if e < 0:
+    stride = field.stride
+    lo = start
+    while lo < stop:
+        hi = min(stop, (lo // block + 1) * block)
+        frozen = count.copy()
+        changes = []
+        for v in order[lo:hi]:
+            z, y, x = np.unravel_index(int(v), vol.shape)
+            num = 0.0
+            den = 0.0
+            for p in range(3):
+                if not field.active[p]:
                     continue
-                val = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
-                w = float(field.weight[p, u])
-                if gain > 0:
-                    b = histogram_bin(val, bins)
-                    excess = (count[b] - histogram.target[b]) / n_total
-                    if excess > 0:
-                        w = w / (1.0 + gain * excess)
-                num += w * float(val)
-                den += w
-        new = np.float32(num / den) if den > 0 else old
-        vol[z, y, x] = new
+                a, b = (int(t) for t in field.axes[p])
+                c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
+                if periodic:
+                    c = np.mod(c, [D, H, W])
+                    inside = np.ones(len(c), dtype=bool)
+                else:
+                    inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
+                on_grid = ((c[:, a] - field.phase[p, 0]) % stride == 0) & (
+                    (c[:, b] - field.phase[p, 1]) % stride == 0
+                )
+                for k in np.flatnonzero(inside & on_grid):
+                    u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
+                    e = field.match[p, u]
+                    if e < 0:
+                        continue
+                    val = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
+                    w = float(field.weight[p, u])
+                    if gain > 0:
+                        bb = histogram_bin(val, bins)
+                        excess = (frozen[bb] - histogram.target[bb]) / n_total
+                        if excess > 0:
+                            w = w / (1.0 + gain * excess)
+                    num += w * float(val)
+                    den += w
+            old = vol[z, y, x]
+            if den > 0:
+                vol[z, y, x] = np.float32(num / den)
+            changes.append((old, vol[z, y, x]))
         if gain > 0:
-            count[histogram_bin(new, bins)] += 1.0
+            for old, new in changes:
+                count[histogram_bin(old, bins)] -= 1.0
+                count[histogram_bin(new, bins)] += 1.0
+        lo = hi

@@ -8,13 +8,17 @@ The volume ``s`` minimises ``E(s, {e}) = sum_v sum_{i in planes} ||s_{v,i} - e_{
 2. the **optimisation step**: every voxel becomes the weighted average of the values that the matched
    neighbourhoods covering it propose (eq 2), with the IRLS weights ``w = ||s_{v,i} - e_{v,i}||^(r-2)``,
    ``r = 0.8`` (eq 3), so that a robust ``L_r`` norm is minimised and averaging blurs less; the
-   weights are divided by ``1 + sum_b max(0, H_s(b) - H_e(b))`` (eq 4, histogram matching: ``H_s`` the
-   volume's grey-level histogram, updated as voxels change in scan order, ``H_e`` the exemplar's), which
-   pulls the volume's grey levels toward the exemplar's.
+   weights are divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (eq 4, histogram matching: ``H_s`` the
+   volume's grey-level histogram, kept up to date during the step, ``H_e`` the exemplars', ``b`` the
+   bin of the proposed value), which pulls the volume's grey levels toward the exemplar's.
 
 Coarse to fine over Gaussian pyramids: the coarsest volume starts as random exemplar values, each
-finer one as the previous level upsampled. The study's settings (Urs et al. 2012, section 3): 5
-levels (fewer for small exemplars), 7x7 neighbourhoods, random scan, 10 iterations per level.
+finer one as the previous level upsampled (trilinear, checked against a known ramp in the tests).
+``planes`` chooses the views: all three (isotropic material), or two, e.g. ``('xz', 'yz')`` for
+laminae (ALGORITHMS.md section 4: "use three and allow two"; a horizontal-laminae exemplar cannot
+describe the xy slices, which cut the sheets into contour mazes), leaving the xy slices free.
+``stats``: ``energy`` (the mean best-match distance of every iteration, per level; it falls at every
+iteration with the exact search, tested), ``contrast_before_remap`` (see below), the level plan.
 
 References
 ----------
@@ -22,28 +26,85 @@ J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid te
 from 2D exemplars", ACM Trans. Graph. 26(3) (Proc. SIGGRAPH 2007), article 2; eqs 1-4.
 V. Kwatra, I. Essa, A. Bobick, N. Kwatra, "Texture optimization for example-based synthesis",
 ACM Trans. Graph. 24(3) (SIGGRAPH 2005): the IRLS optimisation Kopf extends to solids.
+X. Tong, J. Zhang, L. Liu, X. Wang, B. Guo, H.-Y. Shum, "Synthesis of bidirectional texture functions
+on arbitrary surfaces", SIGGRAPH 2002: k-coherence search.
 R. D. Urs, J.-P. Da Costa, J.-M. Leyssale, G. Vignoles, C. Germain, "Non-parametric synthesis of
 laminar volumetric textures from a 2D sample", BMVC 2012: the settings and the scan orders.
 
-Departures, and why
+Departures, and why (figures: soot = ``hrtem-soot-128.png``, seed 1, per-axis means of
+:func:`synth.evaluate.evaluate_volume`; "KL g/o" = grey / orientation KL)
 -------------------
-- **Search**: PCA-reduced neighbourhoods (components holding 97% of the variance, 4 to 16) in an
-  exact k-d tree (:class:`scipy.spatial.cKDTree`), whose 4 nearest are re-ranked with the full
-  distance; Kopf uses PCA and an approximate (ANN) tree. ``search='exact'`` compares every exemplar
-  neighbourhood (the definition); the two are measured against each other in the tests.
+- **Histogram gain 64** (:data:`HISTOGRAM_GAIN`). Eq 4 with normalised histograms (gain 1) hardly
+  changes the weights, and the averaging let the volume collapse toward a flat grey: 32^3 from a
+  64^2 soot crop kept 0.18 of the exemplar's standard deviation (0.13 on the 16^3 test) and its
+  orientation KL was 0.39/0.69/0.46. The first cut then rank-remapped the volume onto the exemplar's
+  grey levels **after every iteration**: that fought the optimisation (the energy jumped 2-3x after
+  each remap) and blew the low-contrast residue up into blotches and streaks (soot 64^3 from 128^2:
+  orientation KL 0.15/0.45/0.15). Gains measured on the 32^3 case without any remap: 1 / 16 / 64 /
+  256 / 1024 / 4096 kept 0.18 / 0.48 / 0.64 / 0.76 / 0.83 / 0.90 of the contrast, with orientation
+  KL (mean of the axes) 0.51 / 0.07 / 0.06 / 0.18 / 0.12 / 0.13: high gains force the grey levels at
+  the expense of the structure; 64 keeps both.
+- **Exemplar-usage re-weighting** (:data:`POSITION_GAIN`, :data:`POSITION_CELLS`; after Chen & Wang's
+  position histogram, which Kopf does not use): after each plane's search, the exemplar is cut into
+  16 x 16 cells and a match centred in a cell used more than the mean has its IRLS weight divided by
+  ``1 + gain * (u / mean(u) - 1)``. Why: without it the volume often fell into a laminar attractor
+  (planar sheets of one orientation satisfy all three planes with parallel stripes; the soot
+  exemplar's fringes run every way), and which seeds did so was luck: soot 64^3 from 128^2, seeds
+  1 / 2, orientation KL per axis: 0.08/0.03/0.02 and 0.13/0.10/0.03 without; 0.04/0.06/0.02 and
+  0.03/0.05/0.02 with gain 1 (the default). Gain 4 (measured with an earlier search setting) gave
+  0.09/0.07/0.06 and 0.06/0.05/0.05 against 0.05/0.06/0.02 and 0.05/0.07/0.04 for gain 1.
+- **One rank remap at the very end** (:func:`synth.pixel.solid.match_histogram`, when
+  ``histogram_matching``): the remaining contrast deficit (the optimisation keeps about 0.6-0.7 of
+  the exemplar's std at 64^3) is removed by a monotone remap of the finished volume, which keeps its
+  structure (orientation KL unchanged) and makes grey KL ~0. It does not feed back into the
+  iterations. ``stats['contrast_before_remap']`` reports what the optimisation achieved by itself.
+- **Search**: k-coherence on each slice (Tong et al.: candidates from the in-plane neighbours'
+  matches, shifted, their :data:`COHERENCE_USED` most similar exemplar positions and
+  :data:`RANDOM_CANDIDATES` random ones), seeded by the coarser level's matches upsampled; only the
+  very first iteration (coarsest level) uses the PCA + approximate k-d tree search (Kopf's search).
+  Final energy against the exact search's (16^3 test volume, seeds 5-8): 1.01 / 0.92 / 0.85 / 0.74x
+  (tested within 5%; the exact search's greedy matches lose coherence and end higher). Also running
+  the tree search at the start of every level and keeping the better match was tried: it broke the
+  coherence (soot orientation KL 0.07/0.11/0.05 against 0.04/0.06/0.02, seed 1) and cost 2-3x the
+  search time. With 4 set entries instead of 8 the search is 25% faster and soot was as good (seed 2:
+  0.02/0.02/0.01), but single seeds of the fast/exact test reached 1.14x.
+  ``search='exact'`` compares every exemplar neighbourhood (the definition).
+- **4 iterations per level** (the study: 10): the energy settles by the 3rd-4th iteration (soot 64^3:
+  finest-level energy 0.0043, 0.0038, 0.0034, 0.0034, then 0.0032 after 10), and the 4-iteration
+  volume was no worse (orientation KL 0.06/0.03/0.02 against 0.04/0.12/0.05 with 10; the spread
+  between seeds is of that order), at 40% of the time.
 - **Sparse grid**: as Kopf, neighbourhoods are centred on every ``stride``-th voxel only, here along
   the two axes of each slice plane (every voxel is still covered by ~(n/stride)^2 neighbourhoods per
-  plane); the grid's phase is drawn afresh every iteration so no voxel is always a centre.
-- **Histogram matching** on grey levels only (the exemplars are grey), 16 bins on [0, 1], with
-  normalised histograms; ``H_e`` pools the three planes' exemplars. Kopf also matches a histogram
-  of exemplar positions in some results; not here (Chen & Wang's method does).
+  plane, tested); the grid's phase is drawn afresh every iteration so no voxel is always a centre.
+- **Histogram in blocks**: the optimisation step takes the voxels in scan order in blocks of
+  ``max(UPDATE_BLOCK, N / 16)`` voxels (:data:`synth.kernels.solid_search.UPDATE_BLOCK` = 4096,
+  :data:`UPDATE_BLOCKS_PER_SWEEP`; also cut at the progress steps), computes a block in parallel from
+  the histogram as it was at the block's start, then updates the histogram (Kopf: after every voxel).
+  A voxel's new value depends on no other voxel, so this is what makes the step parallel and, with
+  the block's voxels taken in memory order, cache-friendly: at 128^3 an update sweep took 5.6 s with
+  blocks of 4096 and 3.0 s with N / 16 (one thread). The histogram lags by at most 1/16 of a sweep.
+- **Histogram matching** on grey levels only (the exemplars are grey), 16 bins on [0, 1];
+  ``H_e`` pools the active planes' exemplars. Kopf also matches other histograms in some results.
 - **Neighbourhood size**: 7x7 (ALGORITHMS.md) rather than Kopf's 8x8 (an odd size has a centre); at
-  coarse levels it shrinks to a quarter of the exemplar's shorter side, so that enough exemplar
-  neighbourhoods exist there.
+  coarse levels it shrinks to a quarter of the exemplar's shorter side
+  (:func:`synth.pixel.solid.plan_levels`). 3 levels instead of 5 gave the same quality on soot
+  (orientation KL 0.03/0.08/0.10 against 0.04/0.12/0.05 at 10 iterations): the 3x3 coarse levels
+  cost little and are kept as the study's setting.
 - **Exemplar borders**: only neighbourhoods fully inside the exemplar are matched (ALGORITHMS.md);
   the volume wraps (``periodic=True``, a tileable volume, the default) or is mirrored at its faces.
-- **Scan order** matters only in the optimisation step (the order in which voxels update the
+- **Scan order** matters only in the optimisation step (the order in which blocks update the
   histogram); the search step is order-free.
+
+Measured (defaults, 2 cores shared with other work, load 2-2.5)
+----------------------------------------------------------------
+Soot 64^3 from 128^2: grey KL 0.000 on every axis (final remap), orientation KL 0.04/0.06/0.02
+(seed 1) and 0.03/0.05/0.02 (seed 2); the slices show fine, isotropic fringes like the exemplar's,
+somewhat softer. Times: 64^3 from 64^2 8.0 s (9.8 s with the import), 128^3 from 128^2 57.5 s, peak
+resident memory 635 MB. **Not reached**: bent laminae (``undulating_laminae((128, 128), 7, 16,
+128, noise=0.3)``) with ``planes=('xz', 'yz')``: orientation KL 1.84/1.89 on the constrained axes
+(axis 1 = xz, axis 2 = yz); the xz/yz slices are clean laminae but all
+tilted one way (~20 degrees): the volume settles on one planar stack, where the exemplar's bend
+spreads the tilts over +-38 degrees. The exemplar-usage re-weighting does not break this attractor.
 """
 
 from __future__ import annotations
@@ -56,13 +117,21 @@ from pydantic import Field, field_validator
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.scan import ScanOrder, scan_order
-from synth.kernels.solid_search import HistogramState, MatchField, PackedExemplars, irls_update
+from synth.kernels.solid_search import (
+    KCOHERENCE_BLOCKS,
+    UPDATE_BLOCK,
+    HistogramState,
+    MatchField,
+    PackedExemplars,
+    irls_update,
+)
 from synth.methods.common import checked_progress
 from synth.params import MethodParams
 from synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
     ProgressMeter,
+    checked_planes,
     dense_sources,
     exemplar_offsets,
     gather_plane,
@@ -85,8 +154,16 @@ DISTANCE_FLOOR = 1e-3
 #: Relative cost of one neighbourhood search and one voxel update (for progress reporting).
 SEARCH_COST = 1.0
 UPDATE_COST = 0.3
-#: Histogram-matching gain (eq 4 with normalised histograms is gain 1).
-HISTOGRAM_GAIN = 1.0
+#: Histogram-matching gain: eq 4 with normalised histograms is gain 1, which let the volume collapse to a
+#: flat grey; 64 measured best (module docstring, Departures).
+HISTOGRAM_GAIN = 64.0
+#: k-coherence search: how many of each exemplar position's similar positions are proposed.
+COHERENCE_USED = 8
+#: The optimisation step updates at least 1/16 of the volume between two histogram updates (cache).
+UPDATE_BLOCKS_PER_SWEEP = 16
+#: Exemplar-usage re-weighting: gain, and cells per exemplar side (module docstring, Departures).
+POSITION_GAIN = 1.0
+POSITION_CELLS = 16
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
 RANDOM_CANDIDATES = 2
 
@@ -98,7 +175,7 @@ class SolidKopfParams(MethodParams):
         7, ge=3, le=15, description="Side of the square slice neighbourhoods (odd)."
     )
     levels: int = Field(5, ge=1, le=8, description="Pyramid levels (fewer when the exemplar is small).")
-    iterations: int = Field(10, ge=1, le=50, description="Search + optimisation iterations per level.")
+    iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
     scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
     periodic: bool = Field(True, description="Toroidal volume: the output tiles seamlessly.")
     r: float = Field(0.8, gt=0.0, le=2.0, description="Robust norm exponent (IRLS weights ||s-e||^(r-2)).")
@@ -112,8 +189,20 @@ class SolidKopfParams(MethodParams):
         description="Neighbourhoods centred on every stride-th voxel of each slice (sparse grid).",
     )
     search: Literal["tree", "exact"] = Field(
-        "tree", description="'tree': PCA + k-d tree (fast); 'exact': every exemplar neighbourhood (slow)."
+        "tree",
+        description="'tree': k-coherence (k-d tree at the start; fast); 'exact': every exemplar "
+        "neighbourhood (slow).",
     )
+    planes: tuple[str, ...] = Field(
+        PLANES,
+        description="Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
+        "two, e.g. ('xz', 'yz') for laminae, leaving the xy slices free.",
+    )
+
+    @field_validator("planes")
+    @classmethod
+    def _planes(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        return checked_planes(value)
 
     @field_validator("neighbourhood_size")
     @classmethod
@@ -121,6 +210,29 @@ class SolidKopfParams(MethodParams):
         if value % 2 == 0:
             raise ValueError("neighbourhood_size must be odd")
         return value
+
+
+def _position_factors(match: np.ndarray, ex_shape: tuple[int, int]) -> np.ndarray:
+    """Weight factors ``1 / (1 + gain * max(0, u(c) / mean(u) - 1))`` of a plane's matched neighbourhoods.
+
+    ``match`` holds the flat exemplar positions of the plane's matches; the exemplar is cut into about
+    :data:`POSITION_CELLS` x :data:`POSITION_CELLS` square cells, ``u(c)`` counts the matches centred in
+    cell ``c`` and ``mean(u)`` is over the cells used. A match in an over-used cell loses weight in
+    proportion to the excess (:data:`POSITION_GAIN`), as eq 4 does for grey levels.
+    """
+    h, w = ex_shape
+    cell = max(2, min(h, w) // POSITION_CELLS)
+    rows, cols = np.divmod(match, w)
+    nc = (w + cell - 1) // cell
+    cells = (rows // cell) * nc + cols // cell
+    usage = np.bincount(cells, minlength=((h + cell - 1) // cell) * nc).astype(np.float64)
+    mean = usage[usage > 0].mean() if np.any(usage > 0) else 1.0
+    excess = np.maximum(0.0, usage[cells] / mean - 1.0)
+    return (1.0 / (1.0 + POSITION_GAIN * excess)).astype(np.float32)
+
+
+def _active_planes(params: SolidKopfParams) -> list[int]:
+    return [PLANES.index(plane) for plane in params.planes]
 
 
 def run_solid_kopf(
@@ -133,21 +245,24 @@ def run_solid_kopf(
     constraint: np.ndarray | None = None,
     exemplars: dict[str, np.ndarray] | None = None,
 ) -> Result:
-    """Synthesize a ``size = (D, H, W)`` volume whose slices look like the per-plane exemplars."""
+    """Synthesize a ``size = (D, H, W)`` volume whose slices in ``params.planes`` match their exemplars."""
     start = time.perf_counter()
     report = checked_progress(progress)
-    planes = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
-    plan = plan_levels(planes, size, params.levels, params.neighbourhood_size)
+    views = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
+    plan = plan_levels(views, size, params.levels, params.neighbourhood_size)
+    active = _active_planes(params)
     rng = np.random.default_rng(seed)
     s = params.stride
     total = sum(
-        params.iterations * np.prod(shape) * (3 * SEARCH_COST / s**2 + UPDATE_COST) for shape in plan.shapes
+        params.iterations * np.prod(shape) * (len(active) * SEARCH_COST / s**2 + UPDATE_COST)
+        for shape in plan.shapes
     )
     meter = ProgressMeter(report, float(total))
     timings = {"search": 0.0, "optimisation": 0.0}
-    distances: dict[str, float] = {}
-    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in range(3)], rng)
+    energies: dict[str, list[float]] = {}
+    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in active], rng)
     src = np.zeros((3, 0), dtype=np.int64)
+    pooled = np.zeros(0, dtype=np.float32)
     for level in range(plan.levels - 1, -1, -1):
         shape = plan.shapes[level]
         n = plan.sizes[level]
@@ -185,20 +300,23 @@ def run_solid_kopf(
             axes=np.array([PLANE_AXES[p] for p in PLANES], dtype=np.int64),
             phase=np.zeros((3, 2), dtype=np.int64),
             stride=s,
+            active=np.array([p in active for p in range(3)], dtype=np.uint8),
         )
         packed = PackedExemplars.pack(images)
-        pooled = np.concatenate([im.ravel() for im in images])
+        pooled = np.concatenate([images[p].ravel() for p in active])
         hist = HistogramState.start(
             vol, pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN if params.histogram_matching else 0.0
         )
-        scratch = (np.zeros(max(im.size for im in images), dtype=np.int64), np.zeros(1, dtype=np.int64))
+        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
+        scratch = (stamps, np.zeros(1, dtype=np.int64))
         for it in range(params.iterations):
             stage = f"solid-kopf: level {level + 1} of {plan.levels}, iteration {it + 1}/{params.iterations}"
             t0 = time.perf_counter()
             field.match.fill(-1)
             sum_d2 = 0.0
             count = 0
-            for p, plane in enumerate(PLANES):
+            for p in active:
+                plane = PLANES[p]
                 phase = (int(rng.integers(0, s)), int(rng.integers(0, s)))
                 field.phase[p] = phase
                 centres = plane_centres(shape, plane, s, phase)
@@ -221,6 +339,7 @@ def run_solid_kopf(
                             seed_key=seed_key,
                             index0=a,
                             scratch=scratch,
+                            k=COHERENCE_USED,
                         )
                     rms = np.maximum(np.sqrt(d2 / queries.shape[1]), DISTANCE_FLOOR)
                     field.match[p, flat[a:b]] = pos
@@ -229,19 +348,24 @@ def run_solid_kopf(
                     count += b - a
                     meter.advance((b - a) * SEARCH_COST, stage)
                 src[p] = dense_sources(field.match[p], shape, plane, s, phase, images[p].shape)
+                if POSITION_GAIN > 0:
+                    field.weight[p, flat] *= _position_factors(field.match[p, flat], images[p].shape)
             t1 = time.perf_counter()
             order = scan_order(shape, params.scan, rng)
-            step = meter.chunk(UPDATE_COST)
+            step = meter.chunk(UPDATE_COST)  # fixed by the sizes: the same blocks on every run
+            block = max(UPDATE_BLOCK, vol.size // UPDATE_BLOCKS_PER_SWEEP)
             for a in range(0, len(order), step):
                 b = min(len(order), a + step)
-                irls_update(vol, order, a, b, field, packed, hist, params.periodic)
+                irls_update(vol, order, a, b, field, packed, hist, params.periodic, block=block)
                 meter.advance((b - a) * UPDATE_COST, stage)
-            if params.histogram_matching:  # rank remap: the volume takes the exemplars' grey levels
-                vol = match_histogram(vol, pooled)
-                hist = HistogramState.start(vol, pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN)
             timings["search"] += t1 - t0
             timings["optimisation"] += time.perf_counter() - t1
-            distances[f"level {level + 1}"] = sum_d2 / max(count, 1)
+            energies.setdefault(f"level {level + 1}", []).append(sum_d2 / max(count, 1))
+    # The optimisation's own contrast (std against the exemplars'), before the final remap: near 0 means
+    # the volume collapsed toward a flat grey, as it did with eq 4's gain 1.
+    contrast = float(vol.std() / max(float(pooled.std()), 1e-12))
+    if params.histogram_matching:  # final rank remap onto the exemplars' grey levels (see Departures)
+        vol = match_histogram(vol, pooled)
     image = np.clip(vol, 0.0, 1.0).astype(np.float32)
     report("done", 1.0)
     timings["total"] = time.perf_counter() - start
@@ -252,10 +376,14 @@ def run_solid_kopf(
         seed=seed,
         timings=timings,
         stats={
-            # Mean squared difference per neighbourhood entry, last iteration of each level (coarse first).
-            "mean_best_distance": distances,
+            # Mean squared difference per neighbourhood entry of the search step, every iteration
+            # (the energy the iterations lower), per level (coarse first); and its last value per level.
+            "energy": energies,
+            "mean_best_distance": {k: v[-1] for k, v in energies.items()},
             "levels": plan.levels,
             "neighbourhood_sizes": list(plan.sizes),
+            "planes": list(params.planes),
+            "contrast_before_remap": contrast,
         },
     )
 

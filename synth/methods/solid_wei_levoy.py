@@ -30,6 +30,9 @@ Departures, and why
   matches upsampled; the parent level's neighbourhood is not part of the comparison.
 - **Exemplar borders**: only neighbourhoods fully inside the exemplar are matched; the volume wraps
   (``periodic``) or is mirrored at its faces.
+- **Views**: ``planes`` (default all three, ALGORITHMS.md: "use three and allow two"); with two, e.g.
+  ``('xz', 'yz')``, the study's front and side views, the voxel averages two matched centres and
+  the third plane's slices are free (laminar materials).
 """
 
 from __future__ import annotations
@@ -42,11 +45,13 @@ from pydantic import Field, field_validator
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.scan import ScanOrder, scan_order
+from synth.kernels.solid_search import KCOHERENCE_BLOCKS
 from synth.methods.common import checked_progress
 from synth.params import MethodParams
 from synth.pixel.solid import (
     PLANES,
     ProgressMeter,
+    checked_planes,
     gather_plane,
     initial_volume,
     plan_levels,
@@ -82,6 +87,16 @@ class SolidWeiLevoyParams(MethodParams):
     search: Literal["kcoherence", "exact"] = Field(
         "kcoherence", description="'kcoherence' (fast) or 'exact': every exemplar neighbourhood (slow)."
     )
+    planes: tuple[str, ...] = Field(
+        PLANES,
+        description="Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
+        "two, e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving xy free.",
+    )
+
+    @field_validator("planes")
+    @classmethod
+    def _planes(cls, value: tuple[str, ...]) -> tuple[str, ...]:
+        return checked_planes(value)
 
     @field_validator("neighbourhood_size")
     @classmethod
@@ -104,13 +119,14 @@ def run_solid_wei_levoy(
     """Synthesize a ``size = (D, H, W)`` volume whose slices look like the per-plane exemplars."""
     start = time.perf_counter()
     report = checked_progress(progress)
-    planes = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
-    plan = plan_levels(planes, size, params.levels, params.neighbourhood_size)
+    views = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
+    plan = plan_levels(views, size, params.levels, params.neighbourhood_size)
+    active = [PLANES.index(plane) for plane in params.planes]
     rng = np.random.default_rng(seed)
     meter = ProgressMeter(report, float(sum(params.iterations * np.prod(sh) for sh in plan.shapes)))
     distances: dict[str, float] = {}
     passes: dict[str, int] = {}
-    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in range(3)], rng)
+    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in active], rng)
     src = np.zeros((3, 0), dtype=np.int64)
     for level in range(plan.levels - 1, -1, -1):
         shape = plan.shapes[level]
@@ -139,7 +155,8 @@ def run_solid_wei_levoy(
         vol = np.ascontiguousarray(vol, dtype=np.float32)
         flat_vol = vol.reshape(-1)
         geometries = [slice_geometry(shape, plane, params.periodic) for plane in PLANES]
-        scratch = (np.zeros(max(im.size for im in images), dtype=np.int64), np.zeros(1, dtype=np.int64))
+        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
+        scratch = (stamps, np.zeros(1, dtype=np.int64))
         for it in range(params.iterations):
             stage = f"solid-wei-levoy: level {level + 1} of {plan.levels}, pass {it + 1}/{params.iterations}"
             order = scan_order(shape, params.scan, rng)
@@ -153,7 +170,8 @@ def run_solid_wei_levoy(
                 centres = np.stack(np.unravel_index(ids, shape), axis=1).astype(np.int64)
                 total = np.zeros(b - a, dtype=np.float64)
                 moved = np.zeros(b - a, dtype=bool)
-                for p, plane in enumerate(PLANES):
+                for p in active:
+                    plane = PLANES[p]
                     queries = gather_plane(vol, centres, plane, n, params.periodic, centre=False)
                     if params.search == "exact" or (coarsest and it == 0):
                         pos, d2 = nbhs[p].search(queries, exact=params.search == "exact")
@@ -172,10 +190,10 @@ def run_solid_wei_levoy(
                     src[p, ids] = pos
                     total += nbhs[p].values(pos)
                     sum_d2 += float(np.sum(d2)) / queries.shape[1]
-                flat_vol[ids] = (total / 3.0).astype(np.float32)
+                flat_vol[ids] = (total / len(active)).astype(np.float32)
                 changed += int(np.count_nonzero(moved))
                 meter.advance(b - a, stage)
-            distances[f"level {level + 1}"] = sum_d2 / (3 * n_vox)
+            distances[f"level {level + 1}"] = sum_d2 / (len(active) * n_vox)
             passes[f"level {level + 1}"] = it + 1
             if it > 0 and changed / n_vox < params.tolerance:
                 meter.advance((params.iterations - it - 1) * n_vox, stage)  # the passes not needed
@@ -193,6 +211,7 @@ def run_solid_wei_levoy(
             "passes": passes,
             "levels": plan.levels,
             "neighbourhood_sizes": list(plan.sizes),
+            "planes": list(params.planes),
         },
     )
 

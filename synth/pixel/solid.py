@@ -15,6 +15,7 @@ three times for an isotropic material). This module holds what every such method
 - :class:`SolidPlan` (:func:`plan_levels`): exemplar pyramids per plane, the volume's level shapes
   and the neighbourhood side at each level, validated once (:class:`~synth.errors.InvalidInput`
   naming the exemplar that is too small);
+- :func:`checked_planes`: the views a method matches (all three, or two for laminar materials);
 - volumes between levels (:func:`initial_volume`, :func:`upsample_volume`, :func:`volume_pyramid`),
   Kopf's sparse neighbourhood centres (:func:`plane_centres`), and :class:`ProgressMeter`, which
   turns units of work into ``progress(stage, fraction)`` calls at least every 2% of the run.
@@ -55,6 +56,7 @@ __all__ = [
     "ExemplarNeighbourhoods",
     "ProgressMeter",
     "SolidPlan",
+    "checked_planes",
     "dense_sources",
     "exemplar_neighbourhoods",
     "exemplar_offsets",
@@ -74,6 +76,21 @@ __all__ = [
 PLANES: tuple[str, ...] = ("xy", "xz", "yz")
 #: The volume axes ``(row axis, column axis)`` of each plane's slices.
 PLANE_AXES: dict[str, tuple[int, int]] = {"xy": (1, 2), "xz": (0, 2), "yz": (0, 1)}
+
+
+def checked_planes(planes: Sequence[str]) -> tuple[str, ...]:
+    """The views a solid method matches, in :data:`PLANES` order: two or three distinct plane names.
+
+    Raises ``ValueError`` (a parameter error once pydantic wraps it) naming the allowed values.
+
+    >>> checked_planes(("yz", "xz"))
+    ('xz', 'yz')
+    """
+    given = list(planes)
+    if len(set(given)) != len(given) or not set(given) <= set(PLANES) or len(given) < 2:
+        raise ValueError(f"planes must be two or three distinct planes among 'xy', 'xz', 'yz'; got {given}")
+    return tuple(p for p in PLANES if p in given)
+
 
 #: The coarsest pyramid level keeps exemplars at least this many pixels on a side ...
 MIN_EXEMPLAR_SIDE = 8
@@ -189,12 +206,14 @@ class ExemplarNeighbourhoods:
         seed_key: int,
         index0: int,
         scratch: tuple[np.ndarray, np.ndarray],
+        k: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """k-coherence search (:func:`synth.kernels.solid_search.kcoherence_search`) of the queries
-        centred at voxels ``centres``, from the plane's current per-voxel positions ``src``."""
+        centred at voxels ``centres``, from the plane's current per-voxel positions ``src``; ``k``: how
+        many of each k-coherence set to use (all by default)."""
         stamp, counter = scratch
         return kcoherence_search(
-            queries, centres, geometry, src, self.sets, n_random, seed_key, index0, stamp, counter
+            queries, centres, geometry, src, self.sets, n_random, seed_key, index0, stamp, counter, k
         )
 
 

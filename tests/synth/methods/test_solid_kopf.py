@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -11,8 +15,10 @@ from synth.api import synthesize
 from synth.errors import Cancelled
 from synth.grid.scan import SCAN_ORDERS
 from synth.io.patterns import undulating_laminae
+from tests.paths import SHARED_DATA
 
 SMALL = {"iterations": 2, "levels": 3}
+SOOT = SHARED_DATA / "hrtem-soot-128.png"
 SIZE = (16, 16, 16)
 
 
@@ -86,13 +92,16 @@ def test_per_plane_exemplars_set_each_planes_orientation(method: str) -> None:
 
 
 def test_kopf_fast_search_matches_exact_search_within_5_percent() -> None:
+    """At the default iterations, the fast search's final energy is within 5% of the exact search's
+    (pooled over two seeds: single runs follow different paths and scatter by a few percent)."""
     ex = _soft()
-    params = {**SMALL, "iterations": 5}  # k-coherence needs a few iterations to settle
-    fast = synthesize("solid-kopf", ex, size=SIZE, params=params, seed=5)
-    exact = synthesize("solid-kopf", ex, size=SIZE, params={**params, "search": "exact"}, seed=5)
-    d_fast = fast.stats["mean_best_distance"]["level 1"]
-    d_exact = exact.stats["mean_best_distance"]["level 1"]
-    assert d_fast <= 1.05 * d_exact
+    fast = exact = 0.0
+    for seed in (5, 6):
+        for search in ("tree", "exact"):
+            res = synthesize("solid-kopf", ex, size=SIZE, params={"levels": 3, "search": search}, seed=seed)
+            d = res.stats["mean_best_distance"]["level 1"]
+            fast, exact = (fast + d, exact) if search == "tree" else (fast, exact + d)
+    assert fast <= 1.05 * exact
 
 
 def test_histogram_matching_keeps_the_exemplar_grey_levels() -> None:
@@ -138,3 +147,94 @@ def test_bad_inputs_are_named() -> None:
     planes = {"xy": ex, "xz": ex[:6].copy(), "yz": ex}
     with pytest.raises(InvalidInput, match=r"exemplar_xz: 6x32 pixels"):
         synthesize("solid-wei-levoy", exemplars=planes, size=SIZE)
+
+
+def _soot(side: int = 32) -> np.ndarray:
+    from synth.io import load_image
+
+    return load_image(SOOT, mode="grey")[:side, :side].copy()
+
+
+def test_kopf_energy_decreases_every_iteration_with_exact_search() -> None:
+    """Kwatra/Kopf: search then weighted average never raises the energy (dense grid, exact search, r = 2,
+    no histogram term, which is not part of the energy)."""
+    params = {
+        "levels": 2,
+        "iterations": 4,
+        "stride": 1,
+        "search": "exact",
+        "histogram_matching": False,
+        "r": 2.0,
+        "neighbourhood_size": 5,
+    }
+    res = synthesize("solid-kopf", _soft(), size=(12, 12, 12), params=params, seed=0)
+    for level, energy in res.stats["energy"].items():
+        assert len(energy) == 4
+        assert np.all(np.diff(energy) <= 1e-9 * max(energy)), (level, energy)
+
+
+@pytest.mark.skipif(not SOOT.exists(), reason=f"shared test images not found in {SHARED_DATA}")
+def test_kopf_does_not_collapse_to_flat_grey() -> None:
+    """The bug of the first cut: eq 4 with normalised histograms (gain 1) let the averaging collapse the
+    volume toward a flat grey (contrast 0.13 of the exemplar's here), which a rank remap after every
+    iteration then blew up into blotches. The optimisation must keep most of the contrast by itself."""
+    res = synthesize("solid-kopf", _soot(), size=(16, 16, 16), params={"levels": 3}, seed=0)
+    assert res.stats["contrast_before_remap"] > 0.3  # 0.13 with gain 1, 0.45 now
+    off = synthesize(
+        "solid-kopf", _soot(), size=(16, 16, 16), params={"levels": 3, "histogram_matching": False}, seed=0
+    )
+    assert off.stats["contrast_before_remap"] < res.stats["contrast_before_remap"]
+
+
+def test_two_views_leave_the_third_plane_free() -> None:
+    """planes=('xz', 'yz'): the xy exemplar is never read, and the two views set their planes' orientation."""
+    planes = {
+        "xy": _stripes((32, 32), "cols"),
+        "xz": _stripes((32, 32), "rows"),
+        "yz": _stripes((32, 32), "diag"),
+    }
+    params = {**SMALL, "iterations": 3, "planes": ("xz", "yz")}
+    res = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=params, seed=2)
+    other = synthesize("solid-kopf", exemplars={**planes, "xy": _soft()}, size=SIZE, params=params, seed=2)
+    assert res.image.tobytes() == other.image.tobytes()
+    assert res.stats["planes"] == ["xz", "yz"]
+    vol = res.image
+    for plane, view in (("xz", np.moveaxis(vol, 1, 0)), ("yz", np.moveaxis(vol, 2, 0))):
+        want = _orientation(planes[plane][None])
+        assert abs(np.degrees(wrap_angle(_orientation(view) - want))) < 15.0, plane
+
+
+@pytest.mark.parametrize("planes", [("xy",), ("xy", "xy"), ("xy", "ab"), ()])
+def test_bad_planes_are_named(planes: tuple[str, ...]) -> None:
+    with pytest.raises(InvalidParameter, match="planes must be two or three distinct planes"):
+        synthesize("solid-kopf", _soft(), size=SIZE, params={**SMALL, "planes": planes})
+
+
+def test_same_bytes_with_one_or_two_threads() -> None:
+    """The parallel kernels (prange) write only their own slots and sum in a fixed order: one thread
+    and two give the same bytes (every kernel forced onto the thread pool, however small its input)."""
+    code = (
+        "import hashlib; from synth.api import synthesize; from synth.io.patterns import undulating_laminae;"
+        "import synth.kernels.solid_search as k; k.PARALLEL_MIN_ITEMS = 0;"  # small inputs in parallel too
+        "ex = undulating_laminae((32, 32), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0);"
+        "r = synthesize('solid-kopf', ex, size=(12, 12, 12), params={'iterations': 2, 'levels': 2}, seed=3);"
+        "print(hashlib.sha256(r.image.tobytes()).hexdigest())"
+    )
+    digests = []
+    for threads in ("1", "2"):
+        env = {**os.environ, "NUMBA_NUM_THREADS": threads}
+        out = subprocess.run(
+            [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+        )
+        digests.append(out.stdout.strip())
+    assert digests[0] == digests[1] and len(digests[0]) == 64
+
+
+def test_position_factors_penalise_only_over_used_exemplar_cells() -> None:
+    from synth.methods.solid_kopf import POSITION_CELLS, POSITION_GAIN, _position_factors
+
+    side = 4 * POSITION_CELLS  # cells of 4 x 4 pixels
+    # cell 0 used 3 times, cell 1 once: mean 2, excess of cell 0 is 0.5
+    match = np.array([0, 1, side + 1, 4], dtype=np.int64)
+    f = _position_factors(match, (side, side))
+    np.testing.assert_allclose(f, [1 / (1 + POSITION_GAIN * 0.5)] * 3 + [1.0], rtol=1e-6)

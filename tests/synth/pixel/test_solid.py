@@ -148,9 +148,9 @@ def test_irls_update_equals_reference(periodic: bool, gain: float, stride: int) 
     a, b = vol.copy(), vol.copy()
     ha = HistogramState.start(a, pooled, 8, gain)
     hb = HistogramState.start(b, pooled, 8, gain)
-    irls_update(a, order, 0, 100, field, packed, ha, periodic)
-    irls_update(a, order, 100, len(order), field, packed, ha, periodic)
-    irls_update_reference(b, order, 0, len(order), field, packed, hb, periodic)
+    irls_update(a, order, 0, 64, field, packed, ha, periodic, block=32)  # split on a block boundary
+    irls_update(a, order, 64, len(order), field, packed, ha, periodic, block=32)
+    irls_update_reference(b, order, 0, len(order), field, packed, hb, periodic, block=32)
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(ha.count, hb.count)
     assert not np.array_equal(a, vol)
@@ -236,3 +236,78 @@ def test_tree_search_is_as_good_as_exact_search() -> None:
     _, d_exact = nb.search(queries, exact=True)
     assert np.all(d_fast >= d_exact - 1e-12)
     assert d_fast.mean() <= 1.05 * d_exact.mean()
+
+
+def test_upsample_volume_of_a_linear_function_has_no_shift_or_transpose() -> None:
+    """Coarse voxel ``j`` covers fine voxels ``2j, 2j + 1`` (skimage's pyramid): a ramp ``a z + b y + c x``
+    sampled at the coarse centres comes back, inside the volume, as the same ramp at the fine centres."""
+    coeff = (0.01, 0.02, 0.05)  # distinct per axis: a transpose would show
+    coarse = np.fromfunction(
+        lambda z, y, x: coeff[0] * (2 * z + 0.5) + coeff[1] * (2 * y + 0.5) + coeff[2] * (2 * x + 0.5),
+        (4, 5, 6),
+    ).astype(np.float32)
+    up = upsample_volume(coarse, (8, 10, 12), periodic=False)
+    want = np.fromfunction(lambda z, y, x: coeff[0] * z + coeff[1] * y + coeff[2] * x, (8, 10, 12))
+    inner = (slice(1, -1),) * 3
+    np.testing.assert_allclose(up[inner], want[inner], atol=1e-5)
+
+
+def test_every_voxel_gets_every_covering_neighbourhood_of_every_plane() -> None:
+    """Weights 1, every proposal of plane p worth 10^p: a voxel's sum of weights is the number of grid
+    centres covering it, and its value tells how many came from each plane (all planes, every window)."""
+    shape, n, stride = (6, 7, 8), 3, 2
+    ex = np.zeros((9, 9), dtype=np.float32)
+    rng = np.random.default_rng(1)
+    field = _field(shape, n, [9, 9, 9], stride, rng)
+    field.weight[:] = 1.0
+    images = [ex + 10.0**p for p in range(3)]
+    vol = np.zeros(shape, dtype=np.float32)
+    hist = HistogramState.start(vol, ex, 4, 0.0)
+    irls_update(vol, np.arange(vol.size), 0, vol.size, field, PackedExemplars.pack(images), hist, True)
+    # expected: per plane, centres of the plane's grid within the voxel's n x n window (periodic)
+    r = n // 2
+    for v in rng.integers(0, vol.size, 40):
+        z, y, x = np.unravel_index(v, shape)
+        counts = []
+        for p, plane in enumerate(PLANES):
+            a, b = PLANE_AXES[plane]
+            pos = (z, y, x)
+            ca = [(pos[a] + d) % shape[a] for d in range(-r, r + 1)]
+            cb = [(pos[b] + d) % shape[b] for d in range(-r, r + 1)]
+            counts.append(
+                sum((i - field.phase[p, 0]) % stride == 0 for i in ca)
+                * sum((j - field.phase[p, 1]) % stride == 0 for j in cb)
+            )
+        want = sum(c * 10.0**p for p, c in enumerate(counts)) / sum(counts)
+        assert vol[z, y, x] == pytest.approx(want, rel=1e-6)
+
+
+def test_irls_update_skips_inactive_planes() -> None:
+    shape = (5, 6, 7)
+    rng = np.random.default_rng(2)
+    images = [np.full((9, 9), 0.1 * (p + 1), dtype=np.float32) for p in range(3)]
+    field = _field(shape, 3, [9, 9, 9], 1, rng)
+    field.active = np.array([0, 1, 1], dtype=np.uint8)
+    vol = np.zeros(shape, dtype=np.float32)
+    hist = HistogramState.start(vol, images[0], 4, 0.0)
+    irls_update(vol, np.arange(vol.size), 0, vol.size, field, PackedExemplars.pack(images), hist, True)
+    assert vol.min() > 0.2 - 1e-6 and vol.max() < 0.3 + 1e-6  # only the xz (0.2) and yz (0.3) proposals
+
+
+def test_kcoherence_search_with_fewer_set_entries_equals_reference() -> None:
+    ex = _exemplar((16, 18), seed=3)
+    nb = exemplar_neighbourhoods(ex, 5)
+    shape = (6, 7, 8)
+    rng = np.random.default_rng(4)
+    vol = rng.random(shape, dtype=np.float32)
+    src = nb.centres[rng.integers(0, len(nb.centres), int(np.prod(shape)))]
+    centres = plane_centres(shape, "xz", 1)
+    queries = gather_plane(vol, centres, "xz", 5, True)
+    geometry = slice_geometry(shape, "xz", True)
+    scratch = (np.zeros((3, ex.size), dtype=np.int64), np.zeros(1, dtype=np.int64))
+    pos, d2 = nb.search_coherent(
+        queries, centres, geometry, src, n_random=1, seed_key=5, index0=0, scratch=scratch, k=3
+    )
+    ref_pos, ref_d2 = kcoherence_search_reference(queries, centres, geometry, src, nb.sets, 1, 5, 0, k=3)
+    np.testing.assert_array_equal(pos, ref_pos)
+    np.testing.assert_array_equal(d2, ref_d2)
