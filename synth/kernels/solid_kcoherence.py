@@ -13,16 +13,20 @@ each a pass over a scan order:
   already match that exemplar neighbourhood and ``target`` is their number under uniform use.
   The match's IRLS weight ``(mean squared difference + eps) ** ((r - 2) / 2)`` (Kopf's
   ``||s - e||^(r - 2)`` per entry, ``r = 0.8``) is stored in ``weight[p, v]``.
-- **solve** (:func:`solve_pass`): every matched neighbourhood that covers ``v`` proposes the exemplar
-  pixel it lays on ``v``: ``3 n^2`` proposals ``e_j`` (pixel values) with weights ``w_j``; the weight of
-  a proposal whose exemplar pixel is over-used is divided by the **position histogram** factor
-  ``h_j = 1 + position_weight * max(0, count / target - 1)`` (``count``: voxels that copy that pixel).
-  The **discrete solver** (Han et al. 2006) gives ``v`` the value of the proposal ``x = e_j`` that
-  minimises the local energy ``E(x) = sum_i w_i / h_i (x - e_i)^2`` times its own position factor
-  ``h_j``: with ``W = sum_i w_i / h_i``, ``E(e_j) / W = (e_j - mean)^2 + var`` (weighted mean and variance
-  of the proposals), so the cost is ``h_j ((e_j - mean)^2 + var)``; ties go to the least used pixel
-  (smallest ``h_j``), then the first. ``origin[v]`` keeps the pixel copied: every voxel value is an
-  exemplar pixel, never an average.
+- **solve** (:func:`solve_pass`, Chen & Wang's discrete solver): the candidates of voxel ``v`` are the
+  exemplar pixels its matches lay on it, from the matched neighbourhoods centred within ``solve_radius``
+  voxels of ``v`` in each constrained plane (``radius 0``: its own three matches). Candidate ``g`` of plane
+  ``p``'s exemplar costs ``(mean_q D_q(g) + consensus * (ex[g] - mu)^2) * h_pos(g) * h_grey(g)``:
+  ``D_q(g)`` the (entry-weighted) mean squared difference between ``g``'s exemplar neighbourhood and the
+  slice of ``v`` in every constrained plane ``q`` sharing ``p``'s exemplar; ``mu`` the mean of the values
+  that every matched neighbourhood covering ``v`` proposes, weighted by their IRLS weights (Kopf's
+  least-squares voxel); ``h_pos = 1 + position_weight * max(0, count / target - 1)`` the **position
+  histogram** factor (``count``: voxels that copy that pixel) and ``h_grey`` the same on grey-level bins
+  (Kopf's histogram matching, off when ``grey_weight = 0``). With ``rerank > 0`` the candidates are first
+  ranked with ``D_q`` computed in the principal subspace and the ``rerank`` best are scored in full; the
+  first lowest cost wins, and ``v`` copies it: ``volume[v] = ex[g]``, ``origin[v] = g`` (every voxel
+  value is an exemplar pixel, never an average).
+- Only the constrained planes (``geometry.active``) are searched, counted and scored.
 
 Exemplar storage: the three planes' exemplars are concatenated into one flat ``values`` buffer (a plane
 whose exemplar is the same as an earlier plane's shares its storage, so an isotropic material has one
@@ -79,6 +83,8 @@ class ExemplarBank:
         Per plane, the mean exemplar neighbourhood (entries in :class:`SliceGeometry` order).
     basis : ndarray (3, K, d) float32
         Per plane, the principal axes (columns; zero columns pad a plane that keeps fewer).
+    grey_bin : ndarray (N,) int64
+        The grey-level bin of each exemplar pixel.
     """
 
     values: np.ndarray
@@ -88,6 +94,7 @@ class ExemplarBank:
     features: np.ndarray
     mean: np.ndarray
     basis: np.ndarray
+    grey_bin: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -106,6 +113,10 @@ class SliceGeometry:
         The same as ``(d_row, d_col)`` in plane ``p``'s slices (the shift applied to their matches).
     periodic : bool
         Whether the volume wraps (a tileable volume).
+    active : ndarray (3,) bool
+        The constrained planes (the others' slices are left free: neither searched nor proposing).
+    entry_weight : ndarray (3, K) float64
+        Weight of each neighbourhood entry in the solver's distances (a Gaussian of the offset).
     """
 
     offsets: np.ndarray
@@ -113,6 +124,8 @@ class SliceGeometry:
     cand_offsets: np.ndarray
     cand_rc: np.ndarray
     periodic: bool
+    active: np.ndarray
+    entry_weight: np.ndarray
 
 
 @dataclass
@@ -131,9 +144,13 @@ class SolidState:
     origin : ndarray (D, H, W) int32
         Global index of the exemplar pixel each voxel copies; ``-1`` before the first solve.
     index_count, position_count : ndarray (N,) int64
-        How many (voxel, plane) matches use each exemplar neighbourhood; how many voxels copy each pixel.
+        How many (voxel, constrained plane) matches use each exemplar neighbourhood; how many voxels copy
+        each pixel.
     index_target, position_target : ndarray (N,) float64
         Their counts under uniform use (positive).
+    grey_count, grey_target : ndarray (B,) int64, (B,) float64
+        Voxels per grey-level bin (``ExemplarBank.grey_bin``), and their number under the exemplars'
+        histogram.
     """
 
     volume: np.ndarray
@@ -144,14 +161,19 @@ class SolidState:
     index_target: np.ndarray
     position_count: np.ndarray
     position_target: np.ndarray
+    grey_count: np.ndarray
+    grey_target: np.ndarray
 
 
 @dataclass(frozen=True)
 class SolverWeights:
-    """Histogram weights, IRLS exponent and random candidates of one run.
+    """Histogram weights, IRLS exponent, solver and candidate settings of one run.
 
-    ``index_weight`` and ``position_weight`` are the histogram-matching strengths (0 switches one off);
-    ``exponent`` is Kopf's ``r``; ``n_random`` random valid candidates per voxel and plane are added to
+    ``index_weight``, ``position_weight`` and ``grey_weight`` are the histogram-matching strengths (0 switches
+    one off); ``exponent`` is Kopf's ``r``; ``consensus`` weighs the solver's pull toward the proposals'
+    weighted mean; ``solve_radius``: the solver's candidates come from the matches centred within it;
+    ``kset_window``: the first ``kset_window`` voxels of the search's candidate window (the voxel first)
+    add their matches' k-coherence sets; ``n_random`` random valid candidates per voxel and plane are added to
     the k-coherent ones, drawn from ``seed_key`` (a fresh 63-bit key per pass). ``rerank`` > 0: the
     candidates are ranked by their distance in the principal subspace (times the index factor) and the
     ``rerank`` best are compared in full; 0: every candidate is compared in full.
@@ -163,6 +185,10 @@ class SolverWeights:
     n_random: int = 0
     seed_key: int = 0
     rerank: int = 4
+    solve_radius: int = 1
+    kset_window: int = 5
+    consensus: float = 0.5
+    grey_weight: float = 5.0
 
 
 # ---------------------------------------------------------------------------------------------- kernels
@@ -266,6 +292,8 @@ def _search_kernel(
     n_random,
     seed_key,
     rerank,
+    kset_window,
+    active,
     stamp,
     counter,
     acc,
@@ -290,6 +318,8 @@ def _search_kernel(
         y = (v // W) % H
         x = v % W
         for p in range(3):
+            if not active[p]:
+                continue
             off = layout[p, 0]
             w = layout[p, 2]
             y0 = valid[p, 0]
@@ -328,7 +358,7 @@ def _search_kernel(
                 dr = cand_rc[p, c, 0]
                 dc = cand_rc[p, c, 1]
                 nc = _add_shifted(cand, nc, g, off, w, dr, dc, y0, y1, x0, x1, stamp, tag)
-                for j in range(k):  # Tong et al.: positions similar to u's match, shifted like it
+                for j in range(k if c < kset_window else 0):  # Tong: positions similar to u's match, shifted
                     gk = np.int64(kset[g, j])
                     if gk >= 0:
                         nc = _add_shifted(cand, nc, gk, off, w, dr, dc, y0, y1, x0, x1, stamp, tag)
@@ -412,24 +442,47 @@ def _solve_kernel(
     origin,
     position_count,
     position_target,
+    grey_bin,
+    grey_count,
+    grey_target,
     ex,
+    layout,
+    valid,
+    features,
+    mean,
+    basis,
     offsets,
     lin,
     periodic,
+    active,
+    entry_weight,
     position_weight,
+    grey_weight,
+    consensus,
+    rerank,
+    radius,
+    stamp,
+    counter,
     acc,
 ):
     D, H, W = vol.shape
     K = offsets.shape[1]
+    n_dims = basis.shape[2]
     n_vox = D * H * W
     matchf = match.ravel()
-    weightf = weight.ravel()
     volf = vol.ravel()
     originf = origin.ravel()
-    vals = np.empty(3 * K, dtype=np.float64)
-    facs = np.empty(3 * K, dtype=np.float64)
-    wts = np.empty(3 * K, dtype=np.float64)
-    gs = np.empty(3 * K, dtype=np.int64)
+    q = np.empty((3, K), dtype=np.float32)
+    ql = np.empty((3, K), dtype=np.int64)
+    qw = np.empty((3, K), dtype=np.float64)
+    qsum = np.zeros(3, dtype=np.float64)
+    nq = np.zeros(3, dtype=np.int64)
+    proj = np.empty((3, n_dims), dtype=np.float64)
+    cand = np.empty(3 * K, dtype=np.int64)
+    cplane = np.empty(3 * K, dtype=np.int64)
+    top_d = np.empty(max(rerank, 1), dtype=np.float64)
+    top_j = np.empty(max(rerank, 1), dtype=np.int64)
+    weightf = weight.ravel()
     for idx in range(start, stop):
         v = order[idx]
         z = v // (H * W)
@@ -437,50 +490,146 @@ def _solve_kernel(
         x = v % W
         if position_weight > 0.0 and originf[v] >= 0:
             position_count[originf[v]] -= 1
-        n = 0
+        if grey_weight > 0.0 and originf[v] >= 0:
+            grey_count[grey_bin[originf[v]]] -= 1
+        # The voxel's slices in the constrained planes, and their principal-subspace projections.
+        full = True
+        for p in range(3):
+            nq[p] = 0
+            if not active[p]:
+                continue
+            n = 0
+            sq = 0.0
+            for i in range(K):
+                u = _neighbour(
+                    z, y, x, offsets[p, i, 0], offsets[p, i, 1], offsets[p, i, 2], D, H, W, periodic
+                )
+                if u < 0:
+                    continue
+                q[p, n] = volf[u]
+                ql[p, n] = lin[p, i]
+                qw[p, n] = entry_weight[p, i]
+                sq += entry_weight[p, i]
+                n += 1
+            qsum[p] = sq
+            nq[p] = n
+            if n < K:
+                full = False
+        ranked = rerank > 0 and full
+        if ranked:
+            for p in range(3):
+                if not active[p]:
+                    continue
+                for dd in range(n_dims):
+                    proj[p, dd] = 0.0
+                for i in range(K):
+                    c0 = np.float64(q[p, i]) - np.float64(mean[p, i])
+                    for dd in range(n_dims):
+                        proj[p, dd] += c0 * np.float64(basis[p, i, dd])
+        # Candidates: the exemplar pixels the matched neighbourhoods covering v lay on it (Chen & Wang).
+        counter[0] += 1
+        tag = counter[0]
+        nc = 0
         sw = 0.0
         swe = 0.0
         for p in range(3):
+            if not active[p]:
+                continue
+            off = layout[p, 0]
+            w = layout[p, 2]
             for i in range(K):
-                # The neighbourhood centred at u = v - offset covers v at that offset.
                 u = _neighbour(
                     z, y, x, -offsets[p, i, 0], -offsets[p, i, 1], -offsets[p, i, 2], D, H, W, periodic
                 )
                 if u < 0:
                     continue
                 g = np.int64(matchf[p * n_vox + u]) + lin[p, i]
-                f = 1.0
-                if position_weight > 0.0:
-                    f = _histogram_factor(position_count[g], position_target[g], position_weight)
-                wt = np.float64(weightf[p * n_vox + u]) / f
-                e = np.float64(ex[g])
-                vals[n] = e
-                facs[n] = f
-                wts[n] = wt
-                gs[n] = g
-                n += 1
+                wt = np.float64(weightf[p * n_vox + u])
                 sw += wt
-                swe += wt * e
-        mean = swe / sw
-        var = 0.0
-        for j in range(n):
-            d = vals[j] - mean
-            var += wts[j] * d * d
-        var /= sw
+                swe += wt * np.float64(ex[g])
+                if max(abs(offsets[p, i, 0]), abs(offsets[p, i, 1]), abs(offsets[p, i, 2])) > radius:
+                    continue
+                local = g - off
+                cy = local // w
+                cx = local % w
+                if cy < valid[p, 0] or cy >= valid[p, 1] or cx < valid[p, 2] or cx >= valid[p, 3]:
+                    continue
+                if stamp[g] == tag:
+                    continue
+                stamp[g] = tag
+                cand[nc] = g
+                cplane[nc] = p
+                nc += 1
+        mu = swe / sw
+        n_pool = nc
+        if ranked and nc > rerank:
+            n_top = 0
+            for j in range(nc):
+                g = cand[j]
+                pg = cplane[j]
+                s = 0.0
+                m = 0
+                for p in range(3):
+                    if not active[p] or layout[p, 0] != layout[pg, 0]:
+                        continue
+                    d = 0.0
+                    for dd in range(n_dims):
+                        t = proj[p, dd] - np.float64(features[g, dd])
+                        d += t * t
+                    s += d / K
+                    m += 1
+                t = np.float64(ex[g]) - mu
+                s = s / m + consensus * t * t
+                if position_weight > 0.0:
+                    s *= _histogram_factor(position_count[g], position_target[g], position_weight)
+                if grey_weight > 0.0:
+                    s *= _histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
+                if n_top < rerank:
+                    pos = n_top
+                    n_top += 1
+                elif s < top_d[rerank - 1]:
+                    pos = rerank - 1
+                else:
+                    continue
+                while pos > 0 and top_d[pos - 1] > s:
+                    top_d[pos] = top_d[pos - 1]
+                    top_j[pos] = top_j[pos - 1]
+                    pos -= 1
+                top_d[pos] = s
+                top_j[pos] = j
+            n_pool = n_top
         best = np.inf
-        best_f = np.inf
-        bj = 0
-        for j in range(n):
-            d = vals[j] - mean
-            c = facs[j] * (d * d + var)
-            if c < best or (c == best and facs[j] < best_f):
-                best = c
-                best_f = facs[j]
-                bj = j
-        volf[v] = vals[bj]
-        originf[v] = gs[bj]
+        bg = cand[0]
+        for jj in range(n_pool):
+            j = top_j[jj] if n_pool < nc else jj
+            g = cand[j]
+            pg = cplane[j]
+            s = 0.0
+            m = 0
+            for p in range(3):
+                if not active[p] or layout[p, 0] != layout[pg, 0]:
+                    continue
+                d = 0.0
+                for i in range(nq[p]):
+                    t = np.float64(q[p, i]) - np.float64(ex[g + ql[p, i]])
+                    d += qw[p, i] * t * t
+                s += d / qsum[p]
+                m += 1
+            t = np.float64(ex[g]) - mu
+            s = s / m + consensus * t * t
+            if position_weight > 0.0:
+                s *= _histogram_factor(position_count[g], position_target[g], position_weight)
+            if grey_weight > 0.0:
+                s *= _histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
+            if s < best:
+                best = s
+                bg = g
+        volf[v] = ex[bg]
+        originf[v] = bg
         if position_weight > 0.0:
-            position_count[gs[bj]] += 1
+            position_count[bg] += 1
+        if grey_weight > 0.0:
+            grey_count[grey_bin[bg]] += 1
         acc[0] += best
         acc[1] += 1.0
 
@@ -529,6 +678,8 @@ def search_pass(
         int(weights.n_random),
         np.uint64(weights.seed_key),
         int(weights.rerank),
+        int(weights.kset_window),
+        geometry.active,
         scratch["stamp"],
         scratch["counter"],
         scratch["acc"],
@@ -560,11 +711,27 @@ def solve_pass(
         state.origin,
         state.position_count,
         state.position_target,
+        bank.grey_bin,
+        state.grey_count,
+        state.grey_target,
         bank.values,
+        bank.layout,
+        bank.valid,
+        bank.features,
+        bank.mean,
+        bank.basis,
         geometry.offsets,
         geometry.lin,
         geometry.periodic,
+        geometry.active,
+        geometry.entry_weight,
         float(weights.position_weight),
+        float(weights.grey_weight),
+        float(weights.consensus),
+        int(weights.rerank),
+        int(weights.solve_radius),
+        scratch["stamp"],
+        scratch["counter"],
         scratch["acc"],
     )
 
@@ -610,7 +777,7 @@ def search_reference(
     matchf = s.match.reshape(3, n_vox)
     for v in order[start:stop]:
         zyx = np.unravel_index(int(v), shape)
-        for p in range(3):
+        for p in np.flatnonzero(g.active):
             off, _, w = (int(t) for t in b.layout[p])
             y0, y1, x0, x1 = (int(t) for t in b.valid[p])
             flat, inside = _neighbours_reference(zyx, g.offsets[p], shape, g.periodic)
@@ -623,7 +790,8 @@ def search_reference(
                 m = int(matchf[p, cflat[c]])
                 dr, dc = (int(t) for t in g.cand_rc[p, c])
                 proposals.append((m, dr, dc))
-                proposals.extend((int(kk), dr, dc) for kk in b.kset[m] if kk >= 0)
+                if c < weights.kset_window:
+                    proposals.extend((int(kk), dr, dc) for kk in b.kset[m] if kk >= 0)
             if weights.n_random > 0:
                 key = _splitmix(np.uint64(weights.seed_key) ^ np.uint64(int(v) * 3 + p))
                 for j in range(weights.n_random):
@@ -684,41 +852,95 @@ def solve_reference(
     scratch: dict[str, np.ndarray],
 ) -> None:
     """Slow, obvious NumPy version of :func:`solve_pass` (same arguments, same results)."""
-    s, g = state, geometry
+    s, b, g = state, bank, geometry
     shape = s.volume.shape
     n_vox = s.volume.size
+    K = g.offsets.shape[1]
     volf, originf = s.volume.ravel(), s.origin.ravel()
-    matchf, weightf = s.match.reshape(3, n_vox), s.weight.reshape(3, n_vox)
+    matchf = s.match.reshape(3, n_vox)
     pw = weights.position_weight
+    gw = weights.grey_weight
+    lam = weights.consensus
+    weightf = s.weight.reshape(3, n_vox)
+    planes = [int(p) for p in np.flatnonzero(g.active)]
     for v in order[start:stop]:
         zyx = np.unravel_index(int(v), shape)
         if pw > 0 and originf[v] >= 0:
             s.position_count[originf[v]] -= 1
-        gs, wts = [], []
-        for p in range(3):
-            flat, inside = _neighbours_reference(zyx, -g.offsets[p], shape, g.periodic)
-            gs.append(matchf[p, flat[inside]].astype(np.int64) + g.lin[p][inside])
-            wts.append(weightf[p, flat[inside]].astype(np.float64))
-        ga, wa = np.concatenate(gs), np.concatenate(wts)
-        f = np.ones(len(ga))
-        if pw > 0:
-            f = _hist_factor_reference(s.position_count[ga], s.position_target[ga], pw)
-        vals = bank.values[ga].astype(np.float64)
-        wa = wa / f
+        if gw > 0 and originf[v] >= 0:
+            s.grey_count[b.grey_bin[originf[v]]] -= 1
+        qs, qls, qws = {}, {}, {}
+        for p in planes:
+            flat, inside = _neighbours_reference(zyx, g.offsets[p], shape, g.periodic)
+            qs[p] = volf[flat[inside]].astype(np.float64)
+            qls[p] = g.lin[p][inside]
+            qws[p] = g.entry_weight[p][inside]
+        ranked = weights.rerank > 0 and all(len(qs[p]) == K for p in planes)
+        cands: list[tuple[int, int]] = []
         sw, swe = 0.0, 0.0
-        for wt, e in zip(wa, vals, strict=True):  # proposal by proposal: the kernel's order of summation
-            sw += wt
-            swe += wt * e
-        mean = swe / sw
-        var = 0.0
-        for wt, e in zip(wa, vals, strict=True):
-            var += wt * (e - mean) * (e - mean)
-        var /= sw
-        cost = f * ((vals - mean) ** 2 + var)
-        best = int(np.lexsort((np.arange(len(cost)), f, cost))[0])
-        volf[v] = vals[best]
-        originf[v] = ga[best]
+        for p in planes:
+            off, _, w = (int(t) for t in b.layout[p])
+            y0, y1, x0, x1 = (int(t) for t in b.valid[p])
+            flat, inside = _neighbours_reference(zyx, -g.offsets[p], shape, g.periodic)
+            for i in np.flatnonzero(inside):
+                gg = int(matchf[p, flat[i]]) + int(g.lin[p, i])
+                sw += float(weightf[p, flat[i]])
+                swe += float(weightf[p, flat[i]]) * float(b.values[gg])
+                if np.abs(g.offsets[p, i]).max() > weights.solve_radius:
+                    continue
+                cy, cx = divmod(gg - off, w)
+                if y0 <= cy < y1 and x0 <= cx < x1 and gg not in [c for c, _ in cands]:
+                    cands.append((gg, p))
+        mu = swe / sw
+        ca = np.asarray([c for c, _ in cands], dtype=np.int64)
+        cp = np.asarray([p for _, p in cands], dtype=np.int64)
+
+        def _factors(idx: np.ndarray, ca: np.ndarray = ca) -> list[np.ndarray]:
+            out = []  # applied one after the other: the kernel's order of multiplication
+            if pw > 0:
+                out.append(_hist_factor_reference(s.position_count[ca[idx]], s.position_target[ca[idx]], pw))
+            if gw > 0:
+                gb = b.grey_bin[ca[idx]]
+                out.append(_hist_factor_reference(s.grey_count[gb], s.grey_target[gb], gw))
+            return out
+
+        def _plane_sets(j: int, cp: np.ndarray = cp) -> list[int]:
+            return [p for p in planes if b.layout[p, 0] == b.layout[cp[j], 0]]
+
+        pool = np.arange(len(ca))
+        if ranked and len(ca) > weights.rerank:
+            approx = np.zeros(len(ca))
+            for j in range(len(ca)):
+                for p in _plane_sets(j):
+                    proj = np.zeros(b.basis.shape[2])
+                    for i in range(K):  # entry by entry: the kernel's order of summation
+                        proj += (qs[p][i] - np.float64(b.mean[p, i])) * b.basis[p, i].astype(np.float64)
+                    dd = 0.0
+                    for t in proj - b.features[ca[j]].astype(np.float64):
+                        dd += t * t
+                    approx[j] += dd / K
+                approx[j] = approx[j] / len(_plane_sets(j)) + lam * (float(b.values[ca[j]]) - mu) ** 2
+            for f in _factors(pool):
+                approx *= f
+            pool = np.lexsort((pool, approx))[: weights.rerank]
+        cost = np.zeros(len(pool))
+        for n, j in enumerate(pool):
+            for p in _plane_sets(j):
+                t = (qs[p] - b.values[ca[j] + qls[p]].astype(np.float64)) ** 2
+                dd, sq = 0.0, 0.0
+                for wi, ti in zip(qws[p], t, strict=True):
+                    dd += wi * ti
+                    sq += wi
+                cost[n] += dd / sq
+            cost[n] = cost[n] / len(_plane_sets(j)) + lam * (float(b.values[ca[j]]) - mu) ** 2
+        for f in _factors(pool):
+            cost *= f
+        best = int(pool[int(np.argmin(cost))])
+        volf[v] = b.values[ca[best]]
+        originf[v] = ca[best]
         if pw > 0:
-            s.position_count[ga[best]] += 1
-        scratch["acc"][0] += cost[best]
+            s.position_count[ca[best]] += 1
+        if gw > 0:
+            s.grey_count[b.grey_bin[ca[best]]] += 1
+        scratch["acc"][0] += float(cost.min())
         scratch["acc"][1] += 1.0

@@ -1,31 +1,38 @@
 """Solid texture synthesis with position and index histogram matching (Chen & Wang 2010).
 
-A volume ``(D, H, W)`` whose slices along all three axes look like the 2D exemplar(s), by texture
+A volume ``(D, H, W)`` whose slices along two or three axes look like the 2D exemplar(s), by texture
 optimisation (Kwatra et al. 2005; Kopf et al. 2007) with a k-coherence search (Tong et al. 2002), a
 discrete solver (Han et al. 2006) and two histograms:
 
 1. **Learning.** For every exemplar pixel (every plane's exemplar, every pyramid level) its ``k = 15``
    most similar exemplar pixels, by their ``n x n`` neighbourhoods (PCA + k-d tree,
    :func:`synth.pixel.synthesis._k_coherence_sets`).
-2. **Energy** (Kopf, eq. 1): ``E = sum_v sum_{p in xy, xz, yz} ||s_{v,p} - e_{v,p}||^r``, ``r = 0.8``:
-   ``s_{v,p}`` the slice neighbourhood of voxel ``v`` in plane ``p``, ``e_{v,p}`` its matched exemplar
-   neighbourhood. Minimised by alternating two phases, each a pass in the chosen scan order
-   (:mod:`synth.kernels.solid_kcoherence` has the formulas):
-   - **search**: each ``e_{v,p}`` is the best k-coherent candidate (the matches of the voxels around
-     ``v`` in its slice, shifted, and their k-coherence sets), its distance multiplied by the **index
-     histogram** factor ``1 + w_idx max(0, H_idx / T_idx - 1)`` (``H_idx``: how many slices already match
-     that exemplar neighbourhood, ``T_idx`` their number under uniform use);
-   - **optimisation**: every matched neighbourhood covering ``v`` proposes an exemplar pixel; the IRLS
-     weights ``||s - e||^(r - 2)`` are divided by the **position histogram** factor
-     ``1 + w_pos max(0, H_pos / T_pos - 1)`` (``H_pos``: voxels copying that exemplar pixel); the
-     **discrete solver** gives ``v`` the proposal nearest to the weighted mean, so every voxel is a
-     copied exemplar pixel (no blur, no grey level the exemplar lacks).
+2. **Energy** (Kopf, eq. 1): ``E = sum_v sum_p ||s_{v,p} - e_{v,p}||^r``, ``r = 0.8``, over the
+   constrained planes ``p`` (``planes``: the three, or two of ``xy, xz, yz``): ``s_{v,p}`` the slice
+   neighbourhood of voxel ``v`` in plane ``p``, ``e_{v,p}`` its matched exemplar neighbourhood. Minimised by
+   alternating two phases, each a pass in the chosen scan order (:mod:`synth.kernels.solid_kcoherence` has
+   the formulas):
+   - **search**: each ``e_{v,p}`` is the best k-coherent candidate (the voxel's own match and its k most
+     similar positions, and its four slice neighbours' matches, shifted), its distance multiplied by the
+     **index histogram** factor ``1 + w_idx max(0, H_idx / T_idx - 1)``;
+   - **discrete solver** (Chen & Wang: "choose among the candidates the one minimising the local energy",
+     no averaging): the candidates are the exemplar pixels the voxel's own matches are centred on (one per
+     constrained plane); each is scored by how well *its* exemplar neighbourhood fits the voxel's slices in
+     every plane sharing its exemplar (mean squared difference, averaged over the planes) plus
+     ``consensus * (e - mu)^2``, ``mu`` the IRLS-weighted mean of the values all matched neighbourhoods
+     covering ``v`` propose (Kopf's least-squares voxel), times the **position histogram** factor (and,
+     optionally, Kopf's grey-level histogram factor). The voxel copies the winner: every voxel is an
+     exemplar pixel.
 3. **Multi-resolution**: Gaussian pyramids of the exemplars (:func:`synth.pixel.solid.plan_levels`),
    coarse to fine; at a finer level each plane's matches are the parent's, doubled, plus the voxel's
-   parity (the coarse solution laid on the fine grid), and one optimisation pass turns them into voxels.
+   parity; the first voxels are the pixels the first constrained plane's matches are centred on, and a
+   solve pass precedes the first search.
 
 Anisotropic materials give one exemplar per plane (``exemplar_xy``, ``exemplar_xz``, ``exemplar_yz``):
 each plane's slices are matched against its own exemplar, and its pixels have their own histograms.
+Laminar materials cannot be consistent on three planes with one horizontal-laminae exemplar (the slices
+across the sheets are contour mazes): ``planes=('xz', 'yz')`` constrains two and leaves the ``xy`` slices
+free (ALGORITHMS.md, section 4: "use three and allow two").
 
 References
 ----------
@@ -36,23 +43,48 @@ exemplars", ACM TOG 26(3), SIGGRAPH 2007. X. Tong et al., "Synthesis of bidirect
 on arbitrary surfaces", SIGGRAPH 2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et al., "Fast
 example-based surface texture synthesis via discrete optimization", The Visual Computer 22, 2006.
 
-Departures, and why
--------------------
+Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL)
+--------------------------------------------------------------------------------------------------------
 - The paper's exact histogram formulas were not available to us; the study (``papers/
   solid-synthesis-from-2d-sample.txt``) describes them only in words. We use Kopf's form of histogram
-  re-weighting (a factor ``1 + w max(0, H / T - 1)``, as the 2D engine does) for both histograms:
-  on the proposals' weights (position) and on the candidates' distances (index).
-- Ties of the discrete solver (equally near proposals, frequent with 8-bit exemplars and coherent
-  neighbourhoods proposing the same pixel) go to the least used pixel: the position histogram then acts
-  on which pixel is copied, not only on the mean.
-- Every voxel is searched in all three planes (Kopf searches a sparse grid of neighbourhoods): measured
-  55-75 distinct k-coherent candidates per slice, ranked on 8 principal components, the best 4 compared
-  in full (mean match distance within 2% of comparing all). This is the cost centre: see the timings.
+  re-weighting (a factor ``1 + w max(0, H / T - 1)``, as the 2D engine does) for both histograms.
+- **The solver.** The first cut gave each voxel the proposal nearest the weighted mean of the ~147
+  proposals of the covering neighbourhoods: a denoiser (grey KL 0.18-0.32, std 0.13 against 0.162,
+  smooth low-contrast blobs). Scoring candidates by their neighbourhoods' fit alone (the paper's reading)
+  keeps the contrast (grey KL 0.004-0.02) but is speckled: the centre is 1/49 of each distance, so
+  neighbouring voxels choose independently, and without the histograms it collapses to flat grey (grey
+  KL 1.5). The ``consensus`` term restores coherence: 0.3 / 0.5 / 1.0 give (``grey_weight`` 0) grey
+  KL 0.037 / 0.048 / 0.053 and worst-axis orientation KL 0.095 / 0.084 / 0.126; 0.5 (default) looks
+  cleanest for its KL. Tried
+  and dropped: mean shift to the proposals' mode (grey KL 0.19-0.37), a Gaussian weighting of the fit
+  (``sigma``, no visible gain at 32^3), a grey-level histogram term strong enough for exact
+  histograms (``grey_weight`` 100: grey KL 0.016 but streaked slices; with ``consensus`` 1 and weight 10
+  the fringes all turn one way, orientation KL 0.36 on one axis). Kopf's grey-level histogram is kept
+  weak (``grey_weight`` 5, grey KL 0.048 -> 0.038) beside the position histogram, which alone does not
+  hold the grey levels: ~2-20 uses per pixel, the over-use of mid-tones is spread over many pixels.
+- **Candidates** (speed): the solver scores only the voxel's own three matches (``solve_radius=0``;
+  radius 1, 27 candidates, costs 1.3x the run time and radius 3, up to 147, over 2x, for no better KL);
+  the search adds the k-coherence sets of the voxel's own match only (``kset_window=1``: 20 candidates
+  instead of ~65; KL unchanged, search 2x faster). Candidates are ranked on 8 principal components and
+  the best 4 compared in full. ``k`` stays the paper's 15: the search's cost grows with it (k = 4: 12.7 s
+  against 19-24 s; k = 8: 15.0 s) and the KLs stay within run-to-run noise (grey 0.046 / 0.051 / 0.048),
+  but at 4 and 8 the slices look fragmented or blobby rather than fringed.
+- The first voxels of a level are copied from the first constrained plane's (upsampled) matches, then
+  one solve pass scores the three planes' matches against them before the first search (a solve from an
+  empty volume chose dark pixels; without the extra pass the last plane lagged: bent laminae with
+  ``planes=('xz', 'yz')``, orientation KL 0.29 / 0.80 -> 0.27 / 0.38; soot worst axis 0.092 -> 0.065).
 - Coarse levels use smaller neighbourhoods (at most a quarter of the exemplar's shorter side) and the
   number of levels shrinks so that the coarsest exemplar keeps 8 pixels and the volume 4 voxels a side
   (:func:`synth.pixel.solid.plan_levels`).
-- Default 3 iterations per level (the study ran 10): measured, the energy stops falling after 2-3
-  k-coherence iterations (``stats['mean_match_distance']``), and 10 would cost 3x the time.
+- Default 3 iterations per level (the study ran 10): the energy stops falling after 2-3 iterations
+  (``stats['mean_match_distance']``), and 10 would cost 3x the time.
+- Passes are sequential (Gauss-Seidel, in the scan order). A parallel version (numba ``prange``, each block
+  of the scan order reading the state as it was before it; same bytes with 1 or 2 threads) was measured
+  and dropped: blocks of 2% of the voxels froze the histograms too long (grey KL 0.19), blocks of 256
+  voxels kept the quality but cost 2x the CPU time on this shared 2-core machine.
+- Measured with the defaults (one core of a shared 2-core machine, load 2-3): soot 64^3 from 128^2 in
+  22 s (grey KL 0.035 on every axis, orientation KL 0.021 / 0.015 / 0.065, std 0.142 against 0.162);
+  128^3 in 142 s, peak memory 0.49 GB. Still slower than ``solid-kopf`` (64^3 from 128^2: 12 s).
 - ``scan`` (lexicographic, random, Morton, Hilbert; default Hilbert, the study's recommendation) orders
   both phases; ``periodic`` makes the volume wrap (tileable); ``random_candidates`` adds random exemplar
   positions to the k-coherent ones (0 = the paper).
@@ -100,6 +132,8 @@ _KSET_DIMS = 8
 _CANDIDATE_WINDOW = "cross"
 #: Principal components that rank the candidates before the best few are compared in full.
 _RANK_DIMS = 8
+#: Grey-level histogram bins (Kopf et al. 2007 use 16 per channel; 8-bit grey exemplars fill 32 evenly).
+_GREY_BINS = 32
 #: Relative cost of a search pass against an optimisation pass (for progress).
 _SEARCH_COST = 4.0
 
@@ -129,6 +163,44 @@ class SolidChenWangParams(MethodParams):
     random_candidates: int = Field(
         0, ge=0, le=16, description="Random exemplar positions added to the k-coherent candidates (0: paper)."
     )
+    planes: tuple[str, ...] = Field(
+        PLANES,
+        description="The planes whose slices must look like their exemplar (two or three of 'xy', 'xz', "
+        "'yz'); the others are left free.",
+    )
+    # Measured (soot 64^3, seed 0): 0 / 5 / 100 give grey KL 0.048 / 0.038 / 0.016 and worst-axis orientation
+    # KL 0.084 / 0.092 / 0.070, but 100 streaks the slices; on binary exemplars (the known-answer test's
+    # two-phase field) 0 lets the majority phase grow (volume fraction 0.18 against 0.40), 5 gives 0.25.
+    grey_weight: float = Field(
+        5.0,
+        ge=0.0,
+        le=1000.0,
+        description="Grey-level histogram weight (Kopf's histogram matching): 0 = off.",
+    )
+    consensus: float = Field(0.5, ge=0.0, le=100.0, description="Solver: weight of the proposals' consensus.")
+    sigma: float = Field(
+        0.0, ge=0.0, le=10.0, description="Gaussian entry weighting of the solver (0: flat)."
+    )
+    kset_window: int = Field(
+        5,
+        ge=0,
+        le=9,
+        description="Search: window voxels (the voxel first) whose k-coherence sets are candidates.",
+    )
+    solve_radius: int = Field(
+        0, ge=0, le=7, description="Solver candidates: matches centred within this many voxels of the voxel."
+    )
+
+    @field_validator("planes", mode="before")
+    @classmethod
+    def _planes(cls, value: object) -> tuple[str, ...]:
+        names = (value,) if isinstance(value, str) else tuple(value)  # type: ignore[arg-type]
+        bad = [n for n in names if n not in PLANES]
+        if bad:
+            raise ValueError(f"planes must be names among {PLANES}; got {bad}")
+        if len(set(names)) != len(names) or len(names) < 2:
+            raise ValueError(f"planes must name two or three distinct planes of {PLANES}; got {list(names)}")
+        return tuple(p for p in PLANES if p in names)
 
     @field_validator("neighbourhood_size")
     @classmethod
@@ -178,19 +250,24 @@ def _bank(plan: SolidPlan, level: int, k: int) -> ExemplarBank:
         feat[nb.centres, :kept] = (nb.vectors - nb.mean) @ nb.basis[:, :kept]
         feats.append(feat)
         total += h * w
+    values = np.ascontiguousarray(np.concatenate(parts), dtype=np.float32)
     return ExemplarBank(
-        values=np.ascontiguousarray(np.concatenate(parts), dtype=np.float32),
+        values=values,
         layout=layout,
         valid=valid,
         kset=np.ascontiguousarray(np.concatenate(ksets), dtype=np.int32),
         features=np.ascontiguousarray(np.concatenate(feats), dtype=np.float32),
         mean=mean,
         basis=basis,
+        grey_bin=np.clip((values * _GREY_BINS).astype(np.int64), 0, _GREY_BINS - 1),
     )
 
 
-def _geometry(size: int, layout: np.ndarray, periodic: bool) -> SliceGeometry:
-    """Slice neighbourhoods (centre included) and candidate windows of the three planes."""
+def _geometry(
+    size: int, layout: np.ndarray, periodic: bool, planes: tuple[str, ...] = PLANES, sigma: float = 0.0
+) -> SliceGeometry:
+    """Slice neighbourhoods (centre included) and candidate windows of the three planes; ``planes`` are
+    the constrained ones."""
     offsets = np.stack([plane_offsets(p, size) for p in PLANES]).astype(np.int64)
     lin = np.stack([exemplar_offsets(size, int(layout[p, 2])) for p in range(3)])
     cw = 2 * _CANDIDATE_RADIUS + 1
@@ -201,7 +278,10 @@ def _geometry(size: int, layout: np.ndarray, periodic: bool) -> SliceGeometry:
         order = order[[0, *[i for i in range(1, len(order)) if np.count_nonzero(cand[0, order[i]]) == 1]]]
     cand = np.ascontiguousarray(cand[:, order])
     rc = np.stack([cand[p][:, list(PLANE_AXES[name])] for p, name in enumerate(PLANES)])
-    return SliceGeometry(offsets, lin, cand, np.ascontiguousarray(rc), bool(periodic))
+    active = np.array([p in planes for p in PLANES], dtype=np.bool_)
+    r2 = np.sum(offsets.astype(np.float64) ** 2, axis=2)
+    entry_weight = np.exp(-0.5 * r2 / sigma**2) if sigma > 0 else np.ones_like(r2)
+    return SliceGeometry(offsets, lin, cand, np.ascontiguousarray(rc), bool(periodic), active, entry_weight)
 
 
 def _random_matches(bank: ExemplarBank, shape: tuple[int, int, int], rng: np.random.Generator) -> np.ndarray:
@@ -232,30 +312,44 @@ def _upsampled_matches(
     return match
 
 
-def _targets(bank: ExemplarBank, n_vox: int) -> tuple[np.ndarray, np.ndarray]:
-    """Uniform-use targets over each plane's valid positions: the index histogram's (slices matched per
-    neighbourhood: ``n_vox`` per plane using the exemplar) and the position histogram's (voxels copying
-    each pixel: a third of ``n_vox`` per plane using the exemplar)."""
+def _targets(
+    bank: ExemplarBank, n_vox: int, active: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Uniform-use targets over each constrained plane's valid positions: the index histogram's (slices
+    matched per neighbourhood: ``n_vox`` per constrained plane using the exemplar) and the position
+    histogram's (voxels copying each pixel: ``n_vox / n_planes`` per constrained plane using it)."""
     n = len(bank.values)
+    act = np.ones(3, dtype=bool) if active is None else np.asarray(active, dtype=bool)
     index_target = np.ones(n)
     position_target = np.ones(n)
-    for p in range(3):
+    for p in np.flatnonzero(act):
         off = int(bank.layout[p, 0])
-        sharing = int(np.sum(bank.layout[:, 0] == off))
+        sharing = int(np.sum((bank.layout[:, 0] == off) & act))
         y0, y1, x0, x1 = (int(t) for t in bank.valid[p])
         n_valid = (y1 - y0) * (x1 - x0)
         w = int(bank.layout[p, 2])
         rows = off + np.arange(y0, y1)[:, None] * w + np.arange(x0, x1)[None, :]
         index_target[rows] = n_vox * sharing / n_valid
-        position_target[rows] = n_vox * sharing / (3.0 * n_valid)
+        position_target[rows] = n_vox * sharing / (float(act.sum()) * n_valid)
     return index_target, position_target
 
 
-def _usage_spread(origin: np.ndarray, bank: ExemplarBank) -> float:
+def _grey_target(bank: ExemplarBank, n_vox: int, active: np.ndarray) -> np.ndarray:
+    """Voxels per grey-level bin if the volume had the constrained planes' exemplars' histogram (pooled,
+    each plane counting for an equal share of the voxels)."""
+    target = np.zeros(_GREY_BINS)
+    for p in np.flatnonzero(active):
+        off, h, w = (int(t) for t in bank.layout[p])
+        counts = np.bincount(bank.grey_bin[off : off + h * w], minlength=_GREY_BINS).astype(np.float64)
+        target += counts / counts.sum() * n_vox / int(np.sum(active))
+    return np.maximum(target, 0.5)
+
+
+def _usage_spread(origin: np.ndarray, bank: ExemplarBank, active: np.ndarray) -> float:
     """Coefficient of variation of how often each valid exemplar pixel is copied (0 = perfectly uniform)."""
     counts = np.bincount(origin.ravel(), minlength=len(bank.values)).astype(np.float64)
     keep = np.zeros(len(bank.values), dtype=bool)
-    for p in range(3):
+    for p in np.flatnonzero(active):
         off, w = int(bank.layout[p, 0]), int(bank.layout[p, 2])
         y0, y1, x0, x1 = (int(t) for t in bank.valid[p])
         keep[off + np.arange(y0, y1)[:, None] * w + np.arange(x0, x1)[None, :]] = True
@@ -315,7 +409,8 @@ def synthesize_solid_chen_wang(
     volume : ndarray (D, H, W) float32
         Every voxel is an exemplar pixel of the finest level.
     stats : dict
-        ``levels``, ``sizes``, ``mean_match_distance`` (per level and iteration), ``usage_spread``
+        ``levels``, ``sizes``, ``mean_match_distance`` and ``mean_candidates`` (per level and iteration of
+        the search), ``usage_spread``
         (coefficient of variation of the exemplar pixels' use at the finest level) and ``level_seconds``.
     """
     for plane in PLANES:
@@ -329,6 +424,10 @@ def synthesize_solid_chen_wang(
         position_weight=params.position_weight,
         exponent=params.exponent,
         n_random=params.random_candidates,
+        solve_radius=params.solve_radius,
+        kset_window=params.kset_window,
+        consensus=params.consensus,
+        grey_weight=params.grey_weight,
     )
     search_fn = search_reference if reference else search_pass
     solve_fn = solve_reference if reference else solve_pass
@@ -351,21 +450,28 @@ def synthesize_solid_chen_wang(
         shape = plan.shapes[level]
         n_vox = int(np.prod(shape))
         bank = _bank(plan, level, params.k)
-        geometry = _geometry(plan.sizes[level], bank.layout, params.periodic)
+        geometry = _geometry(plan.sizes[level], bank.layout, params.periodic, params.planes, params.sigma)
         if match is None or prev_bank is None:
             match = _random_matches(bank, shape, rng)
         else:
             match = _upsampled_matches(match, prev_bank, bank, shape)
-        index_target, position_target = _targets(bank, n_vox)
+        index_target, position_target = _targets(bank, n_vox, geometry.active)
+        # The first voxels: the pixels the first constrained plane's matches are centred on (coherent
+        # 2 x 2 blocks of the coarser solution, or random pixels at the coarsest level).
+        origin = np.ascontiguousarray(match[int(np.flatnonzero(geometry.active)[0])], dtype=np.int32)
         state = SolidState(
-            volume=np.zeros(shape, dtype=np.float32),
+            volume=np.ascontiguousarray(bank.values[origin]),
             match=np.ascontiguousarray(match),
             weight=np.ones((3, *shape), dtype=np.float32),
-            origin=np.full(shape, -1, dtype=np.int32),
-            index_count=np.bincount(match.ravel(), minlength=len(bank.values)).astype(np.int64),
+            origin=origin,
+            index_count=np.bincount(match[geometry.active].ravel(), minlength=len(bank.values)).astype(
+                np.int64
+            ),
             index_target=index_target,
-            position_count=np.zeros(len(bank.values), dtype=np.int64),
+            position_count=np.bincount(origin.ravel(), minlength=len(bank.values)).astype(np.int64),
             position_target=position_target,
+            grey_count=np.bincount(bank.grey_bin[origin].ravel(), minlength=_GREY_BINS).astype(np.int64),
+            grey_target=_grey_target(bank, n_vox, geometry.active),
         )
         scratch = {
             "stamp": np.zeros(len(bank.values), dtype=np.int64),
@@ -375,8 +481,8 @@ def synthesize_solid_chen_wang(
         fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
         ctx = (bank, geometry, state, scratch, shape, fixed_order)
         label = f"level {plan.levels - level}/{plan.levels}"
-
         _run_phase(solve_fn, 1.0, f"{label}: initial voxels", weights0, ctx, meter, rng)
+
         for it in range(params.iterations):
             weights = SolverWeights(**{**weights0.__dict__, "seed_key": int(rng.integers(0, 2**63))})
             scratch["acc"][:] = 0.0
@@ -391,7 +497,7 @@ def synthesize_solid_chen_wang(
         prev_bank = bank
         stats["level_seconds"][f"level {plan.levels - level}"] = time.perf_counter() - t0
     assert state is not None and bank is not None
-    stats["usage_spread"] = _usage_spread(state.origin, bank)
+    stats["usage_spread"] = _usage_spread(state.origin, bank, geometry.active)
     return np.clip(state.volume, 0.0, 1.0).astype(np.float32), stats
 
 

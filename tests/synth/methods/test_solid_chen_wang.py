@@ -21,9 +21,11 @@ from synth.kernels.solid_kcoherence import (
     solve_reference,
 )
 from synth.methods.solid_chen_wang import (
+    _GREY_BINS,
     SolidChenWangParams,
     _bank,
     _geometry,
+    _grey_target,
     _random_matches,
     _targets,
     synthesize_solid_chen_wang,
@@ -38,26 +40,28 @@ def _laminae(side: int = 32, seed: int = 0) -> np.ndarray:
     return undulating_laminae((side, side), period=6.0, amplitude=4.0, wavelength=side, seed=seed)
 
 
-def _setup(shape=(6, 7, 8), periodic=True, k=4, anisotropic=False, seed=0):
+def _setup(shape=(6, 7, 8), periodic=True, k=4, anisotropic=False, seed=0, planes=PLANES):
     ex = _laminae(16)
-    planes = dict.fromkeys(PLANES, ex)
+    images = dict.fromkeys(PLANES, ex)
     if anisotropic:
-        planes = {"xy": ex, "xz": _laminae(16, seed=1)[:, :14], "yz": np.ascontiguousarray(ex.T)}
-    plan = plan_levels(planes, shape, 1, 5)
+        images = {"xy": ex, "xz": _laminae(16, seed=1)[:, :14], "yz": np.ascontiguousarray(ex.T)}
+    plan = plan_levels(images, shape, 1, 5)
     bank = _bank(plan, 0, k)
-    geo = _geometry(5, bank.layout, periodic)
+    geo = _geometry(5, bank.layout, periodic, planes)
     rng = np.random.default_rng(seed)
     match = _random_matches(bank, shape, rng)
-    it, pt = _targets(bank, int(np.prod(shape)))
+    it, pt = _targets(bank, int(np.prod(shape)), geo.active)
     state = SolidState(
         volume=rng.random(shape).astype(np.float32),
         match=match,
         weight=rng.random((3, *shape)).astype(np.float32) + 0.5,
         origin=np.full(shape, -1, np.int32),
-        index_count=np.bincount(match.ravel(), minlength=len(bank.values)).astype(np.int64),
+        index_count=np.bincount(match[geo.active].ravel(), minlength=len(bank.values)).astype(np.int64),
         index_target=it,
         position_count=np.zeros(len(bank.values), np.int64),
         position_target=pt,
+        grey_count=np.zeros(_GREY_BINS, np.int64),
+        grey_target=_grey_target(bank, int(np.prod(shape)), geo.active),
     )
     return bank, geo, state, rng
 
@@ -82,17 +86,25 @@ def _assert_same(a: SolidState, b: SolidState) -> None:
 # ---------------------------------------------------------------- kernels against references
 
 
-@pytest.mark.parametrize("periodic", [True, False])
-@pytest.mark.parametrize("anisotropic", [False, True])
-@pytest.mark.parametrize(("rerank", "n_random"), [(0, 0), (4, 2)])
-def test_search_and_solve_kernels_equal_their_references(periodic, anisotropic, rerank, n_random) -> None:
-    bank, geo, state, rng = _setup(periodic=periodic, anisotropic=anisotropic)
+@pytest.mark.parametrize(
+    ("periodic", "anisotropic", "planes", "options"),
+    [
+        (True, False, PLANES, {"rerank": 0}),
+        (True, False, PLANES, {"rerank": 4, "n_random": 2, "kset_window": 5, "solve_radius": 1}),
+        (False, False, PLANES, {"rerank": 4, "grey_weight": 3.0, "consensus": 0.0}),
+        (False, True, PLANES, {"rerank": 4, "solve_radius": 2, "kset_window": 2}),
+        (True, True, ("xz", "yz"), {"rerank": 4, "n_random": 1, "grey_weight": 1.0, "solve_radius": 1}),
+        (False, False, ("xy", "yz"), {"rerank": 0, "consensus": 4.0}),
+    ],
+)
+def test_search_and_solve_kernels_equal_their_references(periodic, anisotropic, planes, options) -> None:
+    bank, geo, state, rng = _setup(periodic=periodic, anisotropic=anisotropic, planes=planes)
     order = scan_order(state.volume.shape, "random", rng)
-    weights = SolverWeights(
-        index_weight=2.0, position_weight=2.0, n_random=n_random, seed_key=12345, rerank=rerank
-    )
+    weights = SolverWeights(index_weight=2.0, position_weight=2.0, seed_key=12345, **options)
     n = len(order)
-    for _ in range(2):  # a solve from nothing, a search, a solve with counts
+    free = [p for p, name in enumerate(PLANES) if name not in planes]
+    before = state.match[free].copy()
+    for _ in range(2):  # a solve from random voxels, a search, a solve with counts
         for kern, ref in ((solve_pass, solve_reference), (search_pass, search_reference)):
             a, b = _copy(state), _copy(state)
             sa, sb = _scratch(bank), _scratch(bank)
@@ -102,11 +114,15 @@ def test_search_and_solve_kernels_equal_their_references(periodic, anisotropic, 
             _assert_same(a, b)
             np.testing.assert_allclose(sa["acc"], sb["acc"], rtol=1e-9)
             state = a
+    # A free plane is neither searched nor counted.
+    np.testing.assert_array_equal(state.match[free], before)
+    counted = np.bincount(state.match[geo.active].ravel(), minlength=len(bank.values))
+    np.testing.assert_array_equal(state.index_count, counted)
 
 
 def test_whole_run_equals_the_reference_run() -> None:
     ex = _laminae(16)
-    params = SolidChenWangParams(levels=2, iterations=1, neighbourhood_size=5, k=4)
+    params = SolidChenWangParams(levels=2, iterations=1, neighbourhood_size=5, k=4, grey_weight=1.0)
     planes = dict.fromkeys(PLANES, ex)
     fast, _ = synthesize_solid_chen_wang(planes, (8, 8, 8), params, seed=3)
     slow, _ = synthesize_solid_chen_wang(planes, (8, 8, 8), params, seed=3, reference=True)
@@ -144,6 +160,17 @@ def test_per_plane_exemplars_of_different_shapes() -> None:
     assert np.isin(r.image, pool).all()
 
 
+def test_two_planes_leave_the_third_free() -> None:
+    ex = _laminae()
+    a = synthesize("solid-chen-wang", ex, size=(16, 16, 16), params={**FAST, "planes": ["yz", "xz"]}, seed=5)
+    b = synthesize("solid-chen-wang", ex, size=(16, 16, 16), params={**FAST, "planes": ("xz", "yz")}, seed=5)
+    c = synthesize("solid-chen-wang", ex, size=(16, 16, 16), params=FAST, seed=5)
+    assert a.params["planes"] == ("xz", "yz")  # normalised to PLANES order
+    assert a.image.tobytes() == b.image.tobytes()
+    assert a.image.tobytes() != c.image.tobytes()
+    assert np.isin(a.image, ex).all()
+
+
 def _seam_ratios(vol: np.ndarray) -> np.ndarray:
     """Per axis: mean squared jump across the wrapped faces over the mean jump between neighbouring slices."""
     ratios = []
@@ -173,8 +200,9 @@ def test_position_histogram_pushes_use_toward_uniform() -> None:
             "solid-chen-wang", ex, size=(16, 16, 16), params={**base, "position_weight": weight}, seed=4
         )
         spread[weight] = r.stats["usage_spread"]
-    assert spread[1.0] < spread[0.0]
-    assert spread[5.0] < spread[1.0]
+    # Measured (seeds 4, 5): 0.92 / 0.90 off, 0.66-0.72 at 1, 0.66-0.67 at 5 (the effect saturates).
+    assert spread[1.0] < 0.85 * spread[0.0]
+    assert spread[5.0] < 0.85 * spread[0.0]
 
 
 def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
@@ -212,6 +240,9 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"k": -1}}, InvalidParameter, "'k'"),
         ({"params": {"scan": "spiral"}}, InvalidParameter, "scan"),
         ({"params": {"histogram": 1}}, InvalidParameter, "unknown parameter"),
+        ({"params": {"planes": ["xy"]}}, InvalidParameter, "planes must name two or three"),
+        ({"params": {"planes": ["xy", "xy"]}}, InvalidParameter, "planes must name two or three"),
+        ({"params": {"planes": ["xy", "zx"]}}, InvalidParameter, "planes must be names among"),
         (
             {"params": {"neighbourhood_size": 15}, "exemplar": np.zeros((12, 12), np.float32)},
             InvalidInput,
