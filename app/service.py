@@ -175,17 +175,16 @@ class Service:
         self._queue([job.id])
         return self.store.get(job.id) or job
 
-    def _queue(self, job_ids: list[str]) -> None:
+    def _queue(self, job_ids: list[str], sweep_id: str | None = None) -> None:
+        """Send the jobs; if the broker refuses, forget them (records and files) and say so: a refused
+        submission leaves nothing behind, and the client may simply try again."""
         try:
             if len(job_ids) == 1:
                 self.send(job_ids[0])
             else:
                 self.send_group(job_ids)
         except Exception as exc:
-            for job_id in job_ids:
-                self.store.finish(
-                    job_id, None, "failed", f"could not be queued: the broker is unreachable ({exc})"
-                )
+            self.store.discard(job_ids, sweep_id)
             raise BrokerUnavailable(str(exc)) from exc
 
     def submit_sweep(self, req: JobRequest, grid_json: str | dict) -> str:
@@ -234,7 +233,7 @@ class Service:
             )
             job_ids.append(job.id)
         self.store.create_sweep(sweep_id, req.method, grid, req.params, job_ids)
-        self._queue(job_ids)
+        self._queue(job_ids, sweep_id)
         return sweep_id
 
     # -- reporting ----------------------------------------------------------------------------------

@@ -394,6 +394,22 @@ class JobStore:
             )
         return self.get(job_id)
 
+    def discard(self, job_ids: list[str], sweep_id: str | None = None) -> None:
+        """Forget jobs that were never queued (the broker refused them): records, folders, their sweep.
+
+        Only ``queued`` jobs that no worker received are removed, so a job that did reach a worker is
+        never lost by this.
+        """
+        with self._transaction() as db:
+            for job_id in job_ids:
+                cur = db.execute(
+                    "DELETE FROM jobs WHERE id = ? AND state = 'queued' AND received_pid IS NULL", (job_id,)
+                )
+                if cur.rowcount:
+                    shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+            if sweep_id is not None:
+                db.execute("DELETE FROM sweeps WHERE id = ?", (sweep_id,))
+
     def requeue(self, job_id: str, message: str) -> bool:
         """A run was lost: put the job back to ``queued`` (the caller sends a new message)."""
         now = time.time()
