@@ -5,15 +5,16 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from synth.api import Progress
 from synth.grid.neighbourhood import Shape
 from synth.grid.scan import ScanOrder
 from synth.params import MethodParams
+from synth.pixel.solid import PLANES, checked_planes
 from synth.pixel.synthesis import SearchSettings
 
-__all__ = ["NeighbourhoodParams", "as_features", "checked_progress"]
+__all__ = ["NeighbourhoodParams", "SolidParams", "as_features", "checked_progress"]
 
 
 class NeighbourhoodParams(MethodParams):
@@ -70,6 +71,32 @@ class NeighbourhoodParams(MethodParams):
             alpha=alpha,
             **search,
         )
+
+
+class SolidParams(MethodParams):
+    """Parameters every solid method shares: slice neighbourhoods, a tileable volume, the matched planes."""
+
+    neighbourhood_size: int = Field(
+        7, ge=3, le=15, description="Side of the square slice neighbourhoods (odd)."
+    )
+    periodic: bool = Field(True, description="Toroidal volume: the output tiles seamlessly.")
+    planes: tuple[str, ...] = Field(
+        PLANES,
+        description="Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
+        "two, e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving the xy slices free.",
+    )
+
+    @field_validator("planes", mode="before")
+    @classmethod
+    def _planes(cls, value: object) -> tuple[str, ...]:
+        return checked_planes(value)  # type: ignore[arg-type]
+
+    @field_validator("neighbourhood_size")
+    @classmethod
+    def _odd(cls, value: int) -> int:
+        if value % 2 == 0:
+            raise ValueError("neighbourhood_size must be odd")
+        return value
 
 
 def as_features(image: np.ndarray) -> np.ndarray:

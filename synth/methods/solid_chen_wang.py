@@ -96,7 +96,7 @@ import time
 from collections.abc import Callable, Mapping
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from synth.api import PLANES, MethodSpec, Progress, Result, register
 from synth.errors import InvalidInput
@@ -111,8 +111,7 @@ from synth.kernels.solid_kcoherence import (
     solve_pass,
     solve_reference,
 )
-from synth.methods.common import checked_progress
-from synth.params import MethodParams
+from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANE_AXES,
     ProgressMeter,
@@ -138,12 +137,9 @@ _GREY_BINS = 32
 _SEARCH_COST = 4.0
 
 
-class SolidChenWangParams(MethodParams):
+class SolidChenWangParams(SolidParams):
     """Parameters of Chen & Wang's solid synthesis (defaults: the paper's and the study's settings)."""
 
-    neighbourhood_size: int = Field(
-        7, ge=3, le=15, description="Side of the square slice neighbourhoods (odd)."
-    )
     levels: int = Field(
         5, ge=1, le=8, description="Pyramid levels (at most; fewer when the exemplar or volume is small)."
     )
@@ -159,14 +155,8 @@ class SolidChenWangParams(MethodParams):
     )
     exponent: float = Field(0.8, gt=0.0, le=2.0, description="IRLS exponent r of the energy (Kopf: 0.8).")
     scan: ScanOrder = Field("hilbert", description="Voxel visiting order of both phases.")
-    periodic: bool = Field(True, description="The volume wraps around (tileable).")
     random_candidates: int = Field(
         0, ge=0, le=16, description="Random exemplar positions added to the k-coherent candidates (0: paper)."
-    )
-    planes: tuple[str, ...] = Field(
-        PLANES,
-        description="The planes whose slices must look like their exemplar (two or three of 'xy', 'xz', "
-        "'yz'); the others are left free.",
     )
     # Measured (soot 64^3, seed 0): 0 / 5 / 100 give grey KL 0.048 / 0.038 / 0.016 and worst-axis orientation
     # KL 0.084 / 0.092 / 0.070, but 100 streaks the slices; on binary exemplars (the known-answer test's
@@ -190,24 +180,6 @@ class SolidChenWangParams(MethodParams):
     solve_radius: int = Field(
         0, ge=0, le=7, description="Solver candidates: matches centred within this many voxels of the voxel."
     )
-
-    @field_validator("planes", mode="before")
-    @classmethod
-    def _planes(cls, value: object) -> tuple[str, ...]:
-        names = (value,) if isinstance(value, str) else tuple(value)  # type: ignore[arg-type]
-        bad = [n for n in names if n not in PLANES]
-        if bad:
-            raise ValueError(f"planes must be names among {PLANES}; got {bad}")
-        if len(set(names)) != len(names) or len(names) < 2:
-            raise ValueError(f"planes must name two or three distinct planes of {PLANES}; got {list(names)}")
-        return tuple(p for p in PLANES if p in names)
-
-    @field_validator("neighbourhood_size")
-    @classmethod
-    def _odd(cls, value: int) -> int:
-        if value % 2 == 0:
-            raise ValueError("neighbourhood_size must be odd")
-        return value
 
 
 # ------------------------------------------------------------------------------------------------ levels

@@ -113,7 +113,7 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.scan import ScanOrder, scan_order
@@ -125,13 +125,11 @@ from synth.kernels.solid_search import (
     PackedExemplars,
     irls_update,
 )
-from synth.methods.common import checked_progress
-from synth.params import MethodParams
+from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
     ProgressMeter,
-    checked_planes,
     dense_sources,
     exemplar_offsets,
     gather_plane,
@@ -168,16 +166,12 @@ POSITION_CELLS = 16
 RANDOM_CANDIDATES = 2
 
 
-class SolidKopfParams(MethodParams):
+class SolidKopfParams(SolidParams):
     """Parameters of Kopf et al.'s solid optimisation; defaults are the study's settings."""
 
-    neighbourhood_size: int = Field(
-        7, ge=3, le=15, description="Side of the square slice neighbourhoods (odd)."
-    )
     levels: int = Field(5, ge=1, le=8, description="Pyramid levels (fewer when the exemplar is small).")
     iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
     scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
-    periodic: bool = Field(True, description="Toroidal volume: the output tiles seamlessly.")
     r: float = Field(0.8, gt=0.0, le=2.0, description="Robust norm exponent (IRLS weights ||s-e||^(r-2)).")
     histogram_matching: bool = Field(
         True, description="Re-weight toward the exemplar's grey-level histogram."
@@ -193,23 +187,6 @@ class SolidKopfParams(MethodParams):
         description="'tree': k-coherence (k-d tree at the start; fast); 'exact': every exemplar "
         "neighbourhood (slow).",
     )
-    planes: tuple[str, ...] = Field(
-        PLANES,
-        description="Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
-        "two, e.g. ('xz', 'yz') for laminae, leaving the xy slices free.",
-    )
-
-    @field_validator("planes")
-    @classmethod
-    def _planes(cls, value: tuple[str, ...]) -> tuple[str, ...]:
-        return checked_planes(value)
-
-    @field_validator("neighbourhood_size")
-    @classmethod
-    def _odd(cls, value: int) -> int:
-        if value % 2 == 0:
-            raise ValueError("neighbourhood_size must be odd")
-        return value
 
 
 def _position_factors(match: np.ndarray, ex_shape: tuple[int, int]) -> np.ndarray:

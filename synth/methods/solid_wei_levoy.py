@@ -41,17 +41,15 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.scan import ScanOrder, scan_order
 from synth.kernels.solid_search import KCOHERENCE_BLOCKS
-from synth.methods.common import checked_progress
-from synth.params import MethodParams
+from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANES,
     ProgressMeter,
-    checked_planes,
     gather_plane,
     initial_volume,
     plan_levels,
@@ -68,12 +66,9 @@ MAX_BATCH = 4096
 RANDOM_CANDIDATES = 2
 
 
-class SolidWeiLevoyParams(MethodParams):
+class SolidWeiLevoyParams(SolidParams):
     """Parameters of Wei-Levoy solid synthesis; defaults are the study's settings."""
 
-    neighbourhood_size: int = Field(
-        7, ge=3, le=15, description="Side of the square slice neighbourhoods (odd)."
-    )
     levels: int = Field(5, ge=1, le=8, description="Pyramid levels (fewer when the exemplar is small).")
     iterations: int = Field(10, ge=1, le=50, description="Largest number of passes per level.")
     tolerance: float = Field(
@@ -83,27 +78,9 @@ class SolidWeiLevoyParams(MethodParams):
         description="Stop a level once fewer voxels than this fraction change their match.",
     )
     scan: ScanOrder = Field("hilbert", description="Voxel visiting order.")
-    periodic: bool = Field(True, description="Toroidal volume: the output tiles seamlessly.")
     search: Literal["kcoherence", "exact"] = Field(
         "kcoherence", description="'kcoherence' (fast) or 'exact': every exemplar neighbourhood (slow)."
     )
-    planes: tuple[str, ...] = Field(
-        PLANES,
-        description="Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
-        "two, e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving xy free.",
-    )
-
-    @field_validator("planes")
-    @classmethod
-    def _planes(cls, value: tuple[str, ...]) -> tuple[str, ...]:
-        return checked_planes(value)
-
-    @field_validator("neighbourhood_size")
-    @classmethod
-    def _odd(cls, value: int) -> int:
-        if value % 2 == 0:
-            raise ValueError("neighbourhood_size must be odd")
-        return value
 
 
 def run_solid_wei_levoy(

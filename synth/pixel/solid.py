@@ -86,8 +86,11 @@ def checked_planes(planes: Sequence[str]) -> tuple[str, ...]:
     >>> checked_planes(("yz", "xz"))
     ('xz', 'yz')
     """
-    given = list(planes)
-    if len(set(given)) != len(given) or not set(given) <= set(PLANES) or len(given) < 2:
+    given = [planes] if isinstance(planes, str) else list(planes)
+    unknown = [p for p in given if p not in PLANES]
+    if unknown:
+        raise ValueError(f"planes must be names among 'xy', 'xz', 'yz'; got {unknown}")
+    if len(set(given)) != len(given) or len(given) < 2:
         raise ValueError(f"planes must be two or three distinct planes among 'xy', 'xz', 'yz'; got {given}")
     return tuple(p for p in PLANES if p in given)
 

@@ -240,8 +240,8 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"k": -1}}, InvalidParameter, "'k'"),
         ({"params": {"scan": "spiral"}}, InvalidParameter, "scan"),
         ({"params": {"histogram": 1}}, InvalidParameter, "unknown parameter"),
-        ({"params": {"planes": ["xy"]}}, InvalidParameter, "planes must name two or three"),
-        ({"params": {"planes": ["xy", "xy"]}}, InvalidParameter, "planes must name two or three"),
+        ({"params": {"planes": ["xy"]}}, InvalidParameter, "planes must be two or three distinct planes"),
+        ({"params": {"planes": ["xy", "xy"]}}, InvalidParameter, "planes must be two or three distinct"),
         ({"params": {"planes": ["xy", "zx"]}}, InvalidParameter, "planes must be names among"),
         (
             {"params": {"neighbourhood_size": 15}, "exemplar": np.zeros((12, 12), np.float32)},

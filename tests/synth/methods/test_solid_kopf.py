@@ -204,9 +204,17 @@ def test_two_views_leave_the_third_plane_free() -> None:
         assert abs(np.degrees(wrap_angle(_orientation(view) - want))) < 15.0, plane
 
 
-@pytest.mark.parametrize("planes", [("xy",), ("xy", "xy"), ("xy", "ab"), ()])
-def test_bad_planes_are_named(planes: tuple[str, ...]) -> None:
-    with pytest.raises(InvalidParameter, match="planes must be two or three distinct planes"):
+@pytest.mark.parametrize(
+    ("planes", "message"),
+    [
+        (("xy",), "planes must be two or three distinct planes"),
+        (("xy", "xy"), "planes must be two or three distinct planes"),
+        ((), "planes must be two or three distinct planes"),
+        (("xy", "ab"), "planes must be names among 'xy', 'xz', 'yz'; got \\['ab'\\]"),
+    ],
+)
+def test_bad_planes_are_named(planes: tuple[str, ...], message: str) -> None:
+    with pytest.raises(InvalidParameter, match=message):
         synthesize("solid-kopf", _soft(), size=SIZE, params={**SMALL, "planes": planes})
 
 
