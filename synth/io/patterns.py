@@ -23,8 +23,10 @@ __all__ = [
     "concentric_rings",
     "gaussian_random_field",
     "grating",
+    "laminae_volume",
     "spiral",
     "undulating_laminae",
+    "voronoi_cells",
     "waves",
 ]
 
@@ -63,6 +65,48 @@ def undulating_laminae(
     """Horizontal laminae bent by a sine of ``amplitude`` px over ``wavelength`` px (curved fringes)."""
     x, y = _coords(shape)
     return _finish(2 * np.pi * (y + amplitude * np.sin(2 * np.pi * x / wavelength)) / period, noise, seed)
+
+
+def laminae_volume(
+    shape: tuple[int, int, int],
+    normal: Sequence[float] = (1.0, 0.0, 0.0),
+    period: float = 8.0,
+    amplitude: float = 6.0,
+    wavelength: float = 64.0,
+    *,
+    noise: float = 0.15,
+    seed: int = 0,
+) -> np.ndarray:
+    """Bent sheets in a volume ``(D, H, W) = (z, y, x)``: the 3D laminae whose slices are laminae.
+
+    The phase is ``2 pi (n . r + a sin(2 pi u / lambda) + a sin(2 pi v / lambda)) / period`` with ``r =
+    (z, y, x)`` in voxels, ``n`` the unit ``normal`` of the sheets and ``u``, ``v`` two coordinates
+    across them (orthonormal to ``n``), so the sheets undulate both ways by ``amplitude`` voxels over
+    ``wavelength``; grey ``0.5 + 0.5 cos(phase)`` plus Gaussian ``noise``, rescaled to [0, 1].
+
+    Every slice of such a volume is a laminae image, and its three orthogonal mid-slices are mutually
+    consistent per-plane exemplars (a material that exists): with ``normal=(1, 0, 0)`` the xz and yz
+    slices show bent horizontal laminae and the xy slices cut the sheets into contour bands. With
+    ``normal=(1, 1, 1)`` the three planes show the same laminae running diagonally: the one uniaxial
+    layout that a single laminae exemplar can describe on all three planes (docs/solid.md).
+    """
+    dims = tuple(int(s) for s in shape)
+    if len(dims) != 3 or any(s < 2 for s in dims):
+        raise InvalidParameter("shape", tuple(shape), "must be (D, H, W) with every side at least 2")
+    n = np.asarray(normal, dtype=np.float64)
+    if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+        raise InvalidParameter("normal", tuple(normal), "must be three finite numbers, not all zero")
+    n = n / np.linalg.norm(n)
+    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    z, y, x = np.meshgrid(*(np.arange(s, dtype=np.float64) for s in dims), indexing="ij")
+    along = n[0] * z + n[1] * y + n[2] * x
+    cu = u[0] * z + u[1] * y + u[2] * x
+    cv = v[0] * z + v[1] * y + v[2] * x
+    bend = amplitude * (np.sin(2 * np.pi * cu / wavelength) + np.sin(2 * np.pi * cv / wavelength))
+    return _finish(2 * np.pi * (along + bend) / period, noise, seed)
 
 
 def waves(
@@ -184,3 +228,55 @@ def gaussian_random_field(
     if n_phase > 0:
         out[np.argsort(field, axis=None, kind="stable")[field.size - n_phase :]] = 1.0
     return out.reshape(dims)
+
+
+def voronoi_cells(
+    shape: tuple[int, int],
+    cell_size: float = 16.0,
+    wall: float = 1.5,
+    *,
+    noise: float = 0.05,
+    seed: int = 0,
+) -> np.ndarray:
+    """A cell-like texture with known curvilinear features: dark walls on the edges of a Voronoi diagram.
+
+    The cell centres lie on a square grid of spacing ``cell_size`` px, each moved uniformly by up to
+    0.4 of the spacing (a jittered grid, so that cells have similar sizes); the grid covers one cell
+    beyond the image so that border cells are whole. A pixel at distances ``d1 <= d2`` from its two
+    nearest centres lies ``(d2 - d1) / 2`` px (to first order) from the wall between them; the wall is
+    a Gaussian dip of standard deviation ``wall`` px in that distance, and each cell's interior a
+    slightly different grey. The walls form a closed network with no free ends (every feature
+    endpoint in a synthesized image of it is a break), the features that
+    :func:`synth.evaluate.breaks.broken_features` counts.
+
+    Returns a float32 image in [0, 1] (walls dark).
+
+    Examples
+    --------
+    >>> img = voronoi_cells((64, 64), seed=1)
+    >>> img.shape, img.dtype.name, float(img.min()) >= 0.0, float(img.max()) <= 1.0
+    ((64, 64), 'float32', True, True)
+    """
+    from scipy.spatial import cKDTree
+
+    if len(tuple(shape)) != 2 or min(int(s) for s in shape) < 2:
+        raise InvalidParameter("shape", tuple(shape), "must be (H, W) with every side at least 2")
+    for name, value in (("cell_size", cell_size), ("wall", wall)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise InvalidParameter(name, value, "must be a positive number of pixels")
+    if not (isinstance(noise, int | float) and math.isfinite(noise) and noise >= 0):
+        raise InvalidParameter("noise", noise, "must be a number >= 0")
+    h, w = int(shape[0]), int(shape[1])
+    rng = np.random.default_rng(seed)
+    gy, gx = np.mgrid[-1 : h / cell_size + 1, -1 : w / cell_size + 1]
+    centres = (np.stack([gy.ravel(), gx.ravel()], axis=1) + 0.5) * cell_size
+    centres += rng.uniform(-0.4, 0.4, centres.shape) * cell_size
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
+    dist, idx = cKDTree(centres).query(np.stack([rows.ravel(), cols.ravel()], axis=1), k=2)
+    to_wall = (dist[:, 1] - dist[:, 0]) / 2.0
+    shade = rng.uniform(0.75, 0.95, len(centres))[idx[:, 0]]
+    img = shade - 0.6 * np.exp(-0.5 * (to_wall / wall) ** 2)
+    if noise > 0:
+        img = img + rng.normal(0.0, noise, img.shape)
+    img = (img - img.min()) / max(img.max() - img.min(), 1e-12)
+    return img.reshape(h, w).astype(np.float32)

@@ -23,10 +23,10 @@ def truth() -> np.ndarray:
     return gaussian_random_field(TRUTH_SHAPE, LENGTHS, 0.4, seed=11)
 
 
-#: Issue 10 asks 10% on every axis. Measured (32^3 and 48^3, seeds 1-3): x and y 0.065-0.099, z
-#: 0.13-0.17 (z has the shortest correlation length, 2 voxels, where a 7x7 neighbourhood pyramid
-#: resolves least). The z bound pins what holds today; the 10% target along z is not met yet.
-BOUNDS = {"solid-kopf": {"z": 0.20, "y": 0.10, "x": 0.10}}
+#: Issue 10 asks 10% on every axis. Measured with the defaults (32^3, seeds 1-3): 0.033-0.044 along
+#: z, 0.034-0.041 along y, 0.039-0.042 along x. The automatic level count matters: with the paper's 5
+#: levels (4 fit here) z was 0.13-0.17 and x up to 0.10 (``structure_levels``, tested below).
+BOUNDS = {"solid-kopf": {"z": 0.10, "y": 0.10, "x": 0.10}}
 
 
 @pytest.mark.parametrize("method", sorted(BOUNDS))
@@ -39,3 +39,21 @@ def test_s2_along_each_axis_matches_the_truth(truth, method):
     got = volume_s2(result.image, threshold=0.5, periodic=True, max_lag=16)
     errors = {axis: compare_s2(want[axis], got[axis])["relative_error"] for axis in ("z", "y", "x")}
     assert all(errors[axis] < bound for axis, bound in BOUNDS[method].items()), errors
+
+
+def test_the_levels_adapt_to_the_structure(truth):
+    """A micro-structure gets 2 levels, laminae all those asked for; ``adaptive_levels=False`` is literal."""
+    from synth.io.patterns import laminae_volume
+    from synth.pixel.solid import MICROSTRUCTURE_LEVELS, structure_levels
+
+    d = truth.shape[0]
+    grains = [truth[d // 2], truth[:, d // 2, :], truth[:, :, d // 2]]
+    sheets = laminae_volume((48, 48, 48), (1, 0, 0), 7, 4, 48, noise=0.2, seed=1)
+    assert structure_levels(grains, 5) == MICROSTRUCTURE_LEVELS
+    assert structure_levels([sheets[:, 24, :]], 5) == 5
+    assert structure_levels(grains, 1) == 1
+    literal = synthesize(
+        "solid-kopf", grains[0], size=(16, 16, 16), params={"adaptive_levels": False}, seed=1
+    )
+    adapted = synthesize("solid-kopf", grains[0], size=(16, 16, 16), seed=1)
+    assert literal.stats["levels"] > adapted.stats["levels"] == MICROSTRUCTURE_LEVELS

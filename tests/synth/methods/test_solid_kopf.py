@@ -246,3 +246,34 @@ def test_position_factors_penalise_only_over_used_exemplar_cells() -> None:
     match = np.array([0, 1, side + 1, 4], dtype=np.int64)
     f = _position_factors(match, (side, side))
     np.testing.assert_allclose(f, [1 / (1 + POSITION_GAIN * 0.5)] * 3 + [1.0], rtol=1e-6)
+
+
+def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
+    from synth.io.patterns import grating
+    from synth.methods.solid_kopf import ORIENTATION_BINS, orientation_labels
+
+    horizontal = grating((48, 48), np.pi / 2, 8.0)  # gradient along the rows: orientation pi/2
+    labels, shares = orientation_labels(horizontal)
+    inner = labels.reshape(48, 48)[8:-8, 8:-8]
+    assert set(np.unique(inner)) <= {0, ORIENTATION_BINS - 1}  # +-pi/2 wrap to the first/last bin
+    assert shares[[0, ORIENTATION_BINS - 1]].sum() > 0.9
+    assert np.all(shares > 0) and abs(shares.sum() - 1.0) < 0.1 + 1e-6
+
+
+def test_orientation_factors_penalise_only_over_used_orientations() -> None:
+    from synth.methods.solid_kopf import _orientation_factors
+
+    labels = np.array([0, 0, 1, 1], dtype=np.int64)  # exemplar pixels 0, 1 in bin 0; 2, 3 in bin 1
+    shares = np.array([0.5, 0.5])
+    match = np.array([0, 1, 0, 2], dtype=np.int64)  # bin 0 used 3/4 (excess 0.5), bin 1 1/4
+    f = _orientation_factors(match, labels, shares, np.ones(4, np.float32), gain=2.0)
+    np.testing.assert_allclose(f, [0.5, 0.5, 0.5, 1.0], rtol=1e-6)
+    none = _orientation_factors(match, labels, shares, np.ones(4, np.float32), gain=0.0)
+    np.testing.assert_allclose(none, 1.0)
+
+
+def test_orientation_gain_changes_the_volume() -> None:
+    ex = undulating_laminae((32, 32), 6, 4, 32, noise=0.2)
+    plain = synthesize("solid-kopf", ex, size=(12, 12, 12), seed=3)
+    pulled = synthesize("solid-kopf", ex, size=(12, 12, 12), params={"orientation_gain": 4.0}, seed=3)
+    assert not np.array_equal(plain.image, pulled.image)
