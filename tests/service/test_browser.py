@@ -163,7 +163,7 @@ def test_job_page_explains_parameters_metrics_and_failures(browser, embedded, ex
     page.goto(f"{embedded.url}/#/jobs/{failed['id']}")
     page.wait_for_selector("#job-state.failed")
     assert "the test method was asked to fail" in page.inner_text("#job-message")
-    assert page.inner_text("#progress-text").startswith("failed during")
+    assert page.inner_text("#progress-text").startswith("failed at")
     assert page.evaluate("() => document.querySelector('#progress').classList.contains('failed')")
     assert not errors, errors
     page.close()
