@@ -362,14 +362,17 @@ class JobStore:
         return True
 
     def finish(self, job_id: str, token: str | None, state: str, message: str = "") -> bool:
-        """End the job as ``failed`` or ``cancelled`` (if ``token`` is given, only if the run owns it)."""
+        """End the job as ``failed`` or ``cancelled`` (if ``token`` is given, only if the run owns it).
+
+        A failed job keeps the stage it had reached, so that the page can say where it failed.
+        """
         assert state in ("failed", "cancelled")
         now = time.time()
         query = (
-            "UPDATE jobs SET state = ?, message = ?, stage = ?, finished = ?, updated = ?, run_token = NULL"
-            " WHERE id = ? AND state IN ('queued', 'running')"
+            "UPDATE jobs SET state = ?, message = ?, stage = CASE WHEN ? = 'failed' THEN stage ELSE ? END,"
+            " finished = ?, updated = ?, run_token = NULL WHERE id = ? AND state IN ('queued', 'running')"
         )
-        args: list[Any] = [state, message, state, now, now, job_id]
+        args: list[Any] = [state, message, state, state, now, now, job_id]
         if token is not None:
             query += " AND run_token = ?"
             args.append(token)

@@ -122,3 +122,13 @@ def test_no_resend_without_a_live_worker(store):
     job_id = _job(store)
     _backdate(store, job_id, 300)
     assert reap_once(store, settings, lambda j: None, lambda j: None, set()) == []
+
+
+def test_a_failed_job_keeps_the_stage_it_failed_in_and_a_cancelled_one_says_cancelled(store):
+    failed, cancelled = _job(store), _job(store)
+    for job_id in (failed, cancelled):
+        token, _ = store.claim(job_id, pid=1, stale_seconds=10)
+        assert store.progress(job_id, token, "level 2 of 3", 0.4)
+        assert store.finish(job_id, token, "failed" if job_id == failed else "cancelled", "why")
+    assert store.get(failed).stage == "level 2 of 3" and store.get(failed).state == "failed"
+    assert store.get(cancelled).stage == "cancelled"
