@@ -83,11 +83,13 @@ Departures, and why (figures: soot = ``hrtem-soot-128.png``, seed 1, per-axis me
   A voxel's new value depends on no other voxel, so this is what makes the step parallel and, with
   the block's voxels taken in memory order, cache-friendly: at 128^3 an update sweep took 5.6 s with
   blocks of 4096 and 3.0 s with N / 16 (one thread). The histogram lags by at most 1/16 of a sweep.
-- **Levels follow the structure** (``adaptive_levels``, on; :func:`synth.pixel.solid.structure_levels`):
-  a weakly oriented exemplar (mean coherence < 0.75: soot, grains, pores) is synthesized over 2 levels,
-  laminae over ``levels``. The coarse levels of a structure a few pixels across hold only residual noise
-  that the iterations amplify into blobs: on the known-answer field (correlation lengths 2/3.5/6) the
-  output's correlation length along z was 5 against 2 with 4 levels; S2 error 0.13-0.17 along z, and
+- **The schedule follows the structure** (``adapt_to_structure``, on; see
+  :func:`synth.pixel.solid.structure_schedule`): a weakly oriented exemplar (mean coherence < 0.75: soot,
+  grains, pores) is synthesized over at most 2 levels, laminae over ``levels`` with at least 10
+  iterations per level (the paper's 10; per-plane laminae, mean orientation KL on the xz/yz axes
+  0.16/0.13 with 4 -> 0.08/0.07 with 10). The coarse levels of a structure a few pixels across hold
+  only residual noise that the iterations amplify into blobs: on the known-answer field (correlation
+  lengths 2/3.5/6) the output's correlation length along z was 5 against 2 with 4 levels; S2 error
   0.03-0.04 on every axis with 2. More iterations coarsen it further (10 at 2 levels: 0.11 along z).
   Soot: orientation KL 0.04/0.05/0.04 with 2 levels against 0.04/0.06/0.02 with 5, S2 error 0.03-0.04
   against 0.06-0.08, so soot loses nothing.
@@ -153,7 +155,7 @@ from synth.pixel.solid import (
     plane_centres,
     plane_offsets,
     slice_geometry,
-    structure_levels,
+    structure_schedule,
     upsample_sources,
     upsample_volume,
 )
@@ -187,9 +189,10 @@ class SolidKopfParams(SolidParams):
     """Parameters of Kopf et al.'s solid optimisation; defaults are the study's settings."""
 
     levels: int = Field(5, ge=1, le=8, description="Pyramid levels (fewer when the exemplar is small).")
-    adaptive_levels: bool = Field(
+    adapt_to_structure: bool = Field(
         True,
-        description="Use 2 levels for a weakly oriented (micro-structure) exemplar, all levels for laminae.",
+        description="Micro-structures (weakly oriented exemplars) use at most 2 levels; laminae at least "
+        "10 iterations per level (off: levels and iterations literally).",
     )
     orientation_gain: float = Field(
         0.0,
@@ -287,14 +290,14 @@ def run_solid_kopf(
     report = checked_progress(progress)
     views = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
     active = _active_planes(params)
-    levels = params.levels
-    if params.adaptive_levels:
-        levels = structure_levels([views[PLANES[p]] for p in active], levels)
+    levels, iterations = params.levels, params.iterations
+    if params.adapt_to_structure:
+        levels, iterations = structure_schedule([views[PLANES[p]] for p in active], levels, iterations)
     plan = plan_levels(views, size, levels, params.neighbourhood_size)
     rng = np.random.default_rng(seed)
     s = params.stride
     total = sum(
-        params.iterations * np.prod(shape) * (len(active) * SEARCH_COST / s**2 + UPDATE_COST)
+        iterations * np.prod(shape) * (len(active) * SEARCH_COST / s**2 + UPDATE_COST)
         for shape in plan.shapes
     )
     meter = ProgressMeter(report, float(total))
@@ -356,8 +359,8 @@ def run_solid_kopf(
         )
         stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
         scratch = (stamps, np.zeros(1, dtype=np.int64))
-        for it in range(params.iterations):
-            stage = f"solid-kopf: level {level + 1} of {plan.levels}, iteration {it + 1}/{params.iterations}"
+        for it in range(iterations):
+            stage = f"solid-kopf: level {level + 1} of {plan.levels}, iteration {it + 1}/{iterations}"
             t0 = time.perf_counter()
             field.match.fill(-1)
             sum_d2 = 0.0
@@ -433,6 +436,7 @@ def run_solid_kopf(
             "energy": energies,
             "mean_best_distance": {k: v[-1] for k, v in energies.items()},
             "levels": plan.levels,
+            "iterations": iterations,
             "neighbourhood_sizes": list(plan.sizes),
             "planes": list(params.planes),
             "contrast_before_remap": contrast,

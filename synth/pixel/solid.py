@@ -63,12 +63,13 @@ __all__ = [
     "exemplar_offsets",
     "gather_plane",
     "initial_volume",
+    "is_laminar",
     "match_histogram",
     "plan_levels",
     "plane_centres",
     "plane_offsets",
     "slice_geometry",
-    "structure_levels",
+    "structure_schedule",
     "upsample_sources",
     "upsample_volume",
     "volume_pyramid",
@@ -103,30 +104,42 @@ MIN_EXEMPLAR_SIDE = 8
 MIN_VOLUME_SIDE = 4
 #: An exemplar whose mean structure-tensor coherence reaches this is laminar (oriented) ...
 ORIENTED_COHERENCE = 0.75
-#: ... otherwise a micro-structure, synthesized over this many levels (see :func:`structure_levels`).
+#: ... otherwise a micro-structure, synthesized over at most this many levels ...
 MICROSTRUCTURE_LEVELS = 2
+#: ... while laminae get at least this many iterations per level (Kopf's 10) (:func:`structure_schedule`).
+LAMINAR_ITERATIONS = 10
 
 
-def structure_levels(exemplars: Sequence[np.ndarray], levels: int) -> int:
-    """How many pyramid levels the exemplars' structure needs: ``levels``, or fewer for a micro-structure.
+def is_laminar(exemplars: Sequence[np.ndarray]) -> bool:
+    """Whether some exemplar is strongly oriented: mean coherence >= :data:`ORIENTED_COHERENCE`.
 
-    Laminar exemplars (some exemplar's mean coherence >= :data:`ORIENTED_COHERENCE`) keep ``levels``: the
-    coarse levels lay out long sheets, and fewer levels leave more defects (laminae volume, per-plane,
-    64^3 from 128^2: orientation KL 0.05/0.25/0.21 with 2 levels against 0.02/0.10/0.12 with 5).
-    Weakly oriented ones (grains, pores, soot: mean coherence 0.37-0.61 measured) get
-    :data:`MICROSTRUCTURE_LEVELS`: a 7x7 neighbourhood at the second level already spans 14 pixels, and
-    the coarser levels of a structure a few pixels across hold only residual noise, which the
-    optimisation's averaging and histogram pull amplify into blobs several times too large (issue 10's
-    known answer, a level-cut Gaussian field of correlation lengths 2/3.5/6: S2 relative error along
-    z/y/x 0.13-0.17/0.08-0.09/0.08-0.10 with 4 levels, 0.03-0.04 on every axis with 2; soot kept its
-    orientation KL, 0.04 per axis, and its S2 error fell from 0.06-0.08 to 0.03-0.04).
+    Measured mean coherences: bent laminae 0.84-0.91, laminae slices across the sheets 0.73; HRTEM soot
+    0.39, level-cut Gaussian fields (grains, pores) 0.37-0.61.
     """
-    if levels <= MICROSTRUCTURE_LEVELS:
-        return levels
-    strongest = max(
-        float(coherence(structure_tensor(np.asarray(img, np.float32))).mean()) for img in exemplars
+    return max(float(coherence(structure_tensor(np.asarray(e, np.float32))).mean()) for e in exemplars) >= (
+        ORIENTED_COHERENCE
     )
-    return levels if strongest >= ORIENTED_COHERENCE else MICROSTRUCTURE_LEVELS
+
+
+def structure_schedule(exemplars: Sequence[np.ndarray], levels: int, iterations: int) -> tuple[int, int]:
+    """Pyramid levels and iterations per level that the exemplars' structure needs.
+
+    - A **micro-structure** (no exemplar laminar, :func:`is_laminar`: grains, pores, soot) gets at most
+      :data:`MICROSTRUCTURE_LEVELS` levels: a 7x7 neighbourhood at the second level already spans 14
+      pixels, and the coarser levels of a structure a few pixels across hold only residual noise that the
+      optimisation's averaging and histogram pull amplify into blobs several times too large (issue 10's
+      known answer, a level-cut Gaussian field of correlation lengths 2/3.5/6: S2 relative error along
+      z/y/x 0.13-0.17/0.08-0.09/0.08-0.10 with 4 levels, 0.03-0.04 on every axis with 2; soot kept its
+      orientation KL, 0.04 per axis, and its S2 error fell from 0.06-0.08 to 0.03-0.04). More iterations
+      coarsen it further (10 iterations at 2 levels: 0.11 along z), so ``iterations`` is kept.
+    - **Laminae** keep ``levels`` (fewer leave more defects: per-plane laminae, 64^3 from 128^2,
+      orientation KL 0.05/0.25/0.21 with 2 levels against 0.02/0.10/0.12 with 5) and get at least
+      :data:`LAMINAR_ITERATIONS` iterations, which anneal the dislocations between laminae domains
+      (seeds 1-3, mean orientation KL per axis 0.045/0.164/0.133 with 4 -> 0.044/0.077/0.069 with 10).
+    """
+    if is_laminar(exemplars):
+        return levels, max(iterations, LAMINAR_ITERATIONS)
+    return min(levels, MICROSTRUCTURE_LEVELS), iterations
 
 
 #: Principal components of the k-d tree that builds the k-coherence sets and seeds the coarsest level.
