@@ -28,6 +28,7 @@ __all__ = [
     "undulating_laminae",
     "voronoi_cells",
     "waves",
+    "wood_grain",
 ]
 
 
@@ -107,6 +108,37 @@ def laminae_volume(
     cv = v[0] * z + v[1] * y + v[2] * x
     bend = amplitude * (np.sin(2 * np.pi * cu / wavelength) + np.sin(2 * np.pi * cv / wavelength))
     return _finish(2 * np.pi * (along + bend) / period, noise, seed)
+
+
+def wood_grain(
+    shape: tuple[int, int],
+    fibre_width: float = 5.0,
+    amplitude: float = 4.0,
+    wavelength: float = 96.0,
+    *,
+    noise: float = 0.03,
+    seed: int = 0,
+) -> np.ndarray:
+    """Long, nearly vertical fibres with their own grey levels (a wood-grain or fibre-bundle texture).
+
+    Fibre ``k`` occupies ``k w <= u < (k + 1) w`` with ``u = x + amplitude sin(2 pi y / wavelength)``
+    (gently wavy fibres across the whole image); each fibre has a random grey level in [0.3, 0.7] and a
+    slow variation along its length, the boundaries between fibres are dark lines one or two pixels
+    wide, plus Gaussian ``noise``; rescaled to [0, 1]. The strands run the image's full height: the
+    exemplar for measuring whether a method keeps long fibres continuous (issue 13).
+    """
+    rng = np.random.default_rng(seed)
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    u = cols + amplitude * np.sin(2 * np.pi * rows / wavelength) + amplitude
+    fibre = np.floor(u / fibre_width).astype(np.int64)
+    levels = rng.uniform(0.3, 0.7, int(fibre.max()) + 1)
+    phases = rng.uniform(0, 2 * np.pi, int(fibre.max()) + 1)
+    along = 0.08 * np.sin(2 * np.pi * rows / (2.5 * wavelength) + phases[fibre])
+    frac = u / fibre_width - fibre
+    boundary = np.exp(-0.5 * (np.minimum(frac, 1 - frac) * fibre_width / 0.7) ** 2)
+    img = levels[fibre] + along - 0.25 * boundary + rng.normal(0.0, noise, shape)
+    img = (img - img.min()) / max(img.max() - img.min(), 1e-12)
+    return img.astype(np.float32)
 
 
 def waves(
