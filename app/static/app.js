@@ -662,6 +662,18 @@ async function showMetrics(summary) {
   }));
 }
 
+// The exemplar's fringe statistics beside the output's, so a number is read against the sample's own.
+const FRINGE_STATS = [["count", "fringes"], ["mean_length", "mean length (px)"], ["median_length", "median length (px)"],
+  ["mean_tortuosity", "mean tortuosity"], ["share_tortuous", "share tortuous"], ["density_per_10k_px", "per 10k px"]];
+function showFringes(fringes) {
+  const ok = fringes && fringes.exemplar && fringes.output;
+  $("#fringe-metrics").hidden = !ok;
+  if (!ok) return;
+  $("#fringe-metrics tbody").replaceChildren(...FRINGE_STATS.filter(([k]) => k in fringes.exemplar).map(([k, label]) =>
+    el("tr", {}, el("th", { text: label }), el("td", { text: fmtNum(fringes.exemplar[k]) }),
+      el("td", { text: fmtNum(fringes.output[k]) }))));
+}
+
 function showResults(job) {
   const a = job.artifacts;
   const volume = !!job.params.depth;
@@ -687,6 +699,7 @@ function showResults(job) {
   const metrics = Object.entries(flatten(job.metrics)).filter(([k]) => !k.startsWith("settings."));
   const row = ([k, v]) => el("tr", {}, el("th", { text: k }), el("td", { text: fmtNum(v) }));
   showMetrics((job.metrics && job.metrics.summary) || Object.fromEntries(metrics));
+  showFringes(job.metrics && job.metrics.fringes);
   $("#all-metrics tbody").replaceChildren(...metrics.map(row));
   $("#plots").replaceChildren(...Object.keys(a).filter((n) => n.startsWith("plots/"))
     .map((n) => figure(a[n], n.slice(6).replace(".png", "").replaceAll("_", " "))));

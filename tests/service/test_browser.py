@@ -158,6 +158,9 @@ def test_job_page_explains_parameters_metrics_and_failures(browser, embedded, ex
     metrics = page.inner_text("#metrics")
     assert "grey-level KL" in metrics and "lower is better" in metrics
     assert "target < 0.05" in metrics or "good (< 0.05)" in metrics
+    # the exemplar's own fringe statistics beside the output's
+    fringes = page.inner_text("#fringe-metrics")
+    assert "exemplar" in fringes and "output" in fringes and "mean length (px)" in fringes
     page.screenshot(path=str(tmp_path / "explained.png"), full_page=True)
     # a failed job: the reason in words, and a red bar
     page.goto(f"{embedded.url}/#/jobs/{failed['id']}")
