@@ -4,12 +4,12 @@ For lab scripts that run batches on the service instead of on their own machine:
 
     from app.client import Client
 
-    client = Client("http://localhost:8000")
+    client = Client("http://localhost:8000")     # token=... or $TEXSYNTH_TOKEN when the service has tokens
     job = client.submit("carbon.png", method="wei-levoy", params={"width": 256, "height": 256}, seed=1)
     job = client.wait(job["id"], progress=lambda j: print(j["stage"], j["fraction"]))
     paths = client.download(job, "out/")          # output.png, output.tiff, metrics.json, ...
 
-Errors the service reports (413/415/422/404, with its message) raise :class:`ServiceError`, a
+Errors the service reports (401/403/404/413/415/422/429, with its message) raise :class:`ServiceError`, a
 :class:`~synth.errors.SynthError`, so the CLI prints them on one line.
 """
 
@@ -30,7 +30,6 @@ from typing import Any
 
 from synth.cli.inputs import add_plane_arguments, input_sources
 from synth.errors import InvalidInput, SynthError
-from synth.params import parse_assignments
 
 __all__ = ["Client", "ServiceError", "register"]
 
@@ -50,11 +49,13 @@ FileLike = str | os.PathLike[str] | bytes
 
 
 class Client:
-    """Talks to one texsynth service at ``base_url``."""
+    """Talks to one texsynth service at ``base_url``, with ``token`` (default ``$TEXSYNTH_TOKEN``)
+    sent as ``Authorization: Bearer`` on every request when the service has tokens."""
 
-    def __init__(self, base_url: str | None = None, timeout: float = 30.0) -> None:
+    def __init__(self, base_url: str | None = None, timeout: float = 30.0, token: str | None = None) -> None:
         self.base_url = (base_url or os.environ.get("TEXSYNTH_URL") or DEFAULT_URL).rstrip("/")
         self.timeout = timeout
+        self.token = (token or os.environ.get("TEXSYNTH_TOKEN") or "").strip() or None
 
     # -- plumbing -----------------------------------------------------------------------------------
 
@@ -62,7 +63,10 @@ class Client:
         self, method: str, path: str, body: bytes | None = None, headers: dict | None = None
     ) -> bytes:
         url = path if path.startswith("http") else self.base_url + path
-        req = urllib.request.Request(url, data=body, method=method, headers=headers or {})
+        headers = dict(headers or {})
+        if self.token and url.startswith(self.base_url):  # never send the token to another host
+            headers["Authorization"] = f"Bearer {self.token}"
+        req = urllib.request.Request(url, data=body, method=method, headers=headers)
         try:
             with urllib.request.urlopen(req, timeout=self.timeout) as resp:
                 return resp.read()
@@ -169,7 +173,16 @@ class Client:
         return self._json("GET", f"/api/jobs?{query}")
 
     def cancel(self, job_id: str) -> dict:
+        """Cancel a queued or running job (``DELETE``); returns its record."""
         return self._json("DELETE", f"/api/jobs/{urllib.parse.quote(job_id)}")
+
+    def delete(self, job_id: str) -> dict:
+        """Delete a finished job's files and record (a running one is cancelled first, then deleted)."""
+        answer = self.cancel(job_id)
+        if answer.get("state") != "deleted":
+            self.wait(job_id, timeout=60)
+            answer = self.cancel(job_id)
+        return answer
 
     def wait(
         self,
@@ -245,6 +258,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("exemplar", nargs="?", help="exemplar image (PNG, TIFF, JPEG)")
     add_plane_arguments(p)
     p.add_argument("--url", help=f"service URL (default: $TEXSYNTH_URL or {DEFAULT_URL})")
+    p.add_argument(
+        "--token",
+        help="the service's API token, when it has tokens (default: $TEXSYNTH_TOKEN; the variable keeps "
+        "it out of the process list)",
+    )
     p.add_argument("--method", default="wei-levoy")
     p.add_argument("--constraint", help="constraint image, for methods that take one")
     p.add_argument("--width", type=int)
@@ -267,7 +285,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _submit(args: argparse.Namespace) -> int:
-    client = Client(args.url)
+    from synth.params import parse_assignments  # deferred: ``texsynth --help`` needs no pydantic
+
+    client = Client(args.url, token=args.token)
     params = parse_assignments(args.sets)
     size = {"width": args.width, "height": args.height, "depth": args.depth}
     params.update({k: v for k, v in size.items() if v is not None})

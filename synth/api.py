@@ -26,6 +26,7 @@ __all__ = [
     "Result",
     "available_methods",
     "check_inputs",
+    "find_method",
     "synthesize",
 ]
 
@@ -117,6 +118,7 @@ _METHOD_MODULES: Sequence[str] = (
     "synth.methods.quilting",
     "synth.methods.gaussian_patch",
     "synth.methods.random_phase",
+    "synth.methods.feature_guided",
 )
 
 
@@ -138,6 +140,26 @@ def available_methods() -> dict[str, MethodSpec]:
     """All registered methods, by name."""
     _load_methods()
     return dict(METHODS)
+
+
+def find_method(name: str) -> MethodSpec | None:
+    """The method ``name``, or ``None`` when no module registers it.
+
+    Imports only the module that, by the naming rule of :data:`_METHOD_MODULES`
+    (``'wei-levoy'`` -> ``synth.methods.wei_levoy``), should register it, so that one synthesis does
+    not import every method's dependencies; falls back to all of them.
+    """
+    if name not in METHODS:
+        module = f"synth.methods.{name.replace('-', '_')}"
+        if module in _METHOD_MODULES:
+            try:
+                importlib.import_module(module)
+            except ModuleNotFoundError as exc:
+                if exc.name != module:  # a real import error inside the module
+                    raise
+    if name not in METHODS:
+        _load_methods()
+    return METHODS.get(name)
 
 
 def check_inputs(spec: MethodSpec, roles: Sequence[str] | set[str]) -> None:
@@ -213,10 +235,10 @@ def synthesize(
         One grey exemplar per orthogonal plane (:data:`PLANES`), for the solid methods, instead of
         ``exemplar``: each plane's slices of the volume must look like its own exemplar.
     """
-    methods = available_methods()
-    if method not in methods:
-        raise InvalidParameter("method", method, f"unknown method (known: {', '.join(sorted(methods))})")
-    spec = methods[method]
+    spec = find_method(method)
+    if spec is None:
+        known = ", ".join(sorted(available_methods()))
+        raise InvalidParameter("method", method, f"unknown method (known: {known})")
     model = validate_params(spec.params_model, params)
     if not isinstance(seed, int | np.integer) or not 0 <= int(seed) < 2**32:
         raise InvalidParameter("seed", seed, "must be an integer in [0, 2**32)")

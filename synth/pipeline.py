@@ -85,7 +85,7 @@ def synthesize_to_folder(
     the synthesis started and finished (Unix time). A volume is evaluated plane by plane against its
     per-plane exemplars when given; ``voxel_size`` (nm) calibrates its TIFF stack and its fringe lengths.
     """
-    from synth.output.artifacts import write_artifacts  # deferred: matplotlib only when writing
+    from synth.output.artifacts import write_artifacts  # deferred: evaluation and plots only when writing
 
     planes = {plane: images[f"exemplar_{plane}"] for plane in PLANES if f"exemplar_{plane}" in images}
     started = time.time()

@@ -64,6 +64,12 @@ def _on_child_start(**_):
     _store = None  # never share an SQLite connection across a fork
     if settings.worker_nice:
         os.nice(settings.worker_nice)  # the API stays responsive on a machine busy with jobs
+    import importlib
+
     from jobs.methods import methods
 
-    methods(settings)  # import the methods (numba compiles lazily) before the first job
+    # Everything a job imports, once per child process rather than in its first job: the methods
+    # (their numba kernels load from the on-disk cache at their first call, then stay compiled in the
+    # process), the artifact writer with the evaluation and the plots.
+    methods(settings)
+    importlib.import_module("synth.output.artifacts")

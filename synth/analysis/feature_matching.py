@@ -83,6 +83,7 @@ __all__ = [
     "matching_costs",
     "orientation_bucket",
     "tangent_difference",
+    "thin_correspondences",
     "unmatched_penalty",
 ]
 
@@ -640,6 +641,8 @@ def feature_correspondences(
     *,
     tau: float = WARP_TAU,
     max_distance: float | None = None,
+    max_angle: float | None = None,
+    normal_only: bool = False,
 ) -> Correspondences:
     """The mapping ``W'_f`` of section 2.2, made one-to-one: context feature -> patch feature.
 
@@ -655,6 +658,16 @@ def feature_correspondences(
         Weight of tangents in eq 1; the paper uses 10 here "to emphasize tangents".
     max_distance : float, optional
         Drop pairs farther apart than this many pixels (the paper keeps all).
+    max_angle : float, optional
+        Drop pairs whose tangent orientations differ by more than this (radians, modulo pi). Eq 1
+        with ``tau = 10`` only *penalises* a tangent difference, and the adjacent buckets admit up
+        to 67.5 degrees: where nothing parallel lies near, a crossing feature is paired, and the
+        warp then bends one feature onto another that does not continue it.
+    normal_only : bool
+        Keep only the component of each displacement along the context feature's normal: the
+        source becomes ``x_i + ((x'_i - x_i) . n_i) n_i``. Two pieces of one curve meet when they lie
+        on the same curve; where along it the nearest pixel happens to be is noise of the pixel grid
+        (up to half a pixel) that would otherwise shear the patch along its features.
 
     Returns
     -------
@@ -662,7 +675,8 @@ def feature_correspondences(
         Pairs with distinct patch features: when ``W'_f`` maps several context features onto one
         patch feature, the one of least ``gdist`` is kept ("we enforce a one-to-one mapping by
         removing extraneous corresponding features from the context region"); ties go to the
-        first context feature in raster order.
+        first context feature in raster order. The filters (distance, angle) act before that
+        choice, so a rejected pair does not displace an acceptable one.
 
     Notes
     -----
@@ -674,6 +688,10 @@ def feature_correspondences(
         isinstance(max_distance, int | float) and np.isfinite(max_distance) and max_distance >= 0
     ):
         raise InvalidParameter("max_distance", max_distance, "must be a finite number of pixels >= 0")
+    if max_angle is not None and not (
+        isinstance(max_angle, int | float) and np.isfinite(max_angle) and 0 <= max_angle <= np.pi / 2
+    ):
+        raise InvalidParameter("max_angle", max_angle, "must be an angle in [0, pi/2] radians")
     context = context_features(context_mask, context_tangent, region)
     pm, pt = _mask_and_tangent("patch", patch_mask, patch_tangent)
     if pm.shape != context.shape:
@@ -685,10 +703,71 @@ def feature_correspondences(
         c = np.where(keep, match, 0)
         dist = np.hypot(index.rows[c] - context.rows, index.cols[c] - context.cols)
         keep &= dist <= max_distance
+    if max_angle is not None:
+        c = np.where(keep, match, 0)
+        turn = np.abs(wrap_angle(index.tangent[c] - context.tangent))
+        keep &= turn <= max_angle + 1e-12
     order = np.lexsort((np.arange(len(g)), g))  # by gdist, then raster order
     order = order[keep[order]]
     _, first = np.unique(match[order], return_index=True)
     chosen = np.sort(order[first])
     targets = np.stack([context.rows[chosen], context.cols[chosen]], axis=1).astype(np.float64)
     sources = np.stack([index.rows[match[chosen]], index.cols[match[chosen]]], axis=1).astype(np.float64)
-    return Correspondences(targets=targets.reshape(-1, 2), sources=sources.reshape(-1, 2), gdist=g[chosen])
+    targets, sources = targets.reshape(-1, 2), sources.reshape(-1, 2)
+    if normal_only and len(chosen):
+        # the normal of a tangent theta (y up) in (row, col): (cos theta, sin theta)
+        theta = context.tangent[chosen]
+        normal = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        along = ((sources - targets) * normal).sum(axis=1, keepdims=True)
+        sources = targets + along * normal
+    return Correspondences(targets=targets, sources=sources, gdist=g[chosen])
+
+
+def thin_correspondences(pairs: Correspondences, spacing: float) -> Correspondences:
+    """Control points at least ``spacing`` px apart, each carrying the median displacement around it.
+
+    A warp fitted exactly through every pixel of a context feature follows the one-pixel jitter of
+    two independently thinned feature maps (neighbouring pairs displaced by 0 and 1 px): the spline
+    then ripples, and straight features come out wavy. Here the targets are taken greedily in order
+    of ``gdist`` (then as given), skipping any closer than ``spacing`` to one already taken; each
+    kept target gets the component-wise median of the displacements ``x'_i - x_i`` of all pairs
+    within ``spacing`` of it (itself included), a robust local average.
+
+    Parameters
+    ----------
+    pairs : Correspondences
+    spacing : float
+        Minimum distance between kept targets, pixels; ``0`` returns the pairs unchanged.
+
+    Returns
+    -------
+    Correspondences
+        The kept targets (in their original order), with ``sources = targets + median displacement``
+        and their own ``gdist``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.array([[5.0, c] for c in range(8)])
+    >>> d = np.zeros((8, 2)); d[3] = [1.0, 0.0]             # one pixel of jitter on a straight line
+    >>> thin = thin_correspondences(Correspondences(t, t + d, np.zeros(8)), 3.0)
+    >>> thin.targets[:, 1].tolist(), float(np.abs(thin.sources - thin.targets).max())
+    ([0.0, 3.0, 6.0], 0.0)
+    """
+    if not (isinstance(spacing, int | float) and np.isfinite(spacing) and spacing >= 0):
+        raise InvalidParameter("spacing", spacing, "must be a finite number of pixels >= 0")
+    if spacing == 0 or pairs.count < 2:
+        return pairs
+    t, s = pairs.targets, pairs.sources
+    disp = s - t
+    near = np.hypot(*(t[:, None, :] - t[None, :, :]).transpose(2, 0, 1)) < spacing
+    taken = np.zeros(pairs.count, dtype=bool)
+    blocked = np.zeros(pairs.count, dtype=bool)
+    for i in np.lexsort((np.arange(pairs.count), pairs.gdist)):
+        if blocked[i]:
+            continue
+        taken[i] = True
+        blocked |= near[i]
+    keep = np.flatnonzero(taken)
+    moved = np.stack([np.median(disp[near[i]], axis=0) for i in keep]).reshape(-1, 2)
+    return Correspondences(targets=t[keep], sources=t[keep] + moved, gdist=pairs.gdist[keep])

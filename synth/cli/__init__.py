@@ -4,6 +4,10 @@ Each subcommand lives in its own module under :mod:`synth.cli` and exposes
 ``register(subparsers)``; commands that belong above the engine (``serve``, ``worker``,
 ``submit``) are contributed by ``app``/``worker`` through the ``texsynth.commands`` entry-point
 group, so that ``synth`` never imports them. Errors from the engine print as one line and exit 2.
+
+Start-up is kept short: building the parser imports no numpy, numba, scipy or matplotlib (each
+command imports what it needs when it runs), and when the command line names an engine command only
+that command's parser is built (the entry points are not scanned).
 """
 
 from __future__ import annotations
@@ -12,7 +16,6 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
-from importlib.metadata import entry_points
 
 from synth import __version__
 from synth.errors import StorageError, SynthError
@@ -22,14 +25,15 @@ __all__ = ["build_parser", "main"]
 _ENGINE_COMMANDS = ("analyze", "methods", "synthesize", "evaluate")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``texsynth`` parser with every command; with ``only`` (an engine command), just that one."""
     parser = argparse.ArgumentParser(
         prog="texsynth",
         description="Exemplar-based texture synthesis for virtual-material design.",
     )
     parser.add_argument("--version", action="version", version=f"texsynth {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in _ENGINE_COMMANDS:
+    for name in (only,) if only in _ENGINE_COMMANDS else _ENGINE_COMMANDS:
         try:
             module = importlib.import_module(f"synth.cli.{name}")
         except ModuleNotFoundError as exc:
@@ -37,13 +41,22 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue
         module.register(sub)
-    for ep in entry_points(group="texsynth.commands"):
-        ep.load()(sub)
+    if only not in _ENGINE_COMMANDS:
+        from importlib.metadata import entry_points  # scans every installed package: only when needed
+
+        for ep in entry_points(group="texsynth.commands"):
+            ep.load()(sub)
     return parser
 
 
+def _command(argv: Sequence[str]) -> str | None:
+    """The command named on the command line (its first word that is not an option), if any."""
+    return next((word for word in argv if not word.startswith("-")), None)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(_command(argv))
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -20,13 +20,12 @@ import argparse
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from synth.analysis import tensor
 from synth.errors import InvalidParameter
-from synth.output import render
+
+if TYPE_CHECKING:  # numpy, scipy and the renderers load when the command runs, not for ``--help``
+    import numpy as np
 
 __all__ = ["TensorAnalysis", "analyze_image", "register", "run"]
 
@@ -72,6 +71,8 @@ class TensorAnalysis:
 
 
 def _degrees(angle: float) -> float:
+    from synth.analysis import tensor
+
     return round(math.degrees(float(tensor.wrap_angle(angle))), 6)
 
 
@@ -110,6 +111,10 @@ def analyze_image(
         ``dominant_orientation_deg`` (``gradient``, ``fringe``; the orientation of the mean tensor)
         and ``orientation_histogram`` (``bin_edges_deg``, ``gradient``, ``fringe``, each summing to 1).
     """
+    import numpy as np
+
+    from synth.analysis import tensor
+
     _check_parameters(sigma_d, sigma_w, bins)
     largest = int(max(image.shape[:2]))
     _check_scale("sigma_d", sigma_d, largest)
@@ -146,6 +151,8 @@ def analyze_image(
 
 def _as_float(rendering: np.ndarray) -> np.ndarray:
     """uint8 rendering -> float32 in [0, 1] for :func:`synth.io.save_image` (exact at 8 bits)."""
+    import numpy as np
+
     return rendering.astype(np.float32) / np.float32(255)
 
 
@@ -156,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
         load_image,
         save_image,
     )
+    from synth.output import render
 
     _check_parameters(args.sigma_d, args.sigma_w, args.bins)
     image = load_image(args.image)

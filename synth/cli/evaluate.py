@@ -283,7 +283,7 @@ def run(args: argparse.Namespace) -> int:
         output = load_image(args.output)
         metrics = evaluate_pair(exemplar, output, **options)
     if args.plots is not None:
-        from synth.output.plots import write_plots  # deferred: matplotlib only when plots are asked for
+        from synth.output.plots import write_plots  # deferred: only when plots are asked for
 
         try:
             written = write_plots(

@@ -10,11 +10,19 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from synth.api import MethodSpec, available_methods
+if TYPE_CHECKING:
+    from synth.api import MethodSpec
 
 __all__ = ["describe", "register", "run"]
+
+
+def available_methods() -> dict[str, MethodSpec]:
+    """:func:`synth.api.available_methods`, imported when the command runs (``--help`` imports no method)."""
+    from synth.api import available_methods as registered
+
+    return registered()
 
 
 def describe(spec: MethodSpec) -> dict[str, Any]:

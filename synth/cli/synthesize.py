@@ -17,7 +17,6 @@ from typing import Any
 
 from synth.cli.inputs import add_plane_arguments, input_sources
 from synth.errors import InvalidParameter
-from synth.params import parse_assignments
 
 __all__ = ["parse_size", "register"]
 
@@ -59,12 +58,15 @@ class _ProgressBar:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from synth.api import available_methods, check_inputs
+    # deferred: ``--help`` imports no engine; only the chosen method's module is imported
+    from synth.api import available_methods, check_inputs, find_method
+    from synth.params import parse_assignments
     from synth.pipeline import load_inputs, synthesize_to_folder
 
-    methods = available_methods()
-    if args.method not in methods:
-        raise InvalidParameter("METHOD", args.method, f"unknown method (known: {', '.join(sorted(methods))})")
+    spec = find_method(args.method)
+    if spec is None:
+        known = ", ".join(sorted(available_methods()))
+        raise InvalidParameter("METHOD", args.method, f"unknown method (known: {known})")
     if args.bit_depth not in (8, 16):
         raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
     if args.voxel_size is not None and not 0 < args.voxel_size < 1e6:
@@ -72,7 +74,7 @@ def _run(args: argparse.Namespace) -> int:
     params = parse_assignments(args.set or [])
     size = parse_size(args.size) if args.size else None
     sources = input_sources(args)
-    check_inputs(methods[args.method], set(sources))  # before any image is decoded
+    check_inputs(spec, set(sources))  # before any image is decoded
     images = load_inputs(sources)
     out = Path(args.out)
     bar = _ProgressBar()
@@ -94,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         bar.close()
     result, names = outcome.result, outcome.files
     summary = outcome.metrics.get("summary", {})
-    shape = result.image.shape if methods[args.method].output_ndim == 3 else result.image.shape[:2]
+    shape = result.image.shape if spec.output_ndim == 3 else result.image.shape[:2]
     print(
         f"{args.method}: {'x'.join(str(s) for s in reversed(shape))} in "
         f"{result.timings.get('total', 0.0):.2f} s -> {out}/ ({len(names)} files)"

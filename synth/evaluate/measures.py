@@ -39,8 +39,14 @@ Choices the paper leaves open (all recorded in the ``settings`` of every result)
   ``0.299 R + 0.587 G + 0.114 B`` of :func:`synth.io.load_image` (``mode='grey'``,
   :data:`synth.colour.LUMA_WEIGHTS`), so that evaluating an RGB array and its grey-loaded file agree: the
   study's measures are defined on grey levels, and fringes on grey images.
-- **Moments**: :func:`scipy.stats.skew` and :func:`scipy.stats.kurtosis` (Fisher's, excess: 0 for a
-  Gaussian), biased estimators; standard deviation with ``ddof = 0``.
+- **Moments**: skewness and excess kurtosis as :func:`scipy.stats.skew` and :func:`scipy.stats.kurtosis`
+  compute them (Fisher's, excess: 0 for a Gaussian; biased estimators), standard deviation with
+  ``ddof = 0``.
+- **Speed**: ``scipy.stats`` takes longer to import (0.4-0.7 s here) than a whole 256 x 256 evaluation,
+  so the moments and the exact two-sample Kolmogorov-Smirnov test are computed here with the very
+  operations of scipy 1.17 (same bits; the tests compare them with scipy), and ``scipy.stats`` is
+  imported only for the cases the exact test does not cover (more than 10 000 fringes, or too long a
+  computation), as ``scipy.stats.ks_2samp`` itself would then switch method.
 
 Multi-2D analysis of volumes
 ----------------------------
@@ -83,9 +89,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-from synth.analysis.fringes import MIN_LENGTH, extract_fringes, fringe_summary
+from synth.analysis.fringes import MIN_LENGTH, Fringes, extract_fringes, fringe_summary
 from synth.analysis.tensor import (
     coherence,
     orientation_histogram,
@@ -95,7 +100,6 @@ from synth.analysis.tensor import (
 )
 from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate.correlation import compare_s2, image_s2, otsu_threshold, volume_s2
 from synth.io import MIN_SIDE
 
 __all__ = [
@@ -108,6 +112,7 @@ __all__ = [
     "WINDOW",
     "as_grey",
     "evaluate_pair",
+    "evaluate_pair_fringes",
     "evaluate_volume",
     "grey_histogram",
     "kl_divergence",
@@ -213,12 +218,27 @@ def moments(values: np.ndarray) -> dict[str, float | None]:
     flat = np.asarray(values, dtype=np.float64).ravel()
     std = float(flat.std())
     constant = not np.ptp(flat) > 0
-    return {
-        "mean": float(flat.mean()),
-        "std": std,
-        "skewness": None if constant else float(stats.skew(flat)),
-        "kurtosis": None if constant else float(stats.kurtosis(flat, fisher=True)),
-    }
+    skewness, kurtosis = (None, None) if constant else _skew_kurtosis(flat)
+    return {"mean": float(flat.mean()), "std": std, "skewness": skewness, "kurtosis": kurtosis}
+
+
+def _skew_kurtosis(flat: np.ndarray) -> tuple[float, float]:
+    """``scipy.stats.skew(flat)`` and ``scipy.stats.kurtosis(flat)`` (biased, Fisher), bit for bit.
+
+    The same operations as scipy 1.17's ``_moment`` (exponentiation by squares about the mean):
+    ``m2 = mean(d**2)``, ``m3 = mean(d**2 * d)``, ``m4 = mean((d**2)**2)``; NaN where scipy calls the
+    variance zero.
+    """
+    mean = np.mean(flat, axis=0, keepdims=True)
+    d = flat - mean
+    m2 = np.mean(d**2, axis=0)
+    m3 = np.mean(d**2 * d, axis=0)
+    m4 = np.mean((d**2) ** 2, axis=0)
+    with np.errstate(all="ignore"):
+        zero = m2 <= (np.finfo(m2.dtype).eps * mean[0]) ** 2
+        skewness = np.nan if zero else m3 / m2**1.5
+        kurtosis = np.nan if zero else m4 / m2**2.0 - 3
+    return float(skewness), float(kurtosis)
 
 
 @dataclass
@@ -293,6 +313,8 @@ class _Stats:
     n_loops: int
     fringe_area: int
     n_images: int = 1
+    #: The fringes extracted from this one image (not pooled), for overlays drawn after the metrics.
+    extracted: Fringes | None = None
 
     @staticmethod
     def pool(items: Iterable[_Stats]) -> _Stats:
@@ -326,7 +348,7 @@ def _image_stats(grey: np.ndarray, settings: _Settings) -> _Stats:
         fr = extract_fringes(grey, pixel_size=settings.pixel_size, **settings.fringe_options)
         lengths, tortuosity, loops = fr.lengths, fr.tortuosity, fr.n_loops
     else:
-        lengths, tortuosity, loops = np.zeros(0), np.zeros(0), 0
+        fr, lengths, tortuosity, loops = None, np.zeros(0), np.zeros(0), 0
     return _Stats(
         grey=grey_histogram(grey, settings.grey_bins),
         orientation=hist * energy,
@@ -338,6 +360,7 @@ def _image_stats(grey: np.ndarray, settings: _Settings) -> _Stats:
         tortuosity=tortuosity,
         n_loops=loops,
         fringe_area=grey.size,
+        extracted=fr,
     )
 
 
@@ -355,8 +378,100 @@ def _direction_deg(tensor: np.ndarray) -> float | None:
 def _ks(a: np.ndarray, b: np.ndarray) -> dict[str, float | None]:
     if len(a) == 0 or len(b) == 0:
         return {"statistic": None, "pvalue": None}
+    exact = _ks_2samp_exact(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    if exact is not None:
+        return {"statistic": exact[0], "pvalue": exact[1]}
+    from scipy import stats  # the cases the exact test leaves to scipy's asymptotic one
+
     res = stats.ks_2samp(a, b)
     return {"statistic": float(res.statistic), "pvalue": float(res.pvalue)}
+
+
+#: ``scipy.stats.ks_2samp(method='auto')`` is exact up to this many values per sample.
+_KS_EXACT_MAX_N = 10_000
+#: Work bound (inner-loop steps) of the exact p-value in Python; beyond it scipy computes it.
+_KS_MAX_STEPS = 400_000
+
+
+def _ks_2samp_exact(data1: np.ndarray, data2: np.ndarray) -> tuple[float, float] | None:
+    """Two-sided two-sample KS ``(statistic, p-value)`` as ``scipy.stats.ks_2samp`` gives them with its
+    exact method (scipy 1.17, bit for bit), or ``None`` where scipy would not use it or where it would
+    take long here (then :func:`_ks` asks scipy).
+
+    References: J. L. Hodges Jr., "The significance probability of the Smirnov two-sample test",
+    Arkiv för Matematik 3 (1958) 469-486; T. Viehmann, "Numerically more stable computation of the
+    p-values for the two-sample Kolmogorov-Smirnov test", arXiv:2102.08037.
+    """
+    data1, data2 = np.sort(data1), np.sort(data2)
+    n1, n2 = data1.shape[0], data2.shape[0]
+    if max(n1, n2) > _KS_EXACT_MAX_N:
+        return None
+    data_all = np.concatenate([data1, data2])
+    cdf1 = np.searchsorted(data1, data_all, side="right") / n1
+    cdf2 = np.searchsorted(data2, data_all, side="right") / n2
+    cddiffs = cdf1 - cdf2
+    min_s = np.clip(-cddiffs[np.argmin(cddiffs)], 0, 1)
+    max_s = cddiffs[np.argmax(cddiffs)]
+    d = min_s if min_s > max_s else max_s
+    g = math.gcd(n1, n2)
+    lcm = (n1 // g) * n2
+    h = int(np.round(d * lcm))
+    d = h * 1.0 / lcm
+    if h == 0:
+        return float(d), 1.0
+    m, n = max(n1, n2), min(n1, n2)
+    if m * min(n + 1, 2 * math.ceil(h / (m // g)) + 2) > _KS_MAX_STEPS:
+        return None
+    try:
+        with np.errstate(invalid="raise", over="raise"):
+            prob = _ks_prob_outside_square(n1, h) if n1 == n2 else _ks_outer_prob_inside(n1, n2, g, h)
+    except (FloatingPointError, OverflowError):
+        return None
+    if not 0 <= prob <= 1:
+        return None
+    return float(d), float(np.clip(prob, 0, 1))
+
+
+def _ks_prob_outside_square(n: int, h: int) -> float:
+    """``P(D_{n,n} >= h / n)``: scipy's ``_compute_prob_outside_square`` (Horner-like sum)."""
+    p = 0.0
+    k = int(np.floor(n / h))
+    while k >= 0:
+        p1 = 1.0
+        for j in range(h):
+            p1 = (n - k * h - j) * p1 / (n + k * h + j + 1)
+        p = p1 * (1.0 - p)
+        k -= 1
+    return 2 * p
+
+
+def _ks_outer_prob_inside(m: int, n: int, g: int, h: int) -> float:
+    """Share of lattice paths leaving ``|x/m - y/n| < h / lcm(m, n)``: scipy's
+    ``_compute_outer_prob_inside_method`` (Hodges' inside method for ``1 - p``, Viehmann's recursion)."""
+    if m < n:
+        m, n = n, m
+    mg, ng = m // g, n // g
+    minj, maxj = 0, min(int(np.ceil(h / mg)), n + 1)
+    curlen = maxj - minj
+    a = np.ones(min(2 * maxj + 2, n + 1), dtype=np.float64).tolist()
+    for k in range(minj, maxj):
+        a[k] = 0.0
+    for i in range(1, m + 1):
+        lastminj, lastlen = minj, curlen
+        minj = min(max(int(np.floor((ng * i - h) / mg)) + 1, 0), n)
+        maxj = min(int(np.ceil((ng * i + h) / mg)), n + 1)
+        if maxj <= minj:
+            return 1.0
+        val = 0.0 if minj == 0 else 1.0
+        for jj in range(maxj - minj):
+            j = jj + minj
+            val = (a[jj + minj - lastminj] * i + val * j) / (i + j)
+            a[jj] = val
+        curlen = maxj - minj
+        if lastlen > curlen:
+            for k in range(maxj - minj, min(maxj - minj + (lastlen - curlen), len(a))):
+                a[k] = 1.0
+    return a[maxj - minj - 1]
 
 
 def _fringe_block(ref: _Stats, out: _Stats, settings: _Settings) -> dict[str, Any]:
@@ -564,18 +679,37 @@ def evaluate_pair(
         pixel_size=pixel_size,
         fringe_options=dict(fringe_options or {}),
     )
+    return _evaluate_pair(exemplar, output, settings)[0]
+
+
+def evaluate_pair_fringes(
+    exemplar: np.ndarray, output: np.ndarray, **options: Any
+) -> tuple[dict[str, Any], dict[str, Fringes]]:
+    """:func:`evaluate_pair` (the same keyword arguments), and the fringes it extracted.
+
+    Returns ``(metrics, {'exemplar': Fringes, 'output': Fringes})`` (no fringes with
+    ``fringes=False``), so that the fringe overlays (:func:`synth.output.plots.write_plots`) reuse
+    them instead of extracting them a second time.
+    """
+    settings = _Settings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
+    return _evaluate_pair(exemplar, output, settings)
+
+
+def _evaluate_pair(
+    exemplar: np.ndarray, output: np.ndarray, settings: _Settings
+) -> tuple[dict[str, Any], dict[str, Fringes]]:
     ex = as_grey(exemplar, "exemplar")
     out = as_grey(output, "output")
-    block = _compare(
-        _image_stats(ex, settings), _image_stats(out, settings), moments(ex), moments(out), settings
-    )
+    ex_stats, out_stats = _image_stats(ex, settings), _image_stats(out, settings)
+    block = _compare(ex_stats, out_stats, moments(ex), moments(out), settings)
     result = {
         "kind": "pair",
         "settings": settings.record(),
         "shape": {"exemplar": list(ex.shape), "output": list(out.shape)},
         **block,
     }
-    return to_json_types(result)
+    extracted = {"exemplar": ex_stats.extracted, "output": out_stats.extracted}
+    return to_json_types(result), {k: v for k, v in extracted.items() if v is not None}
 
 
 def _spread(values: list[float | None]) -> dict[str, float | None]:
@@ -630,6 +764,8 @@ def _s2_comparisons(
     Every exemplar is thresholded at its own Otsu level (or ``threshold``) and the volume at the same
     level for that comparison, so each plane's phase 1 is defined by its own exemplar.
     """
+    from synth.evaluate.correlation import compare_s2, image_s2, otsu_threshold, volume_s2  # volumes only
+
     thresholds = {p: threshold if threshold is not None else otsu_threshold(ex) for p, ex in planes.items()}
     ex_curves = {p: image_s2(ex, threshold=thresholds[p], periodic=periodic) for p, ex in planes.items()}
     vol_curves: dict[float, dict[str, np.ndarray]] = {}

@@ -26,7 +26,7 @@ import numpy as np
 from synth import __version__
 from synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from synth.api import Result
-from synth.evaluate import evaluate_pair, evaluate_volume, to_json_types
+from synth.evaluate.measures import evaluate_pair_fringes, evaluate_volume, to_json_types
 from synth.io import atomic_write_bytes, atomic_write_json, image_to_png_bytes, save_image, save_volume
 from synth.output.plots import write_plots, write_s2_plot
 from synth.output.render import coherence_image, orientation_image
@@ -66,8 +66,12 @@ def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list
 
 #: Extra maps rendered on a fixed scale ``(black, white)`` instead of their own min-max, so that maps of
 #: different runs compare: ``copy_map`` is the RMS distance to the nearest exemplar patch
-#: (:func:`synth.evaluate.copy_map`): black = verbatim copy, white = 0.05 or more away.
-FIXED_RANGES: dict[str, tuple[float, float]] = {"copy_map": (0.0, 0.05)}
+#: (:func:`synth.evaluate.copy_map`): black = verbatim copy, white = 0.05 or more away. The RGB overlays
+#: of ``feature-guided`` (feature maps, seams) are already pictures in [0, 1].
+FIXED_RANGES: dict[str, tuple[float, float]] = {
+    "copy_map": (0.0, 0.05),
+    **dict.fromkeys(("features_exemplar", "features_output", "seams"), (0.0, 1.0)),
+}
 
 
 def _render_extra(arr: np.ndarray, value_range: tuple[float, float] | None = None) -> np.ndarray | None:
@@ -159,6 +163,7 @@ def write_artifacts(
             save_image(folder / f"{key}.png", rendered)
             names.append(f"{key}.png")
 
+    fringes = None
     if volume:
         pixel_size = None
         if voxel_size is not None and unit.strip() == "nm" and len(set(np.broadcast_to(voxel_size, 3))) == 1:
@@ -166,7 +171,7 @@ def write_artifacts(
         targets = exemplars if exemplars is not None else exemplar
         metrics = to_json_types(evaluate_volume(targets, image, pixel_size=pixel_size))
     else:
-        metrics = to_json_types(evaluate_pair(exemplar, image))
+        metrics, fringes = evaluate_pair_fringes(exemplar, image)
     doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
     atomic_write_json(folder / "metrics.json", doc)
     names.append("metrics.json")
@@ -174,7 +179,7 @@ def write_artifacts(
         plot_dir = folder / "plots"
         plot_dir.mkdir(exist_ok=True)
         targets = exemplars if volume and exemplars is not None else exemplar
-        written = write_plots(targets, image, metrics, plot_dir)
+        written = write_plots(targets, image, metrics, plot_dir, fringes=fringes)
         if volume:
             s2_plot = write_s2_plot(metrics, plot_dir)
             written += [s2_plot] if s2_plot is not None else []

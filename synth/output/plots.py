@@ -1,4 +1,4 @@
-"""Comparison plots of an evaluation (PNG, matplotlib's Agg backend, no pyplot state).
+"""Comparison plots of an evaluation (PNG, painted with Pillow by :mod:`synth.output.chart`).
 
 :func:`write_plots` draws, from the metrics of :func:`synth.evaluate.evaluate_pair` or
 :func:`synth.evaluate.evaluate_volume` and the images themselves:
@@ -17,8 +17,11 @@ each axis's slices against its own plane's exemplar. :func:`write_s2_plot` draws
 two-point correlation ``S2(r)`` of a volume along ``x``, ``y`` and ``z`` against the exemplars'
 (Torquato, *Random Heterogeneous Materials*, 2002, chapter 2).
 
-Figures are :class:`matplotlib.figure.Figure` objects printed by ``FigureCanvasAgg``: nothing is
-registered with pyplot, so this module is safe in worker processes and threads.
+The charts are painted with Pillow (:mod:`synth.output.chart`), the overlays are the images
+themselves enlarged with a title: a synthesis writes them every run, and with matplotlib its import
+and the drawing of the five plots took 1.5-2.5 s of a 256 x 256 run (docs/benchmarks.md, "The whole
+command"). No state is shared but a cache of fonts, so this module is safe in worker processes and
+threads.
 
 References
 ----------
@@ -30,37 +33,41 @@ M. L. Botero et al., Carbon 96 (2016) 459-473 (fringe overlays).
 from __future__ import annotations
 
 import textwrap
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
 import numpy as np
-from matplotlib import colormaps
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
+from PIL import Image
 
-from synth.analysis.fringes import Fringes, extract_fringes
 from synth.errors import InvalidInput
-from synth.evaluate import as_grey
+from synth.output.chart import Axes, Chart, Rose, hex_colour
+
+if TYPE_CHECKING:
+    from synth.analysis.fringes import Fringes
 
 __all__ = ["fringe_overlay", "save_fringe_overlay", "write_plots", "write_s2_plot"]
 
-# Charts are drawn off-screen (FigureCanvasAgg); pyplot, if anyone imports it, gets no GUI either.
-matplotlib.use("Agg")
-
 _EXEMPLAR_COLOUR = "#1f4e9a"
 _OUTPUT_COLOURS = ("#d1495b", "#2a9d8f", "#e9a03b")
-#: Fringe colours: matplotlib's tab20 without its two greys, which vanish on a grey micrograph.
+#: Fringe colours: matplotlib's tab20 (the same values, written out) without its two greys, which vanish
+#: on a grey micrograph.
+_TAB20 = (
+    "#1f77b4", "#aec7e8", "#ff7f0e", "#ffbb78", "#2ca02c", "#98df8a", "#d62728", "#ff9896", "#9467bd",
+    "#c5b0d5", "#8c564b", "#c49c94", "#e377c2", "#f7b6d2", "#7f7f7f", "#c7c7c7", "#bcbd22", "#dbdb8d",
+    "#17becf", "#9edae5",
+)  # fmt: skip
 _PALETTE = np.asarray(
-    [c for i, c in enumerate(colormaps["tab20"].colors) if i not in (14, 15)], dtype=np.float64
+    [[c / 255.0 for c in hex_colour(h)] for i, h in enumerate(_TAB20) if i not in (14, 15)], dtype=np.float64
 )
+_DASH = (3.7, 1.6)  # matplotlib's '--' and ':' (multiples of the line width)
+_DOTTED = (1.0, 1.65)
 
 
-def _save(fig: Figure, path: Path, dpi: int) -> Path:
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=dpi)
-    return path
+def _as_grey(image: np.ndarray, name: str) -> np.ndarray:
+    from synth.evaluate.measures import as_grey
+
+    return as_grey(image, name)
 
 
 def fringe_overlay(image: np.ndarray, fringes: Fringes) -> np.ndarray:
@@ -68,7 +75,7 @@ def fringe_overlay(image: np.ndarray, fringes: Fringes) -> np.ndarray:
 
     Colours cycle through matplotlib's ``tab20`` palette (without its greys) by fringe number.
     """
-    grey = as_grey(image, "image")
+    grey = _as_grey(image, "image")
     rgb = np.repeat(grey[..., None], 3, axis=2)
     labels = fringes.labels
     if labels.shape != grey.shape:
@@ -78,21 +85,20 @@ def fringe_overlay(image: np.ndarray, fringes: Fringes) -> np.ndarray:
     return rgb
 
 
-def _overlay_figure(image: np.ndarray, fringes: Fringes, title: str, scale: int = 3) -> Figure:
+def _overlay_chart(image: np.ndarray, fringes: Fringes, title: str, scale: int = 3) -> Chart:
+    """The overlay enlarged ``scale`` times (nearest neighbour), at least 300 px wide, under its title."""
     rgb = fringe_overlay(image, fringes)
     h, w = rgb.shape[:2]
     scale = max(1, min(scale, 1200 // max(h, w)))
-    dpi = 100
-    width_in = max(w * scale / dpi, 3.0)
-    lines = textwrap.wrap(title, width=max(30, int(width_in * 14)))
-    title_in = 0.08 + 0.16 * len(lines)
-    image_in = h * scale / dpi
-    fig = Figure(figsize=(width_in, image_in + title_in), dpi=dpi)
-    ax = fig.add_axes((0.0, 0.0, 1.0, image_in / (image_in + title_in)))
-    ax.imshow(rgb, interpolation="nearest")
-    ax.set_axis_off()
-    fig.text(0.5, 1.0 - 0.04 / (image_in + title_in), "\n".join(lines), ha="center", va="top", fontsize=8)
-    return fig
+    width = max(w * scale, 300)
+    lines = textwrap.wrap(title, width=max(30, int(width / 100 * 14)))
+    title_h = round(8 + 16 * len(lines))
+    chart = Chart(width, h * scale + title_h)
+    chart.lines((width / 2, 4), lines, 8)
+    pixels = np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+    big = np.repeat(np.repeat(pixels, scale * 2, axis=0), scale * 2, axis=1)  # the chart is supersampled
+    chart.image.paste(Image.fromarray(big), (round((width - w * scale) / 2) * 2, title_h * 2))
+    return chart
 
 
 def _fringe_title(name: str, fringes: Fringes) -> str:
@@ -106,15 +112,25 @@ def _fringe_title(name: str, fringes: Fringes) -> str:
     )
 
 
+def _save(chart: Chart, path: Path, dpi: int = 100) -> Path:
+    """Write ``chart`` as a PNG; drawn for 100 dpi, resampled for another ``dpi``."""
+    if dpi != 100:
+        image = chart.to_image()
+        size = (max(1, round(image.width * dpi / 100)), max(1, round(image.height * dpi / 100)))
+        chart.image = image.resize(size, Image.Resampling.LANCZOS).resize(
+            (size[0] * 2, size[1] * 2), Image.Resampling.NEAREST
+        )
+    return chart.save(path)
+
+
 def save_fringe_overlay(
     image: np.ndarray, fringes: Fringes, path: str | Path, *, title: str | None = None, scale: int = 3
 ) -> Path:
     """Write the fringe overlay of ``image`` as a PNG (enlarged ``scale`` times, nearest neighbour)."""
-    path = Path(path)
-    fig = _overlay_figure(
+    chart = _overlay_chart(
         image, fringes, title if title is not None else _fringe_title("fringes", fringes), scale
     )
-    return _save(fig, path, 100)
+    return _save(chart, Path(path))
 
 
 def _blocks(metrics: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any]]]:
@@ -132,137 +148,128 @@ def _per_plane(metrics: Mapping[str, Any]) -> bool:
     return metrics.get("kind") == "volume" and not metrics.get("isotropic", True)
 
 
-def _grey_figure(metrics: Mapping[str, Any]) -> Figure:
+def _fmt(value: float | None, digits: int = 3) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
+
+
+def _colour(i: int) -> tuple[int, int, int]:
+    return hex_colour(_OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)])
+
+
+_EXEMPLAR = hex_colour(_EXEMPLAR_COLOUR)
+
+
+def _grey_chart(metrics: Mapping[str, Any]) -> Chart:
     if _per_plane(metrics):
-        return _grey_figure_per_plane(metrics)
+        return _grey_chart_per_plane(metrics)
     block = metrics["overall"] if metrics.get("kind") == "volume" else metrics
     grey = block["grey"]
     ex = np.asarray(grey["histogram"]["exemplar"])
     out = np.asarray(grey["histogram"]["output"])
     edges = np.linspace(0.0, 1.0, len(ex) + 1)
-    fig = Figure(figsize=(6.4, 4.0))
-    ax = fig.add_subplot()
+    chart = Chart(640, 400)
+    ax = Axes(chart, (70, 52, 625, 345))
     label = "volume (all slices)" if metrics.get("kind") == "volume" else "output"
-    ax.stairs(out, edges, label=label, color=_OUTPUT_COLOURS[0], linewidth=1.6)
-    ax.stairs(ex, edges, label="exemplar", color=_EXEMPLAR_COLOUR, linewidth=1.8, linestyle="--")
-    ax.set_xlabel("grey level")
-    ax.set_ylabel("fraction of pixels")
+    ax.stairs(out, edges, colour=_colour(0), width=1.6, label=label)
+    ax.stairs(ex, edges, colour=_EXEMPLAR, width=1.8, dash=_DASH, label="exemplar")
+    ax.xlabel, ax.ylabel = "grey level", "fraction of pixels"
     m = block["moments"]
-    ax.set_title(
+    ax.title_text = (
         f"Grey-level histograms ({len(ex)} bins): KL(exemplar || output) = {grey['kl']:.4f} nats\n"
         f"std {m['exemplar']['std']:.3f} vs {m['output']['std']:.3f}, "
-        f"skewness {_fmt(m['exemplar']['skewness'])} vs {_fmt(m['output']['skewness'])}",
-        fontsize=9,
+        f"skewness {_fmt(m['exemplar']['skewness'])} vs {_fmt(m['output']['skewness'])}"
     )
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    return fig
+    ax.finish()
+    return chart
 
 
-def _grey_figure_per_plane(metrics: Mapping[str, Any]) -> Figure:
+def _grey_chart_per_plane(metrics: Mapping[str, Any]) -> Chart:
     """One panel per axis: the pooled slices of that axis against the exemplar of their plane."""
     blocks = _blocks(metrics)
-    fig = Figure(figsize=(4.2 * len(blocks), 3.9))
+    chart = Chart(420 * len(blocks), 390)
+    chart.title(
+        "Grey-level histograms per plane (KL(exemplar || slices)); each plane against its own exemplar", 10
+    )
     for i, (label, block) in enumerate(blocks):
-        ax = fig.add_subplot(1, len(blocks), i + 1)
+        ax = Axes(chart, (420 * i + (68 if i == 0 else 50), 80, 420 * (i + 1) - 14, 340))
         grey = block["grey"]
         ex = np.asarray(grey["histogram"]["exemplar"])
         out = np.asarray(grey["histogram"]["output"])
         edges = np.linspace(0.0, 1.0, len(ex) + 1)
-        ax.stairs(out, edges, label=label, color=_OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)], linewidth=1.6)
+        ax.stairs(out, edges, colour=_colour(i), width=1.6, label=label)
         ax.stairs(
             ex,
             edges,
+            colour=_EXEMPLAR,
+            width=1.8,
+            dash=_DASH,
             label=f"exemplar {block.get('plane', '')}".strip(),
-            color=_EXEMPLAR_COLOUR,
-            linewidth=1.8,
-            linestyle="--",
         )
         m = block["moments"]
-        ax.set_title(
+        ax.title_text = (
             f"{label}: KL = {grey['kl']:.4f} nats\n"
             f"std {m['exemplar']['std']:.3f} vs {m['output']['std']:.3f}, "
-            f"skewness {_fmt(m['exemplar']['skewness'])} vs {_fmt(m['output']['skewness'])}",
-            fontsize=8,
+            f"skewness {_fmt(m['exemplar']['skewness'])} vs {_fmt(m['output']['skewness'])}"
         )
-        ax.set_xlabel("grey level")
-        if i == 0:
-            ax.set_ylabel("fraction of pixels")
-        ax.legend(fontsize=7)
-    fig.suptitle(
-        "Grey-level histograms per plane (KL(exemplar || slices)); each plane against its own exemplar",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    return fig
+        ax.title_size = 8
+        ax.xlabel = "grey level"
+        ax.ylabel = "fraction of pixels" if i == 0 else ""
+        ax.finish()
+    return chart
 
 
-def _fmt(value: float | None, digits: int = 3) -> str:
-    return "n/a" if value is None else f"{value:.{digits}f}"
-
-
-def _rose(ax: Any, hist: Sequence[float], colour: str, title: str) -> None:
-    h = np.asarray(hist, dtype=np.float64)
-    n = len(h)
-    width = np.pi / n
-    # gradient-orientation bin centres, plus 90 degrees: the fringe direction
-    centres = -np.pi / 2 + width * (np.arange(n) + 0.5) + np.pi / 2
-    for shift in (0.0, np.pi):  # mirrored: an orientation is the same line both ways
-        ax.bar(centres + shift, h, width=width, color=colour, alpha=0.75, edgecolor="white", linewidth=0.3)
-    ax.set_title(title, fontsize=9, pad=12)
-    ax.set_yticklabels([])
-    ax.set_thetagrids(range(0, 360, 45), fontsize=7)
-
-
-def _orientation_figure(metrics: Mapping[str, Any]) -> Figure:
+def _orientation_chart(metrics: Mapping[str, Any]) -> Chart:
     blocks = _blocks(metrics)
     if _per_plane(metrics):
         # two rows: each plane's exemplar above the pooled slices of that plane
-        fig = Figure(figsize=(3.3 * len(blocks), 7.8))
+        chart = Chart(330 * len(blocks), 780)
+        chart.title(
+            [
+                "Fringe-direction roses per plane (energy-weighted structure tensor, 7x7 window;",
+                "0 degrees along the slice's columns, 90 degrees up its rows)",
+            ],
+            10,
+        )
         for i, (label, block) in enumerate(blocks):
             s = block["structure"]
-            ax = fig.add_subplot(2, len(blocks), i + 1, projection="polar")
-            _rose(ax, s["orientation_histogram"]["exemplar"], _EXEMPLAR_COLOUR, f"exemplar {block['plane']}")
-            ax = fig.add_subplot(2, len(blocks), len(blocks) + i + 1, projection="polar")
-            _rose(
-                ax,
-                s["orientation_histogram"]["output"],
-                _OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)],
-                f"{label}\nKL = {s['orientation_kl']:.3f}, LE = {s['log_euclidean']:.3f}",
+            cx = 330 * i + 165
+            Rose(chart, (cx, 235), 108).draw(
+                s["orientation_histogram"]["exemplar"], _EXEMPLAR, f"exemplar {block['plane']}"
             )
-        fig.suptitle(
-            "Fringe-direction roses per plane (energy-weighted structure tensor, 7x7 window;\n"
-            "0 degrees along the slice's columns, 90 degrees up its rows)",
-            fontsize=10,
-        )
-        fig.tight_layout()
-        return fig
+            Rose(chart, (cx, 600), 108).draw(
+                s["orientation_histogram"]["output"],
+                _colour(i),
+                [label, f"KL = {s['orientation_kl']:.3f}, LE = {s['log_euclidean']:.3f}"],
+            )
+        return chart
     panels = 1 + len(blocks)
-    fig = Figure(figsize=(3.2 * panels, 3.8))
+    chart = Chart(320 * panels, 380)
+    chart.title("Fringe-direction roses (energy-weighted structure tensor, 7x7 window)", 10)
     first = blocks[0][1]["structure"]
-    ax = fig.add_subplot(1, panels, 1, projection="polar")
-    _rose(ax, first["orientation_histogram"]["exemplar"], _EXEMPLAR_COLOUR, "exemplar")
+    Rose(chart, (160, 225), 112).draw(first["orientation_histogram"]["exemplar"], _EXEMPLAR, "exemplar")
     for i, (label, block) in enumerate(blocks):
         s = block["structure"]
-        ax = fig.add_subplot(1, panels, i + 2, projection="polar")
-        _rose(
-            ax,
+        Rose(chart, (320 * (i + 1) + 160, 225), 112).draw(
             s["orientation_histogram"]["output"],
-            _OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)],
-            f"{label}\nKL = {s['orientation_kl']:.3f}, LE = {s['log_euclidean']:.3f}",
+            _colour(i),
+            [label, f"KL = {s['orientation_kl']:.3f}, LE = {s['log_euclidean']:.3f}"],
         )
-    fig.suptitle("Fringe-direction roses (energy-weighted structure tensor, 7x7 window)", fontsize=10)
-    fig.tight_layout()
-    return fig
+    return chart
 
 
-def _fringe_figure(metrics: Mapping[str, Any]) -> Figure | None:
+def _fringe_chart(metrics: Mapping[str, Any]) -> Chart | None:
     blocks = _blocks(metrics)
     if "fringes" not in blocks[0][1]:
         return None
     pixel_size = metrics.get("settings", {}).get("pixel_size_nm")
-    fig = Figure(figsize=(10.0, 3.8))
-    ax_len, ax_tort = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    chart = Chart(1000, 380)
+    fr = blocks[0][1]["fringes"]["exemplar"]
+    chart.title(
+        f"Fringe morphology: exemplar {fr['count']} fringes, "
+        f"median tortuosity {_fmt(fr['median_tortuosity'], 2)}",
+        10,
+    )
+    ax_len, ax_tort = Axes(chart, (72, 34, 480, 322)), Axes(chart, (572, 34, 985, 322))
     for ax, key, xlabel in (
         (ax_len, "length_histogram", "fringe length (nm)" if pixel_size else "fringe length (px)"),
         (ax_tort, "tortuosity_histogram", "tortuosity (last bin: 3 and above)"),
@@ -282,13 +289,7 @@ def _fringe_figure(metrics: Mapping[str, Any]) -> Figure | None:
         for i, (label, block) in enumerate(blocks):
             values, edges = scaled(block["fringes"][key], "output")
             ks = block["fringes"][ks_key]["statistic"]
-            ax.stairs(
-                values,
-                edges,
-                label=f"{label} (KS {_fmt(ks, 2)})",
-                color=_OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)],
-                linewidth=1.4,
-            )
+            ax.stairs(values, edges, colour=_colour(i), width=1.4, label=f"{label} (KS {_fmt(ks, 2)})")
         # the exemplar last and dashed, so that an identical output does not hide it
         if _per_plane(metrics):
             for i, (_, block) in enumerate(blocks):
@@ -296,61 +297,64 @@ def _fringe_figure(metrics: Mapping[str, Any]) -> Figure | None:
                 ax.stairs(
                     values,
                     edges,
+                    colour=_colour(i),
+                    width=1.4,
+                    dash=_DASH,
                     label=f"exemplar {block['plane']}",
-                    color=_OUTPUT_COLOURS[i % len(_OUTPUT_COLOURS)],
-                    linewidth=1.4,
-                    linestyle="--",
                 )
         else:
             values, edges = scaled(blocks[0][1]["fringes"][key], "exemplar")
-            ax.stairs(values, edges, label="exemplar", color=_EXEMPLAR_COLOUR, linewidth=1.8, linestyle="--")
-        ax.set_xlabel(xlabel)
+            ax.stairs(values, edges, colour=_EXEMPLAR, width=1.8, dash=_DASH, label="exemplar")
+        ax.xlabel = xlabel
         if key == "length_histogram":
-            ax.set_ylabel("fraction of fringes per nm" if pixel_size else "fraction of fringes per px")
+            ax.ylabel = "fraction of fringes per nm" if pixel_size else "fraction of fringes per px"
         else:
-            ax.set_ylabel("fraction of fringes")
-        ax.legend(fontsize=7)
-    fr = blocks[0][1]["fringes"]["exemplar"]
-    fig.suptitle(
-        f"Fringe morphology: exemplar {fr['count']} fringes, "
-        f"median tortuosity {_fmt(fr['median_tortuosity'], 2)}",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    return fig
+            ax.ylabel = "fraction of fringes"
+        ax.finish()
+    return chart
 
 
 _PLANE_COLOURS = {"xy": "#d1495b", "xz": "#2a9d8f", "yz": "#e9a03b"}
 
 
-def _s2_figure(metrics: Mapping[str, Any]) -> Figure | None:
+def _s2_chart(metrics: Mapping[str, Any]) -> Chart | None:
     """Per physical axis: the volume's S2(r) and that of each exemplar whose plane contains the axis."""
     s2 = metrics.get("s2")
     if not s2:
         return None
     axes_order = [a for a in ("x", "y", "z") if a in s2["axes"]]
     one = not _per_plane(metrics)  # one exemplar for every plane: name it once
-    fig = Figure(figsize=(4.3 * len(axes_order), 4.0))
+    chart = Chart(430 * len(axes_order), 400)
+    values = list(s2["thresholds"].values())
+    if all(t == values[0] for t in values):
+        thresholds = f"{values[0]:.3g}"
+    else:
+        thresholds = ", ".join(f"{p} {t:.3g}" for p, t in s2["thresholds"].items())
+    chart.title(
+        f"Two-point correlation, phase 1 = grey >= threshold ({thresholds}); "
+        "dotted: exemplar correlation lengths (the error's window)",
+        9,
+    )
     for i, axis_name in enumerate(axes_order):
-        ax = fig.add_subplot(1, len(axes_order), i + 1)
+        ax = Axes(chart, (430 * i + (68 if i == 0 else 50), 56, 430 * (i + 1) - 14, 345))
         drawn_ex: list[list[float]] = []
         drawn_vol: list[list[float]] = []
         errors = []
         for plane, comp in s2["axes"][axis_name].items():
-            colour = _PLANE_COLOURS.get(plane, _EXEMPLAR_COLOUR)
+            colour = hex_colour(_PLANE_COLOURS.get(plane, _EXEMPLAR_COLOUR))
             ex, vol = comp["s2"]["exemplar"], comp["s2"]["volume"]
             direction = "columns" if comp["exemplar_direction"] == "col" else "rows"
             if vol not in drawn_vol:
                 label = "volume" if not drawn_vol else f"volume (threshold of {plane})"
-                ax.plot(np.arange(len(vol)), vol, color="black", linewidth=1.6, label=label)
+                ax.plot(np.arange(len(vol)), vol, colour=(0, 0, 0), width=1.6, label=label)
                 drawn_vol.append(vol)
             if ex not in drawn_ex:
                 ax.plot(
                     np.arange(len(ex)),
                     ex,
-                    color=colour,
-                    linewidth=1.6,
-                    linestyle="--",
+                    colour=colour,
+                    width=1.6,
+                    dash=_DASH,
                     label=f"exemplar, along its {direction}"
                     if one
                     else f"exemplar {plane}, along its {direction}",
@@ -358,31 +362,19 @@ def _s2_figure(metrics: Mapping[str, Any]) -> Figure | None:
                 drawn_ex.append(ex)
                 length = comp["correlation_length"]["exemplar"]
                 if length is not None:
-                    ax.axvline(length, color=colour, linewidth=0.8, linestyle=":")
+                    ax.axvline(length, colour=colour, dash=_DOTTED)
             errors.append(f"{plane} {_fmt(comp['relative_error'], 3)}")
         if drawn_ex:
             first = next(iter(s2["axes"][axis_name]))
             phi = drawn_ex[0][0]
             label = "phi^2 of the exemplar" if one else f"phi^2 of exemplar {first}"
-            ax.axhline(phi * phi, color="grey", linewidth=0.8, linestyle=":", label=label)
-        ax.set_xlabel(f"lag r along {axis_name} (voxels)")
-        if i == 0:
-            ax.set_ylabel("S2(r): both points in phase 1")
-        ax.set_title(f"along {axis_name}: relative error {', '.join(errors)}", fontsize=9)
-        ax.set_ylim(bottom=0.0)
-        ax.legend(fontsize=7)
-    values = list(s2["thresholds"].values())
-    if all(t == values[0] for t in values):
-        thresholds = f"{values[0]:.3g}"
-    else:
-        thresholds = ", ".join(f"{p} {t:.3g}" for p, t in s2["thresholds"].items())
-    fig.suptitle(
-        f"Two-point correlation, phase 1 = grey >= threshold ({thresholds}); "
-        "dotted: exemplar correlation lengths (the error's window)",
-        fontsize=9,
-    )
-    fig.tight_layout()
-    return fig
+            ax.axhline(phi * phi, colour=(128, 128, 128), dash=_DOTTED, label=label)
+        ax.xlabel = f"lag r along {axis_name} (voxels)"
+        ax.ylabel = "S2(r): both points in phase 1" if i == 0 else ""
+        ax.title_text = f"along {axis_name}: relative error {', '.join(errors)}"
+        ax.ylim = (0.0, None)
+        ax.finish()
+    return chart
 
 
 def write_s2_plot(metrics: Mapping[str, Any], out_dir: str | Path, *, dpi: int = 100) -> Path | None:
@@ -393,12 +385,12 @@ def write_s2_plot(metrics: Mapping[str, Any], out_dir: str | Path, *, dpi: int =
     exemplars' correlation lengths (dotted) and the relative errors of
     :func:`synth.evaluate.evaluate_volume`.
     """
-    fig = _s2_figure(metrics)
-    if fig is None:
+    chart = _s2_chart(metrics)
+    if chart is None:
         return None
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    return _save(fig, out / "s2.png", dpi)
+    return _save(chart, out / "s2.png", dpi)
 
 
 def write_plots(
@@ -408,6 +400,7 @@ def write_plots(
     out_dir: str | Path,
     *,
     dpi: int = 100,
+    fringes: Mapping[str, Fringes] | None = None,
 ) -> list[Path]:
     """Write the comparison plots of an evaluation as PNG files.
 
@@ -423,35 +416,40 @@ def write_plots(
     out_dir : str or Path
         Directory, created if missing.
     dpi : int
-        Resolution of the charts.
+        Resolution of the charts (100: the sizes below; others are resampled).
+    fringes : mapping ``{'exemplar', 'output'} -> Fringes``, optional
+        The fringes of the exemplar and of the (2-D) output when the caller already extracted them
+        with the metrics' settings (:func:`synth.evaluate.measures.evaluate_pair_fringes`); else they
+        are extracted here.
 
     Returns
     -------
     list of Path
-        The files written: ``grey_histogram.png``, ``orientation_rose.png``, and with fringe
-        metrics ``fringe_distributions.png``, ``fringes_exemplar.png``, ``fringes_output.png``.
+        The files written: ``grey_histogram.png`` (640 x 400), ``orientation_rose.png``, and with
+        fringe metrics ``fringe_distributions.png``, ``fringes_exemplar.png``, ``fringes_output.png``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [
-        _save(_grey_figure(metrics), out / "grey_histogram.png", dpi),
-        _save(_orientation_figure(metrics), out / "orientation_rose.png", dpi),
+        _save(_grey_chart(metrics), out / "grey_histogram.png", dpi),
+        _save(_orientation_chart(metrics), out / "orientation_rose.png", dpi),
     ]
-    fringe_fig = _fringe_figure(metrics)
-    if fringe_fig is None:
+    fringe_chart = _fringe_chart(metrics)
+    if fringe_chart is None:
         return paths
-    paths.append(_save(fringe_fig, out / "fringe_distributions.png", dpi))
+    paths.append(_save(fringe_chart, out / "fringe_distributions.png", dpi))
     settings = metrics.get("settings", {})
     options = dict(settings.get("fringe_options") or {})
     pixel_size = settings.get("pixel_size_nm")
     ex = (
-        as_grey(exemplar["xy"], "exemplar_xy")
+        _as_grey(exemplar["xy"], "exemplar_xy")
         if isinstance(exemplar, Mapping)
-        else as_grey(exemplar, "exemplar")
+        else _as_grey(exemplar, "exemplar")
     )
     out_img = np.asarray(output)
     name = "output"
-    if metrics.get("kind") == "volume":
+    volume = metrics.get("kind") == "volume"
+    if volume:
         if out_img.ndim != 3:
             raise InvalidInput(
                 "output", f"metrics describe a volume but the output has shape {out_img.shape}"
@@ -459,11 +457,16 @@ def write_plots(
         mid = out_img.shape[0] // 2
         out_img = out_img[mid]
         name = f"volume slice {mid} along axis 0"
-    out_grey = as_grey(out_img, "output")
-    for label, img, fname in (
-        ("exemplar", ex, "fringes_exemplar.png"),
-        (name, out_grey, "fringes_output.png"),
+    out_grey = _as_grey(out_img, "output")
+    for key, label, img, fname in (
+        ("exemplar", "exemplar", ex, "fringes_exemplar.png"),
+        ("output", name, out_grey, "fringes_output.png"),
     ):
-        fr = extract_fringes(img, pixel_size=pixel_size, **options)
-        paths.append(_save(_overlay_figure(img, fr, _fringe_title(label, fr)), out / fname, 100))
+        if fringes is not None and key in fringes and not (volume and key == "output"):
+            fr = fringes[key]
+        else:
+            from synth.analysis.fringes import extract_fringes
+
+            fr = extract_fringes(img, pixel_size=pixel_size, **options)
+        paths.append(_save(_overlay_chart(img, fr, _fringe_title(label, fr)), out / fname))
     return paths

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from synth.analysis.feature_matching import (
+    Correspondences,
     build_feature_index,
     context_features,
     feature_correspondences,
@@ -18,6 +19,7 @@ from synth.analysis.feature_matching import (
     matching_costs,
     orientation_bucket,
     tangent_difference,
+    thin_correspondences,
     unmatched_penalty,
 )
 from synth.errors import InvalidInput, InvalidParameter
@@ -164,3 +166,52 @@ def test_bad_inputs_are_named():
         context_features(mask, tangent, np.ones((4, 4), dtype=bool))
     with pytest.raises(InvalidParameter, match="max_distance"):
         feature_correspondences(mask, tangent, mask, tangent, max_distance=-1)
+
+
+def _line(shape, row, cols, angle_deg):
+    mask = np.zeros(shape, dtype=bool)
+    mask[row, cols] = True
+    return mask, np.where(mask, np.radians(angle_deg), np.nan)
+
+
+def test_pairing_rejects_tangents_that_disagree():
+    ctx = _line((24, 24), 6, slice(None), 0.0)
+    agree = _line((24, 24), 8, slice(None), 10.0)  # 2 px lower, 10 degrees off
+    cross = _line((24, 24), 8, slice(None), 40.0)  # 2 px lower, 40 degrees off: adjacent bucket
+    limit = np.radians(30.0)
+    assert feature_correspondences(*ctx, *agree, max_angle=limit).count == 24
+    assert feature_correspondences(*cross[:1], *cross[1:], *ctx).count == 24  # the buckets admit it ...
+    assert feature_correspondences(*ctx, *cross).count == 24
+    assert feature_correspondences(*ctx, *cross, max_angle=limit).count == 0  # ... the gate does not
+    with pytest.raises(InvalidParameter, match="max_angle"):
+        feature_correspondences(*ctx, *agree, max_angle=2.0)
+
+
+def test_normal_only_keeps_the_displacement_across_the_feature():
+    ctx = _line((24, 24), 6, [8], 0.0)  # the end of a horizontal context feature
+    patch = _line((24, 24), 8, [9, 10, 11], 0.0)  # a patch feature 2 rows lower, 1 col on
+    raw = feature_correspondences(*ctx, *patch, max_distance=4.0)
+    np.testing.assert_array_equal(raw.sources - raw.targets, [[2.0, 1.0]])  # nearest pixel: slides too
+    pairs = feature_correspondences(*ctx, *patch, max_distance=4.0, normal_only=True)
+    np.testing.assert_allclose(pairs.sources - pairs.targets, [[2.0, 0.0]], atol=1e-12)  # across only
+    diagonal = feature_correspondences(
+        *_line((24, 24), 6, [8], 45.0), *_line((24, 24), 8, [8], 45.0), normal_only=True
+    )
+    # a 45-degree feature (y up: rising to the right), moved 2 rows down: across it, (1, 1)
+    np.testing.assert_allclose(diagonal.sources - diagonal.targets, [[1.0, 1.0]], atol=1e-12)
+
+
+def test_thinning_keeps_spaced_controls_with_the_median_displacement():
+    targets = np.array([[5.0, c] for c in range(12)])
+    moves = np.zeros((12, 2))
+    moves[:, 0] = 2.0
+    moves[4] = [3.0, 0.0]  # a pixel of jitter
+    pairs = Correspondences(targets=targets, sources=targets + moves, gdist=np.zeros(12))
+    thin = thin_correspondences(pairs, 3.0)
+    np.testing.assert_array_equal(thin.targets[:, 1], [0.0, 3.0, 6.0, 9.0])
+    np.testing.assert_array_equal(thin.sources - thin.targets, [[2.0, 0.0]] * 4)  # the jitter is gone
+    gaps = np.diff(thin.targets[:, 1])
+    assert (gaps >= 3.0).all()
+    assert thin_correspondences(pairs, 0.0) is pairs
+    with pytest.raises(InvalidParameter, match="spacing"):
+        thin_correspondences(pairs, -1.0)

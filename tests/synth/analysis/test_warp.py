@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.analysis.warp import shepard_displacement, warp_coordinates, warp_patch
+from synth.analysis.warp import band_falloff, resample, shepard_displacement, warp_coordinates, warp_patch
 from synth.errors import InvalidInput, InvalidParameter
 
 SOURCES = np.array([[10.0, 10.0], [20.0, 30.0], [5.0, 40.0], [30.0, 12.0]])
@@ -96,3 +96,64 @@ def test_bad_inputs_are_named():
         warp_patch(patch, [[3, 3]], [[3, 4]], method="bspline")
     with pytest.raises(InvalidInput, match="NaN"):
         warp_patch(np.full((4, 4), np.nan), [[1, 1]], [[1, 2]])
+
+
+def test_band_falloff_is_one_on_the_region_and_zero_beyond_the_width():
+    region = np.zeros((32, 32), dtype=bool)
+    region[:, :8] = True  # a left overlap
+    w = band_falloff(region, 4.0)
+    assert (w[:, :8] == 1.0).all() and (w[:, 12:] == 0.0).all()
+    np.testing.assert_allclose(w[0, 8:12], 0.5 * (1 + np.cos(np.pi * np.arange(1, 5) / 4)))
+    assert (np.diff(w[0]) <= 0).all()  # decays monotonically
+    assert (band_falloff(region, 0.0) == region).all()
+    with pytest.raises(InvalidParameter, match="width"):
+        band_falloff(region, -1.0)
+
+
+def test_banded_warp_moves_the_control_exactly_and_leaves_the_far_side_in_place():
+    region = np.zeros((32, 32), dtype=bool)
+    region[:, :8] = True
+    falloff = band_falloff(region, 4.0)
+    coords, method, _ = warp_coordinates((32, 32), [[12.0, 5.0]], [[12.0, 3.0]], falloff=falloff)
+    grid = np.stack(np.mgrid[0:32, 0:32]).astype(float)
+    assert method == "tps"
+    np.testing.assert_allclose(coords[:, 12, 3], [12.0, 5.0], atol=1e-9)  # the control, exactly
+    np.testing.assert_array_equal(coords[:, :, 12:], grid[:, :, 12:])  # beyond the band: not moved
+    np.testing.assert_array_equal(coords[:, -1], grid[:, -1])  # the fixed bottom border
+    np.testing.assert_array_equal(coords[:, :, -1], grid[:, :, -1])  # and the right one
+    assert np.abs(coords - grid).max() > 1.0
+    with pytest.raises(InvalidInput, match="falloff"):
+        warp_coordinates((32, 32), [[12.0, 5.0]], [[12.0, 3.0]], falloff=falloff * 2)
+
+
+def test_smoothing_approximates_the_features_but_keeps_the_fixed_borders_exact():
+    src = np.array([[10.0, 10.0], [11.0, 10.0], [12.0, 10.0]])
+    dst = src + np.array([[0.0, 0.0], [0.0, 1.0], [0.0, 0.0]])  # one pixel of jitter
+    exact, _, _ = warp_coordinates((32, 32), src, dst)
+    smooth, method, _ = warp_coordinates((32, 32), src, dst, smoothing=5.0)
+    assert method == "tps"
+    np.testing.assert_allclose(exact[:, 11, 11], [11.0, 10.0], atol=1e-9)
+    # regularised: the jittered control is only partly followed, so the field wobbles less
+    assert abs(smooth[1, 11, 11] - 11.0) < abs(exact[1, 11, 11] - 11.0) - 0.05
+    grid = np.stack(np.mgrid[0:32, 0:32]).astype(float)
+    np.testing.assert_array_equal(smooth[:, -1], grid[:, -1])
+    np.testing.assert_array_equal(smooth[:, :, -1], grid[:, :, -1])
+    with pytest.raises(InvalidParameter, match="smoothing"):
+        warp_coordinates((32, 32), src, dst, smoothing=-1.0)
+
+
+def test_cubic_resampling_is_exact_on_pixel_centres_and_does_not_ring():
+    img = np.zeros((16, 16, 1))
+    img[:, 8:] = 1.0  # a step edge
+    grid = np.stack(np.mgrid[0:16, 0:16]).astype(float)
+    np.testing.assert_allclose(resample(img, grid, order=3), img, atol=1e-12)
+    half = resample(img, grid + np.array([0.0, 0.5])[:, None, None], order=3)
+    assert half.min() >= 0.0 and half.max() <= 1.0  # no overshoot next to the edge
+    assert half[4, 7, 0] == pytest.approx(0.5, abs=0.05)
+    # sharper than bilinear a quarter pixel off a fine grating (bilinear averages it away)
+    grating = np.zeros((8, 16, 1))
+    grating[:, ::2] = 1.0
+    quarter = grid[:, :8] + np.array([0.0, 0.25])[:, None, None]
+    cubic = resample(grating, quarter, order=3)[2:-2, 2:-2]
+    linear = resample(grating, quarter, order=1)[2:-2, 2:-2]
+    assert np.ptp(cubic) > np.ptp(linear)

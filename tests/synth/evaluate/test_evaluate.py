@@ -212,3 +212,40 @@ def test_cli_json_table_volume_and_errors(tmp_path, capsys):
     assert main(["evaluate", "--exemplar", str(missing), "--output", str(out_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing.png" in err[0]
+
+
+def test_moments_and_ks_agree_with_scipy_bit_for_bit():
+    """The metrics' moments and exact KS test are computed without importing scipy.stats (a slow
+    import): the same numbers, to the last bit, as scipy's, including ties and equal sample sizes."""
+    from scipy import stats
+
+    from synth.evaluate.measures import _ks, _ks_2samp_exact, _skew_kurtosis
+
+    rng = np.random.default_rng(5)
+    for trial in range(120):
+        n1 = int(rng.integers(1, 300))
+        n2 = n1 if trial % 4 == 0 else int(rng.integers(1, 300))
+        if trial % 2:  # integer-like fringe lengths: many ties
+            a, b = np.round(rng.gamma(2.0, 10.0, n1)), np.round(rng.gamma(2.3, 10.0, n2))
+        else:
+            a, b = 1 + rng.exponential(0.3, n1), 1 + rng.exponential(0.4, n2)
+        expected = stats.ks_2samp(a, b)
+        assert _ks(a, b) == {"statistic": float(expected.statistic), "pvalue": float(expected.pvalue)}
+        x = rng.normal(size=int(rng.integers(2, 3000))) ** (1 + trial % 3)
+        assert _skew_kurtosis(x) == (float(stats.skew(x)), float(stats.kurtosis(x)))
+    # beyond the exact test's reach scipy answers (its asymptotic method)
+    big_a, big_b = rng.random(10_001), rng.random(50) + 0.1
+    assert _ks_2samp_exact(big_a, big_b) is None
+    expected = stats.ks_2samp(big_a, big_b)
+    assert _ks(big_a, big_b) == {"statistic": float(expected.statistic), "pvalue": float(expected.pvalue)}
+
+
+def test_evaluate_pair_fringes_returns_the_metrics_and_the_fringes():
+    from synth.evaluate.measures import evaluate_pair_fringes
+
+    tex = _directional((48, 48))
+    metrics, fringes = evaluate_pair_fringes(tex, tex[:, ::-1], pixel_size=0.05)
+    assert metrics == evaluate_pair(tex, tex[:, ::-1], pixel_size=0.05)
+    assert set(fringes) == {"exemplar", "output"}
+    assert fringes["exemplar"].summary()["count"] == metrics["fringes"]["exemplar"]["count"]
+    assert evaluate_pair_fringes(tex, tex, fringes=False)[1] == {}

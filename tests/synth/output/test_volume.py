@@ -95,10 +95,10 @@ def test_bad_inputs_name_the_argument():
 def test_write_artifacts_of_a_volume(tmp_path, monkeypatch):
     from synth.output import artifacts
 
-    # the 2-D comparison charts are tested with write_plots itself (seconds of matplotlib): here only
-    # that they are asked for with the per-plane exemplars, beside the real s2.png
+    # the 2-D comparison charts are tested with write_plots itself: here only that they are asked for
+    # with the per-plane exemplars, beside the real s2.png
     calls = []
-    monkeypatch.setattr(artifacts, "write_plots", lambda ex, out, m, folder: calls.append(ex) or [])
+    monkeypatch.setattr(artifacts, "write_plots", lambda ex, out, m, folder, **_: calls.append(ex) or [])
 
     vol = gaussian_random_field((16, 20, 24), (1.5, 3.0, 5.0), 0.4, seed=2)
     planes = {

@@ -1,0 +1,458 @@
+"""Feature-guided patch synthesis (Wu & Yu 2004, section 3): match on features and colour, bend, cut.
+
+The engine behind the ``feature-guided`` method (:mod:`synth.methods.feature_guided`). It composes the
+pieces the project already has; nothing here re-implements them:
+
+1. **feature map of the exemplar** (section 2.3; :func:`synth.analysis.features.feature_map`), and,
+   with ``rotations``, the seven other rotated/reflected copies of the exemplar with their feature maps
+   (section 3: "their rotated or reflected versions are also presented as input"; :func:`variants`:
+   the masks are moved with the pixels and the tangents turned, not detected again);
+2. for every patch of the raster layout (:class:`synth.patch.layout.PatchLayout`), the colour SSD of the
+   output's overlap (L-shaped, top or left) against every exemplar patch, by FFT
+   (:class:`synth.patch.search.PatchSearcher`); the ``candidates`` patches of least SSD (over all copies)
+   are the candidates;
+3. the **feature matching cost** (eq 2, with eq 1's ``gdist``, ``tau = 0.1``, ``beta = 0.3``) of each
+   candidate: the output's context features (the synthesized feature map inside the overlap) matched
+   by the bucketed chamfer matching against the candidate's features
+   (:func:`synth.analysis.feature_matching.matching_costs`);
+4. **total cost** ``= w_f F / mean(F) + (1 - w_f) S / mean(S)`` over the candidates (``w_f = 0.5``,
+   section 3: "the relative weight between feature and SSD color matching costs is always set to
+   0.5"); the patch is drawn uniformly among those within ``(1 + tolerance)`` of the least total
+   (the paper takes the least; the tolerance keeps outputs of different seeds different, as in
+   quilting);
+5. with ``deform``, the **warp** (section 2.2): one-to-one correspondences context feature ->
+   patch feature in the overlap (``W'_f``, eq 1 with ``tau = 10``;
+   :func:`synth.analysis.feature_matching.feature_correspondences`), kept only where the tangents
+   agree within ``max_angle`` and reduced to their displacement across the feature
+   (``normal_only``), thinned to control points ``warp_spacing`` px apart carrying the median
+   displacement around them (:func:`~synth.analysis.feature_matching.thin_correspondences`); a
+   thin-plate spline through them with the bottom and right borders fixed, Shepard's method when
+   the spline fails, its displacement confined to the overlap and a ``warp_band`` px band beyond
+   it (:func:`synth.analysis.warp.band_falloff`, :func:`synth.analysis.warp.warp_coordinates`);
+   the patch is resampled from the exemplar copy around it (cubic, clipped to the four pixels
+   around each source; pixels the warp leaves in place are copied), its features with it
+   (nearest);
+6. **merge** along the graph-cut seam over the overlap (Kwatra et al. 2003;
+   :func:`synth.patch.graphcut.graph_cut_mask`); the output's colour, feature map and patch labels
+   take the patch where the cut says so.
+
+Choices where the paper is silent, and departures
+-------------------------------------------------
+- **Normalisation of the two costs.** The paper mixes the feature cost (pixels) and the colour SSD
+  with equal weights without saying how they are made comparable. Here each is divided by its mean
+  over the candidates, so that ``w_f = 0.5`` means "equal relative importance". A term that is the
+  same for every candidate (e.g. no features anywhere) then weighs nothing; a term whose mean is 0
+  is 0.
+- **Candidates** come from the colour SSD (the ``candidates`` best), and the feature cost re-ranks
+  them; the paper evaluates both costs at every translation. Measured in docs/feature-guided.md.
+- **Output feature map**: the synthesized one (section 3: "generates a new texture and its feature
+  map simultaneously"): each patch's features (warped with it) are pasted where its pixels are.
+- **Correspondences farther apart than ``max_shift`` px are dropped** (the paper keeps all): a context
+  feature with no patch feature nearby has nothing to meet, and pulling a far one across the overlap
+  bends the patch more than the paper's "small amount of deformation".
+- A warp whose backward map folds (non-positive Jacobian determinant, Shepard's method under large
+  displacements) is not applied; the unwarped patch is used (``stats['warps']['folded']``).
+- **The warp, as the paper gives it, damaged the patches here** (docs/feature-guided.md, "the
+  paper's warp"): every context feature pixel was a control point, so the spline interpolated the
+  one-pixel jitter of two independently thinned feature maps (neighbouring pairs displaced by 0
+  and 1 px) and rippled; pairs from the adjacent tangent buckets bent features onto crossing ones;
+  the nearest pixel slid pairs along their features; the displacement, held only at the far
+  borders, spread over the whole patch and bent straight features far from any seam; bilinear
+  resampling at sub-pixel offsets blurred fine fringes. Hence, each measured there: the tangent
+  gate (``max_angle``, 30 degrees), the normal component (``normal_only``), the spaced controls
+  with median displacements (``warp_spacing``, 3 px: the largest single gain), the band
+  (``warp_band``, 4 px; 8, 16 and the whole patch were worse on brick), warps that move nothing
+  by ``min_shift`` (0.5 px) skipped (``stats['warps']['small']``), and cubic resampling.
+  Tried and not kept: spline smoothing (no gain over spaced controls), a ramp from the fixed
+  borders, local chamfer registration of the displacements (worse alignment than the gated pairs).
+- Warped patches are resampled from the exemplar copy around the patch (not only the patch), so that
+  pixels the warp pulls in from outside the patch are real texture; at the exemplar's border the
+  nearest border pixel is used.
+
+References
+----------
+Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on Graphics
+23(3) (Proc. SIGGRAPH 2004), pp. 364-367 (sections 2.1-2.3 and 3; eqs 1-2).
+V. Kwatra, A. Schödl, I. Essa, G. Turk, A. Bobick, "Graphcut textures: image and video synthesis using
+graph cuts", ACM TOG 22(3), 2003, pp. 277-286 (the seam).
+A. A. Efros, W. T. Freeman, "Image quilting for texture synthesis and transfer", SIGGRAPH 2001 (the
+raster layout, the overlap SSD and the tolerance).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage as ndi
+
+from synth.analysis.feature_matching import (
+    BETA,
+    MATCH_TAU,
+    WARP_TAU,
+    FeatureIndex,
+    build_feature_index,
+    context_features,
+    feature_correspondences,
+    matching_costs,
+    thin_correspondences,
+)
+from synth.analysis.features import FeatureMap
+from synth.analysis.tensor import wrap_angle
+from synth.analysis.warp import band_falloff, resample, warp_coordinates
+from synth.colour import to_grey
+from synth.evaluate.breaks import Seams
+from synth.patch.graphcut import graph_cut_mask
+from synth.patch.layout import PatchLayout, overlap_mask
+from synth.patch.search import PatchSearcher, k_nearest
+
+__all__ = [
+    "FeatureGuidedOutput",
+    "FeatureGuidedSettings",
+    "Variant",
+    "combined_cost",
+    "seam_overlay",
+    "synthesize_feature_guided",
+    "variants",
+]
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One copy of the exemplar (the exemplar itself, or a rotated/reflected copy) with its features.
+
+    Attributes
+    ----------
+    name : str
+        ``'identity'``, ``'rot90'``, ``'rot180'``, ``'rot270'``, and ``'flip'`` + those (a left-right
+        mirror, then the rotation).
+    image : ndarray of float64, shape (h, w, C)
+    mask : ndarray of bool, shape (h, w)
+        Feature pixels.
+    tangent : ndarray of float64, shape (h, w)
+        Tangent orientations (y up, ``(-pi/2, pi/2]``), NaN off the features.
+    """
+
+    name: str
+    image: np.ndarray = field(repr=False)
+    mask: np.ndarray = field(repr=False)
+    tangent: np.ndarray = field(repr=False)
+
+
+def variants(image: np.ndarray, fmap: FeatureMap, rotations: bool) -> list[Variant]:
+    """The exemplar and, with ``rotations``, its 7 other rotated (90-degree steps) and reflected copies.
+
+    The feature maps move with the pixels; tangents turn with them: a counter-clockwise quarter turn
+    (:func:`numpy.rot90`) adds ``pi/2``, a left-right mirror negates the angle (y up).
+    """
+    img = np.asarray(image, dtype=np.float64)
+    img = img[..., None] if img.ndim == 2 else img
+    out = [Variant("identity", img, fmap.mask, fmap.tangent)]
+    if not rotations:
+        return out
+    for flip in (False, True):
+        base_img = img[:, ::-1] if flip else img
+        base_mask = fmap.mask[:, ::-1] if flip else fmap.mask
+        base_tan = -fmap.tangent[:, ::-1] if flip else fmap.tangent
+        for k in range(4):
+            if k == 0 and not flip:
+                continue
+            name = ("flip-" if flip else "") + ("identity" if k == 0 else f"rot{90 * k}")
+            tan = np.rot90(base_tan, k)
+            tan = np.where(np.isfinite(tan), wrap_angle(tan + k * np.pi / 2), np.nan)
+            out.append(
+                Variant(
+                    name,
+                    np.ascontiguousarray(np.rot90(base_img, k, axes=(0, 1))),
+                    np.ascontiguousarray(np.rot90(base_mask, k)),
+                    np.ascontiguousarray(tan),
+                )
+            )
+    return out
+
+
+def combined_cost(feature: np.ndarray, colour: np.ndarray, weight: float) -> np.ndarray:
+    """``weight F / mean(F) + (1 - weight) S / mean(S)``: each term scaled by its mean over the candidates.
+
+    A term whose mean is 0 contributes 0 (module docstring, "Normalisation").
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> combined_cost(np.array([1.0, 3.0]), np.array([0.02, 0.02]), 0.5).tolist()
+    [0.75, 1.25]
+    """
+    f = np.asarray(feature, dtype=np.float64)
+    s = np.asarray(colour, dtype=np.float64)
+    mf, ms = float(f.mean()), float(s.mean())
+    fn = f / mf if mf > 0 else np.zeros_like(f)
+    sn = s / ms if ms > 0 else np.zeros_like(s)
+    return weight * fn + (1.0 - weight) * sn
+
+
+@dataclass(frozen=True)
+class FeatureGuidedSettings:
+    """What the engine needs, already validated (the method's parameter model builds it)."""
+
+    patch_size: int
+    overlap: int
+    candidates: int = 20
+    tolerance: float = 0.1
+    feature_weight: float = 0.5
+    tau: float = MATCH_TAU
+    beta: float = BETA
+    warp_tau: float = WARP_TAU
+    deform: bool = True
+    max_shift: float = 4.0
+    rotations: bool = False
+    #: pairs whose tangents differ by more than this (radians) are not pulled together
+    max_angle: float | None = float(np.radians(30.0))
+    #: keep only the displacement across the context feature (its normal component)
+    normal_only: bool = True
+    #: control points at least this far apart (px), each with the median displacement around it
+    warp_spacing: float = 3.0
+    #: regularisation of the spline at the feature constraints (0: exact, the paper)
+    warp_smoothing: float = 0.0
+    #: the displacement decays to 0 over this many px beyond the overlap (None: the paper's whole patch)
+    warp_band: float | None = 4.0
+    #: warps that move no pixel by this much (px) are not applied (resampling would only blur)
+    min_shift: float = 0.5
+    #: resampling of warped patches: 1 bilinear, 3 cubic (clipped to the four neighbours)
+    warp_order: int = 3
+
+
+@dataclass(frozen=True)
+class FeatureGuidedOutput:
+    """The synthesized image (cropped), its synthesized feature map, patch labels and run statistics.
+
+    ``sources`` (int64, ``(H, W, 2)``) is where each pixel came from, encoded so that two neighbours
+    are continuous exactly when they are a verbatim copy of neighbouring pixels of one exemplar copy:
+    ``(row + ROW_CODE * copy, col)`` for pixels copied as they are (unwarped patches, and the
+    pixels a warp leaves in place), and ``(row + WARPED_CODE * (label + 1), col)`` (the patch's own
+    frame) for pixels a warp moved, which continue nothing outside their patch.
+    :func:`synth.evaluate.breaks.seams_from_sources` of it with ``labels`` gives the seams by the
+    same rule as quilting's ``source_map``: a seam is where two patches meet and the pixels are not
+    a verbatim continuation.
+    """
+
+    image: np.ndarray
+    mask: np.ndarray
+    tangent: np.ndarray
+    labels: np.ndarray
+    sources: np.ndarray
+    layout: PatchLayout
+    stats: dict[str, Any]
+
+
+#: Row offsets that keep the sources of different exemplar copies, and of warped patches, apart.
+ROW_CODE = 1 << 20
+WARPED_CODE = 1 << 32
+
+
+def _folds(coords: np.ndarray) -> bool:
+    """Whether a backward map ``(2, h, w)`` has a non-positive Jacobian determinant somewhere."""
+    gr, gc = coords
+    if min(gr.shape) < 2:
+        return False
+    dr_dr, dr_dc = np.gradient(gr)
+    dc_dr, dc_dc = np.gradient(gc)
+    return bool((dr_dr * dc_dc - dr_dc * dc_dr).min() <= 0.0)
+
+
+def _sample(
+    variant: Variant, coords: np.ndarray, y: int, x: int, order: int, coefficients: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The variant's colour (``order``) and features (nearest) at the backward map ``coords`` + ``(y, x)``.
+
+    Pixels the map leaves in place are copied exactly.
+    """
+    h, w = variant.mask.shape
+    pos = coords + np.array([y, x], dtype=np.float64)[:, None, None]
+    colour = resample(variant.image, pos, order=order, coefficients=coefficients)  # type: ignore[arg-type]
+    r = np.clip(np.rint(pos[0]).astype(np.intp), 0, h - 1)
+    c = np.clip(np.rint(pos[1]).astype(np.intp), 0, w - 1)
+    still = (pos[0] == r) & (pos[1] == c)
+    colour[still] = variant.image[r[still], c[still]]
+    return colour, variant.mask[r, c], variant.tangent[r, c]
+
+
+def seam_overlay(
+    image: np.ndarray, seams: Seams, colour: tuple[float, float, float] = (1.0, 0.1, 0.1)
+) -> np.ndarray:
+    """RGB float image: the output in grey, the pixels before each seam edge (left/above it) in ``colour``."""
+    img = np.asarray(image, dtype=np.float64)
+    grey = img if img.ndim == 2 else to_grey(img, np.float64)
+    rgb = np.repeat(np.clip(grey, 0.0, 1.0)[..., None], 3, axis=2)
+    on = np.zeros(seams.shape, dtype=bool)
+    on[:, :-1] |= seams.across_cols
+    on[:-1, :] |= seams.across_rows
+    rgb[on] = colour
+    return rgb.astype(np.float32)
+
+
+def synthesize_feature_guided(
+    exemplar: np.ndarray,
+    fmap: FeatureMap,
+    size: tuple[int, int],
+    settings: FeatureGuidedSettings,
+    rng: np.random.Generator,
+    report: Callable[[str, float], None],
+) -> FeatureGuidedOutput:
+    """Feature-guided patch synthesis (module docstring, steps 1-6).
+
+    Parameters
+    ----------
+    exemplar : ndarray, shape (h, w) or (h, w, C)
+        Float image in [0, 1]; the patch must fit in it (checked by the caller).
+    fmap : FeatureMap
+        The exemplar's feature map (:func:`synth.analysis.features.feature_map`).
+    size : (int, int)
+        Output shape ``(H, W)``.
+    settings : FeatureGuidedSettings
+    rng : numpy.random.Generator
+        The only source of randomness.
+    report : callable ``(stage, fraction)``
+        Progress; it may raise :class:`synth.errors.Cancelled`.
+
+    Returns
+    -------
+    FeatureGuidedOutput
+    """
+    s = settings
+    w, ov = s.patch_size, s.overlap
+    copies = variants(exemplar, fmap, s.rotations)
+    searchers = [PatchSearcher(v.image, w) for v in copies]
+    indices: list[FeatureIndex] = [build_feature_index(v.mask, v.tangent) for v in copies]
+    sizes = np.array([int(np.prod(sr.positions_shape)) for sr in searchers])
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    channels = copies[0].image.shape[2]
+
+    layout = PatchLayout((int(size[0]), int(size[1])), w, ov)
+    gh, gw = layout.grown_shape
+    out = np.zeros((gh, gw, channels), dtype=np.float64)
+    out_mask = np.zeros((gh, gw), dtype=bool)
+    out_tan = np.full((gh, gw), np.nan)
+    labels = np.full((gh, gw), -1, dtype=np.int32)
+    sources = np.zeros((gh, gw, 2), dtype=np.int64)
+    grid = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int64)
+    masks = {kind: overlap_mask(w, ov, kind) for kind in ("left", "top", "L")}
+    falloffs = {
+        kind: None if s.warp_band is None else band_falloff(m, s.warp_band) for kind, m in masks.items()
+    }
+    coefficients = [
+        np.stack(
+            [ndi.spline_filter(v.image[..., c], order=3, mode="nearest") for c in range(channels)], axis=-1
+        )
+        if s.deform and s.warp_order == 3
+        else None
+        for v in copies
+    ]
+    warps = {"tps": 0, "shepard": 0, "identity": 0, "folded": 0, "small": 0}
+    shifts: list[float] = []
+    pairs: list[int] = []
+    feature_costs: list[float] = []
+    colour_costs: list[float] = []
+    reranked = 0
+    report_every = max(1, len(layout) // 50)
+
+    for n, (_, _, y, x, kind) in enumerate(layout.patches()):
+        region = out[y : y + w, x : x + w]
+        if kind == "none":
+            flat = int(rng.integers(int(starts[-1])))
+            mask = None
+        else:
+            mask = masks[kind]
+            ssd = np.concatenate([sr.ssd(region, mask).ravel() for sr in searchers])
+            pool = k_nearest(ssd, s.candidates)
+            colour = ssd[pool] / (mask.sum() * channels)
+            context = context_features(out_mask[y : y + w, x : x + w], out_tan[y : y + w, x : x + w], mask)
+            feature = np.zeros(len(pool))
+            which = np.searchsorted(starts, pool, side="right") - 1
+            for v in np.unique(which):
+                sel = which == v
+                local = pool[sel] - starts[v]
+                offsets = np.stack(np.unravel_index(local, searchers[v].positions_shape), axis=1)
+                feature[sel] = matching_costs(
+                    context, indices[v], offsets.astype(np.int64), tau=s.tau, beta=s.beta
+                )
+            total = combined_cost(feature, colour, s.feature_weight)
+            best = float(total.min())
+            ok = np.flatnonzero(total <= best * (1.0 + s.tolerance) + 1e-12)
+            pick = int(ok[rng.integers(len(ok))])
+            flat = int(pool[pick])
+            reranked += int(pick != int(np.argmin(colour)))
+            feature_costs.append(float(feature[pick]))
+            colour_costs.append(float(colour[pick]))
+        v = int(np.searchsorted(starts, flat, side="right") - 1)
+        py, px = (int(t) for t in np.unravel_index(flat - int(starts[v]), searchers[v].positions_shape))
+        variant = copies[v]
+        patch = variant.image[py : py + w, px : px + w]
+        p_mask = variant.mask[py : py + w, px : px + w]
+        p_tan = variant.tangent[py : py + w, px : px + w]
+        src = grid + np.array([py + ROW_CODE * v, px], dtype=np.int64)
+        if mask is not None and s.deform:
+            corr = feature_correspondences(
+                out_mask[y : y + w, x : x + w],
+                out_tan[y : y + w, x : x + w],
+                p_mask,
+                p_tan,
+                mask,
+                tau=s.warp_tau,
+                max_distance=s.max_shift,
+                max_angle=s.max_angle,
+                normal_only=s.normal_only,
+            )
+            corr = thin_correspondences(corr, s.warp_spacing)
+            pairs.append(corr.count)
+            coords, used, _ = warp_coordinates(
+                (w, w),
+                np.clip(corr.sources, 0.0, w - 1.0),  # a projected source may fall just outside
+                corr.targets,
+                fixed=("bottom", "right"),
+                smoothing=s.warp_smoothing,
+                falloff=falloffs[kind],
+            )
+            shift = float(np.abs(coords - grid.transpose(2, 0, 1)).max())
+            if used != "identity" and _folds(coords):
+                warps["folded"] += 1
+            elif used != "identity" and shift < s.min_shift:
+                warps["small"] += 1
+            else:
+                warps[used] += 1
+                if used != "identity":
+                    shifts.append(shift)
+                    patch, p_mask, p_tan = _sample(variant, coords, py, px, s.warp_order, coefficients[v])
+                    moved = (coords != grid.transpose(2, 0, 1)).any(axis=0)
+                    src[moved] = (grid + np.array([WARPED_CODE * (n + 1), 0], dtype=np.int64))[moved]
+        new = np.ones((w, w), dtype=bool) if mask is None else graph_cut_mask(region, patch, mask)
+        region[new] = patch[new]
+        out_mask[y : y + w, x : x + w][new] = p_mask[new]
+        out_tan[y : y + w, x : x + w][new] = np.where(p_mask, p_tan, np.nan)[new]
+        labels[y : y + w, x : x + w][new] = n
+        sources[y : y + w, x : x + w][new] = src[new]
+        if n % report_every == 0:
+            report("feature-guided", n / len(layout))
+
+    h, wd = layout.size
+    stats: dict[str, Any] = {
+        "variants": [c.name for c in copies],
+        "exemplar_features": int(fmap.count),
+        "reranked_share": reranked / max(1, len(layout) - 1),
+        "mean_feature_cost": float(np.mean(feature_costs)) if feature_costs else 0.0,
+        "mean_overlap_error": float(np.mean(colour_costs)) if colour_costs else 0.0,
+    }
+    if s.deform:
+        stats["warps"] = warps
+        stats["mean_correspondences"] = float(np.mean(pairs)) if pairs else 0.0
+        stats["mean_warp_shift"] = float(np.mean(shifts)) if shifts else 0.0
+    return FeatureGuidedOutput(
+        image=out[:h, :wd],
+        mask=out_mask[:h, :wd],
+        tangent=out_tan[:h, :wd],
+        labels=labels[:h, :wd],
+        sources=sources[:h, :wd],
+        layout=layout,
+        stats=stats,
+    )
