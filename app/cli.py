@@ -3,14 +3,27 @@
 With no ``REDIS_URL`` everything runs on the embedded default (filesystem broker and SQLite under
 the data directory), so a fresh machine needs no server. The worker is a child process group that
 is restarted if it dies; stopping ``serve`` (Ctrl-C) stops it too.
+
+``serve`` owns its worker: on Linux the worker's main process gets SIGQUIT (Celery's cold shutdown,
+which ends its pool children too) the moment ``serve`` dies, even by ``kill -9``
+(``PR_SET_PDEATHSIG``); and ``<data dir>/serve.pid`` records ``serve`` and its worker's process
+group, so a ``serve`` that starts after one that vanished stops the worker left over, and one that
+finds another ``serve`` alive on the same data directory refuses to start.
+
+Without API tokens (``TEXSYNTH_API_TOKENS``, ``TEXSYNTH_API_TOKEN_FILE``, ``TEXSYNTH_ADMIN_TOKEN``)
+anyone who reaches the port can submit, read and delete every job, so ``serve`` listens on 127.0.0.1
+unless ``--host`` says otherwise, says so at start, and warns when told to listen on every interface.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import ctypes
+import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -25,7 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="start the job service (API + browser page + worker)",
         description="Start the texsynth job service and print its URL.",
     )
-    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
+    p.add_argument(
+        "--host",
+        help="interface to listen on (default 127.0.0.1: this machine only; use 0.0.0.0 for every "
+        "interface, with TEXSYNTH_API_TOKENS set)",
+    )
     p.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     p.add_argument(
         "--data-dir",
@@ -36,21 +53,109 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+PID_FILE = "serve.pid"
+_PR_SET_PDEATHSIG = 1
+
+
+class ServeLock:
+    """``<data dir>/serve.pid``: this ``serve`` (pid, host) and its worker's process group."""
+
+    def __init__(self, data_dir: os.PathLike[str] | str) -> None:
+        self.path = os.path.join(data_dir, PID_FILE)
+        self.host = socket.gethostname()
+
+    def _read(self) -> dict:
+        try:
+            with open(self.path) as fh:
+                record = json.load(fh)
+        except (OSError, ValueError):
+            return {}
+        return record if isinstance(record, dict) else {}
+
+    def acquire(self) -> str | None:
+        """Check the previous owner: ``None`` if this ``serve`` may start (a worker left over by a
+        ``serve`` that vanished is stopped first, and said so), else why it may not."""
+        from jobs.store import pid_alive
+
+        record = self._read()
+        if record.get("host") != self.host:  # none, or another machine's (a shared data directory)
+            return None
+        pid, group = record.get("pid"), record.get("worker_group")
+        if isinstance(pid, int) and pid != os.getpid() and pid_alive(pid) and _cmdline_has(pid, b"serve"):
+            return (
+                f"another texsynth serve (pid {pid}) is running on this data directory; stop it first, "
+                "or give this one its own --data-dir"
+            )
+        if isinstance(group, int) and group > 1 and (not pid_alive(group) or _cmdline_has(group, b"worker")):
+            try:
+                os.killpg(group, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                return None
+            print(
+                f"texsynth serve: stopped the worker (process group {group}) left running by a previous "
+                f"serve (pid {pid}) that did not exit cleanly",
+                file=sys.stderr,
+                flush=True,
+            )
+        return None
+
+    def record(self, worker_group: int | None) -> None:
+        tmp = f"{self.path}.{os.getpid()}.tmp"
+        with open(tmp, "w") as fh:
+            json.dump({"pid": os.getpid(), "host": self.host, "worker_group": worker_group}, fh)
+        os.replace(tmp, self.path)
+
+    def release(self) -> None:
+        if self._read().get("pid") == os.getpid():
+            with contextlib.suppress(OSError):
+                os.remove(self.path)
+
+
+def _cmdline_has(pid: int, word: bytes) -> bool:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return word in fh.read()
+    except OSError:
+        return True  # no /proc: trust the record
+
+
+def _libc() -> ctypes.CDLL | None:
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl  # noqa: B018  (Linux only)
+        return libc
+    except (OSError, AttributeError):
+        return None
+
+
 class WorkerSupervisor(threading.Thread):
     """Keeps one ``python -m worker`` process group running; restarts it if it dies."""
 
-    def __init__(self, env: dict[str, str]) -> None:
+    def __init__(self, env: dict[str, str], lock: ServeLock | None = None) -> None:
         super().__init__(name="texsynth-worker-supervisor", daemon=True)
         self.env = env
+        self.lock = lock
         self.proc: subprocess.Popen | None = None
         self._stopping = threading.Event()
+        self._libc = _libc()
 
     def _spawn(self) -> None:
+        parent, libc = os.getpid(), self._libc
+
+        def die_with_serve() -> None:  # in the child, between fork and exec
+            if libc is not None:
+                libc.prctl(_PR_SET_PDEATHSIG, signal.SIGQUIT)  # serve gone -> cold shutdown
+            if os.getppid() != parent:  # serve died before that took effect
+                os._exit(1)
+
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "worker", "--loglevel=WARNING", "--quiet"],
             env=self.env,
             start_new_session=True,
+            preexec_fn=die_with_serve,
         )
+        if self.lock is not None:
+            self.lock.record(self.proc.pid)
 
     def run(self) -> None:
         self._spawn()
@@ -77,32 +182,74 @@ def _kill_group(pgid: int, sig: int) -> None:
         os.killpg(pgid, sig)
 
 
+_LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def host_notice(host: str | None, tokens: bool) -> tuple[str, str | None]:
+    """The interface to listen on and what to tell the person about it (``None``: nothing)."""
+    chosen = host or "127.0.0.1"
+    if tokens:
+        return chosen, None
+    if host is None:
+        return chosen, (
+            "texsynth serve: no API tokens are set, so the service listens on 127.0.0.1 only (this "
+            "machine); to serve others, set TEXSYNTH_API_TOKENS (see docs/service.md, Tokens) and "
+            "pass --host 0.0.0.0"
+        )
+    if chosen not in _LOOPBACK:
+        return chosen, (
+            f"texsynth serve: WARNING: listening on {chosen} without API tokens: anyone who can reach "
+            "this port can submit jobs, read every job's inputs and outputs, and cancel or delete them. "
+            "Set TEXSYNTH_API_TOKENS (see docs/service.md, Tokens)"
+        )
+    return chosen, None
+
+
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from app.auth import TokenError, Tokens
     from app.main import create_app
     from jobs.config import Settings
 
     settings = Settings.from_env(data_dir=args.data_dir, concurrency=args.workers)
     settings.ensure_dirs()
+    try:
+        tokens = Tokens.from_settings(settings)
+    except TokenError as exc:
+        print(f"texsynth serve: {exc}", file=sys.stderr)
+        return 2
+    host, notice = host_notice(args.host, tokens.enabled)
+    if notice:
+        print(notice, file=sys.stderr, flush=True)
     env = {**os.environ, **settings.to_env()}
     cwd = os.getcwd()
     env["PYTHONPATH"] = os.pathsep.join(p for p in (cwd, env.get("PYTHONPATH", "")) if p)
-    supervisor = None if args.no_worker else WorkerSupervisor(env)
+    lock = None
+    if not args.no_worker:
+        lock = ServeLock(settings.data_dir)
+        refusal = lock.acquire()
+        if refusal:
+            print(f"texsynth serve: {refusal}", file=sys.stderr)
+            return 2
+        lock.record(None)
+    supervisor = None if args.no_worker else WorkerSupervisor(env, lock)
     config = uvicorn.Config(
-        create_app(settings), host=args.host, port=args.port, log_level="warning", timeout_graceful_shutdown=3
+        create_app(settings), host=host, port=args.port, log_level="warning", timeout_graceful_shutdown=3
     )
     server = uvicorn.Server(config)
-    url = f"http://{'localhost' if args.host in ('127.0.0.1', '0.0.0.0', '::') else args.host}:{args.port}/"
+    url = f"http://{'localhost' if host in ('127.0.0.1', '0.0.0.0', '::') else host}:{args.port}/"
 
     def announce() -> None:
         while not server.started and not server.should_exit:
             time.sleep(0.05)
         if server.started:
             queue = "Redis" if settings.redis_url else "embedded queue (no server needed)"
+            access = f"tokens of {', '.join(tokens.names)}" if tokens.enabled else "no tokens"
             print(
                 f"texsynth is serving at {url}  (data: {settings.data_dir}; {queue}; "
-                f"{'no worker' if supervisor is None else f'{settings.concurrency} worker processes'})",
+                f"{'no worker' if supervisor is None else f'{settings.concurrency} worker processes'}; "
+                f"{access})",
                 flush=True,
             )
 
@@ -110,6 +257,8 @@ def run(args: argparse.Namespace) -> int:
         # uvicorn restores this handler after its graceful shutdown and re-raises the signal here
         if supervisor is not None:
             supervisor.stop()
+        if lock is not None:
+            lock.release()
         raise SystemExit(130 if sig == signal.SIGINT else 0)
 
     signal.signal(signal.SIGTERM, on_signal)
@@ -122,4 +271,6 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if supervisor is not None:
             supervisor.stop()
+        if lock is not None:
+            lock.release()
     return 0

@@ -26,11 +26,14 @@ __all__ = ["install_error_handlers"]
 
 _HTTP_KINDS = {
     400: "bad_request",
+    401: "unauthorized",
+    403: "forbidden",
     404: "not_found",
     405: "method_not_allowed",
     413: "input_too_large",
     415: "unsupported_format",
     422: "invalid_parameter",
+    429: "too_many_jobs",
     503: "unavailable",
     507: "insufficient_storage",
 }
@@ -60,7 +63,9 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(HTTPException)
     async def _http(request: Request, exc: HTTPException) -> JSONResponse:
         detail = str(exc.detail)
-        return _error(exc.status_code, detail, None, _HTTP_KINDS.get(exc.status_code, "error"))
+        response = _error(exc.status_code, detail, None, _HTTP_KINDS.get(exc.status_code, "error"))
+        response.headers.update(exc.headers or {})
+        return response
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -2,29 +2,50 @@
 
 ``create_app(settings)`` builds it; ``uvicorn --factory app.main:create_app`` serves it with the
 environment's :class:`~jobs.config.Settings`. The API never runs synthesis: it validates, stores,
-queues and reports. Its :class:`~jobs.reaper.Reaper` settles jobs whose worker vanished.
+queues and reports. Its :class:`~jobs.reaper.Reaper` settles jobs whose worker vanished and deletes
+finished jobs after the retention period.
+
+``/docs`` is Swagger UI served from the installed ``swagger-ui-py`` package's static files (no CDN:
+it works offline, and the content security policy allows nothing from another host). ReDoc has no
+such package and is not served.
 """
 
 from __future__ import annotations
 
+import importlib.util
 from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
-from fastapi.responses import FileResponse
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.openapi.utils import get_openapi
+from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 from app.api.routes import health, jobs, methods, metrics, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
-from app.security import SecurityHeadersMiddleware
+from app.security import AuthMiddleware, SameOriginMiddleware, SecurityHeadersMiddleware
 from app.service import Service
 from jobs.config import Settings
 from synth import __version__
 
-__all__ = ["create_app"]
+__all__ = ["SWAGGER_UI", "create_app"]
 
 STATIC = Path(__file__).resolve().parent / "static"
+
+
+def _swagger_ui_static() -> Path | None:
+    """The Swagger UI files of the installed ``swagger-ui-py`` (found without importing it)."""
+    spec = importlib.util.find_spec("swagger_ui")
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        static = Path(folder) / "static"
+        if (static / "swagger-ui-bundle.js").is_file():
+            return static
+    return None
+
+
+SWAGGER_UI = _swagger_ui_static()
 
 
 def create_app(settings: Settings | None = None, *, reaper: bool = True) -> FastAPI:
@@ -43,13 +64,40 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
         version=__version__,
         description="Exemplar-based texture synthesis as a job service: submit, follow, download.",
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.service = service
+    # Outermost last: headers on every answer, then the same-origin rule, then tokens, then the body
+    # limit (an unauthenticated upload is refused before its body is read).
     app.add_middleware(BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes)
+    app.add_middleware(AuthMiddleware, tokens=service.tokens)
+    app.add_middleware(SameOriginMiddleware, allowed=settings.allowed_origins)
     app.add_middleware(SecurityHeadersMiddleware)
     install_error_handlers(app)
     for module in (jobs, methods, metrics, sweeps, health):
         app.include_router(module.router)
+    if service.tokens.enabled:
+        _declare_bearer(app)
+
+    if SWAGGER_UI is not None:
+        app.mount("/docs/assets", StaticFiles(directory=SWAGGER_UI), name="swagger-ui")
+
+    @app.get("/docs", include_in_schema=False)
+    def docs() -> HTMLResponse:
+        if SWAGGER_UI is None:
+            return HTMLResponse(
+                "<p>The interactive API docs need the swagger-ui-py package (pip install swagger-ui-py); "
+                "the schema is at <a href='/openapi.json'>/openapi.json</a>.</p>",
+                status_code=404,
+            )
+        return get_swagger_ui_html(
+            openapi_url="/openapi.json",
+            title="texsynth API",
+            swagger_js_url="/docs/assets/swagger-ui-bundle.js",
+            swagger_css_url="/docs/assets/swagger-ui.css",
+            swagger_favicon_url="/docs/assets/favicon-32x32.png",
+        )
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:
@@ -57,3 +105,29 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     return app
+
+
+def _declare_bearer(app: FastAPI) -> None:
+    """With tokens, the schema says so: a bearer scheme on every route but health (Swagger UI's
+    "Authorize" button then sends the token)."""
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            schema = get_openapi(
+                title=app.title, version=app.version, description=app.description, routes=app.routes
+            )
+            schema.setdefault("components", {})["securitySchemes"] = {
+                "bearer": {
+                    "type": "http",
+                    "scheme": "bearer",
+                    "description": "a token of TEXSYNTH_API_TOKENS",
+                }
+            }
+            for path, operations in schema.get("paths", {}).items():
+                if path != "/api/health":
+                    for operation in operations.values():
+                        operation["security"] = [{"bearer": []}]
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi

@@ -7,6 +7,7 @@ from typing import Any
 from pydantic import BaseModel, Field
 
 __all__ = [
+    "DeletedPublic",
     "ErrorPublic",
     "HealthPublic",
     "JobPublic",
@@ -46,6 +47,18 @@ class JobPublic(BaseModel):
     inputs: dict[str, str] = Field(description="input role -> URL")
     preview: str | None = Field(None, description="URL of a small preview of the running synthesis")
     sweep_id: str | None = None
+    owner: str | None = Field(None, description="the name of the token that submitted it (tokens set)")
+    access: str | None = Field(
+        None,
+        description="with tokens: the signed query (?access=...) that opens this job's files without "
+        "a header until it expires; the file URLs above already carry it",
+    )
+
+
+class DeletedPublic(BaseModel):
+    id: str
+    state: str = Field(description="deleted")
+    message: str
 
 
 class JobsPublic(BaseModel):

@@ -7,6 +7,7 @@ can get wrong is checked here *before* anything is stored or queued, and raised 
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import math
@@ -19,11 +20,13 @@ from typing import Any
 
 from celery import group
 
+from app.admission import Admission
+from app.auth import ANONYMOUS, Principal, Tokens
 from jobs.config import Settings
 from jobs.methods import methods
 from jobs.queue import QUEUE, TASK_NAME, create_celery
 from jobs.reaper import Reaper
-from jobs.store import JobRecord, JobStore
+from jobs.store import TERMINAL, JobRecord, JobStore
 from synth import __version__ as synth_version
 from synth.api import MethodSpec, check_inputs
 from synth.errors import InvalidParameter
@@ -52,15 +55,19 @@ class JobRequest:
     params: dict[str, Any]  # the method's parameters (as validated, defaults filled) + width/height[/depth]
     seed: int
     inputs: dict[str, tuple[str, bytes]]
+    shapes: dict[str, tuple[int, ...]]  # the decoded inputs' array shapes, for admission control
 
 
 class Service:
-    """The job service of one API process: settings, job store, Celery producer, reaper."""
+    """The job service of one API process: settings, tokens, job store, Celery producer, reaper."""
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         settings.ensure_dirs()
+        self.tokens = Tokens.from_settings(settings)
         self.store = JobStore(settings.db_path, settings.jobs_dir)
+        self.admission = Admission(settings, self.store)
+        self._admit_lock = threading.Lock()  # a quota check and the records it counts, together
         self.celery = create_celery(settings)
         self._send_lock = threading.Lock()
         self.reaper = Reaper(self.store, settings, self.send, self.terminate)
@@ -136,16 +143,23 @@ class Service:
         check_inputs(spec, set(by_role))  # each role is the multipart field of the same name
         # The engine's one judge of images: format from the bytes (415), size from the header before
         # decoding (413), then a full decode (truncated or corrupt -> 422 now, not in the worker).
-        load_inputs({role: u.data for role, u in by_role.items()}, max_pixels=self.settings.max_input_pixels)
+        images = load_inputs(
+            {role: u.data for role, u in by_role.items()}, max_pixels=self.settings.max_input_pixels
+        )
+        shapes = {role: tuple(image.shape) for role, image in images.items()}
+        del images
+        params_out = {**model.model_dump(mode="json"), **size}
+        self.admission.check_job(method, params_out, size, shapes)
         return JobRequest(
             method=method,
-            params={**model.model_dump(mode="json"), **size},
+            params=params_out,
             seed=int(seed),
             # stored under a name from the sniffed format, never the client's (no evil.html)
             inputs={
                 role: (f"{role}.{FORMAT_FILES[sniff_format(u.data) or 'PNG'][0]}", u.data)
                 for role, u in by_role.items()
             },
+            shapes=shapes,
         )
 
     def _validate_size(self, spec: MethodSpec, size: dict[str, Any]) -> dict[str, int]:
@@ -164,14 +178,17 @@ class Service:
     def manifest(self, req: JobRequest) -> dict[str, Any]:
         return {"method": req.method, "params": req.params, "seed": req.seed, "texsynth": synth_version}
 
-    def submit(self, req: JobRequest) -> JobRecord:
-        job = self.store.create_job(
-            method=req.method,
-            params=req.params,
-            seed=req.seed,
-            inputs=req.inputs,
-            manifest=self.manifest(req),
-        )
+    def submit(self, req: JobRequest, principal: Principal = ANONYMOUS) -> JobRecord:
+        with self._admit_lock:
+            self.admission.check_queue(principal.name, 1)
+            job = self.store.create_job(
+                method=req.method,
+                params=req.params,
+                seed=req.seed,
+                inputs=req.inputs,
+                manifest={**self.manifest(req), "owner": principal.name},
+                owner=principal.name,
+            )
         self._queue([job.id])
         return self.store.get(job.id) or job
 
@@ -187,7 +204,7 @@ class Service:
             self.store.discard(job_ids, sweep_id)
             raise BrokerUnavailable(str(exc)) from exc
 
-    def submit_sweep(self, req: JobRequest, grid_json: str | dict) -> str:
+    def submit_sweep(self, req: JobRequest, grid_json: str | dict, principal: Principal = ANONYMOUS) -> str:
         """One job per point of the parameter grid (a Celery group); returns the sweep's id."""
         spec = self.method(req.method)
         grid = _parse_json(grid_json, "grid")
@@ -198,13 +215,8 @@ class Service:
         for name, values in grid.items():
             if not isinstance(values, list) or not values:
                 raise InvalidParameter(f"grid.{name}", values, "must be a non-empty list of values")
-        runs = 1
-        for values in grid.values():
-            runs *= len(values)
-        if runs > self.settings.max_sweep_runs:
-            raise InvalidParameter(
-                "grid", runs, f"{runs} runs is more than the limit of {self.settings.max_sweep_runs}"
-            )
+        runs = math.prod(len(values) for values in grid.values())
+        self.admission.check_sweep(runs, 0)
         points = []
         for combo in itertools.product(*grid.values()):
             point = dict(zip(grid.keys(), combo, strict=True))
@@ -219,31 +231,80 @@ class Service:
                 model = validate_params(spec.params_model, params)
             except InvalidParameter as exc:
                 raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
-            points.append({**model.model_dump(mode="json"), **size})
+            point_params = {**model.model_dump(mode="json"), **size}
+            self.admission.check_job(req.method, point_params, size, req.shapes, field_prefix="grid.")
+            points.append(point_params)
+        self.admission.check_sweep(runs, sum(math.prod(p[k] for k in SIZE_FIELDS if k in p) for p in points))
         sweep_id = uuid.uuid4().hex
-        job_ids = []
-        for params in points:
-            job = self.store.create_job(
-                method=req.method,
-                params=params,
-                seed=req.seed,
-                inputs=req.inputs,
-                sweep_id=sweep_id,
-                manifest={**self.manifest(req), "params": params, "sweep_id": sweep_id},
-            )
-            job_ids.append(job.id)
-        self.store.create_sweep(sweep_id, req.method, grid, req.params, job_ids)
+        job_ids: list[str] = []
+        with self._admit_lock:
+            self.admission.check_queue(principal.name, runs)
+            for params in points:
+                job = self.store.create_job(
+                    method=req.method,
+                    params=params,
+                    seed=req.seed,
+                    inputs=req.inputs,
+                    sweep_id=sweep_id,
+                    manifest={
+                        **self.manifest(req),
+                        "params": params,
+                        "sweep_id": sweep_id,
+                        "owner": principal.name,
+                    },
+                    owner=principal.name,
+                    share_inputs_of=job_ids[0] if job_ids else None,  # the upload stored once
+                )
+                job_ids.append(job.id)
+            self.store.create_sweep(sweep_id, req.method, grid, req.params, job_ids, owner=principal.name)
         self._queue(job_ids, sweep_id)
         return sweep_id
+
+    # -- reporting ----------------------------------------------------------------------------------
+
+    # -- ownership ----------------------------------------------------------------------------------
+
+    def visible_job(self, job_id: str, principal: Principal) -> JobRecord | None:
+        """The job, if ``principal`` may see it (another owner's job is as good as absent: 404)."""
+        job = self.store.get(job_id)
+        if job is None or not principal.can_see(job.owner, job.id):
+            return None
+        return job
+
+    def visible_sweep(self, sweep_id: str, principal: Principal) -> dict[str, Any] | None:
+        sweep = self.store.get_sweep(sweep_id)
+        if sweep is None or principal.job is not None or not principal.can_see(sweep.get("owner")):
+            return None
+        return sweep
+
+    def remove(self, job_id: str) -> str:
+        """``DELETE /api/jobs/{id}``: cancel a queued or running job; delete a finished one (its files
+        and its record). Returns what happened: ``cancelled``, ``cancelling`` or ``deleted``."""
+        job = self.store.get(job_id)
+        if job is not None and job.state in TERMINAL:
+            self.store.delete(job_id)  # (False only if another request deleted it first)
+            return "deleted"
+        job = self.store.request_cancel(job_id)
+        if job is not None and job.state == "cancelled":
+            # A queued message is dropped by the workers; if revoking fails, the record says cancelled
+            # and a delivered message skips the job anyway.
+            with contextlib.suppress(Exception):
+                self.celery.control.revoke(job_id)
+            return "cancelled"
+        return "cancelling"
 
     # -- reporting ----------------------------------------------------------------------------------
 
     def job_public(self, job: JobRecord) -> dict[str, Any]:
         base = f"/api/jobs/{job.id}"
         end = job.finished or (time.time() if job.state == "running" else None)
+        access = self.tokens.sign(job.id)
+        signed = f"?access={access}" if access else ""
         preview = None
         if job.preview_at and job.state == "running":
-            preview = f"{base}/preview.png?t={int(job.preview_at * 1000)}"
+            preview = f"{base}/preview.png?t={int(job.preview_at * 1000)}" + (
+                f"&access={access}" if access else ""
+            )
         return {
             "id": job.id,
             "url": base,
@@ -263,10 +324,12 @@ class Service:
             "elapsed": (end - job.started) if (end and job.started) else None,
             "timings": job.timings,
             "metrics": job.metrics,
-            "artifacts": {name: f"{base}/artifacts/{name}" for name in job.artifacts},
-            "inputs": {role: f"{base}/inputs/{role}" for role in job.inputs},
+            "artifacts": {name: f"{base}/artifacts/{name}{signed}" for name in job.artifacts},
+            "inputs": {role: f"{base}/inputs/{role}{signed}" for role in job.inputs},
             "preview": preview,
             "sweep_id": job.sweep_id,
+            "owner": job.owner,
+            "access": access,
         }
 
     def sweep_public(self, sweep: dict[str, Any]) -> dict[str, Any]:
@@ -279,7 +342,13 @@ class Service:
             flat = _flatten(job.metrics)
             metric_names += [k for k in flat if k not in metric_names]
             rows.append(
-                {"job": job.id, "state": job.state, **{k: job.params.get(k) for k in sweep["grid"]}, **flat}
+                {
+                    "job": job.id,
+                    "state": job.state,
+                    **{k: job.params.get(k) for k in sweep["grid"]},
+                    **flat,
+                    "access": self.tokens.sign(job.id),  # not a column: for the page's thumbnails
+                }
             )
         active = counts.get("queued", 0) + counts.get("running", 0)
         return {

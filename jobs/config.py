@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 __all__ = ["Settings"]
 
 _ENV_PREFIX = "TEXSYNTH_"
+_LISTS = ("extra_methods", "allowed_origins")
 
 
 class Settings(BaseModel):
@@ -30,7 +31,32 @@ class Settings(BaseModel):
     max_body_bytes: int = Field(32 * 2**20, description="largest accepted request body (HTTP 413 above)")
     max_input_pixels: int = Field(4096 * 4096, description="largest accepted exemplar/constraint (413 above)")
     max_output_pixels: int = Field(4096 * 4096, description="largest output width*height(*depth)")
-    max_sweep_runs: int = Field(64, description="largest parameter grid of one sweep")
+    max_sweep_runs: int = Field(64, description="largest parameter grid of one sweep (runs)")
+    # Admission control (app/admission.py): per owner (token name; everyone together without tokens).
+    max_queued_per_token: int = Field(
+        100, description="queued + running jobs one token may have at once (HTTP 429 above)"
+    )
+    max_sweep_pixels: int = Field(
+        4 * 4096 * 4096, description="output pixels (voxels) of all runs of one sweep together"
+    )
+    max_job_memory_bytes: int = Field(
+        4 * 2**30, description="largest estimated working memory of one job (HTTP 422 above)"
+    )
+    max_input_output_ratio: int = Field(
+        64, description="an exemplar above 512x512 may have at most this many times the output's pixels"
+    )
+    # Tokens and ownership (app/auth.py). No tokens: one anonymous owner, the API binds to loopback.
+    api_tokens: str | None = Field(None, repr=False, description="comma-separated name:token[:admin] entries")
+    api_token_file: Path | None = Field(None, description="a file of name:token[:admin] lines")
+    admin_token: str | None = Field(None, repr=False, description="a token that sees and manages every job")
+    allowed_origins: tuple[str, ...] = Field(
+        (), description="other origins (scheme://host[:port]) whose pages may POST/DELETE (a proxy)"
+    )
+    signed_url_seconds: int = Field(
+        3600, description="lifetime of the signed file URLs (artifacts, inputs) given to token holders"
+    )
+    # Retention: the reaper deletes finished jobs (files and records) this long after they ended.
+    retention_days: float = Field(30.0, description="days a finished job is kept; 0 keeps jobs forever")
     # Worker: long CPU tasks, at-least-once delivery (DESIGN.md "Queue and storage").
     soft_time_limit: int = Field(1800, description="seconds before the job is asked to stop (fails)")
     hard_time_limit: int = Field(1860, description="seconds before the worker child is killed")
@@ -55,7 +81,7 @@ class Settings(BaseModel):
             raw = env.get(_ENV_PREFIX + name.upper())
             if raw is not None and raw != "":
                 values[name] = (
-                    tuple(m for m in raw.split(",") if m.strip()) if name == "extra_methods" else raw
+                    tuple(m.strip() for m in raw.split(",") if m.strip()) if name in _LISTS else raw
                 )
         if env.get("REDIS_URL"):
             values.setdefault("redis_url", env["REDIS_URL"])
@@ -71,7 +97,9 @@ class Settings(BaseModel):
                 if value:
                     env["REDIS_URL"] = value
                 continue
-            if name == "extra_methods":
+            if value is None:
+                continue
+            if name in _LISTS:
                 value = ",".join(value)
             env[_ENV_PREFIX + name.upper()] = str(value)
         return env

@@ -45,6 +45,15 @@ def create_celery(settings: Settings) -> Celery:
     app.conf.update(
         broker_transport_options=transport,
         broker_connection_retry_on_startup=True,
+        # A broker outage (Redis restarted, network gone) must not end the worker (issue 14): the
+        # consumer reconnects with back-off for as long as it takes; running jobs go on (their
+        # records are in the job store, not in the broker) and a result that cannot be stored is
+        # retried a few times, then dropped (the service never reads Celery's results).
+        broker_connection_retry=True,
+        broker_connection_max_retries=None,
+        worker_cancel_long_running_tasks_on_connection_loss=False,
+        result_backend_always_retry=True,
+        result_backend_max_retries=5,
         task_default_queue=QUEUE,
         task_acks_late=True,  # a job's message is acknowledged only when its run ended ...
         task_reject_on_worker_lost=True,  # ... and re-queued if the worker child died under it

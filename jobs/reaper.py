@@ -8,11 +8,16 @@ taken by a worker main process that died (the filesystem transport loses it) is 
 is a queued job that no worker received within ``resend_seconds`` while the workers have room (its
 message was lost or set aside as unreadable): the embedded queue must not lose work. A cancel that
 the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
+
+Every minute it also applies the retention period (:func:`purge_expired`): a job that ended more than
+``retention_days`` ago is deleted, files and record, like ``DELETE /api/jobs/{id}``; and a job folder
+left without a record for an hour (a run that outlived its job's deletion) is removed.
 """
 
 from __future__ import annotations
 
 import logging
+import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -20,7 +25,10 @@ from collections.abc import Callable
 from jobs.config import Settings
 from jobs.store import JobRecord, JobStore, pid_alive
 
-__all__ = ["Reaper", "reap_once", "stranded"]
+__all__ = ["Reaper", "purge_expired", "reap_once", "stranded"]
+
+#: A job folder without a record this old (seconds) is left over, never a job being created.
+ORPHAN_SECONDS = 3600.0
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +122,23 @@ def reap_once(
     return actions
 
 
+def purge_expired(store: JobStore, settings: Settings, now: float | None = None) -> list[str]:
+    """Delete the jobs that ended more than ``retention_days`` ago (none if it is 0) and left-over
+    job folders without a record; returns the ids (folder names) removed."""
+    now = time.time() if now is None else now
+    removed = []
+    if settings.retention_days > 0:
+        for job_id in store.expired(now - settings.retention_days * 86400.0):
+            if store.delete(job_id):
+                removed.append(job_id)
+    for folder in store.orphan_folders(now - ORPHAN_SECONDS):
+        shutil.rmtree(folder, ignore_errors=True)
+        removed.append(folder.name)
+    if removed:
+        log.warning("reaper: %d finished job(s) past the retention period deleted", len(removed))
+    return removed
+
+
 class Reaper(threading.Thread):
     """Calls :func:`reap_once` every ``interval`` seconds until :meth:`stop`."""
 
@@ -124,17 +149,23 @@ class Reaper(threading.Thread):
         send: Callable[[str], None],
         terminate: Callable[[str], None],
         interval: float = 1.0,
+        purge_interval: float = 60.0,
     ) -> None:
         super().__init__(name="texsynth-reaper", daemon=True)
         self.store, self.settings, self.send, self.terminate = store, settings, send, terminate
         self.interval = interval
+        self.purge_interval = purge_interval
         self.terminated: set[str] = set()
         self._stop_event = threading.Event()
 
     def run(self) -> None:
+        next_purge = 0.0
         while not self._stop_event.wait(self.interval):
             try:
                 reap_once(self.store, self.settings, self.send, self.terminate, self.terminated)
+                if time.monotonic() >= next_purge:
+                    next_purge = time.monotonic() + self.purge_interval
+                    purge_expired(self.store, self.settings)
             except Exception:  # keep reaping; a broker hiccup must not end the thread
                 log.exception("reaper pass failed")
 

@@ -15,7 +15,8 @@ cancelled) can never overwrite the state or the artifacts of another.
 
 Each job's folder::
 
-    jobs/<id>/inputs/exemplar.<ext>   the uploaded bytes, unchanged
+    jobs/<id>/inputs/exemplar.<ext>   the uploaded bytes, unchanged (a sweep's runs share one file:
+                                      hard links)
     jobs/<id>/manifest.json           method, parameters, seed, versions (written at submission)
     jobs/<id>/preview.png             small preview of the running synthesis (replaced atomically)
     jobs/<id>/.run-<token>/           one run's artifacts while it writes them
@@ -71,7 +72,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     preview_at REAL,
     artifacts TEXT NOT NULL DEFAULT '[]',
     timings TEXT NOT NULL DEFAULT '{}',
-    metrics TEXT NOT NULL DEFAULT '{}'
+    metrics TEXT NOT NULL DEFAULT '{}',
+    owner TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);
 CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created);
@@ -82,7 +84,8 @@ CREATE TABLE IF NOT EXISTS sweeps (
     method TEXT NOT NULL,
     grid TEXT NOT NULL,
     params TEXT NOT NULL,
-    job_ids TEXT NOT NULL
+    job_ids TEXT NOT NULL,
+    owner TEXT
 );
 CREATE TABLE IF NOT EXISTS workers (
     name TEXT PRIMARY KEY,
@@ -126,6 +129,7 @@ class JobRecord:
     artifacts: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
+    owner: str | None = None  # the token name that submitted it (None: made without tokens)
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> JobRecord:
@@ -163,6 +167,12 @@ class JobStore:
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
             db.executescript(_SCHEMA)
+            for table in ("jobs", "sweeps"):  # records made before owners existed
+                columns = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
+                if "owner" not in columns:
+                    with contextlib.suppress(sqlite3.OperationalError):  # another process added it
+                        db.execute(f"ALTER TABLE {table} ADD COLUMN owner TEXT")
+            db.execute("CREATE INDEX IF NOT EXISTS jobs_owner ON jobs(owner, state)")
 
     # -- plumbing -------------------------------------------------------------------------------
 
@@ -203,11 +213,17 @@ class JobStore:
         manifest: dict[str, Any],
         sweep_id: str | None = None,
         job_id: str | None = None,
+        owner: str | None = None,
+        share_inputs_of: str | None = None,
     ) -> JobRecord:
         """Store the inputs and manifest in a new job folder, then insert the record as ``queued``.
 
         ``inputs`` maps a role (``exemplar``, ``constraint``) to ``(file name, bytes)``. The folder is
         complete before the record exists, so a worker never sees a job without its inputs.
+        ``share_inputs_of`` names a job (of the same sweep) whose stored inputs are the same bytes:
+        they are hard-linked instead of written again, so a sweep stores its upload once. Nothing
+        ever writes into an input file (a replacement would be a new file), and deleting one job
+        removes only its own link, so the runs share the bytes safely.
         """
         job_id = job_id or uuid.uuid4().hex
         folder = self.job_dir(job_id)
@@ -216,15 +232,19 @@ class JobStore:
         for role, (filename, data) in inputs.items():
             suffix = Path(filename).suffix.lower()[:8] if filename else ""
             names[role] = f"{role}{suffix}"
-            atomic_write_bytes(folder / "inputs" / names[role], data)
+            target = folder / "inputs" / names[role]
+            shared = share_inputs_of and self.job_dir(share_inputs_of) / "inputs" / names[role]
+            if not shared or not _link(shared, target):
+                atomic_write_bytes(target, data)
         now = time.time()
         manifest = {**manifest, "job_id": job_id, "inputs": names, "created": now}
         atomic_write_json(folder / "manifest.json", manifest)
         with self._connect() as db:
             db.execute(
-                "INSERT INTO jobs (id, created, method, params, seed, inputs, sweep_id, state, updated)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, 'queued', ?)",
-                (job_id, now, method, json.dumps(params), seed, json.dumps(names), sweep_id, now),
+                "INSERT INTO jobs"
+                " (id, created, method, params, seed, inputs, sweep_id, state, updated, owner)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
+                (job_id, now, method, json.dumps(params), seed, json.dumps(names), sweep_id, now, owner),
             )
         record = self.get(job_id)
         assert record is not None
@@ -236,10 +256,19 @@ class JobStore:
         return None if row is None else JobRecord.from_row(row)
 
     def list(
-        self, *, state: str | None = None, sweep_id: str | None = None, limit: int = 50, offset: int = 0
+        self,
+        *,
+        state: str | None = None,
+        sweep_id: str | None = None,
+        owner: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
     ) -> tuple[list[JobRecord], int]:
-        """Jobs, newest first, and the total number matching the filters."""
+        """Jobs, newest first, and the total number matching the filters (``owner``: one owner's)."""
         where, args = [], []
+        if owner is not None:
+            where.append("owner = ?")
+            args.append(owner)
         if state:
             where.append("state = ?")
             args.append(state)
@@ -258,6 +287,13 @@ class JobStore:
     def count(self) -> int:
         with self._connect() as db:
             return db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
+
+    def count_active(self, owner: str | None) -> int:
+        """Queued and running jobs of ``owner`` (``None``: those made without a token)."""
+        with self._connect() as db:
+            return db.execute(
+                "SELECT COUNT(*) FROM jobs WHERE owner IS ? AND state IN ('queued', 'running')", (owner,)
+            ).fetchone()[0]
 
     # -- jobs: the worker's side ----------------------------------------------------------------
 
@@ -413,6 +449,47 @@ class JobStore:
             if sweep_id is not None:
                 db.execute("DELETE FROM sweeps WHERE id = ?", (sweep_id,))
 
+    def delete(self, job_id: str) -> bool:
+        """Forget a finished job: its record, its folder (inputs, artifacts), and its sweep's record
+        once the sweep has no job left. ``False`` if the job is not finished (or not there)."""
+        with self._transaction() as db:
+            row = db.execute(
+                "SELECT sweep_id FROM jobs WHERE id = ? AND state IN ('succeeded', 'failed', 'cancelled')",
+                (job_id,),
+            ).fetchone()
+            if row is None:
+                return False
+            db.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
+            sweep_id = row["sweep_id"]
+            if sweep_id and not db.execute("SELECT 1 FROM jobs WHERE sweep_id = ?", (sweep_id,)).fetchone():
+                db.execute("DELETE FROM sweeps WHERE id = ?", (sweep_id,))
+        shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+        return True
+
+    def expired(self, finished_before: float, limit: int = 500) -> list[str]:
+        """Ids of jobs that ended before ``finished_before`` (oldest first, at most ``limit``)."""
+        with self._connect() as db:
+            rows = db.execute(
+                "SELECT id FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished < ?"
+                " ORDER BY finished LIMIT ?",
+                (finished_before, limit),
+            ).fetchall()
+        return [r["id"] for r in rows]
+
+    def orphan_folders(self, older_than: float) -> list[Path]:
+        """Job folders without a record, untouched since ``older_than`` (a run that outlived its
+        job's deletion may leave one); fresh folders are skipped, their record may be on its way."""
+        with self._connect() as db:
+            known = {r[0] for r in db.execute("SELECT id FROM jobs")}
+        found = []
+        for folder in self.jobs_dir.iterdir():
+            if folder.name in known or not folder.is_dir():
+                continue
+            with contextlib.suppress(OSError):
+                if folder.stat().st_mtime < older_than:
+                    found.append(folder)
+        return found
+
     def requeue(self, job_id: str, message: str) -> bool:
         """A run was lost: put the job back to ``queued`` (the caller sends a new message)."""
         now = time.time()
@@ -432,11 +509,28 @@ class JobStore:
 
     # -- sweeps -------------------------------------------------------------------------------------
 
-    def create_sweep(self, sweep_id: str, method: str, grid: dict, params: dict, job_ids: list[str]) -> None:
+    def create_sweep(
+        self,
+        sweep_id: str,
+        method: str,
+        grid: dict,
+        params: dict,
+        job_ids: list[str],
+        owner: str | None = None,
+    ) -> None:
         with self._connect() as db:
             db.execute(
-                "INSERT INTO sweeps (id, created, method, grid, params, job_ids) VALUES (?, ?, ?, ?, ?, ?)",
-                (sweep_id, time.time(), method, json.dumps(grid), json.dumps(params), json.dumps(job_ids)),
+                "INSERT INTO sweeps (id, created, method, grid, params, job_ids, owner)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (
+                    sweep_id,
+                    time.time(),
+                    method,
+                    json.dumps(grid),
+                    json.dumps(params),
+                    json.dumps(job_ids),
+                    owner,
+                ),
             )
 
     def get_sweep(self, sweep_id: str) -> dict[str, Any] | None:
@@ -470,3 +564,12 @@ class JobStore:
             for r in rows
             if now - r["heartbeat"] <= fresh_within and (r["host"] != self.host or pid_alive(r["pid"]))
         ]
+
+
+def _link(source: Path, target: Path) -> bool:
+    """Hard-link ``source`` as ``target``; ``False`` (the caller writes a copy) if it cannot."""
+    try:
+        os.link(source, target)
+    except OSError:
+        return False
+    return True

@@ -20,8 +20,82 @@ let blinkTimer = null; // the compare page's blink
 let relayout = null; // the current page's viewer layout, re-run when the window resizes
 let generation = 0; // incremented on every route change: a stale page's async work stops
 
+// -- the API token (when the service has tokens) ---------------------------------------------------
+// Kept in sessionStorage (this tab's session only; tabs opened from the page inherit it), or in
+// localStorage when "remember" is ticked. It is sent only as an Authorization header by fetch; it is
+// never put in a URL. Images and download links use the per-job signed URLs the API gives instead.
+const TOKEN_KEY = "texsynth-token";
+let askingToken = null; // one prompt at a time, however many requests got a 401
+
+const token = () => sessionStorage.getItem(TOKEN_KEY) || localStorage.getItem(TOKEN_KEY) || "";
+
+function forgetToken() {
+  sessionStorage.removeItem(TOKEN_KEY);
+  localStorage.removeItem(TOKEN_KEY);
+  showTokenState();
+}
+
+function showTokenState() {
+  const button = $("#token-forget");
+  if (button) button.hidden = !token();
+}
+
+function askToken(message) {
+  if (askingToken) return askingToken;
+  const dialog = $("#token-dialog");
+  $("#token-message").textContent = message;
+  $("#token-input").value = "";
+  askingToken = new Promise((resolve) => {
+    const form = $("#token-form");
+    form.onsubmit = (event) => {
+      event.preventDefault();
+      const value = $("#token-input").value.trim();
+      if (!value) return;
+      forgetToken();
+      ($("#token-remember").checked ? localStorage : sessionStorage).setItem(TOKEN_KEY, value);
+      dialog.close();
+      askingToken = null;
+      showTokenState();
+      resolve(value);
+    };
+  });
+  dialog.oncancel = (event) => event.preventDefault(); // nothing works without it: Escape does not dismiss
+  dialog.showModal();
+  $("#token-input").focus();
+  return askingToken;
+}
+
+// fetch with the token; a 401 asks for a (new) token and tries again
+async function authFetch(path, options = {}) {
+  for (;;) {
+    const headers = new Headers(options.headers || {});
+    if (token()) headers.set("Authorization", `Bearer ${token()}`);
+    const resp = await fetch(path, { ...options, headers });
+    if (resp.status !== 401) return resp;
+    const body = await resp.clone().json().catch(() => ({}));
+    await askToken(token() ? `That token was refused: ${body.detail || "HTTP 401"}` : "This service needs an API token.");
+  }
+}
+
+// a download link of an API URL that needs the token (the sweep's CSV): fetched, then saved
+function tokenDownload(event) {
+  if (!token()) return; // no tokens: the plain link works
+  event.preventDefault();
+  const link = event.currentTarget;
+  authFetch(link.href).then((resp) => resp.blob()).then((blob) => {
+    const url = URL.createObjectURL(blob);
+    const a = el("a", { href: url, download: link.getAttribute("download") || "" });
+    document.body.append(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(url), 10000);
+  });
+}
+
+const signed = (url, access) => (access ? `${url}${url.includes("?") ? "&" : "?"}access=${access}` : url);
+
 async function api(path, options = {}) {
-  const resp = await fetch(path, options);
+  const resp = await authFetch(path, options);
   const body = resp.headers.get("content-type")?.includes("json") ? await resp.json() : await resp.text();
   if (!resp.ok) {
     const err = new Error(typeof body === "object" ? body.detail : `HTTP ${resp.status}: ${body}`);
@@ -231,7 +305,7 @@ async function fillFromJob(id) {
   for (const [role, url] of Object.entries(job.inputs)) {
     const input = document.getElementById(role);
     try {
-      const resp = await fetch(url);
+      const resp = await authFetch(url);
       if (!resp.ok) throw new Error(`HTTP ${resp.status}`);
       const blob = await resp.blob();
       if (!input.isConnected) return;
@@ -582,7 +656,7 @@ function showVolumeViewer(job) {
     const plane = $("#slice-plane").value;
     const index = Math.min(parseInt(slider.value, 10), count[plane] - 1);
     $("#slice-label").textContent = `${axis[plane]} = ${index} of ${count[plane] - 1}`;
-    $("#slice-image").src = `/api/jobs/${job.id}/slices/${plane}/${index}.png`;
+    $("#slice-image").src = signed(`/api/jobs/${job.id}/slices/${plane}/${index}.png`, job.access);
     $("#slice-caption").textContent = `${plane} slice at ${axis[plane]} = ${index}`;
   };
   const reset = () => {
@@ -877,6 +951,12 @@ async function renderSweep(ids) {
   await poll();
 }
 
+function csvLink(sweep, text) {
+  const a = el("a", { href: `${sweep.url}?format=csv`, download: `sweep-${short(sweep.id)}.csv`, class: "csv", text });
+  a.addEventListener("click", tokenDownload);
+  return a;
+}
+
 function drawSweep(sweeps, seeds, g) {
   const first = sweeps[0];
   const params = Object.keys(first.grid);
@@ -895,8 +975,7 @@ function drawSweep(sweeps, seeds, g) {
   $("#sweep-progress").value = rows.length ? ended / rows.length : 0;
   $("#sweep-progress-text").textContent = `${ended} of ${rows.length} runs ended`;
   $("#sweep-csv").replaceChildren("CSV: ", ...sweeps.flatMap((s, i) => [i ? " · " : "",
-    el("a", { href: `${s.url}?format=csv`, download: `sweep-${short(s.id)}.csv`, class: "csv",
-      text: sweeps.length > 1 ? `seed ${seeds[s.id] ?? "?"}` : "download the table" })]));
+    csvLink(s, sweeps.length > 1 ? `seed ${seeds[s.id] ?? "?"}` : "download the table")]));
 
   // the headline measures (summary.*) that any run has, in the glossary's order
   const columns = [...new Set(sweeps.flatMap((s) => s.columns))];
@@ -916,7 +995,7 @@ function drawSweep(sweeps, seeds, g) {
   $("#sweep-table tbody").replaceChildren(...rows.map((r) => {
     const name = `${params.map((p) => `${p} = ${r[p]}`).join(", ")}, seed ${r.seed}`;
     const thumb = r.state === "succeeded"
-      ? el("a", { href: `#/jobs/${r.job}` }, el("img", { class: "thumb", src: `/api/jobs/${r.job}/artifacts/output.png`, alt: `output of ${name}` }))
+      ? el("a", { href: `#/jobs/${r.job}` }, el("img", { class: "thumb", src: signed(`/api/jobs/${r.job}/artifacts/output.png`, r.access), alt: `output of ${name}` }))
       : el("a", { href: `#/jobs/${r.job}`, text: short(r.job) });
     return el("tr", {}, el("td", {}, thumb), el("td", { text: r.seed ?? "" }),
       ...params.map((p) => el("td", { text: String(r[p]) })),
@@ -1073,4 +1152,9 @@ async function health() {
 
 window.addEventListener("hashchange", route);
 window.addEventListener("resize", () => relayout && relayout());
-window.addEventListener("DOMContentLoaded", () => { route(); health(); });
+window.addEventListener("DOMContentLoaded", () => {
+  $("#token-forget").addEventListener("click", () => { forgetToken(); route(); });
+  showTokenState();
+  route();
+  health();
+});

@@ -193,6 +193,23 @@ def redis_service(tmp_path_factory, redis_url) -> Iterator[Service]:
     service.stop()
 
 
+#: The token service's tokens (``texsynth serve`` with TEXSYNTH_API_TOKENS and an admin token).
+TOKENS = {"alice": "alice-live-token-0123456789", "bob": "bob-live-token-0123456789ab"}
+ADMIN_TOKEN = "admin-live-token-0123456789"
+
+
+@pytest.fixture(scope="session")
+def token_service(tmp_path_factory) -> Iterator[Service]:
+    """``texsynth serve`` on the embedded queue with tokens for alice and bob and an admin token."""
+    env = {
+        "TEXSYNTH_API_TOKENS": ",".join(f"{name}:{token}" for name, token in TOKENS.items()),
+        "TEXSYNTH_ADMIN_TOKEN": ADMIN_TOKEN,
+    }
+    service = Service(tmp_path_factory.mktemp("tokens") / "data", env, concurrency=1).start()
+    yield service
+    service.stop()
+
+
 @pytest.fixture(params=["embedded", "redis"])
 def service(request) -> Service:
     """Each test using this runs on both brokers."""

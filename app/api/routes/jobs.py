@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
 from functools import lru_cache
 from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Response, UploadFile
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, JSONResponse
 
-from app.api.deps import ServiceDep
-from app.schemas import ErrorPublic, JobPublic, JobsPublic
+from app.api.deps import PrincipalDep, ServiceDep
+from app.auth import Principal
+from app.schemas import DeletedPublic, ErrorPublic, JobPublic, JobsPublic
 from app.service import Upload
 from jobs.store import STATES
 from synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
@@ -19,10 +19,14 @@ from synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
 _ERRORS = {
+    401: {"model": ErrorPublic, "description": "no token, or one the service does not know (tokens set)"},
+    403: {"model": ErrorPublic, "description": "a browser's cross-origin request (CSRF) refused"},
     413: {"model": ErrorPublic, "description": "upload or image too large"},
     415: {"model": ErrorPublic, "description": "not an image format texsynth reads"},
     422: {"model": ErrorPublic, "description": "bad parameter or unusable image (the field is named)"},
+    429: {"model": ErrorPublic, "description": "the token's limit of queued jobs is reached"},
 }
+_NOT_FOUND = {404: {"model": ErrorPublic, "description": "no such job (or another token's)"}}
 
 
 def _plane_file(plane: str, fixed: str) -> Any:
@@ -66,6 +70,7 @@ UploadsDep = Annotated[list[Upload], Depends(read_uploads)]
 @router.post("", status_code=202, response_model=JobPublic, responses=_ERRORS)
 def submit_job(
     service: ServiceDep,
+    principal: PrincipalDep,
     response: Response,
     uploads: UploadsDep,
     method: Annotated[str, Form(min_length=1, description="a method name from GET /api/methods")],
@@ -76,7 +81,7 @@ def submit_job(
 ) -> dict:
     """Validate and queue a synthesis job; ``202`` with the job's URL in ``Location``."""
     request = service.validate(method, params, seed, uploads)
-    job = service.submit(request)
+    job = service.submit(request, principal)
     response.headers["Location"] = f"/api/jobs/{job.id}"
     return service.job_public(job)
 
@@ -84,50 +89,60 @@ def submit_job(
 @router.get("", response_model=JobsPublic)
 def list_jobs(
     service: ServiceDep,
+    principal: PrincipalDep,
     state: Annotated[str | None, Query(description=f"one of {', '.join(STATES)}")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
 ) -> dict:
-    """Jobs, newest first."""
+    """Jobs, newest first: the token's own (an admin's: everyone's)."""
     if state is not None and state not in STATES:
         raise HTTPException(422, f"state must be one of {', '.join(STATES)}, not {state!r}")
-    jobs, count = service.store.list(state=state, limit=limit, offset=offset)
+    jobs, count = service.store.list(state=state, owner=principal.owner_filter, limit=limit, offset=offset)
     return {"data": [service.job_public(j) for j in jobs], "count": count}
 
 
-def _job(service: ServiceDep, job_id: str):
-    job = service.store.get(job_id)
+def _job(service: ServiceDep, job_id: str, principal: Principal):
+    job = service.visible_job(job_id, principal)
     if job is None:
         raise HTTPException(404, f"no job with id {job_id!r}; list jobs with GET /api/jobs")
     return job
 
 
-@router.get("/{job_id}", response_model=JobPublic, responses={404: {"model": ErrorPublic}})
-def get_job(service: ServiceDep, job_id: str) -> dict:
+@router.get("/{job_id}", response_model=JobPublic, responses=_NOT_FOUND)
+def get_job(service: ServiceDep, principal: PrincipalDep, job_id: str) -> dict:
     """State, progress, timings, error message and artifact URLs of one job."""
-    return service.job_public(_job(service, job_id))
+    return service.job_public(_job(service, job_id, principal))
 
 
 @router.delete(
-    "/{job_id}", status_code=202, response_model=JobPublic, responses={404: {"model": ErrorPublic}}
+    "/{job_id}",
+    status_code=202,
+    response_model=JobPublic,
+    responses={
+        **_NOT_FOUND,
+        200: {"model": DeletedPublic, "description": "a finished job: its files and record are deleted"},
+        202: {"model": JobPublic, "description": "a queued or running job: cancelled (or being stopped)"},
+    },
 )
-def cancel_job(service: ServiceDep, job_id: str) -> dict:
-    """Cancel a queued or running job (a finished job is left as it is)."""
-    _job(service, job_id)
-    job = service.store.request_cancel(job_id)
-    assert job is not None
-    if job.state == "cancelled":
-        # A queued message is dropped by the workers; if revoking fails, the record says cancelled
-        # and a delivered message skips the job anyway.
-        with contextlib.suppress(Exception):
-            service.celery.control.revoke(job_id)
+def delete_job(service: ServiceDep, principal: PrincipalDep, job_id: str):
+    """Cancel a queued or running job (``202``, the job); delete a finished one (``200``): its inputs,
+    artifacts and record are gone. To delete a running job, DELETE it twice: cancel, then delete."""
+    _job(service, job_id, principal)
+    outcome = service.remove(job_id)
+    if outcome == "deleted":
+        return JSONResponse(
+            {"id": job_id, "state": "deleted", "message": "the job's files and record are deleted"}
+        )
+    job = service.store.get(job_id)
+    if job is None:  # deleted by a concurrent request
+        raise HTTPException(404, f"no job with id {job_id!r}; list jobs with GET /api/jobs")
     return service.job_public(job)
 
 
-@router.get("/{job_id}/artifacts/{name:path}", responses={404: {"model": ErrorPublic}})
-def get_artifact(service: ServiceDep, job_id: str, name: str) -> FileResponse:
+@router.get("/{job_id}/artifacts/{name:path}", responses=_NOT_FOUND)
+def get_artifact(service: ServiceDep, principal: PrincipalDep, job_id: str, name: str) -> FileResponse:
     """One artifact of a succeeded job (names are listed in the job's ``artifacts``)."""
-    job = _job(service, job_id)
+    job = _job(service, job_id, principal)
     if name not in job.artifacts:
         listed = ", ".join(job.artifacts) or f"none yet (the job is {job.state})"
         raise HTTPException(404, f"job {job_id} has no artifact {name!r}; artifacts: {listed}")
@@ -148,10 +163,10 @@ def _stack(path: str, mtime_ns: int) -> np.ndarray:
     "/{job_id}/slices/{plane}/{index}.png",
     responses={404: {"model": ErrorPublic}, 422: {"model": ErrorPublic}},
 )
-def get_slice(service: ServiceDep, job_id: str, plane: str, index: int) -> Response:
+def get_slice(service: ServiceDep, principal: PrincipalDep, job_id: str, plane: str, index: int) -> Response:
     """Slice ``index`` of a volume job's output in ``plane`` (``xy``: fixed z, ``xz``: fixed y,
     ``yz``: fixed x) as an 8-bit PNG, for the job page's slice viewer."""
-    job = _job(service, job_id)
+    job = _job(service, job_id, principal)
     if plane not in _PLANE_AXIS:
         raise HTTPException(422, f"plane must be one of {', '.join(_PLANE_AXIS)}, not {plane!r}")
     if "output.tiff" not in job.artifacts or job.params.get("depth") is None:
@@ -165,9 +180,10 @@ def get_slice(service: ServiceDep, job_id: str, plane: str, index: int) -> Respo
     return Response(data, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
-@router.get("/{job_id}/inputs/{role}", responses={404: {"model": ErrorPublic}})
-def get_input(service: ServiceDep, job_id: str, role: str) -> FileResponse:
-    job = _job(service, job_id)
+@router.get("/{job_id}/inputs/{role}", responses=_NOT_FOUND)
+def get_input(service: ServiceDep, principal: PrincipalDep, job_id: str, role: str) -> FileResponse:
+    """One stored input of the job, served with the image type sniffed from its bytes."""
+    job = _job(service, job_id, principal)
     if role not in job.inputs:
         raise HTTPException(404, f"job {job_id} has no {role!r} input; inputs: {', '.join(job.inputs)}")
     path = service.store.job_dir(job_id) / "inputs" / job.inputs[role]
@@ -177,10 +193,10 @@ def get_input(service: ServiceDep, job_id: str, role: str) -> FileResponse:
     return FileResponse(path, media_type=media_type)
 
 
-@router.get("/{job_id}/preview.png", responses={404: {"model": ErrorPublic}})
-def get_preview(service: ServiceDep, job_id: str) -> FileResponse:
+@router.get("/{job_id}/preview.png", responses=_NOT_FOUND)
+def get_preview(service: ServiceDep, principal: PrincipalDep, job_id: str) -> FileResponse:
     """A small preview of the running synthesis, when the method provides one."""
-    _job(service, job_id)
+    _job(service, job_id, principal)
     path = service.store.job_dir(job_id) / "preview.png"
     if not path.exists():
         raise HTTPException(404, "no preview yet")

@@ -8,7 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Form, HTTPException, Query, Response
 
-from app.api.deps import ServiceDep
+from app.api.deps import PrincipalDep, ServiceDep
 from app.api.routes.jobs import _ERRORS, UploadsDep
 from app.schemas import ErrorPublic, SweepPublic
 
@@ -18,6 +18,7 @@ router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
 @router.post("", status_code=202, response_model=SweepPublic, responses=_ERRORS)
 def submit_sweep(
     service: ServiceDep,
+    principal: PrincipalDep,
     response: Response,
     uploads: UploadsDep,
     method: Annotated[str, Form(min_length=1, description="a method name from GET /api/methods")],
@@ -29,7 +30,7 @@ def submit_sweep(
 ) -> dict:
     """One job per point of ``grid`` (the product of its lists), sharing the inputs and the seed."""
     request = service.validate(method, params, seed, uploads)
-    sweep_id = service.submit_sweep(request, grid)
+    sweep_id = service.submit_sweep(request, grid, principal)
     response.headers["Location"] = f"/api/sweeps/{sweep_id}"
     sweep = service.store.get_sweep(sweep_id)
     return service.sweep_public(sweep)
@@ -37,10 +38,13 @@ def submit_sweep(
 
 @router.get("/{sweep_id}", response_model=SweepPublic, responses={404: {"model": ErrorPublic}})
 def get_sweep(
-    service: ServiceDep, sweep_id: str, format: Annotated[str, Query(pattern="^(json|csv)$")] = "json"
+    service: ServiceDep,
+    principal: PrincipalDep,
+    sweep_id: str,
+    format: Annotated[str, Query(pattern="^(json|csv)$")] = "json",
 ):
     """The sweep's table: one row per run with its grid values and metrics (``?format=csv`` for CSV)."""
-    sweep = service.store.get_sweep(sweep_id)
+    sweep = service.visible_sweep(sweep_id, principal)
     if sweep is None:
         raise HTTPException(404, f"no sweep with id {sweep_id!r}")
     public = service.sweep_public(sweep)

@@ -1,0 +1,152 @@
+"""Admission control in one place: what the service takes on before anything is stored or queued.
+
+:class:`Admission` is asked by :class:`app.service.Service` after a submission's parameters and images
+were validated (the engine's own checks: finite numbers, sizes, formats):
+
+- **the job's working memory**, estimated from the method, its parameters, the output size and the
+  decoded inputs, against ``TEXSYNTH_MAX_JOB_MEMORY_BYTES`` (422, naming the parameter that drives
+  it). The estimate is coarse and generous on purpose: a generic term (float32 working copies of
+  inputs and output: pyramids, features, distances, tensor maps) plus the terms that are known to
+  explode: a rotated dictionary's copies (``angular_step``) and its k-coherence sets. The engine
+  still checks the k-coherence sets itself in the worker (``synth.methods.arbitrary_shape``); here
+  the same bound is applied before queueing, so the person gets the 422 at once;
+- **an exemplar much larger than the output** (422): above 512x512 pixels an exemplar may have at
+  most ``TEXSYNTH_MAX_INPUT_OUTPUT_RATIO`` times the output's pixels (a 4096^2 exemplar for a 64^2
+  output spends minutes loading for nothing);
+- **a sweep's size**: runs (``TEXSYNTH_MAX_SWEEP_RUNS``) and output pixels of all runs together
+  (``TEXSYNTH_MAX_SWEEP_PIXELS``), 422;
+- **the owner's queue**: queued + running jobs per token (``TEXSYNTH_MAX_QUEUED_PER_TOKEN``), 429.
+  Without tokens every client is the one anonymous owner, so the limit caps the whole queue.
+
+Every refusal names the limit, the setting that raises it, and what to change.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from fastapi import HTTPException
+
+from jobs.config import Settings
+from jobs.store import JobStore
+from synth.errors import InvalidInput, InvalidParameter
+
+__all__ = ["Admission", "estimate_memory"]
+
+#: Bytes of working memory per input pixel or output element, the generic term (float32 arrays:
+#: the image and its pyramid, feature and distance buffers, tensor fields and the rendered maps).
+GENERIC_BYTES_PER_ELEMENT = 48
+#: Exemplars up to this many pixels are always accepted, whatever the output's size.
+SMALL_EXEMPLAR = 512 * 512
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB"
+
+
+def estimate_memory(
+    params: Mapping[str, Any], size: Mapping[str, int], shapes: Mapping[str, Sequence[int]]
+) -> tuple[int, str, str]:
+    """``(bytes, the parameter that drives them, why)``: a generous estimate of a job's working memory.
+
+    ``shapes`` are the decoded inputs' array shapes by role, ``size`` the output's sides.
+    """
+    out = math.prod(size.values())
+    inputs = sum(math.prod(s[:2]) for s in shapes.values())
+    total = GENERIC_BYTES_PER_ELEMENT * (out + inputs)
+    driver, why = ("width", f"the output of {out} elements and {inputs} input pixels")
+    step = params.get("angular_step")
+    exemplar = shapes.get("exemplar")
+    if isinstance(step, int | float) and step > 0 and exemplar is not None:
+        # A rotated dictionary (synth.analysis.rotation): M copies, each on a square tile of the
+        # exemplar's diagonal, holding the image, its tensors and a mask, plus its features and pyramid.
+        rotations = round(360.0 / step)
+        h, w = exemplar[:2]
+        channels = exemplar[2] if len(exemplar) > 2 else 1
+        side = math.ceil(math.hypot(h, w)) + 4
+        dictionary = rotations * side * side * (channels + 4) * 4 * 2
+        if params.get("k", 0) and params.get("search") != "exact":
+            ks = min(int(params.get("neighbourhood_size", 9)), 9)
+            dictionary += rotations * h * w * ks * ks * (channels + 3) * 12  # the engine's k-set bound
+        total += dictionary
+        if dictionary > out * GENERIC_BYTES_PER_ELEMENT:
+            driver, why = (
+                "angular_step",
+                f"{rotations} rotated copies of the {w}x{h} exemplar (angular_step={step:g})",
+            )
+    return int(total), driver, why
+
+
+class Admission:
+    """The service's limits, applied to one submission (see the module's docstring)."""
+
+    def __init__(self, settings: Settings, store: JobStore) -> None:
+        self.settings = settings
+        self.store = store
+
+    def check_job(
+        self,
+        method: str,
+        params: Mapping[str, Any],
+        size: Mapping[str, int],
+        shapes: Mapping[str, Sequence[int]],
+        *,
+        field_prefix: str = "",
+    ) -> None:
+        """Memory and exemplar-to-output checks of one run; raises the engine's 422 errors."""
+        limit = self.settings.max_job_memory_bytes
+        need, driver, why = estimate_memory(params, size, shapes)
+        if need > limit:
+            raise InvalidParameter(
+                field_prefix + driver,
+                params.get(driver, size.get(driver)),
+                f"{method} with these settings would need about {_gib(need)} of memory ({why}), more than "
+                f"this service's limit of {_gib(limit)} per job (TEXSYNTH_MAX_JOB_MEMORY_BYTES); "
+                "ask for a smaller output, a smaller exemplar or a coarser setting",
+            )
+        out = math.prod(v for k, v in size.items() if k != "depth")
+        ratio = self.settings.max_input_output_ratio
+        for role, shape in shapes.items():
+            pixels = math.prod(shape[:2])
+            if role.startswith("exemplar") and pixels > SMALL_EXEMPLAR and pixels > ratio * out:
+                raise InvalidInput(
+                    role,
+                    f"the {shape[1]}x{shape[0]} {role} has {pixels / out:.0f} times the pixels of the "
+                    f"{size['width']}x{size['height']} output; at most {ratio} times is accepted for "
+                    f"exemplars above 512x512 (TEXSYNTH_MAX_INPUT_OUTPUT_RATIO): crop or downscale the "
+                    "exemplar, or ask for a larger output",
+                )
+
+    def check_sweep(self, runs: int, pixels: int) -> None:
+        """A sweep's number of runs and all its runs' output pixels together (422)."""
+        if runs > self.settings.max_sweep_runs:
+            raise InvalidParameter(
+                "grid",
+                runs,
+                f"{runs} runs is more than the limit of {self.settings.max_sweep_runs} runs per sweep "
+                "(TEXSYNTH_MAX_SWEEP_RUNS); sweep fewer values",
+            )
+        if pixels > self.settings.max_sweep_pixels:
+            raise InvalidParameter(
+                "grid",
+                runs,
+                f"the {runs} runs make {pixels} output pixels together, more than the limit of "
+                f"{self.settings.max_sweep_pixels} per sweep (TEXSYNTH_MAX_SWEEP_PIXELS); "
+                "sweep fewer values or ask for a smaller output",
+            )
+
+    def check_queue(self, owner: str | None, new_jobs: int) -> None:
+        """The owner's queued + running jobs, with ``new_jobs`` more, within the limit (else 429)."""
+        limit = self.settings.max_queued_per_token
+        active = self.store.count_active(owner)
+        if active + new_jobs > limit:
+            who = f"token '{owner}'" if owner else "this service (no tokens: one queue for everyone)"
+            room = max(0, limit - active)
+            raise HTTPException(
+                429,
+                f"too many jobs queued: {who} has {active} queued or running, and at most {limit} are "
+                f"allowed (TEXSYNTH_MAX_QUEUED_PER_TOKEN); this submission adds {new_jobs}, room for "
+                f"{room}. Wait for some to finish, or cancel some",
+            )

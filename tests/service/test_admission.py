@@ -1,0 +1,262 @@
+"""DELETE and retention through the API, admission control, and /docs offline (issue 14), in process."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from app.admission import estimate_memory
+from jobs.config import Settings
+from tests.service.test_tokens import ALICE, BOB, A, _client, finish, submit
+
+
+def _png(side: int) -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray((np.random.default_rng(1).random((side, side)) * 255).astype(np.uint8)).save(buf, "PNG")
+    return buf.getvalue()
+
+
+@pytest.fixture
+def api(tmp_path):
+    client, service = _client(Settings(data_dir=tmp_path / "data", max_queued_per_token=3))
+    with client:
+        yield client, service
+
+
+def _folder_bytes(path) -> int:
+    seen, total = set(), 0
+    for root, _, files in os.walk(path):
+        for name in files:
+            st = os.stat(os.path.join(root, name))
+            if st.st_ino not in seen:
+                seen.add(st.st_ino)
+                total += st.st_size
+    return total
+
+
+# -- DELETE ------------------------------------------------------------------------------------------
+
+
+def test_delete_of_a_finished_job_frees_its_files_and_record(api):
+    client, service = api
+    job = submit(client, {}).json()
+    finish(service, job["id"])
+    r = client.delete(f"/api/jobs/{job['id']}")
+    assert r.status_code == 200
+    assert r.json() == {
+        "id": job["id"],
+        "state": "deleted",
+        "message": "the job's files and record are deleted",
+    }
+    assert not service.store.job_dir(job["id"]).exists()
+    r = client.get(f"/api/jobs/{job['id']}")
+    assert r.status_code == 404 and job["id"] in r.json()["detail"]
+    assert client.delete(f"/api/jobs/{job['id']}").status_code == 404
+
+
+def test_delete_of_a_running_job_cancels_it_first(api):
+    client, service = api
+    job = submit(client, {}).json()
+    service.store.claim(job["id"], os.getpid(), 10.0)
+    r = client.delete(f"/api/jobs/{job['id']}")
+    assert r.status_code == 202
+    assert r.json()["state"] == "running" and r.json()["cancel_requested"]
+    assert service.store.job_dir(job["id"]).exists()  # files stay until the run has stopped
+    service.store.finish(job["id"], None, "cancelled", "cancelled by request")
+    assert client.delete(f"/api/jobs/{job['id']}").json()["state"] == "deleted"
+
+
+def test_delete_of_a_queued_job_cancels_it_then_deletes_it(api):
+    client, service = api
+    job = submit(client, {}).json()
+    assert client.delete(f"/api/jobs/{job['id']}").json()["state"] == "cancelled"
+    assert client.delete(f"/api/jobs/{job['id']}").json()["state"] == "deleted"
+    assert service.store.count() == 0
+
+
+# -- sweeps store their upload once ----------------------------------------------------------------------
+
+
+def test_a_sweep_stores_its_upload_once(api):
+    client, service = api
+    upload = _png(256)
+    r = client.post(
+        "/api/sweeps",
+        data={
+            "method": "wei-levoy",
+            "grid": '{"levels": [1, 2, 3]}',
+            "params": '{"width": 64, "height": 64}',
+        },
+        files={"exemplar": ("e.png", upload)},
+    )
+    assert r.status_code == 202, r.text
+    jobs = [row["job"] for row in r.json()["rows"]]
+    inodes = {(service.store.job_dir(j) / "inputs" / "exemplar.png").stat().st_ino for j in jobs}
+    assert len(inodes) == 1
+    assert _folder_bytes(service.settings.jobs_dir) < 2 * len(upload)  # not 3 copies
+
+
+# -- admission control -----------------------------------------------------------------------------------
+
+
+def test_the_queue_limit_per_token_is_429_naming_it(api):
+    client, service = api
+    for _ in range(3):
+        assert submit(client, {}).status_code == 202
+    r = submit(client, {})
+    assert r.status_code == 429
+    body = r.json()
+    assert body["error"] == "too_many_jobs"
+    assert "at most 3" in body["detail"] and "TEXSYNTH_MAX_QUEUED_PER_TOKEN" in body["detail"]
+    assert service.store.count() == 3
+    # a finished job frees its place
+    finish(service, service.store.list(limit=1)[0][0].id)
+    assert submit(client, {}).status_code == 202
+
+
+def test_the_queue_limit_counts_each_token_apart(tmp_path):
+    settings = Settings(
+        data_dir=tmp_path / "d", api_tokens=f"alice:{ALICE},bob:{BOB}", max_queued_per_token=1
+    )
+    client, _ = _client(settings)
+    with client:
+        assert submit(client, A).status_code == 202
+        assert "token 'alice'" in submit(client, A).json()["detail"]
+        assert submit(client, {"Authorization": f"Bearer {BOB}"}).status_code == 202
+
+
+def test_a_sweep_above_the_queue_limit_is_429(api):
+    client, service = api
+    r = client.post(
+        "/api/sweeps",
+        data={"method": "wei-levoy", "grid": '{"levels": [1, 2], "neighbourhood_size": [5, 7]}'},
+        files={"exemplar": ("e.png", _png(32))},
+    )
+    assert r.status_code == 429
+    assert "adds 4, room for 3" in r.json()["detail"]
+    assert service.store.count() == 0
+
+
+def test_a_sweep_above_the_pixel_limit_is_422_naming_it(tmp_path):
+    client, service = _client(Settings(data_dir=tmp_path / "d", max_sweep_pixels=3 * 64 * 64))
+    with client:
+        r = client.post(
+            "/api/sweeps",
+            data={
+                "method": "wei-levoy",
+                "grid": '{"levels": [1, 2, 3, 4]}',
+                "params": '{"width": 64, "height": 64}',
+            },
+            files={"exemplar": ("e.png", _png(32))},
+        )
+    assert r.status_code == 422
+    assert r.json()["field"] == "grid"
+    assert "TEXSYNTH_MAX_SWEEP_PIXELS" in r.json()["detail"] and "16384 output pixels" in r.json()["detail"]
+    assert service.store.count() == 0
+
+
+def test_a_sweep_above_the_run_limit_is_422_naming_it(tmp_path):
+    client, _ = _client(Settings(data_dir=tmp_path / "d", max_sweep_runs=2))
+    with client:
+        r = client.post(
+            "/api/sweeps",
+            data={"method": "wei-levoy", "grid": '{"levels": [1, 2, 3]}'},
+            files={"exemplar": ("e.png", _png(32))},
+        )
+    assert r.status_code == 422
+    assert "3 runs is more than the limit of 2" in r.json()["detail"]
+    assert "TEXSYNTH_MAX_SWEEP_RUNS" in r.json()["detail"]
+
+
+def test_a_job_whose_memory_estimate_is_too_large_is_422_before_queueing(api):
+    client, service = api
+    params = {"width": 64, "height": 64, "angular_step": 0.001}
+    r = client.post(
+        "/api/jobs",
+        data={"method": "arbitrary-shape", "params": json.dumps(params)},
+        files={"exemplar": ("e.png", _png(64)), "constraint": ("c.png", _png(64))},
+    )
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["field"] == "angular_step"
+    assert "360000 rotated copies" in body["detail"] and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["detail"]
+    assert re.search(r"about \d+\.\d GiB", body["detail"])
+    assert service.store.count() == 0
+    # the paper's step is fine
+    params["angular_step"] = 5
+    r = client.post(
+        "/api/jobs",
+        data={"method": "arbitrary-shape", "params": json.dumps(params)},
+        files={"exemplar": ("e.png", _png(64)), "constraint": ("c.png", _png(64))},
+    )
+    assert r.status_code == 202, r.text
+
+
+def test_a_sweep_point_over_the_memory_limit_names_the_grid_field(api):
+    client, _ = api
+    r = client.post(
+        "/api/sweeps",
+        data={
+            "method": "arbitrary-shape",
+            "grid": '{"angular_step": [5, 0.001]}',
+            "params": '{"width": 64, "height": 64}',
+        },
+        files={"exemplar": ("e.png", _png(64)), "constraint": ("c.png", _png(64))},
+    )
+    assert r.status_code == 422
+    assert r.json()["field"] == "grid.angular_step"
+
+
+def test_the_memory_estimate_grows_with_the_rotations():
+    size, shapes = {"height": 64, "width": 64}, {"exemplar": (64, 64)}
+    paper, _, _ = estimate_memory({"angular_step": 5}, size, shapes)
+    fine, driver, _ = estimate_memory({"angular_step": 0.5}, size, shapes)
+    assert fine > 9 * paper and driver == "angular_step"
+    plain, driver, _ = estimate_memory({}, size, shapes)
+    assert driver == "width" and plain < paper
+
+
+def test_an_exemplar_far_larger_than_the_output_is_422(api):
+    client, service = api
+    r = client.post(
+        "/api/jobs",
+        data={"method": "wei-levoy", "params": '{"width": 16, "height": 16}'},
+        files={"exemplar": ("e.png", _png(1024))},
+    )
+    assert r.status_code == 422
+    body = r.json()
+    assert body["field"] == "exemplar"
+    assert "4096 times the pixels of the 16x16 output" in body["detail"]
+    assert "TEXSYNTH_MAX_INPUT_OUTPUT_RATIO" in body["detail"]
+    assert service.store.count() == 0
+
+
+# -- /docs offline -------------------------------------------------------------------------------------------
+
+
+def test_docs_reference_no_external_host(api):
+    client, _ = api
+    r = client.get("/docs")
+    assert r.status_code == 200
+    urls = re.findall(r"""(?:src|href)=["']([^"']+)""", r.text) + re.findall(r"url: *'([^']+)'", r.text)
+    assert urls and all(u.startswith("/") and not u.startswith("//") for u in urls), urls
+    assert "http://" not in r.text and "https://" not in r.text
+    for url in urls:
+        assert client.get(url).status_code == 200, url
+    assert "http" not in r.headers["content-security-policy"]
+    assert client.get("/redoc").status_code == 404
+
+
+def test_with_tokens_the_schema_declares_bearer(tmp_path):
+    client, _ = _client(Settings(data_dir=tmp_path / "d", api_tokens=f"alice:{ALICE}"))
+    with client:
+        schema = client.get("/openapi.json").json()  # the schema itself is public
+    assert schema["components"]["securitySchemes"]["bearer"]["scheme"] == "bearer"
+    assert schema["paths"]["/api/jobs"]["post"]["security"] == [{"bearer": []}]
+    assert "security" not in schema["paths"]["/api/health"]["get"]
