@@ -36,9 +36,8 @@ from skimage import data as skdata
 
 from benchmarks._report import DATA
 from synth.api import synthesize
-from synth.evaluate import evaluate_pair, seam_visibility
+from synth.evaluate import evaluate_pair, seam_contrast, seam_visibility
 from synth.evaluate.breaks import seams_from_sources
-from synth.evaluate.patches import seam_contrast
 from synth.io import load_image, save_image
 from synth.io.patterns import undulating_laminae, wood_grain
 

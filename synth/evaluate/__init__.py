@@ -91,7 +91,10 @@ _SOURCES: dict[str, str] = {
         ),
         "measures",
     ),
-    **dict.fromkeys(("COPY_PATCH", "COPY_THRESHOLD", "copy_map", "copy_share", "seam_visibility"), "patches"),
+    **dict.fromkeys(
+        ("COPY_PATCH", "COPY_THRESHOLD", "copy_map", "copy_share", "seam_contrast", "seam_visibility"),
+        "patches",
+    ),
     **dict.fromkeys(
         (
             "SEAM_RADIUS",
@@ -147,6 +150,7 @@ __all__ = [
     "level_cut_s2",
     "moments",
     "otsu_threshold",
+    "seam_contrast",
     "seam_visibility",
     "seams_from_labels",
     "seams_from_sources",
