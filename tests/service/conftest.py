@@ -147,27 +147,14 @@ def embedded(tmp_path_factory) -> Iterator[Service]:
     service.stop()
 
 
-@pytest.fixture(scope="session")
-def redis_url(tmp_path_factory) -> Iterator[str]:
+def start_redis(port: int, folder) -> subprocess.Popen:
+    """A real redis-server on ``port`` (no persistence, its own process group), answering PING."""
     binary = shutil.which("redis-server")
     if binary is None:
         pytest.skip("redis-server is not installed (`apt-get install redis-server`; .ci/run installs it)")
-    port = free_port()
-    folder = tmp_path_factory.mktemp("redis")
+    options = ["--bind", "127.0.0.1", "--save", "", "--appendonly", "no", "--dir", str(folder)]
     proc = subprocess.Popen(
-        [
-            binary,
-            "--port",
-            str(port),
-            "--bind",
-            "127.0.0.1",
-            "--save",
-            "",
-            "--appendonly",
-            "no",
-            "--dir",
-            str(folder),
-        ],
+        [binary, "--port", str(port), *options],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.STDOUT,
         start_new_session=True,
@@ -182,6 +169,13 @@ def redis_url(tmp_path_factory) -> Iterator[str]:
             return False
 
     wait_until(up, 10, 0.1, "redis-server")
+    return proc
+
+
+@pytest.fixture(scope="session")
+def redis_url(tmp_path_factory) -> Iterator[str]:
+    port = free_port()
+    proc = start_redis(port, tmp_path_factory.mktemp("redis"))
     yield f"redis://127.0.0.1:{port}/0"
     _kill_group(proc)
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -19,7 +18,7 @@ import pytest
 
 from app.cli import ServeLock
 from jobs.store import pid_alive
-from tests.service.conftest import REPO, Service, free_port, wait_until
+from tests.service.conftest import REPO, Service, free_port, start_redis, wait_until
 
 CLI = [sys.executable, "-c", "import sys; from synth.cli import main; sys.exit(main())"]
 
@@ -27,38 +26,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
 def _redis(port: int, folder) -> subprocess.Popen:
-    binary = shutil.which("redis-server")
-    if binary is None:
-        pytest.skip("redis-server is not installed (`apt-get install redis-server`; .ci/run installs it)")
-    proc = subprocess.Popen(
-        [
-            binary,
-            "--port",
-            str(port),
-            "--bind",
-            "127.0.0.1",
-            "--save",
-            "",
-            "--appendonly",
-            "no",
-            "--dir",
-            str(folder),
-        ],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.STDOUT,
-        start_new_session=True,
-    )
-
-    def up() -> bool:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.5) as s:
-                s.sendall(b"PING\r\n")
-                return s.recv(16).startswith(b"+PONG")
-        except OSError:
-            return False
-
-    wait_until(up, 10, 0.1, "redis-server")
-    return proc
+    return start_redis(port, folder)
 
 
 def _stop(proc: subprocess.Popen) -> None:
