@@ -121,14 +121,14 @@ def paper_warp(ex: np.ndarray, options: dict[str, Any], seed: int) -> SimpleName
 ABLATIONS: dict[str, dict[str, Any]] = {
     "defaults (deform on)": {},
     "no tangent gate": {"max_angle": None},
-    "full displacements (not only across the feature)": {"normal_only": False},
-    "every pair a control point (no spacing, no median)": {"warp_spacing": 0.0},
+    "full displacements (not only across)": {"normal_only": False},
+    "every pair a control (no spacing)": {"warp_spacing": 0.0},
     "whole patch (no band; the paper)": {"warp_band": None},
     "band 8 px": {"warp_band": 8.0},
     "bilinear resampling": {"warp_order": 1},
     "sub-pixel warps applied too": {"min_shift": 0.0},
     "spline smoothing 2": {"warp_smoothing": 2.0},
-    "the paper's warp (all of the above undone)": PAPER_WARP,
+    "the paper's warp (all changes undone)": PAPER_WARP,
 }
 
 
@@ -530,9 +530,10 @@ NOTES = """
   them) bent a feature onto one that crosses it (12% of the pairs on cells differed by more than 20
   degrees). The nearest pixel also slid pairs along their features, a shear that meets nothing. With
   only the far borders fixed, the displacement spread over the whole patch and bent features far from
-  any seam, and where the graph cut then kept the context's copy of a feature next to the patch's
-  moved one, lines doubled. A quarter to a third of the warps folded on soot and cells. Bilinear
-  resampling at sub-pixel offsets (a [1/2, 1/2] blur at half a pixel) softened fine fringes.
+  any seam; a joint bent this way next to the context's straight copy of it, with the graph cut
+  keeping parts of both, is the likely origin of the doubled lines. A quarter to a third of the warps
+  folded on soot and cells. Bilinear resampling at sub-pixel offsets (a [1/2, 1/2] blur at half a
+  pixel) softened fine fringes.
 - **The warp now** (`synth.patch.feature_guided`, `synth.analysis.warp`,
   `synth.analysis.feature_matching`): pairs whose tangents differ by more than 30 degrees are dropped
   (`warp_angle`); each pair keeps only its displacement across the context feature (two pieces of one
@@ -547,16 +548,30 @@ NOTES = """
 - **Each change, undone on its own** (`python -m benchmarks.bench_feature_guided --ablation`, seeds
   0-2, the measure of (a); lower is better):
 
-ABLATION
+  | warp | hrtem-soot-128 | laminae-bent-128 | brick | cells-128 |
+  |---|---|---|---|---|
+  | defaults (deform on) | 1.04 ± 0.02 | 0.97 ± 0.04 | 1.02 ± 0.08 | 1.12 ± 0.03 |
+  | no tangent gate | 1.04 ± 0.02 | 0.97 ± 0.04 | 1.13 ± 0.09 | 1.14 ± 0.05 |
+  | full displacements (not only across) | 1.04 ± 0.01 | 0.99 ± 0.03 | 1.31 ± 0.03 | 1.13 ± 0.04 |
+  | every pair a control (no spacing) | 1.09 ± 0.04 | 1.00 ± 0.01 | 1.39 ± 0.05 | 1.19 ± 0.02 |
+  | whole patch (no band; the paper) | 1.03 ± 0.03 | 1.01 ± 0.03 | 1.18 ± 0.15 | 1.10 ± 0.08 |
+  | band 8 px | 1.06 ± 0.01 | 1.01 ± 0.03 | 1.11 ± 0.06 | 1.09 ± 0.03 |
+  | bilinear resampling | 1.03 ± 0.03 | 0.99 ± 0.03 | 1.21 ± 0.06 | 1.08 ± 0.06 |
+  | sub-pixel warps applied too | 1.04 ± 0.02 | 0.97 ± 0.03 | 1.00 ± 0.10 | 1.13 ± 0.02 |
+  | spline smoothing 2 | 1.08 ± 0.05 | 1.03 ± 0.03 | 1.16 ± 0.11 | 1.10 ± 0.02 |
+  | the paper's warp (all changes undone) | 1.07 ± 0.02 | 1.01 ± 0.01 | 1.23 ± 0.14 | 1.21 ± 0.05 |
 
-  The spacing of the control points is the change that matters most (brick and cells); the band, the
-  tangent gate (brick) and cubic resampling help on brick and cells; the displacement across the
-  feature only, and skipping sub-pixel warps, are within the spread. Tried and not kept: smoothing the
-  spline (scipy's `smoothing`; no gain over spaced controls), a ramp from the fixed borders instead of
-  the spline's own constraint (worse on brick), and a displacement per control point from local chamfer
-  registration of the two feature maps (meant for the parallel double edges of brick joints; it aligned
-  the overlap's features less well than the gated pairs, mean distance 0.42 vs 0.39 px on brick, and
-  broke more).
+  The spacing of the control points matters most (soot, brick, cells). Brick, with its straight,
+  doubled-edged joints, is where the other changes show: the displacement across the feature only
+  (1.31 without it), bilinear resampling (1.21), the whole patch (1.18) and the tangent gate (1.13).
+  On the other exemplars they are within the spread (the whole patch and bilinear resampling even a
+  little lower on cells); skipping sub-pixel warps changes nothing measurable and is kept because it
+  saves resampling that could only blur. Tried and not kept: smoothing the spline (scipy's
+  `smoothing`; no gain over spaced controls), a ramp from the fixed borders instead of the spline's
+  own constraint (worse on brick), and a displacement per control point from local chamfer
+  registration of the two feature maps (meant for the parallel double edges of brick joints; it
+  aligned the overlap's features less well than the gated pairs, mean distance 0.42 vs 0.39 px on
+  brick, and broke more).
 - **The measure was blind, in two ways, and is changed** (`synth.evaluate.breaks`, known-answer tests).
   (1) It counted ends only: a feature that continues across a seam with a tangent jump is broken too,
   and on laminae a misaligned lamina meets its neighbour with a kink, not an end. Kinks are now counted
@@ -580,8 +595,8 @@ ABLATION
 - **What does not hold.** The paper's claim (fewer broken features than quilting) holds on soot only.
   On brick feature-guided loses to quilting with or without deformation (1.04 / 1.10 vs 0.90): the loss
   comes from the choice of patches and the cut (feature-guided without deformation is worse than
-  quilting there), not from the warp. Kinks, counted alone, are rarer with deformation on soot and
-  brick, more frequent on laminae (1.23 vs 0.93 without; few crossings, wide spread).
+  quilting there), not from the warp. Kinks, counted alone, are rarer with deformation on soot, brick
+  and cells, more frequent on laminae (1.23 vs 0.93 without; few crossings, wide spread).
 - **Default: `deform` stays off.** The rule for turning it back on was "better than without it and
   than quilting, on the measure and in the pictures"; it is better than or equal to no deformation
   everywhere, but not better than quilting on brick (and only equal on laminae and cells). Turning it
