@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from synth.api import Progress
 from synth.grid.neighbourhood import Shape
@@ -14,7 +14,34 @@ from synth.params import MethodParams
 from synth.pixel.solid import PLANES, checked_planes
 from synth.pixel.synthesis import SearchSettings
 
-__all__ = ["NeighbourhoodParams", "SolidParams", "as_features", "checked_progress"]
+__all__ = ["NeighbourhoodParams", "PatchParams", "SolidParams", "as_features", "checked_progress"]
+
+
+class PatchParams(MethodParams):
+    """The overlap rule every patch method shares: below the patch size, by default a fraction of it.
+
+    Subclasses declare their own ``patch_size`` and ``overlap`` fields (defaults and bounds are each
+    paper's) and set :attr:`OVERLAP_DIVISOR` / :attr:`MIN_OVERLAP` for the default overlap.
+    """
+
+    #: The default overlap is ``max(MIN_OVERLAP, patch_size // OVERLAP_DIVISOR)``.
+    OVERLAP_DIVISOR: ClassVar[int] = 4
+    MIN_OVERLAP: ClassVar[int] = 1
+
+    @field_validator("overlap", check_fields=False)
+    @classmethod
+    def _overlap_below_patch(cls, overlap: int | None, info: ValidationInfo) -> int | None:
+        patch = info.data.get("patch_size")
+        if overlap is not None and patch is not None and overlap >= patch:
+            raise ValueError(f"must be smaller than patch_size ({patch})")
+        return overlap
+
+    def resolved_overlap(self) -> int:
+        """The overlap in pixels: the given one, or the method's default fraction of the patch."""
+        overlap = getattr(self, "overlap", None)
+        if overlap is not None:
+            return int(overlap)
+        return max(self.MIN_OVERLAP, int(self.patch_size) // self.OVERLAP_DIVISOR)
 
 
 class NeighbourhoodParams(MethodParams):

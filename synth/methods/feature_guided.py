@@ -47,23 +47,25 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field
 
 from synth.analysis.feature_matching import BETA, MATCH_TAU, WARP_TAU
 from synth.analysis.features import feature_map, feature_overlay
 from synth.api import MethodSpec, Progress, Result, register
 from synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
 from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import checked_progress
+from synth.methods.common import PatchParams, checked_progress
 from synth.methods.quilting import check_patch_geometry
-from synth.params import MethodParams
 from synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
 
 __all__ = ["FeatureGuidedParams", "run_feature_guided"]
 
 
-class FeatureGuidedParams(MethodParams):
+class FeatureGuidedParams(PatchParams):
     """Parameters of feature-guided patch synthesis (Wu & Yu 2004)."""
+
+    OVERLAP_DIVISOR = 4
+    MIN_OVERLAP = 2
 
     patch_size: int = Field(
         32,
@@ -165,17 +167,6 @@ class FeatureGuidedParams(MethodParams):
     rotations: bool = Field(
         False, description="Also take patches from the 7 rotated/reflected copies of the exemplar."
     )
-
-    @field_validator("overlap")
-    @classmethod
-    def _overlap_below_patch(cls, overlap: int | None, info: ValidationInfo) -> int | None:
-        patch = info.data.get("patch_size")
-        if overlap is not None and patch is not None and overlap >= patch:
-            raise ValueError(f"must be smaller than patch_size ({patch})")
-        return overlap
-
-    def resolved_overlap(self) -> int:
-        return self.overlap if self.overlap is not None else max(2, self.patch_size // 4)
 
     def feature_options(self) -> dict[str, object]:
         """Keyword arguments of :func:`synth.analysis.features.feature_map`."""

@@ -65,15 +65,14 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field
 from skimage.transform import rescale, resize
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.errors import InvalidParameter
 from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import checked_progress
+from synth.methods.common import PatchParams, checked_progress
 from synth.methods.quilting import check_patch_geometry
-from synth.params import MethodParams
 from synth.patch.cut import boundary_cut_mask, error_surface
 from synth.patch.gaussian import GaussianPatchModel, lg_patch, rclg_draw, rclg_patch, restore_contrast
 from synth.patch.layout import PatchLayout, overlap_mask
@@ -82,8 +81,11 @@ from synth.patch.search import PatchSearcher, k_nearest
 __all__ = ["GaussianPatchParams", "run_gaussian_patch", "synthesize_gaussian_patches"]
 
 
-class GaussianPatchParams(MethodParams):
+class GaussianPatchParams(PatchParams):
     """Parameters of the locally Gaussian patch models (Raad, Desolneux & Morel 2015)."""
+
+    OVERLAP_DIVISOR = 4
+    MIN_OVERLAP = 1
 
     model: Literal["lg", "clg", "rclg"] = Field(
         "rclg",
@@ -142,17 +144,6 @@ class GaussianPatchParams(MethodParams):
         description="1 = the paper; > 1: coarse to fine, each scale's neighbours chosen also on the coarser "
         "scale's output.",
     )
-
-    @field_validator("overlap")
-    @classmethod
-    def _overlap_below_patch(cls, overlap: int | None, info: ValidationInfo) -> int | None:
-        patch = info.data.get("patch_size")
-        if overlap is not None and patch is not None and overlap >= patch:
-            raise ValueError(f"must be smaller than patch_size ({patch})")
-        return overlap
-
-    def resolved_overlap(self) -> int:
-        return self.overlap if self.overlap is not None else max(1, self.patch_size // 4)
 
 
 def _check(exemplar: np.ndarray, params: GaussianPatchParams) -> None:

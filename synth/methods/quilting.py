@@ -31,13 +31,12 @@ import time
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field
 
 from synth.api import MethodSpec, Progress, Result, register
 from synth.errors import InvalidParameter
 from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import checked_progress
-from synth.params import MethodParams
+from synth.methods.common import PatchParams, checked_progress
 from synth.patch.cut import boundary_cut_mask, error_surface
 from synth.patch.graphcut import graph_cut_mask
 from synth.patch.layout import PatchLayout, overlap_mask
@@ -46,8 +45,11 @@ from synth.patch.search import PatchSearcher, candidates_within
 __all__ = ["QuiltingParams", "check_patch_geometry", "run_quilting"]
 
 
-class QuiltingParams(MethodParams):
+class QuiltingParams(PatchParams):
     """Parameters of image quilting (Efros & Freeman 2001)."""
+
+    OVERLAP_DIVISOR = 6
+    MIN_OVERLAP = 1
 
     # Efros & Freeman choose the block "big enough to capture the relevant structures"; 32 px suits the
     # 128 -> 256 exemplars of their figures (and ours).
@@ -69,17 +71,6 @@ class QuiltingParams(MethodParams):
         description="'boundary-cut': minimum-error cut by dynamic programming (Efros & Freeman); "
         "'graph-cut': minimum s-t cut over the overlap (Kwatra et al. 2003).",
     )
-
-    @field_validator("overlap")
-    @classmethod
-    def _overlap_below_patch(cls, overlap: int | None, info: ValidationInfo) -> int | None:
-        patch = info.data.get("patch_size")
-        if overlap is not None and patch is not None and overlap >= patch:
-            raise ValueError(f"must be smaller than patch_size ({patch})")
-        return overlap
-
-    def resolved_overlap(self) -> int:
-        return self.overlap if self.overlap is not None else max(1, self.patch_size // 6)
 
 
 def check_patch_geometry(exemplar: np.ndarray, patch_size: int, overlap: int, role: str = "exemplar") -> None:
