@@ -150,6 +150,8 @@ class Service:
         del images
         params_out = {**model.model_dump(mode="json"), **size}
         self.admission.check_job(method, params_out, size, shapes)
+        if spec.precheck is not None and "exemplar" in shapes:  # geometry against the inputs, before queueing
+            spec.precheck(model, shapes)
         return JobRequest(
             method=method,
             params=params_out,
@@ -233,6 +235,11 @@ class Service:
                 raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
             point_params = {**model.model_dump(mode="json"), **size}
             self.admission.check_job(req.method, point_params, size, req.shapes, field_prefix="grid.")
+            if spec.precheck is not None and "exemplar" in req.shapes:
+                try:
+                    spec.precheck(model, req.shapes)
+                except InvalidParameter as exc:
+                    raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
             points.append(point_params)
         self.admission.check_sweep(runs, sum(math.prod(p[k] for k in SIZE_FIELDS if k in p) for p in points))
         sweep_id = uuid.uuid4().hex

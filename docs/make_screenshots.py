@@ -2,8 +2,8 @@
 
 Starts ``texsynth serve`` on a fresh temporary data directory (the embedded queue, a real worker),
 runs a few small real jobs on the HRTEM soot exemplar (quilting, random-phase, a solid-kopf volume, a
-sweep, and one wei-levoy run that fails in the engine), drives Debian's Chromium through Playwright and
-writes ``docs/img/service-*.png``. About a minute on two cores.
+sweep, and one run of the tests' method asked to fail in the worker), drives Debian's Chromium through
+Playwright and writes ``docs/img/service-*.png``. About a minute on two cores.
 """
 
 from __future__ import annotations
@@ -48,7 +48,14 @@ def _png_bytes(array: np.ndarray) -> bytes:
 def _serve(data_dir: Path) -> tuple[subprocess.Popen, str]:
     port = _free_port()
     url = f"http://127.0.0.1:{port}"
-    env = {**os.environ, "PYTHONPATH": str(REPO), "TEXSYNTH_CONCURRENCY": "2"}
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(REPO),
+        "TEXSYNTH_CONCURRENCY": "2",
+        # the tests' method, whose `fail` parameter makes a run fail in the worker (every geometry error
+        # of the real methods is now refused at submission with a 422)
+        "TEXSYNTH_EXTRA_METHODS": "tests.service.methods_for_tests",
+    }
     command = [sys.executable, "-c", "import sys; from synth.cli import main; sys.exit(main())", "serve"]
     command += ["--host", "127.0.0.1", "--port", str(port), "--data-dir", str(data_dir)]
     with open(data_dir.parent / "serve.log", "wb") as log:
@@ -136,7 +143,10 @@ def main() -> None:
                 crop64, method="solid-kopf", params={"width": 32, "height": 32, "depth": 32}, seed=1
             )
             failed = client.submit(
-                small, method="wei-levoy", params={"width": 48, "height": 48, "levels": 6}, seed=1
+                small,
+                method="test-blur",
+                params={"width": 48, "height": 48, "fail": "the worker ran out of memory"},
+                seed=1,
             )
             for job in (quilt, phase, volume, failed):
                 client.wait(job["id"], timeout=300)

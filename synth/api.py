@@ -86,6 +86,10 @@ class MethodSpec:
     #: Takes one exemplar per orthogonal plane (``exemplar_xy``, ``exemplar_xz``, ``exemplar_yz``) as
     #: an alternative to the one exemplar (anisotropic materials).
     plane_exemplars: bool = False
+    #: Cheap checks of the parameters against the inputs' shapes (``{role: shape}``), run before any work
+    #: (the service calls them before queueing, so a patch larger than the exemplar is a 422 at once);
+    #: raise the engine's errors. ``None``: the method has none beyond its parameter model.
+    precheck: Callable[[Any, Mapping[str, tuple[int, ...]]], None] | None = None
 
     def schema(self) -> dict[str, Any]:
         return self.params_model.model_json_schema()

@@ -250,6 +250,9 @@ SPEC = register(
         "graph-cut (Wu & Yu 2004).",
         params_model=FeatureGuidedParams,
         run=run_feature_guided,
+        precheck=lambda params, shapes: check_patch_geometry(
+            shapes["exemplar"], params.patch_size, params.resolved_overlap()
+        ),
         paper="Wu & Yu, SIGGRAPH 2004",
     )
 )

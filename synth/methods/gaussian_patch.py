@@ -146,13 +146,14 @@ class GaussianPatchParams(PatchParams):
     )
 
 
-def _check(exemplar: np.ndarray, params: GaussianPatchParams) -> None:
+def _check(exemplar_shape: tuple[int, ...], params: GaussianPatchParams) -> None:
+    """Patch, overlap and N against the exemplar's shape at every scale (before any work)."""
     overlap = params.resolved_overlap()
-    h, w = exemplar.shape[:2]
+    h, w = exemplar_shape[:2]
     for s in range(params.scales):
         shape = (round(h / 2**s), round(w / 2**s))
         role = "exemplar" if s == 0 else f"exemplar reduced {2**s} times (scale {s + 1} of {params.scales})"
-        check_patch_geometry(np.empty(shape), params.patch_size, overlap, role)
+        check_patch_geometry(shape, params.patch_size, overlap, role)
         count = (shape[0] - params.patch_size + 1) * (shape[1] - params.patch_size + 1)
         if params.neighbours > count:
             raise InvalidParameter(
@@ -244,7 +245,7 @@ def run_gaussian_patch(
     progress: Progress,
     constraint: np.ndarray | None = None,
 ) -> Result:
-    _check(exemplar, params)
+    _check(exemplar.shape, params)
     report = checked_progress(progress)
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -301,6 +302,7 @@ SPEC = register(
         "(Raad, Desolneux & Morel 2015).",
         params_model=GaussianPatchParams,
         run=run_gaussian_patch,
+        precheck=lambda params, shapes: _check(shapes["exemplar"], params),
         paper="Raad, Desolneux & Morel, SSVM 2015",
     )
 )

@@ -73,9 +73,12 @@ class QuiltingParams(PatchParams):
     )
 
 
-def check_patch_geometry(exemplar: np.ndarray, patch_size: int, overlap: int, role: str = "exemplar") -> None:
-    """Errors before any work: the patch must fit in the exemplar and the overlap in the patch."""
-    h, w = exemplar.shape[:2]
+def check_patch_geometry(
+    exemplar: np.ndarray | tuple[int, ...], patch_size: int, overlap: int, role: str = "exemplar"
+) -> None:
+    """Errors before any work: the patch must fit in the exemplar (an array or its shape) and the
+    overlap in the patch."""
+    h, w = (exemplar.shape if isinstance(exemplar, np.ndarray) else tuple(exemplar))[:2]
     if patch_size > min(h, w):
         raise InvalidParameter(
             "patch_size", patch_size, f"larger than the {role} ({h} x {w}); use at most {min(h, w)}"
@@ -159,6 +162,9 @@ SPEC = register(
         summary="Image quilting: raster patches stitched along minimum-error cuts (Efros & Freeman 2001).",
         params_model=QuiltingParams,
         run=run_quilting,
+        precheck=lambda params, shapes: check_patch_geometry(
+            shapes["exemplar"], params.patch_size, params.resolved_overlap()
+        ),
         paper="Efros & Freeman, SIGGRAPH 2001",
     )
 )

@@ -43,7 +43,13 @@ from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.neighbourhood import Shape
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.pixel.synthesis import Guidance, source_map_pyramid, synthesize_source_map, tensor_features
+from synth.pixel.synthesis import (
+    Guidance,
+    check_neighbourhoods_fit,
+    source_map_pyramid,
+    synthesize_source_map,
+    tensor_features,
+)
 
 __all__ = [
     "TensorConstrainedParams",
@@ -227,12 +233,20 @@ def run_tensor_constrained(
     )
 
 
+def _precheck(params: TensorConstrainedParams, shape: tuple[int, ...]) -> None:
+    """Both stages' neighbourhoods fit the exemplar at every level (before any work)."""
+    n = params.structure_neighbourhood_size or params.neighbourhood_size
+    check_neighbourhoods_fit(shape, params.structure_levels, n, params.parent_size)
+    check_neighbourhoods_fit(shape, params.texture_levels, params.neighbourhood_size, params.parent_size)
+
+
 SPEC = register(
     MethodSpec(
         name="tensor-constrained",
         summary="Two-stage synthesis: structure tensor field first, then the texture under it (Akl 2014).",
         params_model=TensorConstrainedParams,
         run=run_tensor_constrained,
+        precheck=lambda params, shapes: _precheck(params, shapes["exemplar"]),
         paper="Akl, Yaacoub, Donias, Da Costa, Germain, ICIP 2014",
     )
 )

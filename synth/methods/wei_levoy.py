@@ -29,7 +29,7 @@ from pydantic import Field
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.pixel.synthesis import synthesize_source_map
+from synth.pixel.synthesis import check_neighbourhoods_fit, synthesize_source_map
 
 __all__ = ["WeiLevoyParams", "run_wei_levoy"]
 
@@ -97,6 +97,9 @@ SPEC = register(
         summary="Pixel-based synthesis by neighbourhood matching (Wei & Levoy 2000), the baseline.",
         params_model=WeiLevoyParams,
         run=run_wei_levoy,
+        precheck=lambda params, shapes: check_neighbourhoods_fit(
+            shapes["exemplar"], params.levels, params.neighbourhood_size, params.parent_size
+        ),
         paper="Wei & Levoy, SIGGRAPH 2000",
     )
 )

@@ -55,6 +55,7 @@ __all__ = [
     "Guidance",
     "SearchSettings",
     "SynthesisReport",
+    "check_neighbourhoods_fit",
     "level_neighbourhood_size",
     "source_map_pyramid",
     "synthesize_source_map",
@@ -207,6 +208,28 @@ def level_neighbourhood_size(size: int, level_shape: tuple[int, int]) -> int:
     cap = max(3, int(min(level_shape) // _COARSE_DIVISOR))
     cap -= 1 - cap % 2
     return int(min(size, cap))
+
+
+def check_neighbourhoods_fit(
+    exemplar_shape: tuple[int, ...], levels: int, size: int, parent_size: int, *, role: str = "exemplar"
+) -> None:
+    """Raise the driver's error now if a neighbourhood would not fit the exemplar at some pyramid level.
+
+    Shapes only (the pyramid of a zero image of ``exemplar_shape``, the same reduction as the driver's),
+    so the service can refuse such a job before queueing it instead of failing it in the worker.
+    """
+    from synth.grid.pyramid import gaussian_pyramid
+
+    shapes = [
+        lv.shape[:2] for lv in gaussian_pyramid(np.zeros(tuple(exemplar_shape[:2]), np.float32), levels)
+    ]
+    for level in range(levels - 1, -1, -1):  # coarse to fine, as the driver: the same first error
+        ex_shape = shapes[level]
+        side = size if level == 0 else level_neighbourhood_size(size, ex_shape)
+        parent = None
+        if level < levels - 1:
+            parent = (shapes[level + 1], level_neighbourhood_size(parent_size, shapes[level + 1]) // 2)
+        _valid_region(ex_shape, side // 2, parent, level)
 
 
 def _valid_region(

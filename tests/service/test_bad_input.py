@@ -87,6 +87,24 @@ class TestRejected:
         assert r.status_code == 422, r.text
         assert r.json()["field"] == field and field in r.json()["detail"]
 
+    @pytest.mark.parametrize(
+        ("method", "params", "field", "words"),
+        [
+            ("quilting", {"patch_size": 100}, "patch_size", "larger than the exemplar (64 x 64)"),
+            ("gaussian-patch", {"patch_size": 60, "neighbours": 100}, "neighbours", "larger than the number"),
+            ("wei-levoy", {"levels": 6}, "neighbourhood_size", "no neighbourhood fits inside the exemplar"),
+            ("tensor-constrained", {"structure_levels": 6}, "neighbourhood_size", "at pyramid level"),
+        ],
+    )
+    def test_geometry_against_the_exemplar_422_before_queueing(
+        self, embedded, exemplar_png, method, params, field, words
+    ):
+        """What the method would only find out in the worker (the patch or the neighbourhood does not fit
+        the 64x64 exemplar) is checked at submission from the exemplar's shape."""
+        r = _post(embedded, exemplar_png, method=method, params={"width": 64, "height": 64, **params})
+        assert r.status_code == 422, r.text
+        assert r.json()["field"] == field and words in r.json()["detail"]
+
     def test_params_not_json_422(self, embedded, exemplar_png):
         r = _post(embedded, exemplar_png, method="test-blur", params="{width: 3")
         assert r.status_code == 422 and r.json()["field"] == "params"
@@ -116,6 +134,14 @@ class TestRejected:
             data={"method": "test-blur", "grid": json.dumps({"steps": [1, 0]})},
         )
         assert r.status_code == 422 and r.json()["field"] == "grid.steps"
+
+    def test_sweep_geometry_422_names_the_grid_field(self, embedded, exemplar_png):
+        r = httpx.post(
+            embedded.url + "/api/sweeps",
+            files={"exemplar": ("e.png", exemplar_png, "image/png")},
+            data={"method": "quilting", "grid": json.dumps({"patch_size": [16, 100]})},
+        )
+        assert r.status_code == 422 and r.json()["field"] == "grid.patch_size", r.text
 
 
 @pytest.mark.usefixtures("nothing_queued")

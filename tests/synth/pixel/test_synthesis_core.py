@@ -497,3 +497,24 @@ def test_candidate_window_restricts_every_copied_position() -> None:
     src = synthesize_source_map([ex], [(12, 10)], settings, seed=1, window=window)[0][0]
     got = window.ex_levels[0][src[..., 0], src[..., 1]]
     np.testing.assert_array_equal(got, window.out_levels[0])
+
+
+@pytest.mark.parametrize("side", [12, 16, 24, 40])
+def test_the_neighbourhood_precheck_fails_exactly_when_the_run_would(side: int) -> None:
+    """``check_neighbourhoods_fit`` (shapes only, used before queueing) says what the driver would say."""
+    from synth.errors import SynthError
+    from synth.pixel.synthesis import check_neighbourhoods_fit
+
+    ex = np.random.default_rng(0).random((side, side)).astype(np.float32)
+    params = {"levels": 4, "neighbourhood_size": 5, "parent_size": 3}
+    try:
+        check_neighbourhoods_fit(ex.shape, 4, 5, 3)
+        before = None
+    except SynthError as exc:
+        before = str(exc)
+    try:
+        synthesize("wei-levoy", ex, size=(16, 16), params=params, seed=0)
+        during = None
+    except SynthError as exc:
+        during = str(exc)
+    assert before == during
