@@ -144,9 +144,10 @@ def test_kill_worker_child_mid_job_reruns_or_fails(service, exemplar_png):
         assert "stopped" in final["message"]
 
 
-def test_kill_whole_worker_mid_job_never_stuck(embedded, exemplar_png):
-    """SIGKILL the worker's main process and its children: the filesystem broker loses the message;
-    the reaper re-queues the job and the restarted worker runs it."""
+def test_kill_whole_worker_mid_job_never_stuck(service, exemplar_png):
+    """SIGKILL the worker's main process and its children, on either queue: the message is gone or
+    unacknowledged; the reaper re-queues the job and the restarted worker runs it."""
+    embedded = service
     client = embedded.client()
     job = client.submit(
         exemplar_png, method="test-blur", params={"width": 64, "height": 64, "steps": 30, "delay": 0.1}
@@ -179,7 +180,8 @@ def test_restart_api_jobs_still_listed(embedded, exemplar_png):
         api.stop()
 
 
-def test_sweep_collects_metrics_in_one_table(embedded, exemplar_png):
+def test_sweep_collects_metrics_in_one_table(service, exemplar_png):
+    embedded = service
     client = embedded.client()
     sweep = client.sweep(
         exemplar_png,
