@@ -5,7 +5,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PIP_NO_CACHE_DIR=1 \
     TEXSYNTH_DATA_DIR=/data \
-    NUMBA_CACHE_DIR=/tmp/numba-cache
+    NUMBA_CACHE_DIR=/numba-cache
 
 WORKDIR /app
 COPY pyproject.toml README.md ./
@@ -15,10 +15,10 @@ COPY worker ./worker
 COPY jobs ./jobs
 RUN pip install . \
     && useradd --create-home --uid 1000 texsynth \
-    && mkdir -p /data && chown texsynth /data
+    && mkdir -p /data /numba-cache && chown texsynth /data /numba-cache
 
 USER texsynth
-VOLUME ["/data"]
+VOLUME ["/data", "/numba-cache"]
 EXPOSE 8000
 # API only; the workers are separate services (see docker-compose.yml)
 CMD ["texsynth", "serve", "--host", "0.0.0.0", "--port", "8000", "--no-worker"]
