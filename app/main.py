@@ -25,6 +25,7 @@ from fastapi.staticfiles import StaticFiles
 from app.api.routes import health, jobs, methods, metrics, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
+from app.schemas import ErrorPublic
 from app.security import AuthMiddleware, SameOriginMiddleware, SecurityHeadersMiddleware
 from app.service import Service
 from jobs.config import Settings
@@ -66,6 +67,12 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
         lifespan=lifespan,
         docs_url=None,
         redoc_url=None,
+        # every error is app/errors.py's JSON body, FastAPI's own validation answers included: the
+        # schema says so (instead of FastAPI's default HTTPValidationError, which no answer matches)
+        responses={
+            400: {"model": ErrorPublic, "description": "a malformed request (e.g. broken multipart)"},
+            422: {"model": ErrorPublic, "description": "a bad parameter (the field is named)"},
+        },
     )
     app.state.service = service
     # Outermost last: headers on every answer, then the same-origin rule, then tokens, then the body
