@@ -211,18 +211,16 @@ def level_neighbourhood_size(size: int, level_shape: tuple[int, int]) -> int:
 
 
 def check_neighbourhoods_fit(
-    exemplar_shape: tuple[int, ...], levels: int, size: int, parent_size: int, *, role: str = "exemplar"
+    exemplar_shape: tuple[int, ...], levels: int, size: int, parent_size: int
 ) -> None:
     """Raise the driver's error now if a neighbourhood would not fit the exemplar at some pyramid level.
 
-    Shapes only (the pyramid of a zero image of ``exemplar_shape``, the same reduction as the driver's),
+    Shapes only (:func:`synth.grid.pyramid.level_shapes`, the driver's pyramid's shapes; no pixels),
     so the service can refuse such a job before queueing it instead of failing it in the worker.
     """
-    from synth.grid.pyramid import gaussian_pyramid
+    from synth.grid.pyramid import level_shapes
 
-    shapes = [
-        lv.shape[:2] for lv in gaussian_pyramid(np.zeros(tuple(exemplar_shape[:2]), np.float32), levels)
-    ]
+    shapes = level_shapes(tuple(int(n) for n in exemplar_shape[:2]), levels)  # type: ignore[arg-type]
     for level in range(levels - 1, -1, -1):  # coarse to fine, as the driver: the same first error
         ex_shape = shapes[level]
         side = size if level == 0 else level_neighbourhood_size(size, ex_shape)
