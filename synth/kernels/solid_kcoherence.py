@@ -44,15 +44,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import prange
 
 from synth.kernels.options import kernel
 from synth.kernels.pixel_search import _histogram_factor, _splitmix
 
 __all__ = [
+    "PARALLEL_BLOCKS",
+    "SOLVE_BLOCK",
     "ExemplarBank",
     "SliceGeometry",
     "SolidState",
     "SolverWeights",
+    "new_scratch",
     "search_pass",
     "search_reference",
     "solve_pass",
@@ -224,6 +228,38 @@ def _neighbour(z, y, x, dz, dy, dx, D, H, W, periodic):
 
 
 @kernel(inline="always")
+def _near(v, inner, delta, z, y, x, dz, dy, dx, D, H, W, periodic):
+    """:func:`_neighbour`, with the interior's shortcut: far enough from every face (``inner``), the
+    neighbour is ``v + delta`` (``delta`` the offset's flat step), the same index without the bounds work."""
+    if inner:
+        return v + delta
+    return _neighbour(z, y, x, dz, dy, dx, D, H, W, periodic)
+
+
+@kernel
+def _flat_steps(offsets, H, W, sign):
+    """Flat index steps ``sign * ((dz H) + dy) W + dx`` of an offset table ``(P, K, 3)``, and the largest
+    offset component (voxels at least that far from every face are interior)."""
+    P = offsets.shape[0]
+    K = offsets.shape[1]
+    steps = np.empty((P, K), dtype=np.int64)
+    reach = 0
+    for p in range(P):
+        for i in range(K):
+            dz = offsets[p, i, 0]
+            dy = offsets[p, i, 1]
+            dx = offsets[p, i, 2]
+            steps[p, i] = sign * ((dz * H + dy) * W + dx)
+            reach = max(reach, abs(dz), abs(dy), abs(dx))
+    return steps, reach
+
+
+@kernel(inline="always")
+def _interior(z, y, x, reach, D, H, W):
+    return reach <= z < D - reach and reach <= y < H - reach and reach <= x < W - reach
+
+
+@kernel(inline="always")
 def _add_shifted(cand, n, g, off, w, dr, dc, y0, y1, x0, x1, stamp, tag):
     """Append exemplar position ``g`` shifted by ``(-dr, -dc)`` if that lies in ``[y0, y1) x [x0, x1)``
     and is new (``stamp[key] != tag``)."""
@@ -238,6 +274,15 @@ def _add_shifted(cand, n, g, off, w, dr, dc, y0, y1, x0, x1, stamp, tag):
     stamp[key] = tag
     cand[n] = key
     return n + 1
+
+
+@kernel(inline="always")
+def _index_factor(index_factor, index_count, index_target, index_weight, g, old):
+    """The index-histogram factor of candidate ``g`` for a voxel whose old match is ``old``: the call's
+    precomputed factor, except for ``old`` itself, whose own use does not count against it."""
+    if g == old:
+        return _histogram_factor(index_count[g] - 1, index_target[g], index_weight)
+    return index_factor[g]
 
 
 @kernel(inline="always")
@@ -265,16 +310,24 @@ def _ssd(q, ql, n, ex, base, limit):
     return s
 
 
-@kernel
+#: Voxels of one parallel call are split into this many blocks, run in parallel, each with its own
+#: working arrays (the search's de-duplication stamps): a fixed number, so the split (and the answer)
+#: does not depend on the threads.
+PARALLEL_BLOCKS = 16
+
+
+@kernel(parallel=True)
 def _search_kernel(
     order,
     start,
     stop,
     vol,
+    prev,
     match,
     weight,
     index_count,
     index_target,
+    index_factor,
     ex,
     layout,
     valid,
@@ -295,23 +348,169 @@ def _search_kernel(
     kset_window,
     active,
     stamp,
-    counter,
-    acc,
+    tags,
+    msd_out,
+    n_cand_out,
 ):
     D, H, W = vol.shape
     n_dims = basis.shape[2]
-    proj = np.empty(n_dims, dtype=np.float64)
-    top_d = np.empty(max(rerank, 1), dtype=np.float64)
-    top_g = np.empty(max(rerank, 1), dtype=np.int64)
     K = offsets.shape[1]
     C = cand_offsets.shape[1]
     k = kset.shape[1]
     volf = vol.ravel()
-    matchf = match.ravel()
-    q = np.empty(K, dtype=np.float32)
-    ql = np.empty(K, dtype=np.int64)
-    cand = np.empty(C * (k + 1) + n_random, dtype=np.int64)
+    prevf = prev.ravel()
     power = 0.5 * (exponent - 2.0)
+    steps, reach = _flat_steps(offsets, H, W, 1)
+    csteps, creach = _flat_steps(cand_offsets, H, W, 1)
+    reach = max(reach, creach)
+    blocks = stamp.shape[0]
+    count = stop - start
+    per = (count + blocks - 1) // blocks
+    for blk in prange(blocks):
+        proj = np.empty(n_dims, dtype=np.float64)
+        top_d = np.empty(max(rerank, 1), dtype=np.float64)
+        top_g = np.empty(max(rerank, 1), dtype=np.int64)
+        q = np.empty(K, dtype=np.float32)
+        ql = np.empty(K, dtype=np.int64)
+        cand = np.empty(C * (k + 1) + n_random, dtype=np.int64)
+        for idx in range(start + blk * per, min(stop, start + (blk + 1) * per)):
+            v = order[idx]
+            z = v // (H * W)
+            y = (v // W) % H
+            x = v % W
+            inner = _interior(z, y, x, reach, D, H, W)
+            for p in range(3):
+                if not active[p]:
+                    continue
+                off = layout[p, 0]
+                w = layout[p, 2]
+                y0 = valid[p, 0]
+                y1 = valid[p, 1]
+                x0 = valid[p, 2]
+                x1 = valid[p, 3]
+                n = 0
+                for i in range(K):
+                    u = _near(
+                        v,
+                        inner,
+                        steps[p, i],
+                        z,
+                        y,
+                        x,
+                        offsets[p, i, 0],
+                        offsets[p, i, 1],
+                        offsets[p, i, 2],
+                        D,
+                        H,
+                        W,
+                        periodic,
+                    )
+                    if u < 0:
+                        continue
+                    q[n] = volf[u]
+                    ql[n] = lin[p, i]
+                    n += 1
+                tags[blk] += 1
+                tag = tags[blk]
+                nc = 0
+                for c in range(C):
+                    u = _near(
+                        v,
+                        inner,
+                        csteps[p, c],
+                        z,
+                        y,
+                        x,
+                        cand_offsets[p, c, 0],
+                        cand_offsets[p, c, 1],
+                        cand_offsets[p, c, 2],
+                        D,
+                        H,
+                        W,
+                        periodic,
+                    )
+                    if u < 0:
+                        continue
+                    g = np.int64(prevf[p * D * H * W + u])
+                    dr = cand_rc[p, c, 0]
+                    dc = cand_rc[p, c, 1]
+                    nc = _add_shifted(cand, nc, g, off, w, dr, dc, y0, y1, x0, x1, stamp[blk], tag)
+                    for j in range(k if c < kset_window else 0):  # Tong: positions similar to u's match
+                        gk = np.int64(kset[g, j])
+                        if gk >= 0:
+                            nc = _add_shifted(cand, nc, gk, off, w, dr, dc, y0, y1, x0, x1, stamp[blk], tag)
+                if n_random > 0:
+                    span_y = np.uint64(y1 - y0)
+                    span_x = np.uint64(x1 - x0)
+                    key = _splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
+                    for j in range(n_random):
+                        r = _splitmix(key + np.uint64(j))
+                        gy = y0 + np.int64(r % span_y)
+                        gx = x0 + np.int64((r >> np.uint64(32)) % span_x)
+                        nc = _add_shifted(
+                            cand, nc, off + gy * w + gx, off, w, 0, 0, y0, y1, x0, x1, stamp[blk], tag
+                        )
+                old = np.int64(prev[p, z, y, x])
+                pool = cand
+                n_pool = nc
+                if rerank > 0 and n == K and nc > rerank:
+                    # Rank in the principal subspace; keep the ``rerank`` best (stable), compare them in full.
+                    for dd in range(n_dims):
+                        proj[dd] = 0.0
+                    for i in range(K):
+                        c0 = np.float64(q[i]) - np.float64(mean[p, i])
+                        for dd in range(n_dims):
+                            proj[dd] += c0 * np.float64(basis[p, i, dd])
+                    n_top = 0
+                    for j in range(nc):
+                        g = cand[j]
+                        s = 0.0
+                        for dd in range(n_dims):
+                            t = proj[dd] - np.float64(features[g, dd])
+                            s += t * t
+                        if index_weight > 0.0:
+                            s *= _index_factor(index_factor, index_count, index_target, index_weight, g, old)
+                        if n_top < rerank:
+                            pos = n_top
+                            n_top += 1
+                        elif s < top_d[rerank - 1]:
+                            pos = rerank - 1
+                        else:
+                            continue
+                        while pos > 0 and top_d[pos - 1] > s:
+                            top_d[pos] = top_d[pos - 1]
+                            top_g[pos] = top_g[pos - 1]
+                            pos -= 1
+                        top_d[pos] = s
+                        top_g[pos] = g
+                    pool = top_g
+                    n_pool = n_top
+                best = np.inf
+                best_raw = np.inf
+                bg = old
+                for j in range(n_pool):
+                    g = pool[j]
+                    f = 1.0
+                    if index_weight > 0.0:
+                        f = _index_factor(index_factor, index_count, index_target, index_weight, g, old)
+                    d = f * _ssd(q, ql, n, ex, g, best / f)
+                    if d < best:
+                        best = d
+                        best_raw = d / f
+                        bg = g
+                match[p, z, y, x] = bg
+                msd = best_raw / n
+                weight[p, z, y, x] = (msd + _WEIGHT_EPS) ** power
+                msd_out[idx - start, p] = msd
+                n_cand_out[idx - start, p] = nc
+
+
+@kernel
+def _search_tally(order, start, stop, prev, match, active, index_count, msd_out, n_cand_out, acc):
+    """After a search block: the index histogram moves each voxel's count from its old match to its new
+    one, and the statistics are summed, in scan order (one thread: the same sums on every run)."""
+    H = match.shape[2]
+    W = match.shape[3]
     for idx in range(start, stop):
         v = order[idx]
         z = v // (H * W)
@@ -320,252 +519,186 @@ def _search_kernel(
         for p in range(3):
             if not active[p]:
                 continue
-            off = layout[p, 0]
-            w = layout[p, 2]
-            y0 = valid[p, 0]
-            y1 = valid[p, 1]
-            x0 = valid[p, 2]
-            x1 = valid[p, 3]
-            n = 0
-            for i in range(K):
-                u = _neighbour(
-                    z, y, x, offsets[p, i, 0], offsets[p, i, 1], offsets[p, i, 2], D, H, W, periodic
-                )
-                if u < 0:
-                    continue
-                q[n] = volf[u]
-                ql[n] = lin[p, i]
-                n += 1
-            counter[0] += 1
-            tag = counter[0]
-            nc = 0
-            for c in range(C):
-                u = _neighbour(
-                    z,
-                    y,
-                    x,
-                    cand_offsets[p, c, 0],
-                    cand_offsets[p, c, 1],
-                    cand_offsets[p, c, 2],
-                    D,
-                    H,
-                    W,
-                    periodic,
-                )
-                if u < 0:
-                    continue
-                g = np.int64(matchf[p * D * H * W + u])
-                dr = cand_rc[p, c, 0]
-                dc = cand_rc[p, c, 1]
-                nc = _add_shifted(cand, nc, g, off, w, dr, dc, y0, y1, x0, x1, stamp, tag)
-                for j in range(k if c < kset_window else 0):  # Tong: positions similar to u's match, shifted
-                    gk = np.int64(kset[g, j])
-                    if gk >= 0:
-                        nc = _add_shifted(cand, nc, gk, off, w, dr, dc, y0, y1, x0, x1, stamp, tag)
-            if n_random > 0:
-                span_y = np.uint64(y1 - y0)
-                span_x = np.uint64(x1 - x0)
-                key = _splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
-                for j in range(n_random):
-                    r = _splitmix(key + np.uint64(j))
-                    gy = y0 + np.int64(r % span_y)
-                    gx = x0 + np.int64((r >> np.uint64(32)) % span_x)
-                    nc = _add_shifted(cand, nc, off + gy * w + gx, off, w, 0, 0, y0, y1, x0, x1, stamp, tag)
-            old = np.int64(match[p, z, y, x])
-            if index_weight > 0.0:
-                index_count[old] -= 1
-            pool = cand
-            n_pool = nc
-            if rerank > 0 and n == K and nc > rerank:
-                # Rank in the principal subspace; keep the ``rerank`` best (stable), compare those in full.
-                for dd in range(n_dims):
-                    proj[dd] = 0.0
-                for i in range(K):
-                    c0 = np.float64(q[i]) - np.float64(mean[p, i])
-                    for dd in range(n_dims):
-                        proj[dd] += c0 * np.float64(basis[p, i, dd])
-                n_top = 0
-                for j in range(nc):
-                    g = cand[j]
-                    s = 0.0
-                    for dd in range(n_dims):
-                        t = proj[dd] - np.float64(features[g, dd])
-                        s += t * t
-                    if index_weight > 0.0:
-                        s *= _histogram_factor(index_count[g], index_target[g], index_weight)
-                    if n_top < rerank:
-                        pos = n_top
-                        n_top += 1
-                    elif s < top_d[rerank - 1]:
-                        pos = rerank - 1
-                    else:
-                        continue
-                    while pos > 0 and top_d[pos - 1] > s:
-                        top_d[pos] = top_d[pos - 1]
-                        top_g[pos] = top_g[pos - 1]
-                        pos -= 1
-                    top_d[pos] = s
-                    top_g[pos] = g
-                pool = top_g
-                n_pool = n_top
-            best = np.inf
-            best_raw = np.inf
-            bg = old
-            for j in range(n_pool):
-                g = pool[j]
-                f = 1.0
-                if index_weight > 0.0:
-                    f = _histogram_factor(index_count[g], index_target[g], index_weight)
-                d = f * _ssd(q, ql, n, ex, g, best / f)
-                if d < best:
-                    best = d
-                    best_raw = d / f
-                    bg = g
-            match[p, z, y, x] = bg
-            if index_weight > 0.0:
-                index_count[bg] += 1
-            msd = best_raw / n
-            weight[p, z, y, x] = (msd + _WEIGHT_EPS) ** power
-            acc[0] += msd
+            index_count[prev[p, z, y, x]] -= 1
+            index_count[match[p, z, y, x]] += 1
+            acc[0] += msd_out[idx - start, p]
             acc[1] += 1.0
-            acc[2] += nc
+            acc[2] += n_cand_out[idx - start, p]
 
 
-@kernel
-def _solve_kernel(
+#: A solve call is taken in blocks of this many voxels (in scan order): each block's candidate costs are
+#: computed in parallel from the volume as the block found it, then its voxels choose one after the other.
+SOLVE_BLOCK = 2048
+
+
+@kernel(parallel=True)
+def _consensus_kernel(match, weight, ex, offsets, lin, periodic, active, mu):
+    """``mu[v]``: the IRLS-weighted mean of the values that the matched neighbourhoods covering voxel ``v``
+    propose (Kopf's least-squares voxel), for the whole volume at once: the matches and weights do not
+    change during a solve pass. Offset by offset over whole rows, so the arrays are read in order; every
+    voxel's sums still run over the planes, then the offsets, in a fixed order."""
+    D = match.shape[1]
+    H = match.shape[2]
+    W = match.shape[3]
+    K = offsets.shape[1]
+    for z in prange(D):
+        sw = np.zeros((H, W), dtype=np.float64)
+        swe = np.zeros((H, W), dtype=np.float64)
+        for p in range(3):
+            if not active[p]:
+                continue
+            for i in range(K):
+                zz = z - offsets[p, i, 0]
+                if periodic:
+                    zz = _wrap(zz, D)
+                elif zz < 0 or zz >= D:
+                    continue
+                dy = offsets[p, i, 1]
+                dx = offsets[p, i, 2]
+                li = lin[p, i]
+                for y in range(H):
+                    yy = y - dy
+                    if periodic:
+                        yy = _wrap(yy, H)
+                    elif yy < 0 or yy >= H:
+                        continue
+                    for x in range(W):
+                        xx = x - dx
+                        if periodic:
+                            xx = _wrap(xx, W)
+                        elif xx < 0 or xx >= W:
+                            continue
+                        wt = np.float64(weight[p, zz, yy, xx])
+                        sw[y, x] += wt
+                        swe[y, x] += wt * np.float64(ex[np.int64(match[p, zz, yy, xx]) + li])
+        for y in range(H):
+            for x in range(W):
+                mu[z, y, x] = swe[y, x] / sw[y, x]
+
+
+@kernel(parallel=True)
+def _solve_fit_kernel(
     order,
     start,
     stop,
     vol,
     match,
-    weight,
-    origin,
-    position_count,
-    position_target,
-    grey_bin,
-    grey_count,
-    grey_target,
+    consensus_mean,
     ex,
     layout,
     valid,
-    features,
-    mean,
-    basis,
     offsets,
     lin,
     periodic,
     active,
     entry_weight,
-    position_weight,
-    grey_weight,
     consensus,
-    rerank,
     radius,
-    stamp,
-    counter,
-    acc,
+    cand_out,
+    cost_out,
+    n_out,
 ):
+    """Each voxel's candidates and their costs before the histogram factors (see :func:`solve_pass`)."""
     D, H, W = vol.shape
     K = offsets.shape[1]
-    n_dims = basis.shape[2]
     n_vox = D * H * W
     matchf = match.ravel()
     volf = vol.ravel()
-    originf = origin.ravel()
-    q = np.empty((3, K), dtype=np.float32)
-    ql = np.empty((3, K), dtype=np.int64)
-    qw = np.empty((3, K), dtype=np.float64)
-    qsum = np.zeros(3, dtype=np.float64)
-    nq = np.zeros(3, dtype=np.int64)
-    proj = np.empty((3, n_dims), dtype=np.float64)
-    cand = np.empty(3 * K, dtype=np.int64)
-    cplane = np.empty(3 * K, dtype=np.int64)
-    top_d = np.empty(max(rerank, 1), dtype=np.float64)
-    top_j = np.empty(max(rerank, 1), dtype=np.int64)
-    weightf = weight.ravel()
-    for idx in range(start, stop):
-        v = order[idx]
-        z = v // (H * W)
-        y = (v // W) % H
-        x = v % W
-        if position_weight > 0.0 and originf[v] >= 0:
-            position_count[originf[v]] -= 1
-        if grey_weight > 0.0 and originf[v] >= 0:
-            grey_count[grey_bin[originf[v]]] -= 1
-        # The voxel's slices in the constrained planes, and their principal-subspace projections.
-        full = True
-        for p in range(3):
-            nq[p] = 0
-            if not active[p]:
-                continue
-            n = 0
-            sq = 0.0
-            for i in range(K):
-                u = _neighbour(
-                    z, y, x, offsets[p, i, 0], offsets[p, i, 1], offsets[p, i, 2], D, H, W, periodic
-                )
-                if u < 0:
-                    continue
-                q[p, n] = volf[u]
-                ql[p, n] = lin[p, i]
-                qw[p, n] = entry_weight[p, i]
-                sq += entry_weight[p, i]
-                n += 1
-            qsum[p] = sq
-            nq[p] = n
-            if n < K:
-                full = False
-        ranked = rerank > 0 and full
-        if ranked:
+    steps, reach = _flat_steps(offsets, H, W, 1)
+    blocks = PARALLEL_BLOCKS
+    per = (stop - start + blocks - 1) // blocks
+    for blk in prange(blocks):
+        q = np.empty((3, K), dtype=np.float32)
+        ql = np.empty((3, K), dtype=np.int64)
+        qw = np.empty((3, K), dtype=np.float64)
+        qsum = np.zeros(3, dtype=np.float64)
+        nq = np.zeros(3, dtype=np.int64)
+        cplane = np.empty(cand_out.shape[1], dtype=np.int64)
+        for idx in range(start + blk * per, min(stop, start + (blk + 1) * per)):
+            v = order[idx]
+            z = v // (H * W)
+            y = (v // W) % H
+            x = v % W
+            inner = _interior(z, y, x, reach, D, H, W)
+            # The voxel's slices in the constrained planes.
             for p in range(3):
                 if not active[p]:
                     continue
-                for dd in range(n_dims):
-                    proj[p, dd] = 0.0
+                n = 0
+                sq = 0.0
                 for i in range(K):
-                    c0 = np.float64(q[p, i]) - np.float64(mean[p, i])
-                    for dd in range(n_dims):
-                        proj[p, dd] += c0 * np.float64(basis[p, i, dd])
-        # Candidates: the exemplar pixels the matched neighbourhoods covering v lay on it (Chen & Wang).
-        counter[0] += 1
-        tag = counter[0]
-        nc = 0
-        sw = 0.0
-        swe = 0.0
-        for p in range(3):
-            if not active[p]:
-                continue
-            off = layout[p, 0]
-            w = layout[p, 2]
-            for i in range(K):
-                u = _neighbour(
-                    z, y, x, -offsets[p, i, 0], -offsets[p, i, 1], -offsets[p, i, 2], D, H, W, periodic
-                )
-                if u < 0:
+                    u = _near(
+                        v,
+                        inner,
+                        steps[p, i],
+                        z,
+                        y,
+                        x,
+                        offsets[p, i, 0],
+                        offsets[p, i, 1],
+                        offsets[p, i, 2],
+                        D,
+                        H,
+                        W,
+                        periodic,
+                    )
+                    if u < 0:
+                        continue
+                    q[p, n] = volf[u]
+                    ql[p, n] = lin[p, i]
+                    qw[p, n] = entry_weight[p, i]
+                    sq += entry_weight[p, i]
+                    n += 1
+                qsum[p] = sq
+                nq[p] = n
+            # The proposals of every matched neighbourhood covering v: their IRLS-weighted mean (Kopf's
+            # least-squares voxel), and the candidates, those centred within ``radius`` (Chen & Wang).
+            nc = 0
+            row = idx - start
+            for p in range(3):
+                if not active[p]:
                     continue
-                g = np.int64(matchf[p * n_vox + u]) + lin[p, i]
-                wt = np.float64(weightf[p * n_vox + u])
-                sw += wt
-                swe += wt * np.float64(ex[g])
-                if max(abs(offsets[p, i, 0]), abs(offsets[p, i, 1]), abs(offsets[p, i, 2])) > radius:
-                    continue
-                local = g - off
-                cy = local // w
-                cx = local % w
-                if cy < valid[p, 0] or cy >= valid[p, 1] or cx < valid[p, 2] or cx >= valid[p, 3]:
-                    continue
-                if stamp[g] == tag:
-                    continue
-                stamp[g] = tag
-                cand[nc] = g
-                cplane[nc] = p
-                nc += 1
-        mu = swe / sw
-        n_pool = nc
-        if ranked and nc > rerank:
-            n_top = 0
+                off = layout[p, 0]
+                w = layout[p, 2]
+                for i in range(K):
+                    if max(abs(offsets[p, i, 0]), abs(offsets[p, i, 1]), abs(offsets[p, i, 2])) > radius:
+                        continue
+                    u = _near(
+                        v,
+                        inner,
+                        -steps[p, i],
+                        z,
+                        y,
+                        x,
+                        -offsets[p, i, 0],
+                        -offsets[p, i, 1],
+                        -offsets[p, i, 2],
+                        D,
+                        H,
+                        W,
+                        periodic,
+                    )
+                    if u < 0:
+                        continue
+                    g = np.int64(matchf[p * n_vox + u]) + lin[p, i]
+                    local = g - off
+                    cy = local // w
+                    cx = local % w
+                    if cy < valid[p, 0] or cy >= valid[p, 1] or cx < valid[p, 2] or cx >= valid[p, 3]:
+                        continue
+                    seen = False
+                    for j in range(nc):
+                        if cand_out[row, j] == g:
+                            seen = True
+                            break
+                    if seen:
+                        continue
+                    cand_out[row, nc] = g
+                    cplane[nc] = p
+                    nc += 1
+            mu = consensus_mean[v]
             for j in range(nc):
-                g = cand[j]
+                g = cand_out[row, j]
                 pg = cplane[j]
                 s = 0.0
                 m = 0
@@ -573,50 +706,52 @@ def _solve_kernel(
                     if not active[p] or layout[p, 0] != layout[pg, 0]:
                         continue
                     d = 0.0
-                    for dd in range(n_dims):
-                        t = proj[p, dd] - np.float64(features[g, dd])
-                        d += t * t
-                    s += d / K
+                    for i in range(nq[p]):
+                        t = np.float64(q[p, i]) - np.float64(ex[g + ql[p, i]])
+                        d += qw[p, i] * t * t
+                    s += d / qsum[p]
                     m += 1
                 t = np.float64(ex[g]) - mu
-                s = s / m + consensus * t * t
-                if position_weight > 0.0:
-                    s *= _histogram_factor(position_count[g], position_target[g], position_weight)
-                if grey_weight > 0.0:
-                    s *= _histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
-                if n_top < rerank:
-                    pos = n_top
-                    n_top += 1
-                elif s < top_d[rerank - 1]:
-                    pos = rerank - 1
-                else:
-                    continue
-                while pos > 0 and top_d[pos - 1] > s:
-                    top_d[pos] = top_d[pos - 1]
-                    top_j[pos] = top_j[pos - 1]
-                    pos -= 1
-                top_d[pos] = s
-                top_j[pos] = j
-            n_pool = n_top
+                cost_out[row, j] = s / m + consensus * t * t
+            n_out[row] = nc
+
+
+@kernel
+def _solve_pick_kernel(
+    order,
+    start,
+    stop,
+    vol,
+    origin,
+    position_count,
+    position_target,
+    grey_bin,
+    grey_count,
+    grey_target,
+    ex,
+    position_weight,
+    grey_weight,
+    cand,
+    cost,
+    n_cand,
+    acc,
+):
+    """The voxels of a block, in scan order: each takes its candidate of lowest cost times the position
+    and grey-level histogram factors (the first lowest wins), and the histograms follow at once."""
+    volf = vol.ravel()
+    originf = origin.ravel()
+    for idx in range(start, stop):
+        v = order[idx]
+        row = idx - start
+        if position_weight > 0.0 and originf[v] >= 0:
+            position_count[originf[v]] -= 1
+        if grey_weight > 0.0 and originf[v] >= 0:
+            grey_count[grey_bin[originf[v]]] -= 1
         best = np.inf
-        bg = cand[0]
-        for jj in range(n_pool):
-            j = top_j[jj] if n_pool < nc else jj
-            g = cand[j]
-            pg = cplane[j]
-            s = 0.0
-            m = 0
-            for p in range(3):
-                if not active[p] or layout[p, 0] != layout[pg, 0]:
-                    continue
-                d = 0.0
-                for i in range(nq[p]):
-                    t = np.float64(q[p, i]) - np.float64(ex[g + ql[p, i]])
-                    d += qw[p, i] * t * t
-                s += d / qsum[p]
-                m += 1
-            t = np.float64(ex[g]) - mu
-            s = s / m + consensus * t * t
+        bg = cand[row, 0]
+        for j in range(n_cand[row]):
+            g = cand[row, j]
+            s = cost[row, j]
             if position_weight > 0.0:
                 s *= _histogram_factor(position_count[g], position_target[g], position_weight)
             if grey_weight > 0.0:
@@ -637,6 +772,22 @@ def _solve_kernel(
 # ---------------------------------------------------------------------------------------------- wrappers
 
 
+def new_scratch(bank: ExemplarBank, state: SolidState) -> dict[str, np.ndarray]:
+    """The working arrays of the passes over one level, kept across calls: de-duplication ``stamp`` and
+    ``counter`` (the solve's), ``search_stamp`` / ``search_tags`` (one row per search block), ``previous``
+    (the matches as the current search pass found them) and ``acc`` ((3,) float64: the sums of the
+    matches' mean squared differences, of searches and of candidates)."""
+    n = len(bank.values)
+    return {
+        "stamp": np.zeros(n, dtype=np.int64),
+        "counter": np.zeros(1, dtype=np.int64),
+        "search_stamp": np.zeros((PARALLEL_BLOCKS, n), dtype=np.int64),
+        "search_tags": np.zeros(PARALLEL_BLOCKS, dtype=np.int64),
+        "previous": np.empty_like(state.match),
+        "acc": np.zeros(3, dtype=np.float64),
+    }
+
+
 def search_pass(
     bank: ExemplarBank,
     geometry: SliceGeometry,
@@ -649,18 +800,31 @@ def search_pass(
 ) -> None:
     """Search phase on the voxels ``order[start:stop]``: update ``state.match``, ``weight``, ``index_count``.
 
-    ``scratch`` holds ``stamp`` ((N,) int64, zeros), ``counter`` ((1,) int64) and ``acc`` ((3,) float64:
-    the sums of the matches' mean squared differences, of searches and of candidates), kept across calls.
+    A pass is Jacobi, as Kopf's search: every voxel's candidates come from the matches as they were
+    when the pass began (``start == 0`` takes that snapshot into ``scratch['previous']``), so the voxels
+    of a call are searched in parallel; the index histogram is the one at the start of the call (minus
+    the voxel's own old match) and is brought up to date after it, in scan order. ``scratch``: see
+    :func:`new_scratch`.
     """
+    start, stop = int(start), int(stop)
+    if start == 0:
+        np.copyto(scratch["previous"], state.match)
+    msd = np.zeros((stop - start, 3), dtype=np.float64)
+    n_cand = np.zeros((stop - start, 3), dtype=np.int64)
+    # The index histogram is frozen during the call: every position's factor, once.
+    excess = state.index_count / state.index_target - 1.0
+    factor = np.where(excess > 0.0, 1.0 + float(weights.index_weight) * excess, 1.0)
     _search_kernel(
         order,
-        int(start),
-        int(stop),
+        start,
+        stop,
         state.volume,
+        scratch["previous"],
         state.match,
         state.weight,
         state.index_count,
         state.index_target,
+        factor,
         bank.values,
         bank.layout,
         bank.valid,
@@ -680,8 +844,21 @@ def search_pass(
         int(weights.rerank),
         int(weights.kset_window),
         geometry.active,
-        scratch["stamp"],
-        scratch["counter"],
+        scratch["search_stamp"],
+        scratch["search_tags"],
+        msd,
+        n_cand,
+    )
+    _search_tally(
+        order,
+        start,
+        stop,
+        scratch["previous"],
+        state.match,
+        geometry.active,
+        state.index_count,
+        msd,
+        n_cand,
         scratch["acc"],
     )
 
@@ -698,42 +875,71 @@ def solve_pass(
 ) -> None:
     """Discrete-solver phase on ``order[start:stop]``: update ``volume``, ``origin``, ``position_count``.
 
-    ``scratch['acc']`` ((3,) float64) receives the sum of the chosen proposals' squared distance to the
-    weighted mean and their number.
+    Taken in blocks of :data:`SOLVE_BLOCK` voxels: a block's candidate costs are computed in parallel
+    from the volume as the block found it; then its voxels choose in scan order with the histograms
+    kept up to date voxel by voxel. ``scratch['acc']`` ((3,) float64) receives the sum of the chosen
+    costs and their number.
     """
-    _solve_kernel(
-        order,
-        int(start),
-        int(stop),
-        state.volume,
-        state.match,
-        state.weight,
-        state.origin,
-        state.position_count,
-        state.position_target,
-        bank.grey_bin,
-        state.grey_count,
-        state.grey_target,
-        bank.values,
-        bank.layout,
-        bank.valid,
-        bank.features,
-        bank.mean,
-        bank.basis,
-        geometry.offsets,
-        geometry.lin,
-        geometry.periodic,
-        geometry.active,
-        geometry.entry_weight,
-        float(weights.position_weight),
-        float(weights.grey_weight),
-        float(weights.consensus),
-        int(weights.rerank),
-        int(weights.solve_radius),
-        scratch["stamp"],
-        scratch["counter"],
-        scratch["acc"],
-    )
+    start, stop = int(start), int(stop)
+    if start == 0:
+        scratch["consensus"] = np.empty(state.volume.shape, dtype=np.float64)
+        _consensus_kernel(
+            state.match,
+            state.weight,
+            bank.values,
+            geometry.offsets,
+            geometry.lin,
+            geometry.periodic,
+            geometry.active,
+            scratch["consensus"],
+        )
+    radius = int(weights.solve_radius)
+    n_max = 3 * min(geometry.offsets.shape[1], (2 * radius + 1) ** 2)
+    for lo in range(start, stop, SOLVE_BLOCK):
+        hi = min(stop, lo + SOLVE_BLOCK)
+        cand = np.full((hi - lo, n_max), -1, dtype=np.int64)
+        cost = np.zeros((hi - lo, n_max), dtype=np.float64)
+        n_cand = np.zeros(hi - lo, dtype=np.int64)
+        _solve_fit_kernel(
+            order,
+            lo,
+            hi,
+            state.volume,
+            state.match,
+            scratch["consensus"].ravel(),
+            bank.values,
+            bank.layout,
+            bank.valid,
+            geometry.offsets,
+            geometry.lin,
+            geometry.periodic,
+            geometry.active,
+            geometry.entry_weight,
+            float(weights.consensus),
+            radius,
+            cand,
+            cost,
+            n_cand,
+        )
+        _solve_pick_kernel(
+            order,
+            lo,
+            hi,
+            state.volume,
+            state.origin,
+            state.position_count,
+            state.position_target,
+            bank.grey_bin,
+            state.grey_count,
+            state.grey_target,
+            bank.values,
+            float(weights.position_weight),
+            float(weights.grey_weight),
+            cand,
+            cost,
+            n_cand,
+            scratch["acc"],
+        )
 
 
 # ---------------------------------------------------------------------------------------------- references
@@ -774,7 +980,11 @@ def search_reference(
     shape = s.volume.shape
     n_vox = s.volume.size
     volf = s.volume.ravel()
-    matchf = s.match.reshape(3, n_vox)
+    if int(start) == 0:
+        scratch["previous"] = s.match.copy()
+    prev = scratch["previous"]
+    prevf = prev.reshape(3, n_vox)
+    counts = s.index_count.copy()  # the histogram as the call found it
     for v in order[start:stop]:
         zyx = np.unravel_index(int(v), shape)
         for p in np.flatnonzero(g.active):
@@ -787,7 +997,7 @@ def search_reference(
             cflat, cin = _neighbours_reference(zyx, g.cand_offsets[p], shape, g.periodic)
             proposals: list[tuple[int, int, int]] = []
             for c in np.flatnonzero(cin):
-                m = int(matchf[p, cflat[c]])
+                m = int(prevf[p, cflat[c]])
                 dr, dc = (int(t) for t in g.cand_rc[p, c])
                 proposals.append((m, dr, dc))
                 if c < weights.kset_window:
@@ -806,9 +1016,8 @@ def search_reference(
                 if y0 <= cy < y1 and x0 <= cx < x1 and key_pos not in cands:
                     cands.append(key_pos)
             ca = np.asarray(cands, dtype=np.int64)
-            old = int(s.match[p][zyx])
-            if weights.index_weight > 0:
-                s.index_count[old] -= 1
+            old = int(prev[p][zyx])
+            own = counts[ca] - (ca == old)  # the voxel's own old match does not count against it
             n_all = len(ca)
             if weights.rerank > 0 and len(q) == g.offsets.shape[1] and len(ca) > weights.rerank:
                 proj = np.zeros(b.basis.shape[2])
@@ -818,8 +1027,9 @@ def search_reference(
                 for dd in range(len(proj)):
                     pd += (proj[dd] - b.features[ca, dd].astype(np.float64)) ** 2
                 if weights.index_weight > 0:
-                    pd *= _hist_factor_reference(s.index_count[ca], s.index_target[ca], weights.index_weight)
-                ca = ca[np.lexsort((np.arange(len(ca)), pd))[: weights.rerank]]
+                    pd *= _hist_factor_reference(own, s.index_target[ca], weights.index_weight)
+                keep = np.lexsort((np.arange(len(ca)), pd))[: weights.rerank]
+                ca, own = ca[keep], own[keep]
             t = (q[None, :] - b.values[ca[:, None] + ql[None, :]].astype(np.float64)) ** 2
             d = np.zeros(len(ca))
             n4 = len(q) - len(q) % 4
@@ -829,11 +1039,11 @@ def search_reference(
                 d += t[:, i]
             f = np.ones(len(ca))
             if weights.index_weight > 0:
-                f = _hist_factor_reference(s.index_count[ca], s.index_target[ca], weights.index_weight)
+                f = _hist_factor_reference(own, s.index_target[ca], weights.index_weight)
             best = int(np.argmin(f * d))
             s.match[p][zyx] = ca[best]
-            if weights.index_weight > 0:
-                s.index_count[ca[best]] += 1
+            s.index_count[old] -= 1
+            s.index_count[ca[best]] += 1
             msd = d[best] / len(q)
             s.weight[p][zyx] = (msd + _WEIGHT_EPS) ** (0.5 * (weights.exponent - 2.0))
             scratch["acc"][0] += msd
@@ -855,92 +1065,68 @@ def solve_reference(
     s, b, g = state, bank, geometry
     shape = s.volume.shape
     n_vox = s.volume.size
-    K = g.offsets.shape[1]
-    volf, originf = s.volume.ravel(), s.origin.ravel()
+    originf = s.origin.ravel()
     matchf = s.match.reshape(3, n_vox)
-    pw = weights.position_weight
-    gw = weights.grey_weight
-    lam = weights.consensus
     weightf = s.weight.reshape(3, n_vox)
+    pw, gw, lam = weights.position_weight, weights.grey_weight, weights.consensus
     planes = [int(p) for p in np.flatnonzero(g.active)]
-    for v in order[start:stop]:
-        zyx = np.unravel_index(int(v), shape)
-        if pw > 0 and originf[v] >= 0:
-            s.position_count[originf[v]] -= 1
-        if gw > 0 and originf[v] >= 0:
-            s.grey_count[b.grey_bin[originf[v]]] -= 1
-        qs, qls, qws = {}, {}, {}
-        for p in planes:
-            flat, inside = _neighbours_reference(zyx, g.offsets[p], shape, g.periodic)
-            qs[p] = volf[flat[inside]].astype(np.float64)
-            qls[p] = g.lin[p][inside]
-            qws[p] = g.entry_weight[p][inside]
-        ranked = weights.rerank > 0 and all(len(qs[p]) == K for p in planes)
-        cands: list[tuple[int, int]] = []
-        sw, swe = 0.0, 0.0
-        for p in planes:
-            off, _, w = (int(t) for t in b.layout[p])
-            y0, y1, x0, x1 = (int(t) for t in b.valid[p])
-            flat, inside = _neighbours_reference(zyx, -g.offsets[p], shape, g.periodic)
-            for i in np.flatnonzero(inside):
-                gg = int(matchf[p, flat[i]]) + int(g.lin[p, i])
-                sw += float(weightf[p, flat[i]])
-                swe += float(weightf[p, flat[i]]) * float(b.values[gg])
-                if np.abs(g.offsets[p, i]).max() > weights.solve_radius:
-                    continue
-                cy, cx = divmod(gg - off, w)
-                if y0 <= cy < y1 and x0 <= cx < x1 and gg not in [c for c, _ in cands]:
-                    cands.append((gg, p))
-        mu = swe / sw
-        ca = np.asarray([c for c, _ in cands], dtype=np.int64)
-        cp = np.asarray([p for _, p in cands], dtype=np.int64)
-
-        def _factors(idx: np.ndarray, ca: np.ndarray = ca) -> list[np.ndarray]:
-            out = []  # applied one after the other: the kernel's order of multiplication
+    for lo in range(int(start), int(stop), SOLVE_BLOCK):
+        block = order[lo : min(int(stop), lo + SOLVE_BLOCK)]
+        volf = s.volume.ravel().copy()  # the volume as the block found it
+        costs: list[tuple[np.ndarray, np.ndarray]] = []
+        for v in block:
+            zyx = np.unravel_index(int(v), shape)
+            qs, qls, qws = {}, {}, {}
+            for p in planes:
+                flat, inside = _neighbours_reference(zyx, g.offsets[p], shape, g.periodic)
+                qs[p] = volf[flat[inside]].astype(np.float64)
+                qls[p] = g.lin[p][inside]
+                qws[p] = g.entry_weight[p][inside]
+            cands: list[tuple[int, int]] = []
+            sw, swe = 0.0, 0.0
+            for p in planes:
+                off, _, w = (int(t) for t in b.layout[p])
+                y0, y1, x0, x1 = (int(t) for t in b.valid[p])
+                flat, inside = _neighbours_reference(zyx, -g.offsets[p], shape, g.periodic)
+                for i in np.flatnonzero(inside):
+                    gg = int(matchf[p, flat[i]]) + int(g.lin[p, i])
+                    sw += float(weightf[p, flat[i]])
+                    swe += float(weightf[p, flat[i]]) * float(b.values[gg])
+                    if np.abs(g.offsets[p, i]).max() > weights.solve_radius:
+                        continue
+                    cy, cx = divmod(gg - off, w)
+                    if y0 <= cy < y1 and x0 <= cx < x1 and gg not in [c for c, _ in cands]:
+                        cands.append((gg, p))
+            mu = swe / sw
+            cost = np.zeros(len(cands))
+            for j, (gg, pg) in enumerate(cands):
+                sharing = [p for p in planes if b.layout[p, 0] == b.layout[pg, 0]]
+                for p in sharing:
+                    t = (qs[p] - b.values[gg + qls[p]].astype(np.float64)) ** 2
+                    dd, sq = 0.0, 0.0
+                    for wi, ti in zip(qws[p], t, strict=True):  # the kernel's order of summation
+                        dd += wi * ti
+                        sq += wi
+                    cost[j] += dd / sq
+                cost[j] = cost[j] / len(sharing) + lam * (float(b.values[gg]) - mu) ** 2
+            costs.append((np.asarray([c for c, _ in cands], dtype=np.int64), cost))
+        for v, (ca, cost) in zip(block, costs, strict=True):
+            if pw > 0 and originf[v] >= 0:
+                s.position_count[originf[v]] -= 1
+            if gw > 0 and originf[v] >= 0:
+                s.grey_count[b.grey_bin[originf[v]]] -= 1
+            total = cost.copy()  # factors applied one after the other: the kernel's order
             if pw > 0:
-                out.append(_hist_factor_reference(s.position_count[ca[idx]], s.position_target[ca[idx]], pw))
+                total *= _hist_factor_reference(s.position_count[ca], s.position_target[ca], pw)
             if gw > 0:
-                gb = b.grey_bin[ca[idx]]
-                out.append(_hist_factor_reference(s.grey_count[gb], s.grey_target[gb], gw))
-            return out
-
-        def _plane_sets(j: int, cp: np.ndarray = cp) -> list[int]:
-            return [p for p in planes if b.layout[p, 0] == b.layout[cp[j], 0]]
-
-        pool = np.arange(len(ca))
-        if ranked and len(ca) > weights.rerank:
-            approx = np.zeros(len(ca))
-            for j in range(len(ca)):
-                for p in _plane_sets(j):
-                    proj = np.zeros(b.basis.shape[2])
-                    for i in range(K):  # entry by entry: the kernel's order of summation
-                        proj += (qs[p][i] - np.float64(b.mean[p, i])) * b.basis[p, i].astype(np.float64)
-                    dd = 0.0
-                    for t in proj - b.features[ca[j]].astype(np.float64):
-                        dd += t * t
-                    approx[j] += dd / K
-                approx[j] = approx[j] / len(_plane_sets(j)) + lam * (float(b.values[ca[j]]) - mu) ** 2
-            for f in _factors(pool):
-                approx *= f
-            pool = np.lexsort((pool, approx))[: weights.rerank]
-        cost = np.zeros(len(pool))
-        for n, j in enumerate(pool):
-            for p in _plane_sets(j):
-                t = (qs[p] - b.values[ca[j] + qls[p]].astype(np.float64)) ** 2
-                dd, sq = 0.0, 0.0
-                for wi, ti in zip(qws[p], t, strict=True):
-                    dd += wi * ti
-                    sq += wi
-                cost[n] += dd / sq
-            cost[n] = cost[n] / len(_plane_sets(j)) + lam * (float(b.values[ca[j]]) - mu) ** 2
-        for f in _factors(pool):
-            cost *= f
-        best = int(pool[int(np.argmin(cost))])
-        volf[v] = b.values[ca[best]]
-        originf[v] = ca[best]
-        if pw > 0:
-            s.position_count[ca[best]] += 1
-        if gw > 0:
-            s.grey_count[b.grey_bin[ca[best]]] += 1
-        scratch["acc"][0] += float(cost.min())
-        scratch["acc"][1] += 1.0
+                gb = b.grey_bin[ca]
+                total *= _hist_factor_reference(s.grey_count[gb], s.grey_target[gb], gw)
+            best = int(np.argmin(total))
+            s.volume.ravel()[v] = b.values[ca[best]]
+            originf[v] = ca[best]
+            if pw > 0:
+                s.position_count[ca[best]] += 1
+            if gw > 0:
+                s.grey_count[b.grey_bin[ca[best]]] += 1
+            scratch["acc"][0] += float(total[best])
+            scratch["acc"][1] += 1.0

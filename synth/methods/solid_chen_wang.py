@@ -59,13 +59,18 @@ Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis g
   and dropped: mean shift to the proposals' mode (grey KL 0.19-0.37), a Gaussian weighting of the fit
   (``sigma``, no visible gain at 32^3), a grey-level histogram term strong enough for exact
   histograms (``grey_weight`` 100: grey KL 0.016 but streaked slices; with ``consensus`` 1 and weight 10
-  the fringes all turn one way, orientation KL 0.36 on one axis). Kopf's grey-level histogram is kept
-  weak (``grey_weight`` 5, grey KL 0.048 -> 0.038) beside the position histogram, which alone does not
-  hold the grey levels: ~2-20 uses per pixel, the over-use of mid-tones is spread over many pixels.
+  the fringes all turn one way, orientation KL 0.36 on one axis). Kopf's grey-level histogram sits
+  beside the position histogram, which alone does not hold the grey levels (~2-20 uses per pixel: the
+  over-use of mid-tones is spread over many pixels). Its weight, measured in session 5 with the
+  parallel passes below (seeds 1-3): 5 against 20 gives soot 64^3 grey KL 0.047 / 0.034 (orientation
+  KL at most 0.044 / 0.038), per-plane laminae 0.04 / 0.18 / 0.14 against 0.04 / 0.17 / 0.18, and on the
+  known answer's two-phase field a volume fraction of 0.32-0.35 / 0.37 (truth 0.40), S2 error
+  0.09-0.21 / 0.05-0.08. Default 20.
 - **Candidates** (speed): the solver scores only the voxel's own three matches (``solve_radius=0``;
   radius 1, 27 candidates, costs 1.3x the run time and radius 3, up to 147, over 2x, for no better KL);
   the search adds the k-coherence sets of the voxel's own match only (``kset_window=1``: 20 candidates
-  instead of ~65; KL unchanged, search 2x faster). Candidates are ranked on 8 principal components and
+  instead of ~80; soot 64^3, seeds 1-3: grey KL 0.047 against 0.050, worst orientation KL 0.044
+  against 0.026, 6.5 s against 10.8 s). Candidates are ranked on 8 principal components and
   the best 4 compared in full. ``k`` stays the paper's 15: the search's cost grows with it (k = 4: 12.7 s
   against 19-24 s; k = 8: 15.0 s) and the KLs stay within run-to-run noise (grey 0.046 / 0.051 / 0.048),
   but at 4 and 8 the slices look fragmented or blobby rather than fringed.
@@ -76,15 +81,28 @@ Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis g
 - Coarse levels use smaller neighbourhoods (at most a quarter of the exemplar's shorter side) and the
   number of levels shrinks so that the coarsest exemplar keeps 8 pixels and the volume 4 voxels a side
   (:func:`synth.pixel.solid.plan_levels`).
-- Default 3 iterations per level (the study ran 10): the energy stops falling after 2-3 iterations
-  (``stats['mean_match_distance']``), and 10 would cost 3x the time.
-- Passes are sequential (Gauss-Seidel, in the scan order). A parallel version (numba ``prange``, each block
-  of the scan order reading the state as it was before it; same bytes with 1 or 2 threads) was measured
-  and dropped: blocks of 2% of the voxels froze the histograms too long (grey KL 0.19), blocks of 256
-  voxels kept the quality but cost 2x the CPU time on this shared 2-core machine.
-- Measured with the defaults (one core of a shared 2-core machine, load 2-3): soot 64^3 from 128^2 in
-  22 s (grey KL 0.035 on every axis, orientation KL 0.021 / 0.015 / 0.065, std 0.142 against 0.162);
-  128^3 in 142 s, peak memory 0.49 GB. Still slower than ``solid-kopf`` (64^3 from 128^2: 12 s).
+- Default 3 iterations per level (the study ran 10): on soot the energy stops falling after 2-3
+  iterations (``stats['mean_match_distance']``). Laminae get 10 (``adapt_to_structure``, as
+  ``solid-kopf``; :func:`synth.pixel.solid.structure_schedule`): per-plane laminae, seeds 1-3, mean
+  orientation KL 0.09 / 0.26 / 0.30 with 3 -> 0.04 / 0.18 / 0.14 with 10. Kopf's other half of that
+  schedule, 2 levels for micro-structures, is not taken: it doubled the known answer's S2 error here
+  (0.13 against 0.06) and saved little time (the finest level is 85-90% of a run).
+- **Parallel passes** (session 5). The search is Jacobi, as Kopf's: every voxel's candidates come from
+  the matches as the pass found them, the index histogram is frozen during a call (about 1% of the
+  run) and brought up to date after it, and the voxels of a call are searched in parallel in a fixed
+  number of blocks. The solve takes blocks of 2048 voxels in scan order: their candidates' costs are
+  computed in parallel from the volume as the block found it, then the voxels choose one after the other
+  with the position and grey histograms kept up to date voxel by voxel; the consensus means of the whole
+  volume are computed once per pass (the matches do not change during it). The same bytes with 1 or 2
+  threads. Session 3's fully sequential version kept the histograms fresher but ran on one core (an
+  earlier parallel attempt froze the position histogram for 2% of the voxels: grey KL 0.19); the
+  parallel one measures as well (soot grey KL 0.034, orientation 0.03 per axis) and is about 3x faster.
+  The same session fixed the first voxels' origins, which aliased the first plane's matches so that
+  every solve overwrote them.
+- Measured with the defaults (2 cores, load below 1.3, see docs/benchmarks.md): soot 64^3 from 64^2
+  in about 5 s, 128^3 from 128^2 in about 39 s (``solid-kopf``: 5.7 s and 33 s). It searches every
+  voxel of every slice where Kopf searches a sparse grid (every second voxel of each slice axis), four
+  times the searches per iteration.
 - ``scan`` (lexicographic, random, Morton, Hilbert; default Hilbert, the study's recommendation) orders
   both phases; ``periodic`` makes the volume wrap (tileable); ``random_candidates`` adds random exemplar
   positions to the k-coherent ones (0 = the paper).
@@ -106,6 +124,7 @@ from synth.kernels.solid_kcoherence import (
     SliceGeometry,
     SolidState,
     SolverWeights,
+    new_scratch,
     search_pass,
     search_reference,
     solve_pass,
@@ -119,6 +138,7 @@ from synth.pixel.solid import (
     exemplar_offsets,
     plan_levels,
     plane_offsets,
+    structure_schedule,
 )
 from synth.pixel.synthesis import _k_coherence_sets
 
@@ -143,6 +163,10 @@ class SolidChenWangParams(SolidParams):
     levels: int = Field(
         5, ge=1, le=8, description="Pyramid levels (at most; fewer when the exemplar or volume is small)."
     )
+    adapt_to_structure: bool = Field(
+        True,
+        description="Laminae get at least 10 iterations per level (off: iterations literally).",
+    )
     iterations: int = Field(3, ge=1, le=20, description="Search + optimisation iterations per level.")
     k: int = Field(15, ge=0, le=32, description="k-coherence: similar exemplar positions per pixel.")
     # Not given by the paper; measured on the soot exemplar (32^3): 5 narrows the usage spread and the
@@ -162,7 +186,7 @@ class SolidChenWangParams(SolidParams):
     # KL 0.084 / 0.092 / 0.070, but 100 streaks the slices; on binary exemplars (the known-answer test's
     # two-phase field) 0 lets the majority phase grow (volume fraction 0.18 against 0.40), 5 gives 0.25.
     grey_weight: float = Field(
-        5.0,
+        20.0,
         ge=0.0,
         le=1000.0,
         description="Grey-level histogram weight (Kopf's histogram matching): 0 = off.",
@@ -172,7 +196,7 @@ class SolidChenWangParams(SolidParams):
         0.0, ge=0.0, le=10.0, description="Gaussian entry weighting of the solver (0: flat)."
     )
     kset_window: int = Field(
-        5,
+        1,
         ge=0,
         le=9,
         description="Search: window voxels (the voxel first) whose k-coherence sets are candidates.",
@@ -389,7 +413,11 @@ def synthesize_solid_chen_wang(
         img = np.asarray(exemplars[plane])
         if not np.all(np.isfinite(img)):
             raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
-    plan = plan_levels(exemplars, tuple(int(s) for s in size), params.levels, params.neighbourhood_size)
+    iterations = params.iterations
+    if params.adapt_to_structure:  # the iterations only: fewer levels hurt this method (see above)
+        _, iterations = structure_schedule([exemplars[name] for name in params.planes], 1, iterations)
+    levels = params.levels
+    plan = plan_levels(exemplars, tuple(int(s) for s in size), levels, params.neighbourhood_size)
     rng = np.random.default_rng(seed)
     weights0 = SolverWeights(
         index_weight=params.index_weight,
@@ -403,11 +431,12 @@ def synthesize_solid_chen_wang(
     )
     search_fn = search_reference if reference else search_pass
     solve_fn = solve_reference if reference else solve_pass
-    per_pass = 1 + params.iterations * (1 + _SEARCH_COST)
+    per_pass = 1 + iterations * (1 + _SEARCH_COST)
     total = sum(per_pass * int(np.prod(s)) for s in plan.shapes)
     meter = ProgressMeter(progress or (lambda stage, fraction: None), total)
     stats: dict = {
         "levels": plan.levels,
+        "iterations": iterations,
         "sizes": list(plan.sizes),
         "mean_match_distance": {},
         "mean_candidates": {},
@@ -430,7 +459,8 @@ def synthesize_solid_chen_wang(
         index_target, position_target = _targets(bank, n_vox, geometry.active)
         # The first voxels: the pixels the first constrained plane's matches are centred on (coherent
         # 2 x 2 blocks of the coarser solution, or random pixels at the coarsest level).
-        origin = np.ascontiguousarray(match[int(np.flatnonzero(geometry.active)[0])], dtype=np.int32)
+        # A copy: a view would alias the plane's matches, and every solve would overwrite them.
+        origin = np.array(match[int(np.flatnonzero(geometry.active)[0])], dtype=np.int32)
         state = SolidState(
             volume=np.ascontiguousarray(bank.values[origin]),
             match=np.ascontiguousarray(match),
@@ -445,17 +475,13 @@ def synthesize_solid_chen_wang(
             grey_count=np.bincount(bank.grey_bin[origin].ravel(), minlength=_GREY_BINS).astype(np.int64),
             grey_target=_grey_target(bank, n_vox, geometry.active),
         )
-        scratch = {
-            "stamp": np.zeros(len(bank.values), dtype=np.int64),
-            "counter": np.zeros(1, dtype=np.int64),
-            "acc": np.zeros(3, dtype=np.float64),
-        }
+        scratch = new_scratch(bank, state)
         fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
         ctx = (bank, geometry, state, scratch, shape, fixed_order)
         label = f"level {plan.levels - level}/{plan.levels}"
         _run_phase(solve_fn, 1.0, f"{label}: initial voxels", weights0, ctx, meter, rng)
 
-        for it in range(params.iterations):
+        for it in range(iterations):
             weights = SolverWeights(**{**weights0.__dict__, "seed_key": int(rng.integers(0, 2**63))})
             scratch["acc"][:] = 0.0
             _run_phase(

@@ -26,7 +26,11 @@ def truth() -> np.ndarray:
 #: Issue 10 asks 10% on every axis. Measured with the defaults (32^3, seeds 1-3): 0.033-0.044 along
 #: z, 0.034-0.041 along y, 0.039-0.042 along x. The automatic level count matters: with the paper's 5
 #: levels (4 fit here) z was 0.13-0.17 and x up to 0.10 (``structure_schedule``, tested below).
-BOUNDS = {"solid-kopf": {"z": 0.10, "y": 0.10, "x": 0.10}}
+BOUNDS = {
+    "solid-kopf": {"z": 0.10, "y": 0.10, "x": 0.10},
+    # Measured (seeds 1-3): 0.075-0.084 along z, 0.054-0.057 along y, 0.057-0.058 along x.
+    "solid-chen-wang": {"z": 0.10, "y": 0.10, "x": 0.10},
+}
 
 
 @pytest.mark.parametrize("method", sorted(BOUNDS))
@@ -60,3 +64,16 @@ def test_the_schedule_adapts_to_the_structure(truth):
     adapted = synthesize("solid-kopf", grains[0], size=(16, 16, 16), seed=1)
     assert literal.stats["levels"] > adapted.stats["levels"] == MICROSTRUCTURE_LEVELS
     assert literal.stats["iterations"] == adapted.stats["iterations"] == 4
+    # Chen-Wang takes the iterations only: with 2 levels its S2 error here doubled (0.13 against 0.06).
+    cw = synthesize("solid-chen-wang", grains[0], size=(16, 16, 16), seed=1)
+    assert cw.stats["levels"] > MICROSTRUCTURE_LEVELS and cw.stats["iterations"] == 3
+    laminar = synthesize("solid-chen-wang", sheets[:, 24, :], size=(8, 8, 8), params={"levels": 1}, seed=1)
+    assert laminar.stats["iterations"] == LAMINAR_ITERATIONS
+    literal = synthesize(
+        "solid-chen-wang",
+        sheets[:, 24, :],
+        size=(8, 8, 8),
+        params={"levels": 1, "adapt_to_structure": False},
+        seed=1,
+    )
+    assert literal.stats["iterations"] == 3
