@@ -6,8 +6,9 @@ is gone on this machine or its heartbeat is older than ``stale_seconds``. A dead
 limit was reached; then the job fails with a message that says why. A queued job whose message was
 taken by a worker main process that died (the filesystem transport loses it) is sent again, and so
 is a queued job that no worker received within ``resend_seconds`` while the workers have room (its
-message was lost or set aside as unreadable): the embedded queue must not lose work. A cancel that
-the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
+message was lost or set aside as unreadable), or that a live worker received but did not start within
+that time while workers have room (its message was lost with a broker connection): no queue may lose
+work. A cancel that the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
 
 Every minute it also applies the retention period (:func:`purge_expired`): a job that ended more than
 ``retention_days`` ago is deleted, files and record, like ``DELETE /api/jobs/{id}``; and a job folder
@@ -34,28 +35,31 @@ log = logging.getLogger(__name__)
 
 
 def stranded(store: JobStore, settings: Settings, now: float | None = None) -> list[JobRecord]:
-    """Queued jobs that no worker received within ``resend_seconds`` although the workers have room.
+    """Queued jobs that have not started within ``resend_seconds`` although the workers have room.
 
-    Room: the live workers' processes (``concurrency`` each) less the jobs they run or hold. A job
-    waiting behind busy workers is not stranded; one waiting while workers idle is (its message was
-    lost). At most as many as there is room for, oldest first, so a worker between two jobs causes
-    at most one duplicate message (harmless: a run claims its job once).
+    Two kinds: a job that no worker received, and a job that a live worker's main process received
+    but did not start (its message went with a broker connection: redis-server restarted empty after
+    the worker had prefetched it, and the worker process itself lived on). Room: the live workers'
+    processes (``concurrency`` each) less the jobs they run or hold, a held job counting only until it
+    is overdue. A job waiting behind busy workers is not stranded; one waiting while workers idle is.
+    At most as many as there is room for, oldest first, so a worker between two jobs causes at most
+    one duplicate message, and a held message that does arrive late is a duplicate too: harmless, a
+    run claims its job once (:meth:`jobs.store.JobStore.claim`).
     """
     now = time.time() if now is None else now
     workers = store.workers(fresh_within=max(10.0, settings.stale_seconds))
     active = store.active()
-    busy = sum(1 for job in active if job.state == "running" or job.received_pid)
+
+    def overdue(job: JobRecord) -> bool:
+        return (
+            job.state == "queued" and not job.cancel_requested and now - job.updated > settings.resend_seconds
+        )
+
+    busy = sum(1 for job in active if job.state == "running" or (job.received_pid and not overdue(job)))
     room = len(workers) * settings.concurrency - busy
     if room <= 0:
         return []
-    waiting = [
-        job
-        for job in active
-        if job.state == "queued"
-        and not job.received_pid
-        and not job.cancel_requested
-        and now - job.updated > settings.resend_seconds
-    ]
+    waiting = [job for job in active if overdue(job)]
     return sorted(waiting, key=lambda job: job.updated)[:room]
 
 
@@ -114,7 +118,12 @@ def reap_once(
             send(job.id)
             actions.append((job.id, "resent"))
     for job in stranded(store, settings, now):
-        if store.requeue(job.id, "no worker received this job; sent again"):
+        why = (
+            "no worker started this job; sent again"
+            if job.received_pid
+            else ("no worker received this job; sent again")
+        )
+        if store.requeue(job.id, why):
             send(job.id)
             actions.append((job.id, "resent"))
     for job_id, action in actions:

@@ -117,6 +117,41 @@ def test_a_job_waiting_behind_busy_workers_is_not_resent(store):
     assert reap_once(store, settings, lambda j: None, lambda j: None, set()) == []
 
 
+def test_a_job_held_by_a_live_worker_that_never_starts_it_is_resent_once_and_runs_once(store, tmp_path):
+    """Issue 14's Redis case: a live worker's main process received (prefetched) the message, then
+    redis-server restarted empty and the message was gone; the worker lives on, idle."""
+    settings = Settings(data_dir=store.jobs_dir.parent, concurrency=2, resend_seconds=30)
+    held = _job(store)
+    store.worker_heartbeat("w1", pid=1, started=time.time())  # pid 1 is alive
+    store.mark_received(held, pid=1)
+    sent: list[str] = []
+    assert reap_once(store, settings, sent.append, lambda j: None, set()) == []  # not overdue yet
+    _backdate(store, held, 31)
+    assert reap_once(store, settings, sent.append, lambda j: None, set()) == [(held, "resent")]
+    job = store.get(held)
+    assert sent == [held] and job.state == "queued" and job.received_pid is None
+    assert "no worker started this job" in job.message
+    assert reap_once(store, settings, sent.append, lambda j: None, set()) == []  # once
+    # The new message runs it; the old one, should it arrive after all, is a duplicate.
+    token, _ = store.claim(held, pid=1, stale_seconds=10)
+    assert token and store.claim(held, pid=1, stale_seconds=10) == (None, "running elsewhere")
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    assert store.commit_success(held, token, staging, ["a"], {}, {})
+    assert store.claim(held, pid=1, stale_seconds=10) == (None, "already succeeded")
+    assert store.get(held).attempts == 1
+
+
+def test_a_job_held_behind_a_busy_worker_is_not_resent(store):
+    settings = Settings(data_dir=store.jobs_dir.parent, concurrency=1, resend_seconds=30)
+    busy, held = _job(store), _job(store)
+    store.worker_heartbeat("w1", pid=1, started=time.time())
+    store.claim(busy, pid=1, stale_seconds=10)
+    store.mark_received(held, pid=1)
+    _backdate(store, held, 300)  # overdue, but the only slot runs the other job
+    assert reap_once(store, settings, lambda j: None, lambda j: None, set()) == []
+
+
 def test_no_resend_without_a_live_worker(store):
     settings = Settings(data_dir=store.jobs_dir.parent, resend_seconds=30)
     job_id = _job(store)

@@ -173,6 +173,12 @@ class TestNonFiniteAndHuge:
         r = httpx.get(embedded.url + "/api/jobs", params={"offset": 2**63})
         assert r.status_code == 422 and r.json()["field"] == "offset"
 
+    def test_unknown_state_filter_422_names_the_field(self, embedded):
+        r = httpx.get(embedded.url + "/api/jobs", params={"state": "bogus"})
+        body = r.json()
+        assert r.status_code == 422 and body["field"] == "state"
+        assert "succeeded" in body["detail"] and "'bogus'" in body["detail"]
+
 
 @pytest.mark.usefixtures("nothing_queued")
 def test_an_empty_method_is_refused_not_replaced(embedded, exemplar_png):

@@ -7,6 +7,7 @@ from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Response, UploadFile
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 
 from app.api.deps import PrincipalDep, ServiceDep
@@ -96,7 +97,9 @@ def list_jobs(
 ) -> dict:
     """Jobs, newest first: the token's own (an admin's: everyone's)."""
     if state is not None and state not in STATES:
-        raise HTTPException(422, f"state must be one of {', '.join(STATES)}, not {state!r}")
+        raise RequestValidationError(
+            [{"loc": ("query", "state"), "msg": f"must be one of {', '.join(STATES)}, not {state!r}"}]
+        )
     jobs, count = service.store.list(state=state, owner=principal.owner_filter, limit=limit, offset=offset)
     return {"data": [service.job_public(j) for j in jobs], "count": count}
 
