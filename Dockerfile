@@ -8,12 +8,12 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     NUMBA_CACHE_DIR=/numba-cache
 
 WORKDIR /app
-COPY pyproject.toml README.md ./
+COPY pyproject.toml README.md constraints.txt ./
 COPY synth ./synth
 COPY app ./app
 COPY worker ./worker
 COPY jobs ./jobs
-RUN pip install . \
+RUN pip install -c constraints.txt . \
     && useradd --create-home --uid 1000 texsynth \
     && mkdir -p /data /numba-cache && chown texsynth /data /numba-cache
 

@@ -38,7 +38,9 @@ def browser():
         b.close()
 
 
-def test_upload_submit_watch_progress_see_result(browser, embedded, exemplar_png, tmp_path):
+def test_upload_submit_watch_progress_see_result(browser, service, exemplar_png, tmp_path):
+    """On both queues (``service``: embedded and Redis): the page's whole flow does not depend on it."""
+    embedded = service
     exemplar = tmp_path / "fringes.png"
     exemplar.write_bytes(exemplar_png)
     page = browser.new_page(viewport={"width": 1200, "height": 1000})
