@@ -10,6 +10,9 @@ were validated (the engine's own checks: finite numbers, sizes, formats):
   explode: a rotated dictionary's copies (``angular_step``) and its k-coherence sets. The engine
   still checks the k-coherence sets itself in the worker (``synth.methods.arbitrary_shape``); here
   the same bound is applied before queueing, so the person gets the 422 at once;
+- **the job's run time**, estimated from the method's measured rate per output element (a lower
+  bound), against the soft time limit (``TEXSYNTH_SOFT_TIME_LIMIT``, 422 naming the output size): a job
+  the worker would stop after 30 minutes anyway is refused at once;
 - **an exemplar much larger than the output** (422): above 512x512 pixels an exemplar may have at
   most ``TEXSYNTH_MAX_INPUT_OUTPUT_RATIO`` times the output's pixels (a 4096^2 exemplar for a 64^2
   output spends minutes loading for nothing);
@@ -94,8 +97,12 @@ class Admission:
         shapes: Mapping[str, Sequence[int]],
         *,
         field_prefix: str = "",
+        seconds_per_element: float = 0.0,
     ) -> None:
-        """Memory and exemplar-to-output checks of one run; raises the engine's 422 errors."""
+        """Memory, time and exemplar-to-output checks of one run; raises the engine's 422 errors.
+
+        ``seconds_per_element``: the method's measured rate (``MethodSpec.seconds_per_element``).
+        """
         limit = self.settings.max_job_memory_bytes
         need, driver, why = estimate_memory(params, size, shapes)
         if need > limit:
@@ -105,6 +112,18 @@ class Admission:
                 f"{method} with these settings would need about {_gib(need)} of memory ({why}), more than "
                 f"this service's limit of {_gib(limit)} per job (TEXSYNTH_MAX_JOB_MEMORY_BYTES); "
                 "ask for a smaller output, a smaller exemplar or a coarser setting",
+            )
+        elements = math.prod(size.values())
+        seconds = seconds_per_element * elements
+        if seconds > self.settings.soft_time_limit:
+            side = "depth" if "depth" in size else "width"
+            raise InvalidParameter(
+                field_prefix + side,
+                size[side],
+                f"{method} would run about {seconds / 60:.0f} minutes for {elements} output elements "
+                f"(at least {seconds_per_element:.1e} s each, measured on 2 cores), more than this "
+                f"service's time limit of {self.settings.soft_time_limit / 60:.0f} minutes per job "
+                "(TEXSYNTH_SOFT_TIME_LIMIT); ask for a smaller output",
             )
         out = math.prod(v for k, v in size.items() if k != "depth")
         ratio = self.settings.max_input_output_ratio

@@ -149,7 +149,9 @@ class Service:
         shapes = {role: tuple(image.shape) for role, image in images.items()}
         del images
         params_out = {**model.model_dump(mode="json"), **size}
-        self.admission.check_job(method, params_out, size, shapes)
+        self.admission.check_job(
+            method, params_out, size, shapes, seconds_per_element=spec.seconds_per_element
+        )
         if spec.precheck is not None and "exemplar" in shapes:  # geometry against the inputs, before queueing
             spec.precheck(model, shapes)
         return JobRequest(
@@ -234,7 +236,14 @@ class Service:
             except InvalidParameter as exc:
                 raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
             point_params = {**model.model_dump(mode="json"), **size}
-            self.admission.check_job(req.method, point_params, size, req.shapes, field_prefix="grid.")
+            self.admission.check_job(
+                req.method,
+                point_params,
+                size,
+                req.shapes,
+                field_prefix="grid.",
+                seconds_per_element=spec.seconds_per_element,
+            )
             if spec.precheck is not None and "exemplar" in req.shapes:
                 try:
                     spec.precheck(model, req.shapes)

@@ -90,6 +90,10 @@ class MethodSpec:
     #: (the service calls them before queueing, so a patch larger than the exemplar is a 422 at once);
     #: raise the engine's errors. ``None``: the method has none beyond its parameter model.
     precheck: Callable[[Any, Mapping[str, tuple[int, ...]]], None] | None = None
+    #: Measured run time per output element with the defaults on the reference machine (2 cores,
+    #: docs/benchmarks.md), a lower bound: the service refuses before queueing a job whose estimate
+    #: already exceeds its time limit. ``0``: no estimate (the method is fast at every allowed size).
+    seconds_per_element: float = 0.0
 
     def schema(self) -> dict[str, Any]:
         return self.params_model.model_json_schema()

@@ -260,3 +260,27 @@ def test_with_tokens_the_schema_declares_bearer(tmp_path):
     assert schema["components"]["securitySchemes"]["bearer"]["scheme"] == "bearer"
     assert schema["paths"]["/api/jobs"]["post"]["security"] == [{"bearer": []}]
     assert "security" not in schema["paths"]["/api/health"]["get"]
+
+
+def test_a_job_whose_time_estimate_exceeds_the_time_limit_is_422_before_queueing(api):
+    """solid-wei-levoy runs about 2.8e-4 s a voxel here: 256^3 would take about 78 minutes."""
+    client, service = api
+    params = {"width": 256, "height": 256, "depth": 256}
+    r = client.post(
+        "/api/jobs",
+        data={"method": "solid-wei-levoy", "params": json.dumps(params)},
+        files={"exemplar": ("e.png", _png(64))},
+    )
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["field"] == "depth" and "TEXSYNTH_SOFT_TIME_LIMIT" in body["detail"]
+    assert re.search(r"about 7\d minutes", body["detail"]) and service.store.count() == 0
+    # Kopf's rate fits the same volume in the limit; a small Wei-Levoy volume is queued too.
+    for method, side in (("solid-kopf", 256), ("solid-wei-levoy", 32)):
+        params = {"width": side, "height": side, "depth": side}
+        r = client.post(
+            "/api/jobs",
+            data={"method": method, "params": json.dumps(params)},
+            files={"exemplar": ("e.png", _png(64))},
+        )
+        assert r.status_code == 202, (method, r.text)
