@@ -52,7 +52,9 @@ if TYPE_CHECKING:
         COPY_THRESHOLD,
         copy_map,
         copy_share,
+        seam_contrast,
         seam_visibility,
+        tile_seam,
     )
 
 #: Where each public name lives. The submodules load on first use (PEP 562), so that importing one
@@ -92,7 +94,15 @@ _SOURCES: dict[str, str] = {
         "measures",
     ),
     **dict.fromkeys(
-        ("COPY_PATCH", "COPY_THRESHOLD", "copy_map", "copy_share", "seam_contrast", "seam_visibility"),
+        (
+            "COPY_PATCH",
+            "COPY_THRESHOLD",
+            "copy_map",
+            "copy_share",
+            "seam_contrast",
+            "seam_visibility",
+            "tile_seam",
+        ),
         "patches",
     ),
     **dict.fromkeys(
@@ -154,6 +164,7 @@ __all__ = [
     "seam_visibility",
     "seams_from_labels",
     "seams_from_sources",
+    "tile_seam",
     "to_json_types",
     "two_point_correlation",
     "volume_s2",

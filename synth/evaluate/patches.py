@@ -19,6 +19,10 @@
   squared grey-level difference across the seam edges (neighbours whose sources are not neighbours the same
   way) over the mean across the other edges, and the share of coherent edges. A patchwork of copied
   regions whose borders show raises the ratio above 1; the exemplar's own, cut anywhere, is 1.
+- **Tile seam** (:func:`tile_seam`): whether an output tiles. Laid 2 x 2, the image meets itself where its
+  last row touches its first and its last column its first; the squared grey-level differences across
+  those wrap-around pairs, each over the mean of the same direction's differences inside the image. 1 =
+  the tile borders look like the interior (a tileable output); a visible seam raises it.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ __all__ = [
     "copy_share",
     "seam_contrast",
     "seam_visibility",
+    "tile_seam",
 ]
 
 #: Side of the patches compared by :func:`copy_map`, pixels.
@@ -192,3 +197,44 @@ def seam_contrast(image: np.ndarray, seams: Any) -> dict[str, float]:
     ratio = seam / coherent if cut.size and kept.size and coherent > 0 else float("nan")
     share = kept.size / max(cut.size + kept.size, 1)
     return {"ratio": ratio, "seam": seam, "coherent": coherent, "coherent_share": float(share)}
+
+
+def tile_seam(image: np.ndarray) -> dict[str, float]:
+    """Gradient energy across the borders of a 2 x 2 tiling over the interior's.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, 3)
+        An output meant to tile (``periodic=True``).
+
+    Returns
+    -------
+    dict
+        ``ratio``: the wrap-around pairs' squared differences, each over the mean squared difference of
+        the pairs inside the image in the same direction, averaged over all ``H + W`` wrap pairs (1 = no
+        seam; ``nan`` for a flat image); ``rows`` and ``cols``: the same for the horizontal border (last
+        row against first) and the vertical one (last column against first) alone.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.arange(16)
+    >>> tri = np.abs(x - 8.0)  # a triangle wave: every step, the wrap included, is 1
+    >>> round(tile_seam(tri[None, :] + tri[::2, None])["ratio"], 6)
+    1.0
+    >>> tile_seam(np.tile(x / 15.0, (8, 1)))["cols"] > 100  # a ramp jumps back at the border
+    True
+    """
+    grey = _grey(image, "image")
+    if min(grey.shape) < 2:
+        raise InvalidInput("image", f"needs at least 2 x 2 pixels to tile, got {grey.shape}")
+    inner_y = float(np.mean(np.diff(grey, axis=0) ** 2))
+    inner_x = float(np.mean(np.diff(grey, axis=1) ** 2))
+    wrap_y = (grey[0] - grey[-1]) ** 2
+    wrap_x = (grey[:, 0] - grey[:, -1]) ** 2
+    rows = float(wrap_y.mean()) / inner_y if inner_y > 0 else float("nan")
+    cols = float(wrap_x.mean()) / inner_x if inner_x > 0 else float("nan")
+    if not (inner_y > 0 and inner_x > 0):
+        return {"ratio": float("nan"), "rows": rows, "cols": cols}
+    ratio = (wrap_y.sum() / inner_y + wrap_x.sum() / inner_x) / (wrap_y.size + wrap_x.size)
+    return {"ratio": float(ratio), "rows": rows, "cols": cols}
