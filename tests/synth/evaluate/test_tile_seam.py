@@ -20,14 +20,18 @@ def test_rolled_periodic_noise_stays_near_one_and_a_cut_crop_does_not():
     spectrum = np.fft.fft2(rng.standard_normal((128, 128)))
     f = np.fft.fftfreq(128)
     smooth = np.real(np.fft.ifft2(spectrum * np.exp(-((f[:, None] ** 2 + f[None, :] ** 2) * 400))))
-    assert 0.7 < tile_seam(np.roll(smooth, (40, 70), axis=(0, 1)))["ratio"] < 1.3  # periodic: no seam
-    assert tile_seam(smooth[:90, :90])["ratio"] > 5  # a crop of it does not tile
+    rolled = tile_seam(np.roll(smooth, (40, 70), axis=(0, 1)))  # periodic: no seam
+    assert 0.7 < rolled["ratio"] < 1.3
+    assert 0.05 < rolled["rows_rank"] < 0.95 and 0.05 < rolled["cols_rank"] < 0.95
+    crop = tile_seam(smooth[:90, :90])  # a crop of it does not tile
+    assert crop["ratio"] > 5 and crop["rows_rank"] == 1.0 and crop["cols_rank"] == 1.0
 
 
 def test_known_ratio_of_a_single_jump():
     img = np.tile(np.arange(10.0), (6, 1))  # steps of 1 inside, a jump of 9 at the vertical border
     out = tile_seam(img)
     assert out["cols"] == pytest.approx(81.0)
+    assert out["cols_rank"] == 1.0 and out["rows_rank"] == 0.0
     assert np.isnan(out["rows"])  # no vertical change anywhere
     assert np.isnan(out["ratio"])
 
