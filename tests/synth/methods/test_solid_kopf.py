@@ -71,13 +71,25 @@ def _steps(vol: np.ndarray, axis: int) -> tuple[np.ndarray, float]:
 
 
 def test_periodic_volume_tiles_seamlessly() -> None:
-    """Across the wrap, neighbouring slices differ no more than neighbouring slices inside do."""
-    res = synthesize(
-        "solid-kopf", _soft(), size=SIZE, params={**_small("solid-kopf"), "periodic": True}, seed=1
-    )
-    for axis in range(3):
-        inside, across = _steps(res.image, axis)
-        assert 0.9 * inside.min() <= across <= 1.1 * inside.max(), axis
+    """Across the wrap, neighbouring slices differ about as much as neighbouring slices inside do, and
+    clearly less than across the faces of a volume that is not periodic.
+
+    One step across the wrap is a noisy sample (16^3 of period-6 laminae must also fit whole periods):
+    the ratio across / inside, averaged over the three axes, was 1.01-1.27 for periodic volumes and
+    1.64-1.98 for non-periodic ones over seeds 0-5.
+    """
+
+    def wrap_ratio(periodic: bool) -> float:
+        params = {**_small("solid-kopf"), "periodic": periodic}
+        vol = synthesize("solid-kopf", _soft(), size=SIZE, params=params, seed=1).image
+        ratios = []
+        for axis in range(3):
+            inside, across = _steps(vol, axis)
+            ratios.append(across / inside.mean())
+        return float(np.mean(ratios))
+
+    assert wrap_ratio(True) < 1.4
+    assert wrap_ratio(False) > 1.5
 
 
 def _orientation(images: np.ndarray) -> float:
@@ -213,8 +225,11 @@ def test_two_views_leave_the_third_plane_free() -> None:
         "yz": _stripes((32, 32), "diag"),
     }
     params = {**_small("solid-kopf"), "iterations": 3, "planes": ("xz", "yz")}
-    res = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=params, seed=2)
-    other = synthesize("solid-kopf", exemplars={**planes, "xy": _soft()}, size=SIZE, params=params, seed=2)
+    # 24^3: at 16^3 the diagonal view's orientation was off by up to 13 degrees (21 with the orientation
+    # re-weighting) on some seeds; at 24^3 by 4.7-12.1 over seeds 0-7.
+    size = (24, 24, 24)
+    res = synthesize("solid-kopf", exemplars=planes, size=size, params=params, seed=2)
+    other = synthesize("solid-kopf", exemplars={**planes, "xy": _soft()}, size=size, params=params, seed=2)
     assert res.image.tobytes() == other.image.tobytes()
     assert res.stats["planes"] == ["xz", "yz"]
     vol = res.image
@@ -271,24 +286,55 @@ def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
     from synth.io.patterns import grating
     from synth.methods.solid_kopf import ORIENTATION_BINS, orientation_labels
 
-    horizontal = grating((48, 48), np.pi / 2, 8.0)  # gradient along the rows: orientation pi/2
-    labels, shares = orientation_labels(horizontal)
-    inner = labels.reshape(48, 48)[8:-8, 8:-8]
-    assert set(np.unique(inner)) <= {0, ORIENTATION_BINS - 1}  # +-pi/2 wrap to the first/last bin
+    horizontal = grating((48, 48), np.pi / 2, 8.0)  # gradient along the rows: orientation pi/2 = -pi/2
+    lower, fraction, shares = orientation_labels(horizontal)
+    inner = lower.reshape(48, 48)[8:-8, 8:-8]
+    # -pi/2 lies half-way between the last bin's centre and the first's: split between them.
+    assert set(np.unique(inner)) <= {ORIENTATION_BINS - 1}
+    np.testing.assert_allclose(fraction.reshape(48, 48)[8:-8, 8:-8], 0.5, atol=0.05)
     assert shares[[0, ORIENTATION_BINS - 1]].sum() > 0.9
+    assert abs(shares[0] - shares[-1]) < 0.1
     assert np.all(shares > 0) and abs(shares.sum() - 1.0) < 0.1 + 1e-6
+
+
+def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_centres() -> None:
+    from synth.io.patterns import grating
+    from synth.methods.solid_kopf import orientation_labels
+
+    bins = 12  # centres at -82.5, -67.5, ..., 82.5 degrees
+    for degrees, lower, fraction in ((-60.0, 1, 0.5), (-67.5, 1, 0.0), (45.0, 8, 0.5), (40.0, 8, 1 / 6)):
+        image = grating((48, 48), np.radians(degrees), 8.0)
+        got_lower, got_fraction, shares = orientation_labels(image, bins)
+        inner = (slice(8, -8), slice(8, -8))
+        got_t = got_fraction.reshape(48, 48)[inner]
+        got_b = got_lower.reshape(48, 48)[inner]
+        # the measured orientation jitters by a fraction of a degree around the grating's
+        at = got_b + got_t
+        np.testing.assert_allclose(np.median(at), lower + fraction, atol=0.05, err_msg=str(degrees))
+        assert abs(shares.sum() - 1.0) < 0.1 + 1e-6
 
 
 def test_orientation_factors_penalise_only_over_used_orientations() -> None:
     from synth.methods.solid_kopf import _orientation_factors
 
-    labels = np.array([0, 0, 1, 1], dtype=np.int64)  # exemplar pixels 0, 1 in bin 0; 2, 3 in bin 1
-    shares = np.array([0.5, 0.5])
+    # exemplar pixels 0, 1 wholly in bin 0; 2, 3 wholly in bin 1 (fraction 0)
+    labels = (np.array([0, 0, 1, 1], dtype=np.int64), np.zeros(4), np.array([0.5, 0.5]))
     match = np.array([0, 1, 0, 2], dtype=np.int64)  # bin 0 used 3/4 (excess 0.5), bin 1 1/4
-    f = _orientation_factors(match, labels, shares, np.ones(4, np.float32), gain=2.0)
+    f = _orientation_factors(match, labels, np.ones(4, np.float32), gain=2.0)
     np.testing.assert_allclose(f, [0.5, 0.5, 0.5, 1.0], rtol=1e-6)
-    none = _orientation_factors(match, labels, shares, np.ones(4, np.float32), gain=0.0)
+    none = _orientation_factors(match, labels, np.ones(4, np.float32), gain=0.0)
     np.testing.assert_allclose(none, 1.0)
+
+
+def test_orientation_factors_interpolate_between_the_two_bins() -> None:
+    from synth.methods.solid_kopf import _orientation_factors
+
+    # pixel 0 half in bin 0, half in bin 1; pixel 1 wholly in bin 1; pixel 2 wholly in bin 2
+    labels = (np.array([0, 1, 2], dtype=np.int64), np.array([0.5, 0.0, 0.0]), np.full(3, 1 / 3))
+    match = np.array([0, 0, 1, 1], dtype=np.int64)  # usage: bin 0 1/4, bin 1 3/4, bin 2 0
+    f = _orientation_factors(match, labels, np.ones(4, np.float32), gain=1.0)
+    excess_1 = 0.75 * 3 - 1.0  # 1.25; bin 0 is under-used (no excess)
+    np.testing.assert_allclose(f, [1 / (1 + 0.5 * excess_1)] * 2 + [1 / (1 + excess_1)] * 2, rtol=1e-6)
 
 
 def test_orientation_gain_changes_the_volume() -> None:
