@@ -40,6 +40,11 @@ __all__ = ["SIZE_FIELDS", "JobRequest", "Service", "Upload"]
 SIZE_FIELDS = ("width", "height", "depth")
 
 
+def _output_shape(size: dict[str, int]) -> tuple[int, ...]:
+    """The output's array shape ``(H, W)`` or ``(D, H, W)`` from the size fields, for the prechecks."""
+    return tuple(int(size[k]) for k in ("depth", "height", "width") if k in size)
+
+
 @dataclass(frozen=True)
 class Upload:
     role: str
@@ -153,7 +158,7 @@ class Service:
             method, params_out, size, shapes, seconds_per_element=spec.seconds_per_element
         )
         if spec.precheck is not None and "exemplar" in shapes:  # geometry against the inputs, before queueing
-            spec.precheck(model, shapes)
+            spec.precheck(model, {**shapes, "output": _output_shape(size)})
         return JobRequest(
             method=method,
             params=params_out,
@@ -246,7 +251,7 @@ class Service:
             )
             if spec.precheck is not None and "exemplar" in req.shapes:
                 try:
-                    spec.precheck(model, req.shapes)
+                    spec.precheck(model, {**req.shapes, "output": _output_shape(size)})
                 except InvalidParameter as exc:
                     raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
             points.append(point_params)

@@ -1,4 +1,5 @@
-"""Shared machinery of the benchmarks: timing (median of runs) and writing a section of docs/benchmarks.md.
+"""Shared machinery of the benchmarks: timing (median of runs) and writing a section of docs/benchmarks.md
+(or of another document).
 
 Each benchmark owns one section, delimited by HTML comments, and rewrites only that section, so that
 benchmarks can run in any order and the document keeps the latest figures of each.
@@ -42,14 +43,14 @@ def median_time(fn: Callable[[], object], runs: int = 5, warmup: int = 1) -> tup
     return statistics.median(times), times
 
 
-def write_section(name: str, markdown: str) -> None:
-    """Replace (or append) section ``name`` of docs/benchmarks.md with ``markdown``."""
-    DOC.parent.mkdir(parents=True, exist_ok=True)
-    text = DOC.read_text() if DOC.exists() else _HEADER
+def write_section(name: str, markdown: str, doc: Path = DOC) -> None:
+    """Replace (or append) section ``name`` of ``doc`` (default docs/benchmarks.md) with ``markdown``."""
+    doc.parent.mkdir(parents=True, exist_ok=True)
+    text = doc.read_text() if doc.exists() else _HEADER
     stamp = f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}._"
     block = f"<!-- begin:{name} -->\n{markdown.rstrip()}\n\n{stamp}\n<!-- end:{name} -->"
     pattern = re.compile(rf"<!-- begin:{re.escape(name)} -->.*?<!-- end:{re.escape(name)} -->", re.S)
     text = (
         pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
     )
-    DOC.write_text(text)
+    doc.write_text(text)

@@ -1,6 +1,7 @@
 """The 2D methods' quality, side by side with the best open peer (issue 13).
 
-Run: ``python -m benchmarks.bench_quality`` (writes docs/quality.md and docs/img/quality-*.png).
+Run: ``python -m benchmarks.bench_quality`` (writes docs/quality.md and docs/img/quality-*.png; the sections
+other benchmarks own there, between ``<!-- begin:name -->`` and ``<!-- end:name -->``, are kept).
 ``--seeds 1`` for a quick look.
 
 Every 2D method with its defaults, 128 x 128 exemplars -> 256 x 256, seeds 1-3, on the public crops
@@ -25,6 +26,7 @@ Cells are the mean over seeds, with the worst seed in brackets.
 from __future__ import annotations
 
 import argparse
+import re
 import statistics
 import sys
 import time
@@ -189,7 +191,11 @@ def main(argv: list[str] | None = None) -> int:
         summary.append(f"- `{method}`: " + "; ".join(notes) + ".")
     sections.append("\n".join(summary) + "\n")
     sections.append(f"_Benchmark wall time {time.perf_counter() - started:.0f} s (2 cores, shared)._\n")
-    (DOCS / "quality.md").write_text("\n\n".join(sections))
+    # sections other benchmarks own (<!-- begin:name --> ... <!-- end:name -->, e.g. bench_tileable's) stay
+    doc = DOCS / "quality.md"
+    old = doc.read_text() if doc.exists() else ""
+    blocks = [m.group(0) for m in re.finditer(r"<!-- begin:(.*?) -->.*?<!-- end:\1 -->", old, re.S)]
+    doc.write_text("\n\n".join([*sections, *blocks]) + ("\n" if blocks else ""))
     return 0
 
 

@@ -86,9 +86,11 @@ class MethodSpec:
     #: Takes one exemplar per orthogonal plane (``exemplar_xy``, ``exemplar_xz``, ``exemplar_yz``) as
     #: an alternative to the one exemplar (anisotropic materials).
     plane_exemplars: bool = False
-    #: Cheap checks of the parameters against the inputs' shapes (``{role: shape}``), run before any work
-    #: (the service calls them before queueing, so a patch larger than the exemplar is a 422 at once);
-    #: raise the engine's errors. ``None``: the method has none beyond its parameter model.
+    #: Cheap checks of the parameters against the inputs' shapes (``{role: shape}``, plus ``'output'``:
+    #: the output's shape when the caller knows it), run before any work (the service calls them before
+    #: queueing, so a patch larger than the exemplar, or a tileable output too small for two patch steps,
+    #: is a 422 at once); raise the engine's errors. ``None``: the method has none beyond its parameter
+    #: model.
     precheck: Callable[[Any, Mapping[str, tuple[int, ...]]], None] | None = None
     #: Measured run time per output element with the defaults on the reference machine (2 cores,
     #: docs/benchmarks.md), a lower bound: the service refuses before queueing a job whose estimate

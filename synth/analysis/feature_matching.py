@@ -699,11 +699,11 @@ def feature_correspondences(
     index = build_feature_index(pm & context.region, np.where(pm & context.region, pt, np.nan))
     match, g = match_features(context, index, (0, 0), tau=tau)
     keep = match >= 0
-    if max_distance is not None:
+    if max_distance is not None and keep.any():  # (no pair: nothing to filter, and no feature to index)
         c = np.where(keep, match, 0)
         dist = np.hypot(index.rows[c] - context.rows, index.cols[c] - context.cols)
         keep &= dist <= max_distance
-    if max_angle is not None:
+    if max_angle is not None and keep.any():
         c = np.where(keep, match, 0)
         turn = np.abs(wrap_angle(index.tangent[c] - context.tangent))
         keep &= turn <= max_angle + 1e-12

@@ -18,7 +18,8 @@ __all__ = ["NeighbourhoodParams", "PatchParams", "SolidParams", "as_features", "
 
 
 class PatchParams(MethodParams):
-    """The overlap rule every patch method shares: below the patch size, by default a fraction of it.
+    """The overlap rule every patch method shares (below the patch size, by default a fraction of it) and
+    the tileable option ``periodic`` (:class:`synth.patch.layout.PatchLayout`).
 
     Subclasses declare their own ``patch_size`` and ``overlap`` fields (defaults and bounds are each
     paper's) and set :attr:`OVERLAP_DIVISOR` / :attr:`MIN_OVERLAP` for the default overlap.
@@ -27,6 +28,13 @@ class PatchParams(MethodParams):
     #: The default overlap is ``max(MIN_OVERLAP, patch_size // OVERLAP_DIVISOR)``.
     OVERLAP_DIVISOR: ClassVar[int] = 4
     MIN_OVERLAP: ClassVar[int] = 1
+
+    periodic: bool = Field(
+        False,
+        description="Tileable output: the patches are laid on a torus of the output's size, the last "
+        "column's patches overlapping the first column and the last row the first row, so a 2 x 2 tiling "
+        "shows no seam. Each output side must hold at least two patch steps (patch_size - overlap).",
+    )
 
     @field_validator("overlap", check_fields=False)
     @classmethod

@@ -37,6 +37,10 @@ Departures
   on soot (1.04 vs 1.10) and cells (1.11 vs 1.21) and as many on bent laminae (0.97 vs 0.97) and brick
   (1.04 vs 1.10, within the spread). Neither beats ``quilting`` on brick (0.90): the paper's claim
   holds on soot only.
+- ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
+  (:class:`synth.patch.layout.PatchLayout`); the last patch of a row is matched (colour and features)
+  on its left *and* right overlaps, the last row on its top *and* bottom ones, warped with only the
+  borders that have no known strip held fixed, and cut by the graph cut through every strip.
 - See :mod:`synth.patch.feature_guided` for the normalisation of the two costs, the candidates, the
   dropped far correspondences and the rejected folding warps.
 """
@@ -55,7 +59,7 @@ from synth.api import MethodSpec, Progress, Result, register
 from synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
-from synth.methods.quilting import check_patch_geometry
+from synth.methods.quilting import precheck_patch_method
 from synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
 
 __all__ = ["FeatureGuidedParams", "run_feature_guided"]
@@ -189,7 +193,8 @@ def run_feature_guided(
     constraint: np.ndarray | None = None,
 ) -> Result:
     overlap = params.resolved_overlap()
-    check_patch_geometry(exemplar, params.patch_size, overlap)
+    size = (int(size[0]), int(size[1]))
+    precheck_patch_method(params, {"exemplar": exemplar.shape, "output": size})
     report = checked_progress(progress)
     start = time.perf_counter()
     options = params.feature_options()
@@ -209,6 +214,7 @@ def run_feature_guided(
         max_angle=float(np.radians(params.warp_angle)),
         warp_band=params.warp_band,
         rotations=params.rotations,
+        periodic=params.periodic,
     )
     made = synthesize_feature_guided(exemplar, fmap, size, settings, np.random.default_rng(seed), report)
     image = np.clip(made.image, 0.0, 1.0).astype(np.float32)
@@ -250,9 +256,7 @@ SPEC = register(
         "graph-cut (Wu & Yu 2004).",
         params_model=FeatureGuidedParams,
         run=run_feature_guided,
-        precheck=lambda params, shapes: check_patch_geometry(
-            shapes["exemplar"], params.patch_size, params.resolved_overlap()
-        ),
+        precheck=precheck_patch_method,
         paper="Wu & Yu, SIGGRAPH 2004",
     )
 )

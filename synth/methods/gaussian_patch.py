@@ -33,6 +33,16 @@ Departures
   law (:func:`synth.patch.gaussian.rclg_draw`) instead of its mode. Measured in docs/patch.md: it barely
   differs from the mode, since ``k >> N`` overlap values pin the ``N`` coefficients of the model.
 - Gaussian patches can leave [0, 1]; the output is clipped at the end (``stats['clipped_share']``).
+- ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
+  (:class:`synth.patch.layout.PatchLayout`), the last patch of a row is conditioned on its left *and*
+  right overlaps and the last row on its top *and* bottom ones (the model takes any known mask; the
+  neighbours are searched on the whole known region); the boundary cut cuts each strip
+  (:func:`synth.patch.cut.strips_cut_mask`). A CLG/RCLG patch known on two opposite sides fits twice the
+  overlap with the same ``N`` neighbours and met its strips with a jump at their inner edges (1.2-2.9 times
+  the mean gradient energy on soot, 128^2, against 1.1-2.0 for the one-sided patches); its new part is
+  re-solved to meet them smoothly (:func:`synth.patch.gaussian.mend_inner_edges`, a Poisson equation).
+  The other patches are those of the non-periodic layout. With ``scales > 1`` a coarser scale is periodic
+  too when its size holds two patch steps (else it is laid out as usual: it only guides the search).
 - ``contrast='restore'`` (the default; not the paper): each CLG/RCLG patch's new part keeps the
   neighbours' mean standard deviation (:func:`synth.patch.gaussian.restore_contrast`). The paper's
   conditional mean averages the neighbours' continuations, and the next patch conditioned on that
@@ -73,9 +83,16 @@ from synth.errors import InvalidParameter
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
 from synth.methods.quilting import check_patch_geometry
-from synth.patch.cut import boundary_cut_mask, error_surface
-from synth.patch.gaussian import GaussianPatchModel, lg_patch, rclg_draw, rclg_patch, restore_contrast
-from synth.patch.layout import PatchLayout, overlap_mask
+from synth.patch.cut import error_surface, strips_cut_mask
+from synth.patch.gaussian import (
+    GaussianPatchModel,
+    lg_patch,
+    mend_inner_edges,
+    rclg_draw,
+    rclg_patch,
+    restore_contrast,
+)
+from synth.patch.layout import PatchLayout, Strips, check_periodic_size
 from synth.patch.search import PatchSearcher, k_nearest
 
 __all__ = ["GaussianPatchParams", "run_gaussian_patch", "synthesize_gaussian_patches"]
@@ -146,9 +163,14 @@ class GaussianPatchParams(PatchParams):
     )
 
 
-def _check(exemplar_shape: tuple[int, ...], params: GaussianPatchParams) -> None:
-    """Patch, overlap and N against the exemplar's shape at every scale (before any work)."""
+def _check(
+    exemplar_shape: tuple[int, ...], params: GaussianPatchParams, output: tuple[int, ...] | None = None
+) -> None:
+    """Patch, overlap and N against the exemplar's shape at every scale, and with ``periodic`` the
+    ``output`` shape (when known) against the patch step (before any work)."""
     overlap = params.resolved_overlap()
+    if params.periodic and output is not None:
+        check_periodic_size(output, params.patch_size, overlap)
     h, w = exemplar_shape[:2]
     for s in range(params.scales):
         shape = (round(h / 2**s), round(w / 2**s))
@@ -164,6 +186,15 @@ def _check(exemplar_shape: tuple[int, ...], params: GaussianPatchParams) -> None
             )
 
 
+def _fits_torus(size: tuple[int, int], params: GaussianPatchParams) -> bool:
+    """Whether a periodic layout of ``size`` passes :func:`check_periodic_size`."""
+    try:
+        check_periodic_size(size, params.patch_size, params.resolved_overlap())
+    except InvalidParameter:
+        return False
+    return True
+
+
 def synthesize_gaussian_patches(
     exemplar: np.ndarray,
     size: tuple[int, int],
@@ -171,16 +202,18 @@ def synthesize_gaussian_patches(
     rng: np.random.Generator,
     report=None,
     guide: tuple[np.ndarray, np.ndarray] | None = None,
+    periodic: bool = False,
 ) -> tuple[np.ndarray, PatchLayout]:
     """One scale of the synthesis: ``(H, W, C)`` float64 (unclipped) and its layout.
 
     ``guide = (exemplar_guide, output_guide)``: images of the same shapes as the exemplar and the output
     (the coarser scale upsampled) whose whole patch joins the overlap in the neighbour search.
+    ``periodic``: the layout is a torus of ``size`` (checked by the caller, :func:`check_periodic_size`).
     """
     w, overlap = params.patch_size, params.resolved_overlap()
     ex = exemplar[..., None] if exemplar.ndim == 2 else exemplar
     channels = ex.shape[2]
-    layout = PatchLayout(size, w, overlap)
+    layout = PatchLayout(size, w, overlap, periodic=periodic)
     gh, gw = layout.grown_shape
     if guide is not None:
         ex_guide, out_guide = (g[..., None] if g.ndim == 2 else g for g in guide)
@@ -193,20 +226,20 @@ def synthesize_gaussian_patches(
     searcher = PatchSearcher(search_image, w)
     out = np.zeros((gh, gw, channels), dtype=np.float64)
     n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
-    masks = {kind: overlap_mask(w, overlap, kind) for kind in ("none", "left", "top", "L")}
+    masks: dict[Strips, np.ndarray] = {}
     report_every = max(1, len(layout) // 50)
-    for n, (_, _, y, x, kind) in enumerate(layout.patches()):
-        region = out[y : y + w, x : x + w]
-        mask = masks[kind]
+    for n, (i, j, y, x, kind) in enumerate(layout.patches()):
+        at = layout.index(y, x)  # wraps around the torus when periodic
+        region = out[at]
+        strips = layout.strips(i, j)
+        mask = masks.setdefault(strips, strips.mask(w))
         if out_guide is None and kind == "none":
-            region[...] = searcher.patch(
-                *np.unravel_index(int(rng.integers(n_pos)), searcher.positions_shape)
-            )
+            out[at] = searcher.patch(*np.unravel_index(int(rng.integers(n_pos)), searcher.positions_shape))
             continue
         template = region
         weights = np.repeat(mask[..., None].astype(np.float64), channels, axis=2)
         if out_guide is not None:
-            template = np.concatenate([region, out_guide[y : y + w, x : x + w]], axis=2)
+            template = np.concatenate([region, out_guide[at]], axis=2)
             share = mask.sum() / mask.size if kind != "none" else 1.0
             weights = np.concatenate([weights, np.full((w, w, channels), share)], axis=2)
         nearest = k_nearest(searcher.ssd(template, weights), params.neighbours)
@@ -225,12 +258,15 @@ def synthesize_gaussian_patches(
                 patch = rclg_patch(model, known, y0, params.sigma, theta)
             if params.contrast == "restore":
                 patch = restore_contrast(model, known, patch)
+            if strips.two_sided:
+                patch = mend_inner_edges(patch.reshape(w, w, channels), mask)
         patch = patch.reshape(w, w, channels)
         if params.blending == "boundary-cut" and kind != "none":
-            new_mask = boundary_cut_mask(error_surface(region, patch), overlap, kind)
+            new_mask = strips_cut_mask(error_surface(region, patch), strips)
             region[new_mask] = patch[new_mask]
         else:
             region[...] = patch
+        out[at] = region
         if report is not None and n % report_every == 0:
             report("patches", n / len(layout))
     return out[: size[0], : size[1]], layout
@@ -245,11 +281,11 @@ def run_gaussian_patch(
     progress: Progress,
     constraint: np.ndarray | None = None,
 ) -> Result:
-    _check(exemplar.shape, params)
+    size = (int(size[0]), int(size[1]))
+    _check(exemplar.shape, params, size)
     report = checked_progress(progress)
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
-    size = (int(size[0]), int(size[1]))
     channel_axis = 2 if exemplar.ndim == 3 else None
     guide = None
     out = None
@@ -275,7 +311,11 @@ def run_gaussian_patch(
             done = params.scales - 1 - s
             report(f"scale {done + 1}/{params.scales}", (done + fraction) / params.scales)
 
-        out, layout = synthesize_gaussian_patches(ex_s, size_s, params, rng, level_report, guide)
+        # a coarser scale only guides the search: periodic when its size allows (the finest is checked)
+        periodic = params.periodic and (s == 0 or _fits_torus(size_s, params))
+        out, layout = synthesize_gaussian_patches(
+            ex_s, size_s, params, rng, level_report, guide, periodic=periodic
+        )
         ex_prev = ex_s
     assert out is not None and layout is not None
     raw = out[..., 0] if exemplar.ndim == 2 else out
@@ -302,7 +342,7 @@ SPEC = register(
         "(Raad, Desolneux & Morel 2015).",
         params_model=GaussianPatchParams,
         run=run_gaussian_patch,
-        precheck=lambda params, shapes: _check(shapes["exemplar"], params),
+        precheck=lambda params, shapes: _check(shapes["exemplar"], params, shapes.get("output")),
         paper="Raad, Desolneux & Morel, SSVM 2015",
     )
 )

@@ -19,6 +19,11 @@ Departures
 ----------
 - The first patch is drawn uniformly among all exemplar patches (the paper: "randomly picked").
 - The output is grown to a whole number of patches and cropped to ``size`` (the paper does not say).
+- ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
+  (:class:`synth.patch.layout.PatchLayout`, module docstring: the steps are spread evenly when the size
+  is not a multiple of the step, never longer than it), the last patch of a row is searched and cut
+  against its left *and* right overlaps, the last row against its top *and* bottom ones (one cut per
+  strip, :func:`synth.patch.cut.strips_cut_mask`; the graph cut ties every known border to the old side).
 - The overlap error is the SSD summed over colour channels; exemplar patches wrap nowhere (only patches
   fully inside the exemplar are candidates).
 - ``copy_map`` (extras) is the verbatim-copy map of :func:`synth.evaluate.copy_map`; ``source_map`` the
@@ -28,6 +33,7 @@ Departures
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import Literal
 
 import numpy as np
@@ -37,12 +43,12 @@ from synth.api import MethodSpec, Progress, Result, register
 from synth.errors import InvalidParameter
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
-from synth.patch.cut import boundary_cut_mask, error_surface
+from synth.patch.cut import error_surface, strips_cut_mask
 from synth.patch.graphcut import graph_cut_mask
-from synth.patch.layout import PatchLayout, overlap_mask
+from synth.patch.layout import PatchLayout, Strips, check_periodic_size
 from synth.patch.search import PatchSearcher, candidates_within
 
-__all__ = ["QuiltingParams", "check_patch_geometry", "run_quilting"]
+__all__ = ["QuiltingParams", "check_patch_geometry", "precheck_patch_method", "run_quilting"]
 
 
 class QuiltingParams(PatchParams):
@@ -87,6 +93,15 @@ def check_patch_geometry(
         raise InvalidParameter("overlap", overlap, f"must be smaller than patch_size ({patch_size})")
 
 
+def precheck_patch_method(params: PatchParams, shapes: Mapping[str, tuple[int, ...]]) -> None:
+    """:attr:`MethodSpec.precheck` of a patch method: the patch fits the exemplar, and with ``periodic``
+    the output (``shapes['output']``, when the caller knows it) holds at least two patch steps per side."""
+    overlap = params.resolved_overlap()
+    check_patch_geometry(shapes["exemplar"], params.patch_size, overlap)
+    if params.periodic and "output" in shapes:
+        check_periodic_size(shapes["output"], params.patch_size, overlap)
+
+
 def run_quilting(
     exemplar: np.ndarray,
     *,
@@ -97,29 +112,32 @@ def run_quilting(
     constraint: np.ndarray | None = None,
 ) -> Result:
     overlap = params.resolved_overlap()
-    check_patch_geometry(exemplar, params.patch_size, overlap)
+    size = (int(size[0]), int(size[1]))
+    precheck_patch_method(params, {"exemplar": exemplar.shape, "output": size})
     report = checked_progress(progress)
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
     w = params.patch_size
-    layout = PatchLayout((int(size[0]), int(size[1])), w, overlap)
+    layout = PatchLayout(size, w, overlap, periodic=params.periodic)
     searcher = PatchSearcher(exemplar, w)
     ex = searcher.exemplar
     gh, gw = layout.grown_shape
     out = np.zeros((gh, gw, ex.shape[2]), dtype=np.float64)
     source = np.zeros((gh, gw, 2), dtype=np.int32)
     n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
-    masks = {kind: overlap_mask(w, overlap, kind) for kind in ("left", "top", "L")}
+    masks: dict[Strips, np.ndarray] = {}
     offsets = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int32)
     errors = []
     report_every = max(1, len(layout) // 50)
-    for n, (_, _, y, x, kind) in enumerate(layout.patches()):
-        region = out[y : y + w, x : x + w]
+    for n, (i, j, y, x, kind) in enumerate(layout.patches()):
+        at = layout.index(y, x)  # wraps around the torus when periodic
+        region = out[at]
+        strips = layout.strips(i, j)
         if kind == "none":
             choice = int(rng.integers(n_pos))
             new_mask = np.ones((w, w), dtype=bool)
         else:
-            mask = masks[kind]
+            mask = masks.setdefault(strips, strips.mask(w))
             ssd = searcher.ssd(region, mask)
             pool = candidates_within(ssd, params.tolerance)
             choice = int(pool[rng.integers(len(pool))])
@@ -128,11 +146,14 @@ def run_quilting(
         patch = searcher.patch(py, px)
         if kind != "none":
             if params.blending == "graph-cut":
-                new_mask = graph_cut_mask(region, patch, masks[kind])
+                new_mask = graph_cut_mask(region, patch, masks[strips], layout.sealed(i, j))
             else:
-                new_mask = boundary_cut_mask(error_surface(region, patch), overlap, kind)
+                new_mask = strips_cut_mask(error_surface(region, patch), strips)
         region[new_mask] = patch[new_mask]
-        source[y : y + w, x : x + w][new_mask] = (offsets + np.array([py, px], dtype=np.int32))[new_mask]
+        out[at] = region
+        src = source[at]
+        src[new_mask] = (offsets + np.array([py, px], dtype=np.int32))[new_mask]
+        source[at] = src
         if n % report_every == 0:
             report("quilting", n / len(layout))
     h, wd = layout.size
@@ -162,9 +183,7 @@ SPEC = register(
         summary="Image quilting: raster patches stitched along minimum-error cuts (Efros & Freeman 2001).",
         params_model=QuiltingParams,
         run=run_quilting,
-        precheck=lambda params, shapes: check_patch_geometry(
-            shapes["exemplar"], params.patch_size, params.resolved_overlap()
-        ),
+        precheck=precheck_patch_method,
         paper="Efros & Freeman, SIGGRAPH 2001",
     )
 )

@@ -8,6 +8,10 @@
 3. Larger output ``M' x N'`` (the asymptotic discrete spot noise, sec. 3 of the IPOL paper): the normalised
    spot ``sqrt(M'N' / MN) (p - m)``, zero-padded to ``M' x N'``, takes the place of ``p - m``; its modulus
    keeps the exemplar's variance. A smaller output is the top-left crop of an exemplar-size one.
+   Every output at least as large as the exemplar along both axes is periodic (an inverse FFT of its own
+   size): it tiles. ``periodic=True`` makes a smaller output tile too: along an axis where the output is
+   smaller, the exemplar is cropped to the output's size (top-left) before step 1, so the noise is made at
+   the output's size instead of cropped from a larger one; otherwise it changes nothing.
 4. Colour: the same random phase is added to the three channels' phases (their cross-spectra are kept).
 
 References
@@ -28,6 +32,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from pydantic import Field
 from scipy import fft as sfft
 
 from synth.api import MethodSpec, Progress, Result, register
@@ -39,7 +44,14 @@ __all__ = ["RandomPhaseParams", "periodic_component", "random_phase_noise", "run
 
 
 class RandomPhaseParams(MethodParams):
-    """Random-phase noise has no parameter besides the seed and the output size."""
+    """Random-phase noise: besides the seed and the output size, only whether a smaller output must tile."""
+
+    periodic: bool = Field(
+        False,
+        description="Tileable output. Random-phase noise is periodic by construction when the output is at "
+        "least as large as the exemplar; with periodic=True a smaller output is made from an exemplar crop "
+        "of its size instead of cropped from a larger noise, so it tiles too.",
+    )
 
 
 def periodic_component(image: np.ndarray) -> np.ndarray:
@@ -108,7 +120,9 @@ def run_random_phase(
 ) -> Result:
     report = checked_progress(progress)
     start = time.perf_counter()
-    raw = random_phase_noise(exemplar, (int(size[0]), int(size[1])), np.random.default_rng(seed))
+    shape = (int(size[0]), int(size[1]))
+    source = exemplar[: shape[0], : shape[1]] if params.periodic else exemplar
+    raw = random_phase_noise(source, shape, np.random.default_rng(seed))
     clipped = float(np.mean((raw < 0) | (raw > 1)))
     image = np.clip(raw, 0.0, 1.0).astype(np.float32)
     t_synth = time.perf_counter() - start

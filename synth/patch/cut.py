@@ -7,6 +7,12 @@ values, the path and the pixels right of it take the new patch's. A horizontal c
 the transposed strip. For an L-shaped overlap, the two cuts meet at the corner pixel where the sum of
 their costs-to-go (counting the shared pixel once) is least, and each is traced from there.
 
+A wrapped patch of a periodic layout (:class:`synth.patch.layout.Strips`) is also known along its right
+and/or bottom border: each of those strips gets its own cut, a DP across that strip alone (the strip
+mirrored so that the cut runs from its outer border inward, the same kernel), and the new patch wins where
+it wins for every cut (the intersection of their new sides: where two cuts cross in a corner square, the
+seam follows one up to the crossing and the other from there). The strips' cuts are not optimised jointly.
+
 :func:`min_cut_reference` is the plain NumPy DP that the tests compare with the numba kernels.
 """
 
@@ -15,8 +21,16 @@ from __future__ import annotations
 import numpy as np
 
 from synth.kernels.options import kernel
+from synth.patch.layout import Strips
 
-__all__ = ["boundary_cut_mask", "cut_cost", "error_surface", "min_cut", "min_cut_reference"]
+__all__ = [
+    "boundary_cut_mask",
+    "cut_cost",
+    "error_surface",
+    "min_cut",
+    "min_cut_reference",
+    "strips_cut_mask",
+]
 
 
 @kernel
@@ -126,24 +140,30 @@ def boundary_cut_mask(errors: np.ndarray, overlap: int, kind: str) -> np.ndarray
     ndarray of bool, shape (w, w)
         True where the output takes the new patch (the cut itself included).
     """
-    e = np.ascontiguousarray(errors, dtype=np.float64)
+    if kind == "none" or overlap == 0:
+        return np.ones(np.shape(errors)[:2], dtype=bool)
+    return strips_cut_mask(errors, Strips.of_kind(overlap, kind))
+
+
+def _raster_cut(e: np.ndarray, top: int, left: int) -> np.ndarray:
+    """The new side of the cut of a left (``left`` wide) and/or top (``top`` rows) overlap."""
     w = e.shape[0]
     new = np.ones((w, w), dtype=bool)
     cols = np.arange(w)
-    if kind == "none" or overlap == 0:
+    if top == 0 and left == 0:
         return new
-    if kind == "left":
-        path = _min_cut_kernel(np.ascontiguousarray(e[:, :overlap]), 0, -1)
+    if top == 0:
+        path = _min_cut_kernel(np.ascontiguousarray(e[:, :left]), 0, -1)
         return cols[None, :] >= path[:, None]
-    if kind == "top":
-        path = _min_cut_kernel(np.ascontiguousarray(e[:overlap, :].T), 0, -1)
+    if left == 0:
+        path = _min_cut_kernel(np.ascontiguousarray(e[:top, :].T), 0, -1)
         return cols[:, None] >= path[None, :]
-    # L: vertical strip (w x overlap) and horizontal strip (overlap x w) share the overlap x overlap corner.
-    vert = np.ascontiguousarray(e[:, :overlap])
-    horiz = np.ascontiguousarray(e[:overlap, :].T)  # transposed: rows = patch columns
+    # L: vertical strip (w x left) and horizontal strip (top x w) share the top x left corner.
+    vert = np.ascontiguousarray(e[:, :left])
+    horiz = np.ascontiguousarray(e[:top, :].T)  # transposed: rows = patch columns
     cv = _cost_to_go_kernel(vert)
     ch = _cost_to_go_kernel(horiz)
-    corner = cv[:overlap, :overlap] + ch[:overlap, :overlap].T - e[:overlap, :overlap]
+    corner = cv[:top, :left] + ch[:left, :top].T - e[:top, :left]
     i0, j0 = (int(v) for v in np.unravel_index(int(np.argmin(corner)), corner.shape))
     pv = _min_cut_kernel(vert, i0, j0)  # rows i0.. : column of the vertical cut
     ph = _min_cut_kernel(horiz, j0, i0)  # patch columns j0.. : row of the horizontal cut
@@ -151,4 +171,41 @@ def boundary_cut_mask(errors: np.ndarray, overlap: int, kind: str) -> np.ndarray
     v_side = np.where(rows[:, None] >= i0, cols[None, :] >= pv[:, None], cols[None, :] >= j0)
     h_side = np.where(cols[None, :] >= j0, rows[:, None] >= ph[None, :], rows[:, None] >= i0)
     new &= v_side & h_side
+    return new
+
+
+def strips_cut_mask(errors: np.ndarray, strips: Strips) -> np.ndarray:
+    """Where the new patch wins after the boundary cuts of any known strips (module docstring).
+
+    Parameters
+    ----------
+    errors : ndarray, shape (w, w)
+        ``||old - new||^2`` over the whole patch (only the strips are read).
+    strips : Strips
+        Widths of the known top, left, bottom and right strips; the top / left pair is cut as in
+        :func:`boundary_cut_mask` (an L meets at its cheapest corner point), a right or bottom strip by its
+        own cut from the patch's border inward.
+
+    Returns
+    -------
+    ndarray of bool, shape (w, w)
+        True where the output takes the new patch (the cuts included).
+
+    Examples
+    --------
+    >>> e = np.ones((6, 6)); e[:, 1] = 0; e[:, 4] = 0  # a zero column in each strip
+    >>> strips_cut_mask(e, Strips(left=2, right=2))[0].astype(int).tolist()
+    [0, 1, 1, 1, 1, 0]
+    """
+    e = np.ascontiguousarray(errors, dtype=np.float64)
+    w = e.shape[0]
+    new = _raster_cut(e, strips.top, strips.left)
+    cols = np.arange(w)
+    if strips.right:
+        # mirrored strip: column c' is patch column w - 1 - c'; the new side is c' >= path
+        path = _min_cut_kernel(np.ascontiguousarray(e[:, ::-1][:, : strips.right]), 0, -1)
+        new &= cols[None, :] <= (w - 1 - path)[:, None]
+    if strips.bottom:
+        path = _min_cut_kernel(np.ascontiguousarray(e[::-1, :][: strips.bottom, :].T), 0, -1)
+        new &= cols[:, None] <= (w - 1 - path)[None, :]
     return new

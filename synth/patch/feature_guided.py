@@ -105,7 +105,7 @@ from synth.analysis.warp import band_falloff, resample, warp_coordinates
 from synth.colour import to_grey
 from synth.evaluate.breaks import Seams
 from synth.patch.graphcut import graph_cut_mask
-from synth.patch.layout import PatchLayout, overlap_mask
+from synth.patch.layout import PatchLayout, Strips
 from synth.patch.search import PatchSearcher, k_nearest
 
 __all__ = [
@@ -221,6 +221,11 @@ class FeatureGuidedSettings:
     min_shift: float = 0.5
     #: resampling of warped patches: 1 bilinear, 3 cubic (clipped to the four neighbours)
     warp_order: int = 3
+    #: a torus of the output's size (a tileable output; :class:`synth.patch.layout.PatchLayout`)
+    periodic: bool = False
+    #: warp the wrapped patches of a periodic layout too (known on both sides of an axis); False: paste
+    #: them unwarped
+    warp_two_sided: bool = True
 
 
 @dataclass(frozen=True)
@@ -329,7 +334,7 @@ def synthesize_feature_guided(
     starts = np.concatenate([[0], np.cumsum(sizes)])
     channels = copies[0].image.shape[2]
 
-    layout = PatchLayout((int(size[0]), int(size[1])), w, ov)
+    layout = PatchLayout((int(size[0]), int(size[1])), w, ov, periodic=s.periodic)
     gh, gw = layout.grown_shape
     out = np.zeros((gh, gw, channels), dtype=np.float64)
     out_mask = np.zeros((gh, gw), dtype=bool)
@@ -337,10 +342,8 @@ def synthesize_feature_guided(
     labels = np.full((gh, gw), -1, dtype=np.int32)
     sources = np.zeros((gh, gw, 2), dtype=np.int64)
     grid = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int64)
-    masks = {kind: overlap_mask(w, ov, kind) for kind in ("left", "top", "L")}
-    falloffs = {
-        kind: None if s.warp_band is None else band_falloff(m, s.warp_band) for kind, m in masks.items()
-    }
+    masks: dict[Strips, np.ndarray] = {}
+    falloffs: dict[Strips, np.ndarray | None] = {}
     coefficients = [
         np.stack(
             [ndi.spline_filter(v.image[..., c], order=3, mode="nearest") for c in range(channels)], axis=-1
@@ -357,17 +360,23 @@ def synthesize_feature_guided(
     reranked = 0
     report_every = max(1, len(layout) // 50)
 
-    for n, (_, _, y, x, kind) in enumerate(layout.patches()):
-        region = out[y : y + w, x : x + w]
+    for n, (i, j, y, x, kind) in enumerate(layout.patches()):
+        at = layout.index(y, x)  # wraps around the torus when periodic
+        region = out[at]
+        region_mask, region_tan = out_mask[at], out_tan[at]
+        strips = layout.strips(i, j)
         if kind == "none":
             flat = int(rng.integers(int(starts[-1])))
             mask = None
         else:
-            mask = masks[kind]
+            if strips not in masks:
+                masks[strips] = strips.mask(w)
+                falloffs[strips] = None if s.warp_band is None else band_falloff(masks[strips], s.warp_band)
+            mask = masks[strips]
             ssd = np.concatenate([sr.ssd(region, mask).ravel() for sr in searchers])
             pool = k_nearest(ssd, s.candidates)
             colour = ssd[pool] / (mask.sum() * channels)
-            context = context_features(out_mask[y : y + w, x : x + w], out_tan[y : y + w, x : x + w], mask)
+            context = context_features(region_mask, region_tan, mask)
             feature = np.zeros(len(pool))
             which = np.searchsorted(starts, pool, side="right") - 1
             for v in np.unique(which):
@@ -392,10 +401,10 @@ def synthesize_feature_guided(
         p_mask = variant.mask[py : py + w, px : px + w]
         p_tan = variant.tangent[py : py + w, px : px + w]
         src = grid + np.array([py + ROW_CODE * v, px], dtype=np.int64)
-        if mask is not None and s.deform:
+        if mask is not None and s.deform and (s.warp_two_sided or not strips.two_sided):
             corr = feature_correspondences(
-                out_mask[y : y + w, x : x + w],
-                out_tan[y : y + w, x : x + w],
+                region_mask,
+                region_tan,
                 p_mask,
                 p_tan,
                 mask,
@@ -410,9 +419,11 @@ def synthesize_feature_guided(
                 (w, w),
                 np.clip(corr.sources, 0.0, w - 1.0),  # a projected source may fall just outside
                 corr.targets,
-                fixed=("bottom", "right"),
+                # the free borders stay in place (the paper: bottom and right; a wrapped patch's known
+                # right / bottom strip is free to move like its left / top ones)
+                fixed=tuple(side for side in ("bottom", "right") if getattr(strips, side) == 0),
                 smoothing=s.warp_smoothing,
-                falloff=falloffs[kind],
+                falloff=falloffs[strips],
             )
             shift = float(np.abs(coords - grid.transpose(2, 0, 1)).max())
             if used != "identity" and _folds(coords):
@@ -426,12 +437,24 @@ def synthesize_feature_guided(
                     patch, p_mask, p_tan = _sample(variant, coords, py, px, s.warp_order, coefficients[v])
                     moved = (coords != grid.transpose(2, 0, 1)).any(axis=0)
                     src[moved] = (grid + np.array([WARPED_CODE * (n + 1), 0], dtype=np.int64))[moved]
-        new = np.ones((w, w), dtype=bool) if mask is None else graph_cut_mask(region, patch, mask)
+        new = (
+            np.ones((w, w), dtype=bool)
+            if mask is None
+            else graph_cut_mask(region, patch, mask, layout.sealed(i, j))
+        )
         region[new] = patch[new]
-        out_mask[y : y + w, x : x + w][new] = p_mask[new]
-        out_tan[y : y + w, x : x + w][new] = np.where(p_mask, p_tan, np.nan)[new]
-        labels[y : y + w, x : x + w][new] = n
-        sources[y : y + w, x : x + w][new] = src[new]
+        region_mask[new] = p_mask[new]
+        region_tan[new] = np.where(p_mask, p_tan, np.nan)[new]
+        region_labels, region_sources = labels[at], sources[at]
+        region_labels[new] = n
+        region_sources[new] = src[new]
+        out[at], out_mask[at], out_tan[at], labels[at], sources[at] = (
+            region,
+            region_mask,
+            region_tan,
+            region_labels,
+            region_sources,
+        )
         if n % report_every == 0:
             report("feature-guided", n / len(layout))
 

@@ -10,6 +10,10 @@ overlap into the pixels that keep the old values and those that take the new pat
 ``maximum_flow`` takes integer capacities: the costs are scaled to integers in ``[1, 2^16]`` (the +1 keeps
 every edge, so the graph stays connected), and "infinite" is ``2^29``, above any finite cut of a patch
 overlap (at most a few thousand edges).
+
+The known region may be any union of border strips (:class:`synth.patch.layout.Strips`): a wrapped patch
+of a periodic layout is also known along its right and/or bottom border, and those borders are tied to the
+source like the top and left ones, so the cut runs through every strip.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ def _edge_costs(old: np.ndarray, new: np.ndarray) -> np.ndarray:
 
 
 def overlap_graph(
-    old: np.ndarray, new: np.ndarray, overlap_mask: np.ndarray
+    old: np.ndarray, new: np.ndarray, overlap_mask: np.ndarray, keep_old: np.ndarray | None = None
 ) -> tuple[csr_matrix, np.ndarray, int, int]:
     """The s-t graph of an overlap: ``(capacities, node_of_pixel, source, sink)``.
 
@@ -40,6 +44,9 @@ def overlap_graph(
         The output under the patch and the new patch.
     overlap_mask : ndarray of bool, shape (w, w)
         The overlap (pixels that already hold values).
+    keep_old : ndarray of bool, shape (w, w), optional
+        More overlap pixels tied to the source (kept old), besides the outer borders of the strips: e.g.
+        a strip's end on a patch border where the output beyond it is already written.
 
     Returns
     -------
@@ -81,6 +88,10 @@ def overlap_graph(
     border = np.zeros((h, w), dtype=bool)
     border[0, :] |= mask[0, :] & _strip_kind(mask, "top")
     border[:, 0] |= mask[:, 0] & _strip_kind(mask, "left")
+    border[-1, :] |= mask[-1, :] & _strip_kind(mask, "bottom")
+    border[:, -1] |= mask[:, -1] & _strip_kind(mask, "right")
+    if keep_old is not None:
+        border |= np.asarray(keep_old, dtype=bool) & mask
     interior = ~mask
     near_new = np.zeros((h, w), dtype=bool)
     near_new[:-1, :] |= interior[1:, :]
@@ -102,20 +113,25 @@ def overlap_graph(
 
 
 def _strip_kind(mask: np.ndarray, side: str) -> bool:
-    """Whether the overlap includes the whole top row / left column (a top / left strip)."""
-    return bool(mask[0, :].all()) if side == "top" else bool(mask[:, 0].all())
+    """Whether the overlap includes the whole top row / left column / bottom row / right column (a strip
+    along that border)."""
+    line = {"top": mask[0, :], "left": mask[:, 0], "bottom": mask[-1, :], "right": mask[:, -1]}[side]
+    return bool(line.all())
 
 
-def graph_cut_mask(old: np.ndarray, new: np.ndarray, overlap_mask: np.ndarray) -> np.ndarray:
+def graph_cut_mask(
+    old: np.ndarray, new: np.ndarray, overlap_mask: np.ndarray, keep_old: np.ndarray | None = None
+) -> np.ndarray:
     """Where the new patch wins after the graph-cut seam: boolean ``(w, w)``.
 
     Non-overlap pixels always take the new patch; overlap pixels reachable from the source in the residual
-    graph of a maximum flow keep the old values.
+    graph of a maximum flow keep the old values. ``keep_old``: more pixels tied to the source
+    (:func:`overlap_graph`).
     """
     mask = np.asarray(overlap_mask, dtype=bool)
     if not mask.any():
         return np.ones(mask.shape, dtype=bool)
-    graph, nodes, source, sink = overlap_graph(old, new, mask)
+    graph, nodes, source, sink = overlap_graph(old, new, mask, keep_old)
     flow = maximum_flow(graph, source, sink).flow
     residual = (graph - flow).tocsr()
     residual.data[residual.data < 0] = 0

@@ -134,6 +134,22 @@ def test_correspondences_follow_a_shifted_line_one_to_one():
     assert feature_correspondences(mask, tangent, patch_mask, patch_tangent, max_distance=1.0).count == 0
 
 
+def test_correspondences_with_no_patch_feature_are_none():
+    """A context with features against a patch with none (filters on): no pair, no IndexError."""
+    mask = np.zeros((16, 16), dtype=bool)
+    mask[4, :] = True
+    empty = np.zeros_like(mask)
+    pairs = feature_correspondences(
+        mask,
+        np.where(mask, 0.0, np.nan),
+        empty,
+        np.full(mask.shape, np.nan),
+        max_distance=4.0,
+        max_angle=0.5,
+    )
+    assert pairs.count == 0
+
+
 def test_candidate_cost_is_well_under_a_millisecond():
     rng = np.random.default_rng(11)
     index = build_feature_index(*_random_features(rng, (128, 128), 0.1))

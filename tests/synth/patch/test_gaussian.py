@@ -10,11 +10,12 @@ from synth.patch.gaussian import (
     GaussianPatchModel,
     clg_patch,
     lg_patch,
+    mend_inner_edges,
     rclg_draw,
     rclg_patch,
     restore_contrast,
 )
-from synth.patch.layout import overlap_mask
+from synth.patch.layout import Strips, overlap_mask
 
 
 def _case(seed: int = 0, n: int = 8, w: int = 5, channels: int = 1):
@@ -97,3 +98,23 @@ def test_restore_contrast_gives_the_new_part_the_neighbours_spread_and_keeps_the
     flat = np.full(36, 0.5)
     np.testing.assert_array_equal(restore_contrast(model, known, flat), flat)
     np.testing.assert_array_equal(restore_contrast(model, np.ones(36, bool), blurred), blurred)
+
+
+@pytest.mark.parametrize("channels", [0, 3])
+def test_mend_inner_edges_removes_the_jumps_and_keeps_the_rest(channels):
+    """A smooth field whose new part is off by a constant (the jump a two-sided conditional patch leaves at
+    its strips' inner edges) comes back exactly; the known part is never changed, and a patch without a
+    jump is left as it is."""
+    w = 12
+    y, x = np.mgrid[0:w, 0:w].astype(np.float64)
+    smooth = 0.3 + 0.02 * x + 0.01 * y
+    if channels:
+        smooth = np.stack([smooth, 1 - smooth, 0.5 * smooth], axis=-1)
+    known = Strips(top=3, left=3, bottom=2, right=2).mask(w)
+    jumpy = smooth.copy()
+    jumpy[~known] += 0.25
+    mended = mend_inner_edges(jumpy, known)
+    assert mended.shape == smooth.shape
+    np.testing.assert_allclose(mended, smooth, atol=1e-9)
+    np.testing.assert_array_equal(mended[known], jumpy[known])
+    np.testing.assert_allclose(mend_inner_edges(smooth, known), smooth, atol=1e-9)

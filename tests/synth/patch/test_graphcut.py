@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from synth.patch.graphcut import graph_cut_mask, overlap_graph
-from synth.patch.layout import overlap_mask
+from synth.patch.layout import Strips, overlap_mask
 
 
 def _cut_value(graph, labels_old: np.ndarray) -> int:
@@ -60,3 +60,30 @@ def test_graph_cut_prefers_the_zero_error_seam():
     new[:, :2] = 0.0  # agrees with the old image on the first two overlap columns
     got = graph_cut_mask(old, new, overlap_mask(w, 4, "left"))
     assert not got[:, 0].any() and got[:, 2:].all()
+
+
+def test_graph_cut_through_two_opposite_strips():
+    """Left and right strips (a wrapped patch): the new patch agrees with the old output on one column
+    of each strip; the seams run there, and both outer borders keep the old values."""
+    w = 10
+    old = np.zeros((w, w))
+    new = np.ones((w, w))
+    new[:, 1] = 0.0  # agrees inside the left strip (columns 0-2)
+    new[:, 8] = 0.0  # and inside the right strip (columns 7-9)
+    known = Strips(left=3, right=3).mask(w)
+    got = graph_cut_mask(old, new, known)
+    assert not got[:, 0].any() and not got[:, 9].any()
+    assert got[:, 2:8].all()
+
+
+def test_graph_cut_keeps_sealed_pixels_old():
+    """``keep_old`` ties more pixels to the old side: the top strip's left end of a row's first patch
+    (except the one next to the new part, which the new side claims as on every border)."""
+    w = 8
+    rng = np.random.default_rng(0)
+    old, new = rng.random((w, w)), rng.random((w, w))
+    known = Strips(top=3).mask(w)
+    sealed = np.zeros((w, w), dtype=bool)
+    sealed[:3, 0] = True
+    got = graph_cut_mask(old, new, known, sealed)
+    assert not got[:2, 0].any() and got[2:, :].all()

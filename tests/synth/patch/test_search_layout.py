@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.patch.layout import PatchLayout, overlap_mask
+from synth.errors import InvalidParameter
+from synth.patch.layout import PatchLayout, check_periodic_size, overlap_mask, periodic_positions
 from synth.patch.search import PatchSearcher, candidates_within, k_nearest
 
 
@@ -50,3 +51,68 @@ def test_candidates_within_tolerance():
     d = np.array([[1.0, 1.05, 1.2], [3.0, 1.09, 0.99999]])
     assert set(candidates_within(d, 0.1)) == {0, 1, 4, 5}
     assert list(k_nearest(d, 2)) == [5, 0]
+
+
+@pytest.mark.parametrize(
+    ("size", "w", "overlap"), [((96, 96), 16, 4), ((100, 77), 16, 4), ((128, 128), 30, 7)]
+)
+def test_periodic_layout_covers_the_torus_and_knows_what_is_written(size, w, overlap):
+    """Painting the patches in raster order on the torus: every pixel is covered, each patch's strips are
+    exactly the pixels already written under it, and the last column / row have right / bottom strips."""
+    check_periodic_size(size, w, overlap)
+    layout = PatchLayout(size, w, overlap, periodic=True)
+    assert layout.grown_shape == size
+    written = np.zeros(size, dtype=bool)
+    for i, j, y, x, kind in layout.patches():
+        at = layout.index(y, x)
+        np.testing.assert_array_equal(written[at], layout.mask(i, j), err_msg=f"patch {(i, j)} ({kind})")
+        written[at] = True
+        strips = layout.strips(i, j)
+        assert (strips.right > 0) == (j == layout.cols - 1)
+        assert (strips.bottom > 0) == (i == layout.rows - 1)
+        widths = [s for s in (strips.top, strips.left, strips.right, strips.bottom) if s]
+        assert (min(widths) >= overlap) if (i or j) else (kind == "none" and not widths)
+    assert written.all()
+    last = layout.mask(layout.rows - 1, layout.cols - 1)
+    assert last[:, -1].all() and last[-1, :].all() and last[:, 0].all() and last[0, :].all()
+    assert not last.all()  # the last patch keeps pixels of its own
+    assert layout.kind(0, layout.cols - 1) == "left+right" and layout.kind(layout.rows - 1, 0) == "top+bottom"
+    assert layout.kind(layout.rows - 1, layout.cols - 1) == "L+right+bottom"
+
+
+def test_periodic_positions_spread_the_steps_evenly():
+    assert periodic_positions(96, 12) == list(range(0, 96, 12))  # a multiple: the step itself
+    pos = periodic_positions(100, 12)  # 9 patches, steps of 11 or 12 (never longer than the step)
+    steps = np.diff([*pos, 100])
+    assert len(pos) == 9 and set(steps) <= {11, 12}
+    desc = PatchLayout((100, 96), 16, 4, periodic=True).describe()
+    assert desc["periodic"] and desc["seam_rows"][0] == 0 and desc["overlap"] == 16 - 11
+    assert PatchLayout((50, 37), 10, 3).describe()["periodic"] is False
+
+
+def test_periodic_index_wraps_reads_and_writes():
+    layout = PatchLayout((20, 20), 8, 2, periodic=True)
+    out = np.zeros((20, 20))
+    at = layout.index(15, 17)
+    out[at] = 1.0
+    assert out.sum() == 64 and out[15:20, 17:20].all() and out[0:3, 0:5].all() and out[15:, :5].all()
+
+
+@pytest.mark.parametrize(
+    ("size", "field", "match"),
+    [
+        ((23, 96), "height", "at least two patch steps.*2 x \\(16 - 4\\) = 24 px"),
+        ((96, 23), "width", "at least two patch steps"),
+    ],
+)
+def test_periodic_size_errors_name_the_side(size, field, match):
+    with pytest.raises(InvalidParameter, match=match) as err:
+        check_periodic_size(size, 16, 4)
+    assert err.value.name == field
+
+
+def test_periodic_size_error_when_the_last_patch_keeps_nothing():
+    # overlap 12 of 32 (step 20), 41 px: 3 patches 13-14 px apart, the last one's two strips meet
+    with pytest.raises(InvalidParameter, match="no pixel of its own") as err:
+        check_periodic_size((41, 64), 32, 12)
+    assert err.value.name == "height"
