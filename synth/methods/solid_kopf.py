@@ -93,21 +93,20 @@ Departures, and why (figures: soot = ``hrtem-soot-128.png``, seed 1, per-axis me
   0.03-0.04 on every axis with 2. More iterations coarsen it further (10 at 2 levels: 0.11 along z).
   Soot: orientation KL 0.04/0.05/0.04 with 2 levels against 0.04/0.06/0.02 with 5, S2 error 0.03-0.04
   against 0.06-0.08, so soot loses nothing.
-- **Orientation-usage re-weighting** (``orientation_gain``, default :data:`ORIENTATION_GAIN` = 32; 0 =
-  off, the paper): eq 4 applied to each plane's orientation histogram (:func:`orientation_labels`, 12
-  bins, coherence-weighted exemplar shares). Why: eq 4 on grey levels and the usage re-weighting leave
-  the volume free to fall into an orientation attractor. Bent horizontal laminae given for the two
-  views that admit a volume (``planes=('xz', 'yz')``) came out as straight laminae tilted about 30
-  degrees on both planes (orientation KL xz / yz 2.3 / 1.6, seeds 1-3): every window matched the slopes
-  of the exemplar's bends, a consistent but wrong solid. Measured in session 6 (64^3 from 128^2, mean
-  over seeds, worst in brackets), gain 0 / 1 / 4 / 16 / 32 / 64:
-  two-view bent laminae (seeds 1-2) xz 2.3 / 0.46 / 0.29 / 0.14 / 0.14 / 0.15 and yz 1.6 / 0.44 / 0.20 /
-  0.17 / 0.11 / 0.12 (horizontal bent laminae, kinked where the bends turn); per-plane laminae (seeds
-  1-3) worst axis xy / xz / yz 0.08 / 0.16 / 0.10 at 0, 0.02 / 0.10 / 0.09 at 16, **0.02 / 0.08 /
-  0.09** at 32, 0.02 / 0.08 / 0.11 at 64. It also helps the micro-structures: soot orientation KL
-  0.015-0.025 per axis against 0.036-0.047 at 0, S2 error 0.028-0.037 against 0.033-0.044; the
-  known answer's S2 error stays 0.03-0.05 on every axis. Session 4 had measured gains 1 and 4 only,
-  too weak to matter.
+- **Orientation-usage re-weighting** (``orientation_gain``, default :data:`ORIENTATION_GAIN` = 32; 0 = off,
+  the paper): eq 4 applied to each plane's orientation histogram (:mod:`synth.grid.orientation_histogram`:
+  12 bins, coherence-weighted exemplar shares). Why: eq 4 on grey levels and the usage re-weighting leave
+  the volume free to fall into an orientation attractor. Bent horizontal laminae given for the two views
+  that admit a volume (``planes=('xz', 'yz')``) came out as straight laminae tilted about 30 degrees on both
+  planes (orientation KL xz / yz 2.3 / 1.6, seeds 1-3): every window matched the slopes of the exemplar's
+  bends, a consistent but wrong solid. Measured in session 6 (64^3 from 128^2, mean over seeds, worst in
+  brackets), gain 0 / 1 / 4 / 16 / 32 / 64: two-view bent laminae (seeds 1-2) xz 2.3 / 0.46 / 0.29 / 0.14 /
+  0.14 / 0.15 and yz 1.6 / 0.44 / 0.20 / 0.17 / 0.11 / 0.12 (horizontal bent laminae, kinked where the bends
+  turn); per-plane laminae (seeds 1-3) worst axis xy / xz / yz 0.08 / 0.16 / 0.10 at 0, 0.02 / 0.10 / 0.09
+  at 16, **0.02 / 0.08 / 0.09** at 32, 0.02 / 0.08 / 0.11 at 64. It also helps the micro-structures: soot
+  orientation KL 0.015-0.025 per axis against 0.036-0.047 at 0, S2 error 0.028-0.037 against 0.033-0.044;
+  the known answer's S2 error stays 0.03-0.05 on every axis. Session 4 had measured gains 1 and 4 only, too
+  weak to matter.
 - **Histogram matching** on grey levels only (the exemplars are grey), 16 bins on [0, 1];
   ``H_e`` pools the active planes' exemplars. Kopf also matches other histograms in some results.
 - **Neighbourhood size**: 7x7 (ALGORITHMS.md) rather than Kopf's 8x8 (an odd size has a centre); at
@@ -137,8 +136,13 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.tensor import coherence, orientation, structure_tensor
 from synth.api import MethodSpec, Progress, Result, register
+from synth.grid.orientation_histogram import (
+    OrientationLabels,
+    orientation_excess,
+    orientation_labels,
+    usage_factors,
+)
 from synth.grid.scan import ScanOrder, scan_order
 from synth.kernels.solid_search import (
     KCOHERENCE_BLOCKS,
@@ -186,8 +190,6 @@ UPDATE_BLOCKS_PER_SWEEP = 16
 #: Exemplar-usage re-weighting: gain, and cells per exemplar side (module docstring, Departures).
 POSITION_GAIN = 1.0
 POSITION_CELLS = 16
-#: Orientation bins of the orientation-usage re-weighting (``orientation_gain``).
-ORIENTATION_BINS = 12
 #: Default gain of the orientation-usage re-weighting (module docstring, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
@@ -248,66 +250,19 @@ def _position_factors(match: np.ndarray, ex_shape: tuple[int, int]) -> np.ndarra
     return (1.0 / (1.0 + POSITION_GAIN * excess)).astype(np.float32)
 
 
-def orientation_labels(
-    image: np.ndarray, bins: int = ORIENTATION_BINS
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each exemplar pixel's orientation between two bins, and the exemplar's share of each bin.
-
-    The gradient orientation of the structure tensor (:func:`synth.analysis.tensor.orientation`, the
-    evaluation's 7x7-window tensor), over ``bins`` circular bins of ``[-pi/2, pi/2)`` whose centres are
-    ``-pi/2 + (i + 1/2) pi / bins``. A pixel counts ``1 - t`` in its ``lower`` bin and ``t`` in the next
-    one (linear binning): with hard bins an orientation on a bin edge (a 45-degree grating with 12 bins)
-    fell in one bin for the exemplar and, jittered, in the next for the slices, whose matches were then
-    penalised as a foreign orientation (a 10-degree bias, measured on diagonal stripes). The shares are
-    coherence-weighted (weakly oriented pixels say little about orientation), floored so no bin has a
-    zero target.
-
-    Returns
-    -------
-    lower : ndarray of int64, shape (H * W,)
-    fraction : ndarray of float64, shape (H * W,)
-        ``t``, the weight of bin ``(lower + 1) % bins``.
-    shares : ndarray of float64, shape (bins,)
-    """
-    tensors = structure_tensor(np.asarray(image, dtype=np.float32))
-    theta = orientation(tensors).ravel().astype(np.float64)
-    u = (theta + np.pi / 2) / np.pi * bins - 0.5
-    base = np.floor(u)
-    fraction = u - base
-    lower = base.astype(np.int64) % bins
-    weight = coherence(tensors).ravel().astype(np.float64)
-    shares = np.bincount(lower, weights=weight * (1.0 - fraction), minlength=bins)
-    shares += np.bincount((lower + 1) % bins, weights=weight * fraction, minlength=bins)
-    shares = shares / max(shares.sum(), 1e-12)
-    return lower, fraction, np.maximum(shares, 0.1 / bins)
-
-
 def _orientation_factors(
-    match: np.ndarray,
-    labels: tuple[np.ndarray, np.ndarray, np.ndarray],
-    weight: np.ndarray,
-    gain: float,
+    match: np.ndarray, labels: OrientationLabels, weight: np.ndarray, gain: float
 ) -> np.ndarray:
     """Weight factors ``1 / (1 + gain * excess)`` of a plane's matched neighbourhoods.
 
-    ``labels`` is :func:`orientation_labels`'s answer. ``u(b)`` is the (current, IRLS-weighted) share of
-    the plane's matches whose exemplar pixel lies in orientation bin ``b`` (split between two bins as
-    there) and ``H_e(b)`` the exemplar's share; a match's excess is ``max(0, u(b) / H_e(b) - 1)``
-    interpolated between its two bins: eq 4's histogram matching applied to orientations instead of
-    grey levels, so the slices of each plane are pulled toward their exemplar's orientation
+    The excess of each bin is the (current, IRLS-weighted) over-use of the orientations of the exemplar
+    pixels the plane's matches are centred on (:func:`synth.grid.orientation_histogram.orientation_excess`),
+    interpolated between a match's two bins: eq 4's histogram matching applied to orientations instead
+    of grey levels, so the slices of each plane are pulled toward their exemplar's orientation
     distribution (a departure; see the module notes).
     """
-    lower, fraction, shares = labels
-    bins = len(shares)
-    b0 = lower[match]
-    t = fraction[match]
-    b1 = (b0 + 1) % bins
-    w = weight.astype(np.float64)
-    usage = np.bincount(b0, weights=w * (1.0 - t), minlength=bins)
-    usage += np.bincount(b1, weights=w * t, minlength=bins)
-    usage = usage / max(usage.sum(), 1e-12)
-    excess = np.maximum(0.0, usage / shares - 1.0)
-    return (1.0 / (1.0 + gain * ((1.0 - t) * excess[b0] + t * excess[b1]))).astype(np.float32)
+    excess = orientation_excess(labels, match, weight)
+    return (1.0 / usage_factors(labels, excess, match, gain)).astype(np.float32)
 
 
 def _active_planes(params: SolidKopfParams) -> list[int]:
@@ -385,9 +340,9 @@ def run_solid_kopf(
             active=np.array([p in active for p in range(3)], dtype=np.uint8),
         )
         packed = PackedExemplars.pack(images)
-        orient: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        orient: dict[int, OrientationLabels] = {}
         if params.orientation_gain > 0:
-            known: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+            known: dict[int, OrientationLabels] = {}
             for p in active:
                 if id(images[p]) not in known:
                     known[id(images[p])] = orientation_labels(images[p])

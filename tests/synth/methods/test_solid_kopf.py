@@ -283,8 +283,8 @@ def test_position_factors_penalise_only_over_used_exemplar_cells() -> None:
 
 
 def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
+    from synth.grid.orientation_histogram import ORIENTATION_BINS, orientation_labels
     from synth.io.patterns import grating
-    from synth.methods.solid_kopf import ORIENTATION_BINS, orientation_labels
 
     horizontal = grating((48, 48), np.pi / 2, 8.0)  # gradient along the rows: orientation pi/2 = -pi/2
     lower, fraction, shares = orientation_labels(horizontal)
@@ -298,8 +298,8 @@ def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
 
 
 def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_centres() -> None:
+    from synth.grid.orientation_histogram import orientation_labels
     from synth.io.patterns import grating
-    from synth.methods.solid_kopf import orientation_labels
 
     bins = 12  # centres at -82.5, -67.5, ..., 82.5 degrees
     for degrees, lower, fraction in ((-60.0, 1, 0.5), (-67.5, 1, 0.0), (45.0, 8, 0.5), (40.0, 8, 1 / 6)):
@@ -315,10 +315,11 @@ def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_cen
 
 
 def test_orientation_factors_penalise_only_over_used_orientations() -> None:
+    from synth.grid.orientation_histogram import OrientationLabels
     from synth.methods.solid_kopf import _orientation_factors
 
     # exemplar pixels 0, 1 wholly in bin 0; 2, 3 wholly in bin 1 (fraction 0)
-    labels = (np.array([0, 0, 1, 1], dtype=np.int64), np.zeros(4), np.array([0.5, 0.5]))
+    labels = OrientationLabels(np.array([0, 0, 1, 1], dtype=np.int64), np.zeros(4), np.array([0.5, 0.5]))
     match = np.array([0, 1, 0, 2], dtype=np.int64)  # bin 0 used 3/4 (excess 0.5), bin 1 1/4
     f = _orientation_factors(match, labels, np.ones(4, np.float32), gain=2.0)
     np.testing.assert_allclose(f, [0.5, 0.5, 0.5, 1.0], rtol=1e-6)
@@ -327,10 +328,13 @@ def test_orientation_factors_penalise_only_over_used_orientations() -> None:
 
 
 def test_orientation_factors_interpolate_between_the_two_bins() -> None:
+    from synth.grid.orientation_histogram import OrientationLabels
     from synth.methods.solid_kopf import _orientation_factors
 
     # pixel 0 half in bin 0, half in bin 1; pixel 1 wholly in bin 1; pixel 2 wholly in bin 2
-    labels = (np.array([0, 1, 2], dtype=np.int64), np.array([0.5, 0.0, 0.0]), np.full(3, 1 / 3))
+    labels = OrientationLabels(
+        np.array([0, 1, 2], dtype=np.int64), np.array([0.5, 0.0, 0.0]), np.full(3, 1 / 3)
+    )
     match = np.array([0, 0, 1, 1], dtype=np.int64)  # usage: bin 0 1/4, bin 1 3/4, bin 2 0
     f = _orientation_factors(match, labels, np.ones(4, np.float32), gain=1.0)
     excess_1 = 0.75 * 3 - 1.0  # 1.25; bin 0 is under-used (no excess)
