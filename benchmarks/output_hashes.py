@@ -43,7 +43,7 @@ def _exemplar() -> np.ndarray:
 
 
 def _constraint() -> np.ndarray:
-    yy, xx = np.mgrid[0:_SIZE_2D[0], 0:_SIZE_2D[1]].astype(np.float32)
+    yy, xx = np.mgrid[0 : _SIZE_2D[0], 0 : _SIZE_2D[1]].astype(np.float32)
     return (0.5 + 0.5 * np.sin(2 * np.pi * (xx + 6 * np.sin(2 * np.pi * yy / 48)) / 12)).astype(np.float32)
 
 
