@@ -17,6 +17,8 @@ from synth.analysis.tensor import structure_tensor
 from synth.api import available_methods, synthesize
 from synth.evaluate import tile_seam
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
+from synth.io.patterns import grating, waves
+from synth.methods.arbitrary_shape import constraint_field
 from synth.pixel.synthesis import Guidance, SearchSettings, tensor_features
 
 from .test_synthesis_core import _run_both
@@ -35,7 +37,25 @@ def _noise(shape: tuple[int, int] = (96, 96)) -> np.ndarray:
     return ((z - z.min()) / np.ptp(z)).astype(np.float32)
 
 
+def _fringes() -> np.ndarray:
+    return grating((64, 64), np.radians(20), 6.0, noise=0.1, seed=0)
+
+
+def _tileable_constraint(shape: tuple[int, int] = SIZE) -> np.ndarray:
+    """Bent fringes with whole periods across the image (it tiles), its borders at a generic phase."""
+    return np.roll(waves(shape, period=8.0, amplitude=6.0, wavelength=shape[1]), shape[1] // 8, axis=1)
+
+
 def _run(method: str, periodic: bool, seed: int):
+    if method == "arbitrary-shape":
+        return synthesize(
+            method,
+            _fringes(),
+            size=SIZE,
+            seed=seed,
+            params={"periodic": periodic},
+            constraint=_tileable_constraint(),
+        )
     return synthesize(method, _noise(), size=SIZE, seed=seed, params={"periodic": periodic})
 
 
@@ -50,13 +70,13 @@ def _mean_seam(method: str, periodic: bool) -> tuple[float, float]:
 # ---------------------------------------------------------------- the outputs tile
 
 
-@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained"])
+@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained", "arbitrary-shape"])
 def test_periodic_output_tiles_without_a_seam(method: str) -> None:
     ratio, rank = _mean_seam(method, periodic=True)
     assert ratio < MAX_RATIO and rank < MAX_RANK, (ratio, rank)
 
 
-@pytest.mark.parametrize("method", ["wei-levoy"])
+@pytest.mark.parametrize("method", ["wei-levoy", "arbitrary-shape"])
 def test_the_default_output_shows_the_seam_the_measure_catches(method: str) -> None:
     """The same check fails without ``periodic``: a causal scan closes at the tile borders."""
     ratio, rank = _mean_seam(method, periodic=False)
@@ -66,7 +86,7 @@ def test_the_default_output_shows_the_seam_the_measure_catches(method: str) -> N
 # ---------------------------------------------------------------- reproducibility, invariance, parameters
 
 
-@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained"])
+@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained", "arbitrary-shape"])
 def test_periodic_same_seed_same_bytes(method: str) -> None:
     a, b = _run(method, True, seed=5), _run(method, True, seed=5)
     assert a.image.tobytes() == b.image.tobytes()
@@ -84,7 +104,7 @@ def test_a_square_neighbourhood_in_random_order_already_wraps_and_is_unchanged()
     assert plain.image.tobytes() == periodic.image.tobytes()
 
 
-@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained"])
+@pytest.mark.parametrize("method", ["wei-levoy", "tensor-constrained", "arbitrary-shape"])
 def test_periodic_is_in_the_schema_with_a_description(method: str) -> None:
     prop = available_methods()[method].schema()["properties"]["periodic"]
     assert prop["default"] is False and prop["type"] == "boolean"
@@ -95,6 +115,7 @@ def test_periodic_is_in_the_schema_with_a_description(method: str) -> None:
     ("method", "params", "field"),
     [
         ("wei-levoy", {"iterations": 1}, "iterations"),
+        ("arbitrary-shape", {"iterations": 1}, "iterations"),
         ("tensor-constrained", {"structure_iterations": 1}, "structure_iterations"),
         ("tensor-constrained", {"texture_iterations": 1}, "texture_iterations"),
     ],
@@ -158,3 +179,34 @@ def test_kernel_matches_reference_periodic_with_tensor_guidance(search: str) -> 
     _run_both(
         ex_levels=[ex[..., None]], out_shapes=[(12, 12)], settings=settings, p=0.6, guidance=guidance, seed=2
     )
+
+
+# ---------------------------------------------------------------- arbitrary shape: the constraint wraps
+
+
+def test_periodic_constraint_field_wraps_around_the_borders() -> None:
+    con = _tileable_constraint((48, 48))
+    shift = (11, 17)
+    _, s = constraint_field(con, (48, 48), 1.0, 3.0, periodic=True)
+    _, s_rolled = constraint_field(np.roll(con, shift, axis=(0, 1)), (48, 48), 1.0, 3.0, periodic=True)
+    np.testing.assert_allclose(s_rolled, np.roll(s, shift, axis=(0, 1)), atol=1e-6)
+    _, plain = constraint_field(np.roll(con, shift, axis=(0, 1)), (48, 48), 1.0, 3.0)
+    assert not np.allclose(plain, np.roll(s, shift, axis=(0, 1)), atol=1e-6)  # mirrored borders differ
+
+
+def test_periodic_arbitrary_shape_synthesizes_a_tileable_base_even_at_the_exemplar_size() -> None:
+    ex = _fringes()
+    params = {"angular_step": 15.0, "neighbourhood_size": 7, "periodic": True}
+    r = synthesize(
+        "arbitrary-shape", ex, size=(64, 64), seed=1, params=params, constraint=_tileable_constraint((64, 64))
+    )
+    assert r.stats["exemplar_like"]  # the exemplar itself does not tile: a tileable S_en was synthesized
+    plain = synthesize(
+        "arbitrary-shape",
+        ex,
+        size=(64, 64),
+        seed=1,
+        params=params | {"periodic": False},
+        constraint=_tileable_constraint((64, 64)),
+    )
+    assert plain.stats["exemplar_like"] == {}
