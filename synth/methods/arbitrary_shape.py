@@ -49,6 +49,14 @@ Choices the paper leaves open, and departures (why)
   typical value), so ``W = 0.5`` weighs intensities and tensors equally; the paper gives no value,
   the default 0.1 is the measured best (docs/arbitrary-shape.md).
 
+- ``periodic=True`` (a tileable output): the synthesis wraps (:mod:`synth.pixel.synthesis`), the
+  constraint's structure tensors and any resampling of it wrap around its borders, the exemplar-like
+  texture behind ``S_en`` is synthesized tileable (also when the exemplar already has the output's
+  size: the exemplar itself does not tile) and the guidance pyramid wraps. The constraint is the
+  user's and is used as given: the output tiles seamlessly only if the constraint does (e.g.
+  :func:`synth.io.patterns.grating` or a wave with whole periods across the image); a constraint that
+  jumps at its borders makes the texture follow the jump.
+
 The measure of "following the constraint" is :func:`orientation_agreement`.
 
 References
@@ -228,17 +236,29 @@ def orientation_agreement(
 
 
 def constraint_field(
-    constraint: np.ndarray, shape: tuple[int, int], sigma_d: float, sigma_w: float
+    constraint: np.ndarray,
+    shape: tuple[int, int],
+    sigma_d: float,
+    sigma_w: float,
+    *,
+    periodic: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The constraint image at ``shape`` (grey) and its tensor field; a flat image is an error."""
+    """The constraint image at ``shape`` (grey) and its tensor field; a flat image is an error.
+
+    With ``periodic`` the constraint is taken as a tile: its resampling and its tensors' filters wrap
+    around its borders (``mode='wrap'``) instead of mirroring it.
+    """
+    mode = "wrap" if periodic else "reflect"
     con = to_grey(constraint)
     if con.ndim != 2:
         raise InvalidInput("constraint", f"shape {constraint.shape} is neither (H, W) grey nor (H, W, 3) RGB")
     if not np.isfinite(con).all():
         raise InvalidInput("constraint", "contains NaN or infinite values")
     if con.shape != tuple(shape):
-        con = resize(con, shape, order=1, anti_aliasing=True, preserve_range=True).astype(np.float32)
-    s_icon = structure_tensor(con, sigma_d, sigma_w)
+        con = resize(con, shape, order=1, mode=mode, anti_aliasing=True, preserve_range=True).astype(
+            np.float32
+        )
+    s_icon = structure_tensor(con, sigma_d, sigma_w, mode=mode)
     if float((s_icon[..., 0] + s_icon[..., 2]).max()) < FLAT_TRACE:
         raise InvalidInput(
             "constraint",
@@ -253,8 +273,9 @@ def _identity_sources(shape: tuple[int, int]) -> np.ndarray:
 
 
 def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.ndarray, dict]:
-    """``S_en``'s texture at the output size and, per position, the exemplar position it shows."""
-    if tuple(exemplar.shape[:2]) == tuple(size):
+    """``S_en``'s texture at the output size and, per position, the exemplar position it shows
+    (synthesized, tileable, whenever the output is periodic: the exemplar itself does not tile)."""
+    if tuple(exemplar.shape[:2]) == tuple(size) and not params.periodic:
         return exemplar, _identity_sources(size), {}
     sub = TensorConstrainedParams(
         neighbourhood_size=params.neighbourhood_size,
@@ -264,6 +285,7 @@ def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.
         search=params.search,
         sigma_d=params.sigma_d,
         sigma_w=params.sigma_w,
+        periodic=params.periodic,
     )
 
     def sub_progress(stage: str, fraction: float) -> None:
@@ -344,7 +366,8 @@ def run_arbitrary_shape(
     report = checked_progress(progress)
     t0 = time.perf_counter()
     size = (int(size[0]), int(size[1]))
-    con, s_icon = constraint_field(constraint, size, params.sigma_d, params.sigma_w)
+    mode = "wrap" if params.periodic else "reflect"  # filters on output-sized fields
+    con, s_icon = constraint_field(constraint, size, params.sigma_d, params.sigma_w, periodic=params.periodic)
     o_con = orientation(s_icon)
     s_ex = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
     o_dom = dominant_orientation(s_ex)
@@ -352,7 +375,7 @@ def run_arbitrary_shape(
     # Step 1: S_con, the exemplar-like texture's tensors turned by the constraint's angle (eqs 2-3).
     base, base_src, base_stats = _base_texture(exemplar, size, params, seed, report)
     t1 = time.perf_counter()
-    s_en = s_ex if base is exemplar else structure_tensor(base, params.sigma_d, params.sigma_w)
+    s_en = s_ex if base is exemplar else structure_tensor(base, params.sigma_d, params.sigma_w, mode=mode)
     reference = {"dominant": o_dom, "absolute": 0.0, "local": None}[params.rotation_reference]
     reference = orientation(s_en).astype(np.float64) if reference is None else reference
     delta = wrap_angle(o_con.astype(np.float64) - reference)
@@ -398,7 +421,7 @@ def run_arbitrary_shape(
         ]
     gui_code = tensor_features(guide, params.metric)[1]
     guidance = Guidance(
-        out_levels=[tensor_features(t, params.metric)[0] for t in gaussian_pyramid(guide, levels)],
+        out_levels=[tensor_features(t, params.metric)[0] for t in gaussian_pyramid(guide, levels, mode=mode)],
         ex_levels=[
             tensor_features(t, params.metric)[0] for t in gaussian_pyramid(dictionary.tensors, levels)
         ],

@@ -78,6 +78,12 @@ class NeighbourhoodParams(MethodParams):
     random_candidates: int = Field(
         2, ge=0, le=64, description="k-coherence: random candidates added per pixel."
     )
+    periodic: bool = Field(
+        False,
+        description="Toroidal output: the output tiles seamlessly (every stage wraps around its borders). "
+        "A causal neighbourhood then needs 2 or more passes: its refinement passes compare the full "
+        "square in random order, which closes the tile borders.",
+    )
 
     @model_validator(mode="after")
     def _odd_sizes(self) -> NeighbourhoodParams:
@@ -85,6 +91,21 @@ class NeighbourhoodParams(MethodParams):
             if getattr(self, name) % 2 == 0:
                 raise ValueError(f"{name} must be odd")
         return self
+
+    @model_validator(mode="after")
+    def _periodic_refines(self) -> NeighbourhoodParams:
+        if self.periodic:
+            for passes, shape in self.periodic_stages():
+                if shape == "causal" and getattr(self, passes) < 2:
+                    raise ValueError(
+                        f"periodic=True with a causal neighbourhood needs {passes} >= 2: the first pass "
+                        "cannot close the tile borders, a refinement pass does"
+                    )
+        return self
+
+    def periodic_stages(self) -> list[tuple[str, Shape]]:
+        """Each synthesis stage's passes field and neighbourhood shape (the periodic check)."""
+        return [("iterations", self.neighbourhood)] if "iterations" in type(self).model_fields else []
 
     def resolved_scan(self) -> ScanOrder:
         return self.scan or ("lexicographic" if self.neighbourhood == "causal" else "random")
@@ -104,6 +125,7 @@ class NeighbourhoodParams(MethodParams):
             k=self.k,
             random_candidates=self.random_candidates,
             alpha=alpha,
+            periodic=self.periodic,
             **search,
         )
 

@@ -24,6 +24,11 @@ The tensor part of a texture neighbourhood has the pixel part's shape (plus its 
 (it names, for every output position, an exemplar position whose tensor neighbourhood matches
 ``S_out`` there), which lets the fast search find what the constraint asks for.
 
+Tileable outputs: ``periodic=True`` makes both stages' searches close the tile borders (see
+:mod:`synth.pixel.synthesis`; a causal neighbourhood then needs two or more passes in each stage).
+The structure field needs nothing else to wrap: ``S_out`` is copied from ``S_in`` and its pyramid
+for the texture stage always wraps (``mode='wrap'``).
+
 References
 ----------
 A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis of
@@ -113,6 +118,12 @@ class TensorConstrainedParams(NeighbourhoodParams):
         le=100.0,
         description="Weight of the structure stage's histogram matching (ignored with 'none').",
     )
+
+    def periodic_stages(self) -> list[tuple[str, Shape]]:
+        return [
+            ("structure_iterations", self.structure_neighbourhood or self.neighbourhood),
+            ("texture_iterations", self.neighbourhood),
+        ]
 
 
 def orientation_labels(tensors: np.ndarray, bins: int = ORIENTATION_LABELS) -> tuple[np.ndarray, np.ndarray]:
