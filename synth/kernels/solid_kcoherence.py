@@ -155,6 +155,11 @@ class SolidState:
     grey_count, grey_target : ndarray (B,) int64, (B,) float64
         Voxels per grey-level bin (``ExemplarBank.grey_bin``), and their number under the exemplars'
         histogram.
+    orientation_factor : ndarray (3, N) float64
+        Per plane, the factor multiplying the search distance of each exemplar neighbourhood: eq 4's
+        re-weighting on the plane's orientation histogram
+        (:func:`synth.grid.orientation_histogram.usage_factors`), frozen during a search pass; ones
+        switch it off.
     """
 
     volume: np.ndarray
@@ -167,6 +172,7 @@ class SolidState:
     position_target: np.ndarray
     grey_count: np.ndarray
     grey_target: np.ndarray
+    orientation_factor: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -328,6 +334,7 @@ def _search_kernel(
     index_count,
     index_target,
     index_factor,
+    orient_factor,
     ex,
     layout,
     valid,
@@ -470,6 +477,7 @@ def _search_kernel(
                             s += t * t
                         if index_weight > 0.0:
                             s *= _index_factor(index_factor, index_count, index_target, index_weight, g, old)
+                        s *= orient_factor[p, g]
                         if n_top < rerank:
                             pos = n_top
                             n_top += 1
@@ -493,6 +501,7 @@ def _search_kernel(
                     f = 1.0
                     if index_weight > 0.0:
                         f = _index_factor(index_factor, index_count, index_target, index_weight, g, old)
+                    f *= orient_factor[p, g]
                     d = f * _ssd(q, ql, n, ex, g, best / f)
                     if d < best:
                         best = d
@@ -825,6 +834,7 @@ def search_pass(
         state.index_count,
         state.index_target,
         factor,
+        state.orientation_factor,
         bank.values,
         bank.layout,
         bank.valid,
@@ -1028,6 +1038,7 @@ def search_reference(
                     pd += (proj[dd] - b.features[ca, dd].astype(np.float64)) ** 2
                 if weights.index_weight > 0:
                     pd *= _hist_factor_reference(own, s.index_target[ca], weights.index_weight)
+                pd *= s.orientation_factor[p, ca]
                 keep = np.lexsort((np.arange(len(ca)), pd))[: weights.rerank]
                 ca, own = ca[keep], own[keep]
             t = (q[None, :] - b.values[ca[:, None] + ql[None, :]].astype(np.float64)) ** 2
@@ -1040,6 +1051,7 @@ def search_reference(
             f = np.ones(len(ca))
             if weights.index_weight > 0:
                 f = _hist_factor_reference(own, s.index_target[ca], weights.index_weight)
+            f = f * s.orientation_factor[p, ca]
             best = int(np.argmin(f * d))
             s.match[p][zyx] = ca[best]
             s.index_count[old] -= 1

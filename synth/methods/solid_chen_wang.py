@@ -106,6 +106,16 @@ Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis g
   then the grid points within one voxel, up to 12): soot 64^3 orientation KL 0.05 / 0.17 / 0.18 against
   0.03 per axis, and no faster (6.2-6.9 s against 5.8-6.9 s from 128^2): the solver's extra candidates
   cost what the search saved. Dropped.
+- **Orientation re-weighting for laminae** (session 6; ``orientation_gain``, :data:`LAMINAR_ORIENTATION_GAIN`
+  when the constrained exemplars are laminar and ``adapt_to_structure`` is on, else off): each search
+  pass multiplies a candidate's distance by ``1 + gain * excess`` of its orientation bin in the plane's
+  current matches (:mod:`synth.grid.orientation_histogram`, as ``solid-kopf``'s default). Bent laminae on
+  the two views that admit a volume (``planes=('xz', 'yz')``, 64^3 from 128^2, seeds 1-3, orientation KL
+  xz / yz): 0.52 / 0.43 without, 0.20 / 0.17 with gain 32, 0.21 / 0.18 with 64 (the tilted planar stack
+  is gone; more dislocations than Kopf's remain). Per-plane laminae barely move (0.04 / 0.17 / 0.16
+  against 0.04 / 0.17 / 0.18): their error is dislocations, not the orientation mix. Not for
+  micro-structures: on soot the gain raised the orientation KL from 0.024-0.038 to 0.04-0.08 and the S2
+  error from 0.05 to 0.11, hence laminae only.
 - ``scan`` (lexicographic, random, Morton, Hilbert; default Hilbert, the study's recommendation) orders
   both phases; ``periodic`` makes the volume wrap (tileable); ``random_candidates`` adds random exemplar
   positions to the k-coherent ones (0 = the paper).
@@ -121,6 +131,12 @@ from pydantic import Field
 
 from synth.api import PLANES, MethodSpec, Progress, Result, register
 from synth.errors import InvalidInput
+from synth.grid.orientation_histogram import (
+    OrientationLabels,
+    orientation_excess,
+    orientation_labels,
+    usage_factors,
+)
 from synth.grid.scan import ScanOrder, scan_order
 from synth.kernels.solid_kcoherence import (
     ExemplarBank,
@@ -139,6 +155,7 @@ from synth.pixel.solid import (
     ProgressMeter,
     SolidPlan,
     exemplar_offsets,
+    is_laminar,
     plan_levels,
     plane_offsets,
     structure_schedule,
@@ -158,6 +175,8 @@ _RANK_DIMS = 8
 _GREY_BINS = 32
 #: Relative cost of a search pass against an optimisation pass (for progress).
 _SEARCH_COST = 4.0
+#: The orientation re-weighting's gain for laminar exemplars (``orientation_gain=None``; module notes).
+LAMINAR_ORIENTATION_GAIN = 32.0
 
 
 class SolidChenWangParams(SolidParams):
@@ -206,6 +225,14 @@ class SolidChenWangParams(SolidParams):
     )
     solve_radius: int = Field(
         0, ge=0, le=7, description="Solver candidates: matches centred within this many voxels of the voxel."
+    )
+    orientation_gain: float | None = Field(
+        None,
+        ge=0.0,
+        le=64.0,
+        description="Pull each plane's matches toward its exemplar's orientation histogram (Kopf's eq 4 on "
+        f"orientations; 0 = off, the paper). None: {LAMINAR_ORIENTATION_GAIN:g} for laminar exemplars "
+        "when adapt_to_structure is on, else off.",
     )
 
 
@@ -281,6 +308,35 @@ def _geometry(
     r2 = np.sum(offsets.astype(np.float64) ** 2, axis=2)
     entry_weight = np.exp(-0.5 * r2 / sigma**2) if sigma > 0 else np.ones_like(r2)
     return SliceGeometry(offsets, lin, cand, np.ascontiguousarray(rc), bool(periodic), active, entry_weight)
+
+
+def _bank_orientations(plan: SolidPlan, level: int, bank: ExemplarBank) -> list[OrientationLabels]:
+    """Per plane, the orientation labels of its exemplar at ``level`` indexed by the bank's global
+    positions (:func:`synth.grid.orientation_histogram.orientation_labels`)."""
+    n = len(bank.values)
+    lower = np.zeros(n, dtype=np.int64)
+    fraction = np.zeros(n, dtype=np.float64)
+    out: list[OrientationLabels] = []
+    known: dict[int, OrientationLabels] = {}
+    for p, nb in enumerate(plan.neighbourhoods(level)):
+        if id(nb.image) not in known:
+            known[id(nb.image)] = orientation_labels(nb.image)
+            off, h, w = (int(t) for t in bank.layout[p])
+            lower[off : off + h * w] = known[id(nb.image)].lower
+            fraction[off : off + h * w] = known[id(nb.image)].fraction
+        out.append(OrientationLabels(lower, fraction, known[id(nb.image)].shares))
+    return out
+
+
+def _update_orientation_factor(
+    state: SolidState, labels: list[OrientationLabels], active: np.ndarray, gain: float
+) -> None:
+    """Each constrained plane's search factors from the over-use of orientations by its current matches
+    (each counted with its IRLS weight), frozen for the next search pass."""
+    everywhere = np.arange(state.orientation_factor.shape[1])
+    for p in np.flatnonzero(active):
+        excess = orientation_excess(labels[p], state.match[p].ravel(), state.weight[p].ravel())
+        state.orientation_factor[p] = usage_factors(labels[p], excess, everywhere, gain)
 
 
 def _random_matches(bank: ExemplarBank, shape: tuple[int, int, int], rng: np.random.Generator) -> np.ndarray:
@@ -417,8 +473,12 @@ def synthesize_solid_chen_wang(
         if not np.all(np.isfinite(img)):
             raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
     iterations = params.iterations
+    orientation_gain = params.orientation_gain or 0.0
     if params.adapt_to_structure:  # the iterations only: fewer levels hurt this method (see above)
-        _, iterations = structure_schedule([exemplars[name] for name in params.planes], 1, iterations)
+        constrained = [exemplars[name] for name in params.planes]
+        _, iterations = structure_schedule(constrained, 1, iterations)
+        if params.orientation_gain is None and is_laminar(constrained):
+            orientation_gain = LAMINAR_ORIENTATION_GAIN
     levels = params.levels
     plan = plan_levels(exemplars, tuple(int(s) for s in size), levels, params.neighbourhood_size)
     rng = np.random.default_rng(seed)
@@ -440,6 +500,7 @@ def synthesize_solid_chen_wang(
     stats: dict = {
         "levels": plan.levels,
         "iterations": iterations,
+        "orientation_gain": orientation_gain,
         "sizes": list(plan.sizes),
         "mean_match_distance": {},
         "mean_candidates": {},
@@ -477,7 +538,9 @@ def synthesize_solid_chen_wang(
             position_target=position_target,
             grey_count=np.bincount(bank.grey_bin[origin].ravel(), minlength=_GREY_BINS).astype(np.int64),
             grey_target=_grey_target(bank, n_vox, geometry.active),
+            orientation_factor=np.ones((3, len(bank.values)), dtype=np.float64),
         )
+        orientations = _bank_orientations(plan, level, bank) if orientation_gain > 0 else None
         scratch = new_scratch(bank, state)
         fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
         ctx = (bank, geometry, state, scratch, shape, fixed_order)
@@ -487,6 +550,8 @@ def synthesize_solid_chen_wang(
         for it in range(iterations):
             weights = SolverWeights(**{**weights0.__dict__, "seed_key": int(rng.integers(0, 2**63))})
             scratch["acc"][:] = 0.0
+            if orientations is not None:
+                _update_orientation_factor(state, orientations, geometry.active, orientation_gain)
             _run_phase(
                 search_fn, _SEARCH_COST, f"{label}, iteration {it + 1}: search", weights, ctx, meter, rng
             )

@@ -66,6 +66,8 @@ def _setup(shape=(6, 7, 8), periodic=True, k=4, anisotropic=False, seed=0, plane
         position_target=pt,
         grey_count=np.zeros(_GREY_BINS, np.int64),
         grey_target=_grey_target(bank, int(np.prod(shape)), geo.active),
+        # arbitrary orientation re-weighting factors, so that the kernel and the reference apply them alike
+        orientation_factor=1.0 + 2.0 * rng.random((3, len(bank.values))),
     )
     return bank, geo, state, rng
 
@@ -279,3 +281,27 @@ def test_same_bytes_with_one_or_two_threads() -> None:
         )
         digests.append(out.stdout.strip())
     assert digests[0] == digests[1] and len(digests[0]) == 64
+
+
+def test_orientation_gain_defaults_to_laminae_only() -> None:
+    """``orientation_gain=None``: the laminar gain for a laminar exemplar, off for a weakly oriented one,
+    and whatever is given when given; the re-weighting changes the volume."""
+    from synth.io.patterns import undulating_laminae
+    from synth.methods.solid_chen_wang import LAMINAR_ORIENTATION_GAIN
+
+    laminae = undulating_laminae((32, 32), 6, 4, 32, noise=0.2)
+    noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    small = {"iterations": 1, "levels": 2, "adapt_to_structure": True}
+    lam = synthesize("solid-chen-wang", laminae, size=(12, 12, 12), params=small, seed=1)
+    assert lam.stats["orientation_gain"] == LAMINAR_ORIENTATION_GAIN
+    off = synthesize(
+        "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "orientation_gain": 0.0}, seed=1
+    )
+    assert off.stats["orientation_gain"] == 0.0
+    assert not np.array_equal(lam.image, off.image)
+    grains = synthesize("solid-chen-wang", noise, size=(12, 12, 12), params=small, seed=1)
+    assert grains.stats["orientation_gain"] == 0.0
+    literal = synthesize(
+        "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "adapt_to_structure": False}, seed=1
+    )
+    assert literal.stats["orientation_gain"] == 0.0
