@@ -28,6 +28,16 @@ most probable one"), :func:`rclg_draw` draws from the conditional law by Mathero
 drawn (it would only add white pixel noise of standard deviation ``sigma``), so the draw lies in the
 neighbours' span; it is exact for the model ``N(mu, Sigma)`` observed with the regularised gain.
 
+Also beyond the paper, :func:`rclg_neighbour` is Matheron's rule applied to a draw from the *empirical*
+law of the neighbours instead of their Gaussian: one neighbour ``p_j``, drawn uniformly, corrected by the
+same gain, ``p = p_j + G M^T (M G M^T + theta^2 I)^-1 (y0 - M p_j)`` (the analysis of one member of an
+ensemble Kalman filter, Evensen 1994, without perturbed observations). With ``k >> N`` overlap values the
+correction pins the member to the overlap and, like the mean, averages the neighbours' structure beyond it;
+so the correction is tapered with the distance from the overlap (:func:`localisation_taper`), the ensemble
+Kalman filter's covariance localisation (Houtekamer & Mitchell 2001): from ``N`` samples the covariance
+between an overlap pixel and a far pixel is poorly estimated, and it carries the other neighbours'
+structure there. Near the overlap the patch is the corrected member, far from it the neighbour itself.
+
 Also beyond the paper, for the wrapped patches of a periodic layout (known along two opposite borders):
 :func:`mend_inner_edges` re-solves a conditional patch's new part so that it meets its known part without
 a jump (a discrete Poisson equation, as in Pérez, Gangnet & Blake, "Poisson image editing", SIGGRAPH 2003).
@@ -39,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
+from scipy.ndimage import distance_transform_edt
 from scipy.sparse import coo_matrix
 from scipy.sparse.linalg import spsolve
 
@@ -46,8 +57,10 @@ __all__ = [
     "GaussianPatchModel",
     "clg_patch",
     "lg_patch",
+    "localisation_taper",
     "mend_inner_edges",
     "rclg_draw",
+    "rclg_neighbour",
     "rclg_patch",
     "restore_contrast",
 ]
@@ -149,6 +162,56 @@ def rclg_draw(
     noise = theta * rng.standard_normal(int(known.sum()))
     d = np.asarray(y0, dtype=np.float64) - prior[known] - noise
     return _corrected(model, known, prior, d, sigma, theta)
+
+
+def localisation_taper(known: np.ndarray, length: float) -> np.ndarray:
+    """``exp(-d^2 / (2 length^2))``, ``d`` the Euclidean distance (pixels) to the nearest known pixel.
+
+    ``known`` is a ``(h, w)`` mask: 1 on it, falling off away from it (the taper of
+    :func:`rclg_neighbour`'s correction).
+
+    Examples
+    --------
+    >>> known = np.zeros((1, 4), dtype=bool); known[0, 0] = True
+    >>> np.round(localisation_taper(known, 1.0), 3)
+    array([[1.   , 0.607, 0.135, 0.011]])
+    """
+    known = np.asarray(known, dtype=bool)
+    if not known.any():
+        return np.zeros(known.shape)
+    d = distance_transform_edt(~known)
+    return np.exp(-0.5 * (d / float(length)) ** 2)
+
+
+def rclg_neighbour(
+    model: GaussianPatchModel,
+    known: np.ndarray,
+    y0: np.ndarray,
+    sigma: float,
+    theta: float,
+    rng: np.random.Generator,
+    taper: np.ndarray | None = None,
+) -> np.ndarray:
+    """A neighbour drawn uniformly, corrected toward the overlap by the RCLG gain (a departure).
+
+    Same parameters as :func:`rclg_patch`, plus ``rng`` and ``taper``. The neighbour ``p_j`` (one of the
+    ``N`` patches the model is learnt from, ``mu + sqrt(N) A[:, j]``) is corrected as the prior draw of
+    :func:`rclg_draw` is: ``p = p_j + A c`` with ``c = (A2^T A2 + lam I)^-1 A2^T (y0 - p_j2)``, its overlap
+    part as in :func:`rclg_patch`. ``taper`` (shape ``(D,)``, 1 on the overlap; :func:`localisation_taper`)
+    multiplies the correction ``A c`` pixel by pixel: the patch keeps the neighbour's own structure where
+    the overlap says little about it. ``taper=None``: no taper (then the average over ``j`` is
+    :func:`rclg_patch`, since the correction is linear).
+    """
+    known = np.asarray(known, dtype=bool)
+    n = model.A.shape[1]
+    prior = model.mu + np.sqrt(n) * model.A[:, int(rng.integers(n))]
+    if not known.any():
+        return prior
+    d = np.asarray(y0, dtype=np.float64) - prior[known]
+    if taper is None:
+        return _corrected(model, known, prior, d, sigma, theta)
+    corrected = _corrected(model, known, prior, d, sigma, theta)
+    return prior + np.asarray(taper, dtype=np.float64) * (corrected - prior)
 
 
 def clg_patch(model: GaussianPatchModel, known: np.ndarray, y0: np.ndarray, sigma: float) -> np.ndarray:

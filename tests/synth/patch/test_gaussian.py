@@ -10,8 +10,10 @@ from synth.patch.gaussian import (
     GaussianPatchModel,
     clg_patch,
     lg_patch,
+    localisation_taper,
     mend_inner_edges,
     rclg_draw,
+    rclg_neighbour,
     rclg_patch,
     restore_contrast,
 )
@@ -80,6 +82,47 @@ def test_conditional_draws_average_to_the_most_probable_patch(theta):
     np.testing.assert_allclose(draws.mean(axis=0), rclg_patch(model, known, y0, 0.1, theta), atol=0.025)
     if theta == 0.0:
         np.testing.assert_allclose(draws[:, known], np.broadcast_to(y0, draws[:, known].shape), atol=1e-12)
+
+
+class _Pick:
+    """An rng stand-in whose ``integers`` returns a chosen index (to enumerate the neighbours)."""
+
+    def __init__(self, j: int):
+        self.j = j
+
+    def integers(self, n):
+        assert 0 <= self.j < n
+        return self.j
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.2])
+def test_neighbour_estimate_is_a_corrected_neighbour_whose_average_is_the_mean(theta):
+    """Untapered, the corrected neighbours average to the most probable patch (the correction is linear);
+    with a taper that is 0 on the new part, the new part is the neighbour itself and the overlap is as
+    untapered; with a taper of 1 everywhere, nothing changes."""
+    patches, model, known, y0 = _case(seed=5, n=6)
+    P = patches.reshape(len(patches), -1)
+    sigma = 0.1
+    members = np.array([rclg_neighbour(model, known, y0, sigma, theta, _Pick(j)) for j in range(len(P))])
+    np.testing.assert_allclose(members.mean(axis=0), rclg_patch(model, known, y0, sigma, theta), atol=1e-10)
+    if theta == 0.0:
+        np.testing.assert_allclose(members[:, known], np.tile(y0, (len(P), 1)), atol=1e-12)
+    off = known.astype(np.float64)
+    for j in (0, 3):
+        cut = rclg_neighbour(model, known, y0, sigma, theta, _Pick(j), off)
+        np.testing.assert_allclose(cut[~known], P[j, ~known], atol=1e-12)
+        np.testing.assert_allclose(cut[known], members[j, known], atol=1e-12)
+        ones = rclg_neighbour(model, known, y0, sigma, theta, _Pick(j), np.ones(known.size))
+        np.testing.assert_allclose(ones, members[j], atol=1e-12)
+
+
+def test_localisation_taper_is_one_on_the_overlap_and_falls_with_the_distance():
+    known = overlap_mask(9, 2, "L")
+    taper = localisation_taper(known, 3.0)
+    np.testing.assert_array_equal(taper[known], 1.0)
+    assert taper[-1, -1] == pytest.approx(np.exp(-0.5 * (7 / 3.0) ** 2))  # 7 px from both strips
+    assert np.all(np.diff(taper[8, 2:]) < 0)  # along the last row, away from the left strip
+    np.testing.assert_array_equal(localisation_taper(np.zeros((3, 3), bool), 1.0), 0.0)
 
 
 def test_restore_contrast_gives_the_new_part_the_neighbours_spread_and_keeps_the_overlap():
