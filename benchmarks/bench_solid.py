@@ -279,10 +279,10 @@ def fresh_process(n: int, method: str) -> tuple[float, float, int]:
 def speed(runs: int, big: bool = False) -> str:
     lines = ["| method | size | median (s) | runs | peak memory (MiB) |", "|---|---|---|---|---|"]
     soot = DATA / "hrtem-soot-256.png"
-    big = load_image(soot) if soot.exists() else undulating_laminae((256, 256), 7, 16, 128, noise=0.3)
+    source = load_image(soot) if soot.exists() else undulating_laminae((256, 256), 7, 16, 128, noise=0.3)
     for method in ("solid-kopf", "solid-chen-wang"):
         for n in (64, 128):
-            ex = np.ascontiguousarray(big[:n, :n])
+            ex = np.ascontiguousarray(source[:n, :n])
             med, times = median_time(
                 lambda ex=ex, n=n, method=method: synthesize(method, ex, size=(n, n, n), seed=1),
                 runs=runs if n == 64 else max(1, runs // 2),
