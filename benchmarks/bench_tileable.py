@@ -61,7 +61,12 @@ NOTES = (
     "layout); the last column / row of patches is searched and cut against its left *and* right / top "
     "*and* bottom strips; `gaussian-patch` re-solves the new part of those two-sided patches so that it "
     "meets its strips without a jump (`synth.patch.gaussian.mend_inner_edges`); random-phase noise is "
-    "periodic by construction (`periodic=True` only changes outputs smaller than the exemplar).",
+    "periodic by construction (`periodic=True` only changes outputs smaller than the exemplar). The pixel "
+    "methods' neighbourhoods always wrapped, but a causal scan ends at the bottom and right borders without "
+    "ever matching the first rows and columns it touches in a tiling: with `periodic=True` the first pass "
+    "also compares the already-made pixels across the border, the later passes compare full square "
+    "neighbourhoods in random order, and `arbitrary-shape` wraps its constraint's tensors, S_en and "
+    "guidance pyramid (the output tiles when the constraint does).",
     "",
     "Reading the ratios: one line of pixel pairs is a noisy sample. On gravel and brick, 91-98 % of "
     "`quilting`'s wrap-around pairs are verbatim continuations of the exemplar (the cuts lie elsewhere in "
