@@ -128,10 +128,10 @@ Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis g
   (where the laminae first appear: 32^3 from 64^2) passes cost 1/8 or less. Bent laminae, two views,
   64^3 from 128^2, orientation KL xz / yz, mean (worst) over seeds 1-3: 0.198 (0.234) / 0.165 (0.188)
   before; radius 1 alone 0.128 (0.140) / 0.147 (0.160); 60 coarse iterations alone 0.140 (0.158) /
-  0.159 (0.182); both 0.084 (0.090) / 0.095 (0.104) (seeds 4-5: 0.064-0.101 / 0.099-0.153); 30 coarse
-  iterations 0.124 / 0.117, 100 0.075 / 0.087; 20 iterations at every level with radius 1 0.111 /
-  0.097 at 1.3x the time of this schedule; radius 2 0.141 / 0.177; ``levels`` 3 0.145 / 0.136;
-  ``consensus`` 2, ``neighbourhood_size`` 9, ``k`` 5 no better (solid-kopf: 0.098 / 0.100).
+  0.159 (0.182); both 0.084 (0.090) / 0.095 (0.104) (seeds 4-5: 0.064-0.101 / 0.099-0.153). With
+  radius 1: 30 coarse iterations 0.124 / 0.117, 100 0.075 / 0.087 (17 s), 20 at every level 0.111 /
+  0.097 (1.3x the time), ``k`` 5 0.177 / 0.244. Radius 2: 0.141 / 0.177. Radius 0: ``levels`` 3
+  0.145 / 0.136; ``consensus`` 2 and ``neighbourhood_size`` 9 no better (solid-kopf: 0.098 / 0.100).
   Per-plane laminae 0.036 / 0.171 / 0.158 -> 0.022 / 0.078 / 0.076 (Kopf 0.023 / 0.077 / 0.077). Cost:
   7.0 -> 13.8 s (two views), 12.0 -> 20.4 s (per-plane) at 64^3, 2 cores. Soot and the known answer are
   not laminar: their bytes are unchanged.
