@@ -116,6 +116,25 @@ Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis g
   against 0.04 / 0.17 / 0.18): their error is dislocations, not the orientation mix. Not for
   micro-structures: on soot the gain raised the orientation KL from 0.024-0.038 to 0.04-0.08 and the S2
   error from 0.05 to 0.11, hence laminae only.
+- **Annealing schedule for laminae** (session 7; ``coarse_iterations``, :data:`LAMINAR_COARSE_ITERATIONS`
+  = 60, and ``solve_radius``, :data:`LAMINAR_SOLVE_RADIUS` = 1, when the constrained exemplars are
+  laminar and ``adapt_to_structure`` is on; else the finest level's iterations and radius 0). Diagnosis
+  (mid-slices beside ``solid-kopf``'s, and the orientation histograms): the laminae had the right
+  spacing but were short, ragged segments with many dislocations and too few of the exemplar's
+  +-35-40 degree tilts. Two causes. (1) The solver chose each voxel among its own two or three matches
+  only, so neighbouring voxels copied from unrelated matches and the lamina edges frayed; radius 1 also
+  scores the neighbours' matches, shifted (Han et al.'s coherent candidates). (2) Ten iterations do not
+  anneal the dislocations, and at the finest level they are expensive to move; at the coarser levels
+  (where the laminae first appear: 32^3 from 64^2) passes cost 1/8 or less. Bent laminae, two views,
+  64^3 from 128^2, orientation KL xz / yz, mean (worst) over seeds 1-3: 0.198 (0.234) / 0.165 (0.188)
+  before; radius 1 alone 0.128 (0.140) / 0.147 (0.160); 60 coarse iterations alone 0.140 (0.158) /
+  0.159 (0.182); both 0.084 (0.090) / 0.095 (0.104) (seeds 4-5: 0.064-0.101 / 0.099-0.153). With
+  radius 1: 30 coarse iterations 0.124 / 0.117, 100 0.075 / 0.087 (17 s), 20 at every level 0.111 /
+  0.097 (1.3x the time), ``k`` 5 0.177 / 0.244. Radius 2: 0.141 / 0.177. Radius 0: ``levels`` 3
+  0.145 / 0.136; ``consensus`` 2 and ``neighbourhood_size`` 9 no better (solid-kopf: 0.098 / 0.100).
+  Per-plane laminae 0.036 / 0.171 / 0.158 -> 0.022 / 0.078 / 0.076 (Kopf 0.023 / 0.077 / 0.077). Cost:
+  7.0 -> 13.8 s (two views), 12.0 -> 20.4 s (per-plane) at 64^3, 2 cores. Soot and the known answer are
+  not laminar: their bytes are unchanged.
 - ``scan`` (lexicographic, random, Morton, Hilbert; default Hilbert, the study's recommendation) orders
   both phases; ``periodic`` makes the volume wrap (tileable); ``random_candidates`` adds random exemplar
   positions to the k-coherent ones (0 = the paper).
@@ -177,6 +196,10 @@ _GREY_BINS = 32
 _SEARCH_COST = 4.0
 #: The orientation re-weighting's gain for laminar exemplars (``orientation_gain=None``; module notes).
 LAMINAR_ORIENTATION_GAIN = 32.0
+#: The solver's candidate radius for laminar exemplars (``solve_radius=None``; module notes).
+LAMINAR_SOLVE_RADIUS = 1
+#: Iterations per level above the finest for laminar exemplars (``coarse_iterations=None``; module notes).
+LAMINAR_COARSE_ITERATIONS = 60
 
 
 class SolidChenWangParams(SolidParams):
@@ -190,6 +213,14 @@ class SolidChenWangParams(SolidParams):
         description="Laminae get at least 10 iterations per level (off: iterations literally).",
     )
     iterations: int = Field(3, ge=1, le=20, description="Search + optimisation iterations per level.")
+    coarse_iterations: int | None = Field(
+        None,
+        ge=1,
+        le=200,
+        description="Iterations at every level but the finest. None: "
+        f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as the "
+        "finest level's.",
+    )
     k: int = Field(15, ge=0, le=32, description="k-coherence: similar exemplar positions per pixel.")
     # Not given by the paper; measured on the soot exemplar (32^3): 5 narrows the usage spread and the
     # grey-level KL more than 1 (0.35 against 0.45), 10 and 50 add little.
@@ -223,8 +254,13 @@ class SolidChenWangParams(SolidParams):
         le=9,
         description="Search: window voxels (the voxel first) whose k-coherence sets are candidates.",
     )
-    solve_radius: int = Field(
-        0, ge=0, le=7, description="Solver candidates: matches centred within this many voxels of the voxel."
+    solve_radius: int | None = Field(
+        None,
+        ge=0,
+        le=7,
+        description="Solver candidates: matches centred within this many voxels of the voxel. None: "
+        f"{LAMINAR_SOLVE_RADIUS} for laminar exemplars when adapt_to_structure is on, else 0 (the voxel's "
+        "own matches).",
     )
     orientation_gain: float | None = Field(
         None,
@@ -474,11 +510,20 @@ def synthesize_solid_chen_wang(
             raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
     iterations = params.iterations
     orientation_gain = params.orientation_gain or 0.0
+    solve_radius = params.solve_radius or 0
+    coarse_iterations = params.coarse_iterations
     if params.adapt_to_structure:  # the iterations only: fewer levels hurt this method (see above)
         constrained = [exemplars[name] for name in params.planes]
         _, iterations = structure_schedule(constrained, 1, iterations)
-        if params.orientation_gain is None and is_laminar(constrained):
+        laminar = is_laminar(constrained)
+        if params.orientation_gain is None and laminar:
             orientation_gain = LAMINAR_ORIENTATION_GAIN
+        if params.solve_radius is None and laminar:
+            solve_radius = LAMINAR_SOLVE_RADIUS
+        if coarse_iterations is None and laminar:
+            coarse_iterations = LAMINAR_COARSE_ITERATIONS
+    if coarse_iterations is None:
+        coarse_iterations = iterations
     levels = params.levels
     plan = plan_levels(exemplars, tuple(int(s) for s in size), levels, params.neighbourhood_size)
     rng = np.random.default_rng(seed)
@@ -487,20 +532,24 @@ def synthesize_solid_chen_wang(
         position_weight=params.position_weight,
         exponent=params.exponent,
         n_random=params.random_candidates,
-        solve_radius=params.solve_radius,
+        solve_radius=solve_radius,
         kset_window=params.kset_window,
         consensus=params.consensus,
         grey_weight=params.grey_weight,
     )
     search_fn = search_reference if reference else search_pass
     solve_fn = solve_reference if reference else solve_pass
-    per_pass = 1 + iterations * (1 + _SEARCH_COST)
-    total = sum(per_pass * int(np.prod(s)) for s in plan.shapes)
+    total = sum(
+        (1 + (iterations if level == 0 else coarse_iterations) * (1 + _SEARCH_COST)) * int(np.prod(s))
+        for level, s in enumerate(plan.shapes)
+    )
     meter = ProgressMeter(progress or (lambda stage, fraction: None), total)
     stats: dict = {
         "levels": plan.levels,
         "iterations": iterations,
+        "coarse_iterations": coarse_iterations,
         "orientation_gain": orientation_gain,
+        "solve_radius": solve_radius,
         "sizes": list(plan.sizes),
         "mean_match_distance": {},
         "mean_candidates": {},
@@ -547,7 +596,7 @@ def synthesize_solid_chen_wang(
         label = f"level {plan.levels - level}/{plan.levels}"
         _run_phase(solve_fn, 1.0, f"{label}: initial voxels", weights0, ctx, meter, rng)
 
-        for it in range(iterations):
+        for it in range(iterations if level == 0 else coarse_iterations):
             weights = SolverWeights(**{**weights0.__dict__, "seed_key": int(rng.integers(0, 2**63))})
             scratch["acc"][:] = 0.0
             if orientations is not None:

@@ -305,3 +305,32 @@ def test_orientation_gain_defaults_to_laminae_only() -> None:
         "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "adapt_to_structure": False}, seed=1
     )
     assert literal.stats["orientation_gain"] == 0.0
+
+
+def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
+    """``solve_radius=None``: the solver also scores the neighbours' shifted matches (radius 1) for a
+    laminar exemplar, only the voxel's own matches (0) for a weakly oriented one or when
+    ``adapt_to_structure`` is off; a given radius is taken literally, and radius 1 is what the default
+    gives on laminae (the same volume)."""
+    from synth.io.patterns import undulating_laminae
+    from synth.methods.solid_chen_wang import LAMINAR_SOLVE_RADIUS
+
+    laminae = undulating_laminae((32, 32), 6, 4, 32, noise=0.2)
+    noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    small = {"iterations": 1, "levels": 2, "adapt_to_structure": True}
+    lam = synthesize("solid-chen-wang", laminae, size=(12, 12, 12), params=small, seed=1)
+    assert lam.stats["solve_radius"] == LAMINAR_SOLVE_RADIUS == 1
+    given = synthesize(
+        "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "solve_radius": 1}, seed=1
+    )
+    assert np.array_equal(lam.image, given.image)
+    own = synthesize(
+        "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "solve_radius": 0}, seed=1
+    )
+    assert own.stats["solve_radius"] == 0 and not np.array_equal(lam.image, own.image)
+    grains = synthesize("solid-chen-wang", noise, size=(12, 12, 12), params=small, seed=1)
+    assert grains.stats["solve_radius"] == 0
+    literal = synthesize(
+        "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "adapt_to_structure": False}, seed=1
+    )
+    assert literal.stats["solve_radius"] == 0
