@@ -264,7 +264,6 @@ def synthesize_gaussian_patches(
     searcher = PatchSearcher(search_image, w)
     out = np.zeros((gh, gw, channels), dtype=np.float64)
     n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
-    masks: dict[Strips, np.ndarray] = {}
     tapers: dict[Strips, np.ndarray] = {}
     length = params.localisation if params.localisation is not None else float(overlap)
     report_every = max(1, len(layout) // 50)
@@ -272,7 +271,7 @@ def synthesize_gaussian_patches(
         at = layout.index(y, x)  # wraps around the torus when periodic
         region = out[at]
         strips = layout.strips(i, j)
-        mask = masks.setdefault(strips, strips.mask(w))
+        mask = strips.mask(w)
         if out_guide is None and kind == "none":
             out[at] = searcher.patch(*np.unravel_index(int(rng.integers(n_pos)), searcher.positions_shape))
             continue

@@ -45,7 +45,7 @@ from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
 from synth.patch.cut import error_surface, strips_cut_mask
 from synth.patch.graphcut import graph_cut_mask
-from synth.patch.layout import PatchLayout, Strips, check_periodic_size
+from synth.patch.layout import PatchLayout, check_periodic_size
 from synth.patch.search import PatchSearcher, candidates_within
 
 __all__ = ["QuiltingParams", "check_patch_geometry", "precheck_patch_method", "run_quilting"]
@@ -125,7 +125,6 @@ def run_quilting(
     out = np.zeros((gh, gw, ex.shape[2]), dtype=np.float64)
     source = np.zeros((gh, gw, 2), dtype=np.int32)
     n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
-    masks: dict[Strips, np.ndarray] = {}
     offsets = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int32)
     errors = []
     report_every = max(1, len(layout) // 50)
@@ -137,7 +136,7 @@ def run_quilting(
             choice = int(rng.integers(n_pos))
             new_mask = np.ones((w, w), dtype=bool)
         else:
-            mask = masks.setdefault(strips, strips.mask(w))
+            mask = strips.mask(w)
             ssd = searcher.ssd(region, mask)
             pool = candidates_within(ssd, params.tolerance)
             choice = int(pool[rng.integers(len(pool))])
@@ -146,7 +145,7 @@ def run_quilting(
         patch = searcher.patch(py, px)
         if kind != "none":
             if params.blending == "graph-cut":
-                new_mask = graph_cut_mask(region, patch, masks[strips], layout.sealed(i, j))
+                new_mask = graph_cut_mask(region, patch, mask, layout.sealed(i, j))
             else:
                 new_mask = strips_cut_mask(error_surface(region, patch), strips)
         region[new_mask] = patch[new_mask]

@@ -342,7 +342,6 @@ def synthesize_feature_guided(
     labels = np.full((gh, gw), -1, dtype=np.int32)
     sources = np.zeros((gh, gw, 2), dtype=np.int64)
     grid = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int64)
-    masks: dict[Strips, np.ndarray] = {}
     falloffs: dict[Strips, np.ndarray | None] = {}
     coefficients = [
         np.stack(
@@ -369,10 +368,9 @@ def synthesize_feature_guided(
             flat = int(rng.integers(int(starts[-1])))
             mask = None
         else:
-            if strips not in masks:
-                masks[strips] = strips.mask(w)
-                falloffs[strips] = None if s.warp_band is None else band_falloff(masks[strips], s.warp_band)
-            mask = masks[strips]
+            mask = strips.mask(w)
+            if strips not in falloffs:
+                falloffs[strips] = None if s.warp_band is None else band_falloff(mask, s.warp_band)
             ssd = np.concatenate([sr.ssd(region, mask).ravel() for sr in searchers])
             pool = k_nearest(ssd, s.candidates)
             colour = ssd[pool] / (mask.sum() * channels)

@@ -208,9 +208,9 @@ def rclg_neighbour(
     if not known.any():
         return prior
     d = np.asarray(y0, dtype=np.float64) - prior[known]
-    if taper is None:
-        return _corrected(model, known, prior, d, sigma, theta)
     corrected = _corrected(model, known, prior, d, sigma, theta)
+    if taper is None:
+        return corrected
     return prior + np.asarray(taper, dtype=np.float64) * (corrected - prior)
 
 

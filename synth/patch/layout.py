@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -43,11 +44,19 @@ def overlap_mask(w: int, overlap: int, kind: str) -> np.ndarray:
     kind : {'none', 'left', 'top', 'L'}
         Which borders overlap.
     """
+    return Strips.of_kind(overlap, kind).mask(w).copy()
+
+
+@lru_cache(maxsize=256)
+def _strips_mask(top: int, left: int, bottom: int, right: int, w: int) -> np.ndarray:
     mask = np.zeros((w, w), dtype=bool)
-    if kind in ("left", "L"):
-        mask[:, :overlap] = True
-    if kind in ("top", "L"):
-        mask[:overlap, :] = True
+    mask[:top, :] = True
+    mask[:, :left] = True
+    if bottom:
+        mask[w - bottom :, :] = True
+    if right:
+        mask[:, w - right :] = True
+    mask.setflags(write=False)
     return mask
 
 
@@ -100,15 +109,9 @@ class Strips:
         return self.right > 0 or self.bottom > 0
 
     def mask(self, w: int) -> np.ndarray:
-        """Boolean ``(w, w)`` mask of the union of the strips."""
-        mask = np.zeros((w, w), dtype=bool)
-        mask[: self.top, :] = True
-        mask[:, : self.left] = True
-        if self.bottom:
-            mask[w - self.bottom :, :] = True
-        if self.right:
-            mask[:, w - self.right :] = True
-        return mask
+        """Boolean ``(w, w)`` mask of the union of the strips (made once per strips and side, read-only:
+        the patch loops ask for it at every patch)."""
+        return _strips_mask(self.top, self.left, self.bottom, self.right, w)
 
 
 def periodic_positions(n: int, step: int) -> list[int]:
