@@ -116,7 +116,7 @@ Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis g
   against 0.04 / 0.17 / 0.18): their error is dislocations, not the orientation mix. Not for
   micro-structures: on soot the gain raised the orientation KL from 0.024-0.038 to 0.04-0.08 and the S2
   error from 0.05 to 0.11, hence laminae only.
-- **Annealing schedule for laminae** (session 7; ``coarse_iterations``, :data:`LAMINAR_COARSE_ITERATIONS`
+- **Annealing schedule for laminae** (session 6; ``coarse_iterations``, :data:`LAMINAR_COARSE_ITERATIONS`
   = 60, and ``solve_radius``, :data:`LAMINAR_SOLVE_RADIUS` = 1, when the constrained exemplars are
   laminar and ``adapt_to_structure`` is on; else the finest level's iterations and radius 0). Diagnosis
   (mid-slices beside ``solid-kopf``'s, and the orientation histograms): the laminae had the right
