@@ -137,6 +137,13 @@ class FeatureGuidedParams(PatchParams):
         le=100.0,
         description="Weight of non-bijectivity in the matching cost (eq 2; paper: 0.3).",
     )
+    reverse_weight: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description="Weight of the reverse chamfer term: mean gdist from the candidate's features in the "
+        "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq 2).",
+    )
     warp_tau: float = Field(
         WARP_TAU,
         ge=0.0,
@@ -208,6 +215,7 @@ def run_feature_guided(
         feature_weight=params.feature_weight,
         tau=params.tau,
         beta=params.beta,
+        reverse_weight=params.reverse_weight,
         warp_tau=params.warp_tau,
         deform=params.deform,
         max_shift=params.max_shift,

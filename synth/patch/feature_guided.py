@@ -203,6 +203,8 @@ class FeatureGuidedSettings:
     feature_weight: float = 0.5
     tau: float = MATCH_TAU
     beta: float = BETA
+    #: weight of the reverse chamfer term (candidate features -> context features); 0: the paper's eq 2
+    reverse_weight: float = 0.0
     warp_tau: float = WARP_TAU
     deform: bool = True
     max_shift: float = 4.0
@@ -382,7 +384,12 @@ def synthesize_feature_guided(
                 local = pool[sel] - starts[v]
                 offsets = np.stack(np.unravel_index(local, searchers[v].positions_shape), axis=1)
                 feature[sel] = matching_costs(
-                    context, indices[v], offsets.astype(np.int64), tau=s.tau, beta=s.beta
+                    context,
+                    indices[v],
+                    offsets.astype(np.int64),
+                    tau=s.tau,
+                    beta=s.beta,
+                    reverse_weight=s.reverse_weight,
                 )
             total = combined_cost(feature, colour, s.feature_weight)
             best = float(total.min())
