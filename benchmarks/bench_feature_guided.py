@@ -48,6 +48,12 @@ IMG = ROOT / "docs" / "img"
 SIZE = (256, 256)
 PATCH, OVERLAP = 32, 8
 SEEDS = range(5)
+#: Seeds of the fringe measures on soot (section (b)). With 5 or 10 seeds their standard errors
+#: (about 0.2 px in mean length and 0.015-0.02 in mean tortuosity) are as large as the gaps between the
+#: methods: quilting's mean tortuosity is 1.419 over seeds 0-9 and 1.461 over seeds 10-29.
+FRINGE_SEEDS = range(30)
+#: The reverse chamfer term's weight in the row that measures it (``reverse_weight``; 0 = eq 2).
+REVERSE = 4.0
 
 
 def exemplars() -> dict[str, tuple[np.ndarray, dict[str, Any]]]:
@@ -75,6 +81,10 @@ RUNS: dict[str, tuple[str, dict[str, Any]]] = {
     "feature-guided, deform on": (
         "feature-guided",
         {"patch_size": PATCH, "overlap": OVERLAP, "deform": True},
+    ),
+    "feature-guided, deform on, reverse term": (
+        "feature-guided",
+        {"patch_size": PATCH, "overlap": OVERLAP, "deform": True, "reverse_weight": REVERSE},
     ),
 }
 
@@ -190,6 +200,7 @@ def figure(name: str, ex: np.ndarray, options: dict[str, Any], results: dict[str
     paper = results["feature-guided, deform on, the paper's warp"]
     off = results["feature-guided, deform off"]
     q = results["quilting"]
+    rev = results["feature-guided, deform on, reverse term"]
     tiles = [
         [
             (
@@ -202,6 +213,7 @@ def figure(name: str, ex: np.ndarray, options: dict[str, Any], results: dict[str
             ("feature-guided, deform off, seams", off.extras["seams"]),
             ("deform on, the paper's warp, seams", paper.extras["seams"]),
             ("feature-guided, deform on, seams", on.extras["seams"]),
+            (f"reverse term {REVERSE:g}, seams", rev.extras["seams"]),
         ],
         [
             (
@@ -214,6 +226,7 @@ def figure(name: str, ex: np.ndarray, options: dict[str, Any], results: dict[str
             ("feature-guided (off) features", off.extras["features_output"]),
             ("paper's warp features", paper.extras["features_output"]),
             ("feature-guided (on) features", on.extras["features_output"]),
+            ("reverse term features", rev.extras["features_output"]),
         ],
         [
             ("", None),
@@ -221,6 +234,7 @@ def figure(name: str, ex: np.ndarray, options: dict[str, Any], results: dict[str
             ("feature-guided, deform off", np.repeat(off.image[..., None], 3, axis=2)),
             ("deform on, the paper's warp", np.repeat(paper.image[..., None], 3, axis=2)),
             ("feature-guided, deform on", np.repeat(on.image[..., None], 3, axis=2)),
+            (f"deform on, reverse term {REVERSE:g}", np.repeat(rev.image[..., None], 3, axis=2)),
         ],
     ]
     pad, label_h, tile = 6, 16, SIZE[0]
@@ -279,6 +293,13 @@ def quality() -> tuple[
             if seed == 0:
                 figures.append(figure(name, ex, options, results))
             print(name, seed, {k: round(v[-1]["ratio"], 3) for k, v in table[name].items()}, flush=True)
+        if name in fringes:
+            for seed in FRINGE_SEEDS:
+                if seed in SEEDS:
+                    continue
+                for label in RUNS:
+                    fringes[name][label].append(fringe_stats(run(label, ex, options, seed).image))
+                print(name, "fringes, seed", seed, flush=True)
     return table, fringes, figures
 
 
@@ -286,7 +307,12 @@ def speed() -> list[dict[str, Any]]:
     ex = load_image(DATA / "hrtem-soot-128.png", mode="grey")
     options = exemplars()["hrtem-soot-128"][1]
     rows = []
-    for label in ("quilting", "feature-guided, deform off", "feature-guided, deform on"):
+    for label in (
+        "quilting",
+        "feature-guided, deform off",
+        "feature-guided, deform on",
+        "feature-guided, deform on, reverse term",
+    ):
         synth_times: list[float] = []
 
         def once(label: str = label, synth_times: list[float] = synth_times) -> None:
@@ -324,13 +350,16 @@ def write(table, fringes, figures, times, wall: float) -> None:
         "exemplars, 256 x 256 outputs, patch "
         f"{PATCH} px, overlap {OVERLAP} px for every method, seeds {SEEDS.start}-{SEEDS.stop - 1}. "
         "`feature-guided` runs with its defaults otherwise (candidates 20, weights "
-        "0.5, tau 0.1, beta 0.3, warp tau 10, max shift 4 px, warp angle 30 degrees, warp band 4 px; "
+        "0.5, tau 0.1, beta 0.3, reverse weight 0 (eq 2), warp tau 10, max shift 4 px, warp angle 30 "
+        "degrees, warp band 4 px; "
         "the engine's control spacing 3 px, least shift 0.5 px, cubic resampling) and the feature "
         "detector settings of each exemplar below; the measure uses the same settings for every method. "
         "`the paper's warp` is deformation as the paper describes it (and as this project first had it): "
         "every W'_f pair a control point, displacements as they come, a thin-plate spline over the whole "
         "patch with the bottom and right borders fixed, bilinear resampling "
-        "(`benchmarks.bench_feature_guided.PAPER_WARP`).",
+        "(`benchmarks.bench_feature_guided.PAPER_WARP`). "
+        f"`reverse term` adds the candidate-to-context chamfer term to eq 2 (`reverse_weight={REVERSE:g}`; "
+        "`synth.analysis.feature_matching`, see the notes at the end).",
         "",
         "| exemplar | features |",
         "|---|---|",
@@ -392,6 +421,7 @@ def write(table, fringes, figures, times, wall: float) -> None:
             )
     on, off = "feature-guided, deform on", "feature-guided, deform off"
     paper = "feature-guided, deform on, the paper's warp"
+    rev = "feature-guided, deform on, reverse term"
     lines += [
         "",
         "What feature-guided did (mean over seeds): share of patches where the feature cost changed the "
@@ -442,32 +472,65 @@ def write(table, fringes, figures, times, wall: float) -> None:
         f"- ... than quilting with the same graph cut: {verdict(off, 'quilting, graph cut')}",
         f"- deformation lowers the measure: {verdict(on, off)}",
         f"- the changed warp breaks fewer features than the paper's: {verdict(on, paper)}",
+        f"- the reverse term breaks fewer features than eq 2 alone: {verdict(rev, on)}",
+        f"- eq 2 alone breaks fewer features than with the reverse term: {verdict(on, rev)}",
+        "- feature-guided with the reverse term breaks fewer features than quilting: "
+        + verdict(rev, "quilting"),
         "",
     ]
     if fringes:
         f = fringes["hrtem-soot-128"]
         ex = f["exemplar"][0]
+        n_seeds = len(f["quilting"])
+
+        def col(label: str, key: str, stop: int | None = None) -> np.ndarray:
+            return np.array([r[key] for r in f[label][:stop]])
+
         lines += [
             "## (b) Fringes on soot (`synth.analysis.fringes.extract_fringes`, defaults)",
             "",
-            "Mean fringe length (px) and mean tortuosity per image, mean ± "
-            "standard deviation over the 5 seeds; "
-            "the exemplar's in the first row. Closer to the exemplar is better.",
+            f"Mean fringe length (px) and mean tortuosity per image over seeds 0-{n_seeds - 1} (mean ± "
+            "standard deviation, then the standard error of the mean); the exemplar's in the first row, "
+            "and the means over seeds 0-9 alone in the last two columns. Closer to the exemplar is better. "
+            f"{n_seeds} seeds, not 5: the standard errors over 5 or 10 seeds are as large as the gaps "
+            "between the methods (quilting's mean tortuosity is 1.419 over seeds 0-9, 1.461 over seeds "
+            "10-29). The exemplar's own means carry a sampling error too: its 55 fringes give a standard "
+            "error of 1.7 px in mean length and 0.08 in mean tortuosity.",
             "",
-            "| image | fringes | mean length (px) | mean tortuosity | length gap | tortuosity gap |",
-            "|---|---|---|---|---|---|",
-            f"| exemplar (128^2) | {ex['count']:.0f} | {ex['length']:.2f} | {ex['tortuosity']:.3f} | | |",
+            "| image | fringes | mean length (px) | se | mean tortuosity | se | length gap | tortuosity gap "
+            "| seeds 0-9: length | tortuosity |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+            f"| exemplar (128^2) | {ex['count']:.0f} | {ex['length']:.2f} | | {ex['tortuosity']:.3f} "
+            "| | | | | |",
         ]
         for label in labels:
-            rows = f[label]
+            length, tort = col(label, "length"), col(label, "tortuosity")
             lines.append(
-                f"| {label} | {np.mean([r['count'] for r in rows]):.0f} | "
-                f"{_ms([r['length'] for r in rows])} | "
-                f"{np.mean([r['tortuosity'] for r in rows]):.3f} ± "
-                f"{np.std([r['tortuosity'] for r in rows]):.3f} | "
-                f"{abs(np.mean([r['length'] for r in rows]) - ex['length']):.2f} | "
-                f"{abs(np.mean([r['tortuosity'] for r in rows]) - ex['tortuosity']):.3f} |"
+                f"| {label} | {col(label, 'count').mean():.0f} | {_ms(list(length))} | "
+                f"{length.std(ddof=1) / np.sqrt(len(length)):.2f} | "
+                f"{tort.mean():.3f} ± {tort.std():.3f} | {tort.std(ddof=1) / np.sqrt(len(tort)):.3f} | "
+                f"{abs(length.mean() - ex['length']):.2f} | {abs(tort.mean() - ex['tortuosity']):.3f} | "
+                f"{col(label, 'length', 10).mean():.2f} | {col(label, 'tortuosity', 10).mean():.3f} |"
             )
+
+        def closer(label: str, key: str, stop: int | None = None) -> str:
+            a, q = col(label, key, stop), col("quilting", key, stop)
+            ga, gq = abs(a.mean() - ex[key]), abs(q.mean() - ex[key])
+            se = float(np.hypot(a.std(ddof=1) / np.sqrt(len(a)), q.std(ddof=1) / np.sqrt(len(q))))
+            digits = 2 if key == "length" else 3
+            word = "closer" if ga < gq else "**not** closer"
+            size = "more" if abs(a.mean() - q.mean()) > se else "less"
+            return (
+                f"{key} {word} ({ga:.{digits}f} vs {gq:.{digits}f}; the means differ by "
+                f"{abs(a.mean() - q.mean()):.{digits}f}, {size} than the standard error of the difference, "
+                f"{se:.{digits}f})"
+            )
+
+        lines += ["", "Against quilting (gap to the exemplar):", ""]
+        for label in (on, rev):
+            for stop, text in ((None, f"seeds 0-{n_seeds - 1}"), (10, "seeds 0-9")):
+                both = f"{closer(label, 'length', stop)}; {closer(label, 'tortuosity', stop)}"
+                lines.append(f"- {label}, {text}: {both}.")
         lines.append("")
     lines += [
         "## (c) Speed",
