@@ -37,6 +37,11 @@ Departures
   on soot (1.04 vs 1.10) and cells (1.11 vs 1.21) and as many on bent laminae (0.97 vs 0.97) and brick
   (1.04 vs 1.10, within the spread). Neither beats ``quilting`` on brick (0.90): the paper's claim
   holds on soot only.
+- ``reverse_weight`` (not the paper; default 0 = eq 2): adds the reverse chamfer term (the
+  candidate's overlap features matched against the context's,
+  :func:`synth.analysis.feature_matching.reverse_costs`). At 4 it restores the mean fringe length on
+  soot that eq 2 loses (19.9 vs 19.1 px, exemplar 20.0; seeds 0-29) at equal tortuosity, but breaks
+  slightly more features on soot (1.07 vs 1.05); measured in docs/feature-guided.md.
 - ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
   (:class:`synth.patch.layout.PatchLayout`); the last patch of a row is matched (colour and features)
   on its left *and* right overlaps, the last row on its top *and* bottom ones, warped with only the
