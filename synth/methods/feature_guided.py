@@ -41,7 +41,7 @@ Departures
   candidate's overlap features matched against the context's,
   :func:`synth.analysis.feature_matching.reverse_costs`). At 4 it restores the mean fringe length on
   soot that eq 2 loses (19.9 vs 19.1 px, exemplar 20.0; seeds 0-29) at equal tortuosity, but breaks
-  slightly more features on soot (1.07 vs 1.05); measured in docs/feature-guided.md.
+  slightly more features on soot (1.07 vs 1.04, seeds 0-9); measured in docs/feature-guided.md.
 - ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
   (:class:`synth.patch.layout.PatchLayout`); the last patch of a row is matched (colour and features)
   on its left *and* right overlaps, the last row on its top *and* bottom ones, warped with only the

@@ -53,7 +53,7 @@ Choices where the paper is silent, and departures
   how near each context feature lies to a candidate feature. Adding the other direction (the
   symmetric chamfer distance) brings the fringes of soot outputs back to the exemplar's mean length
   (weight 4: 19.9 px against 19.1 with eq 2 alone and 20.0 in the exemplar, seeds 0-29) with the
-  same tortuosity, but soot breaks slightly more features at the seams (1.07 vs 1.05, seeds 0-9;
+  same tortuosity, but soot breaks slightly more features at the seams (1.07 vs 1.04, seeds 0-9;
   the other exemplars level); it is not the default (docs/feature-guided.md).
 - **Correspondences farther apart than ``max_shift`` px are dropped** (the paper keeps all): a context
   feature with no patch feature nearby has nothing to meet, and pulling a far one across the overlap
