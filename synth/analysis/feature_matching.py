@@ -88,6 +88,7 @@ __all__ = [
     "BETA",
     "MATCH_TAU",
     "N_BUCKETS",
+    "REVERSE_WEIGHT",
     "WARP_TAU",
     "ContextFeatures",
     "Correspondences",
@@ -115,6 +116,9 @@ MATCH_TAU = 0.1
 WARP_TAU = 10.0
 #: beta of eq 2 (paper, section 2.1, distances in pixels).
 BETA = 0.3
+#: Weight of the reverse chamfer term (not the paper; 0 = eq 2): the default of the feature-guided
+#: method, measured on soot fringes (docs/feature-guided.md; module docstring, "the reverse term").
+REVERSE_WEIGHT = 4.0
 #: Order in which the three candidate buckets are tried (own bucket first): bucket offsets.
 _BUCKET_STEPS = (0, -1, 1)
 
