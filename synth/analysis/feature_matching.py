@@ -31,6 +31,25 @@ The symbols of the paper
 - **eq 2**: the matching cost ``(1/m) sum_i gdist(f_i^out, W_f(f_i^out)) + beta (1/n) sum_j
   |B_f(f_j^in) - 1|``, with ``beta = 0.3`` (distances in pixels).
 
+Departure (optional): the reverse term
+--------------------------------------
+Eq 2 is a one-sided (directed) chamfer distance: it asks how near every *context* feature lies to
+some candidate feature, never how near the *candidate's* features lie to the context's. A candidate
+whose overlap is cluttered with short, broken features offers any context feature a near partner and
+scores well, although most of its features continue nothing; on HRTEM soot the chosen patches then
+carry shorter fringes than the exemplar (docs/feature-guided.md). ``reverse_weight`` (``lambda``)
+adds the other direction, as the symmetric chamfer distance does (Barrow et al. 1977; Borgefors
+1988 match one way, symmetric variants sum both):
+
+``eq 2 + lambda (1/n) sum_j gdist(f_j^in, W_b(f_j^in))``
+
+where ``W_b`` maps each candidate feature inside the overlapping region to the nearest context
+feature in its own and the two adjacent buckets, found exactly as ``W_f`` is but with the four
+distance transforms built on the context's features (the overlap of the output window), and a
+candidate feature with no context feature in its three buckets gets :func:`unmatched_penalty` of the
+window. ``lambda = 0`` is the paper's eq 2 (the same bytes); ``lambda = 1`` weighs both directions
+alike. Brute-force spelling: :func:`reverse_cost_reference`.
+
 Choices where the paper is silent
 ---------------------------------
 - The distance transforms cover the **whole** input feature map, as the paper precomputes them: a
@@ -69,6 +88,7 @@ __all__ = [
     "BETA",
     "MATCH_TAU",
     "N_BUCKETS",
+    "REVERSE_WEIGHT",
     "WARP_TAU",
     "ContextFeatures",
     "Correspondences",
@@ -82,6 +102,8 @@ __all__ = [
     "matching_cost_reference",
     "matching_costs",
     "orientation_bucket",
+    "reverse_cost_reference",
+    "reverse_costs",
     "tangent_difference",
     "thin_correspondences",
     "unmatched_penalty",
@@ -94,6 +116,9 @@ MATCH_TAU = 0.1
 WARP_TAU = 10.0
 #: beta of eq 2 (paper, section 2.1, distances in pixels).
 BETA = 0.3
+#: Weight of the reverse chamfer term (not the paper; 0 = eq 2): the default of the feature-guided
+#: method, measured on soot fringes (docs/feature-guided.md; module docstring, "the reverse term").
+REVERSE_WEIGHT = 4.0
 #: Order in which the three candidate buckets are tried (own bucket first): bucket offsets.
 _BUCKET_STEPS = (0, -1, 1)
 
@@ -138,6 +163,20 @@ def _check_tau_beta(tau: float, beta: float | None = None) -> None:
         raise InvalidParameter("beta", beta, "must be a finite number >= 0 (weight of bijectivity, eq 2)")
 
 
+def _check_reverse_weight(reverse_weight: float) -> None:
+    if not (
+        isinstance(reverse_weight, int | float)
+        and not isinstance(reverse_weight, bool)
+        and np.isfinite(reverse_weight)
+        and reverse_weight >= 0
+    ):
+        raise InvalidParameter(
+            "reverse_weight",
+            reverse_weight,
+            "must be a finite number >= 0 (weight of the candidate-to-context chamfer term; 0 = eq 2)",
+        )
+
+
 def _mask_and_tangent(role: str, mask: np.ndarray, tangent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     m = np.asarray(mask)
     t = np.asarray(tangent, dtype=np.float64)
@@ -173,6 +212,9 @@ class FeatureIndex:
         The feature mask.
     unit : ndarray of float64, shape (n_total, 2)
         Unit tangent vectors ``(cos, sin)`` (for the kernel).
+    label : ndarray of int32, shape (H, W)
+        ``label[r, c]``: the feature at pixel ``(r, c)`` (its position in ``rows``), -1 off the features
+        (for the reverse term of :func:`matching_costs`).
     """
 
     shape: tuple[int, int]
@@ -183,6 +225,7 @@ class FeatureIndex:
     nearest: np.ndarray = field(repr=False)
     mask: np.ndarray = field(repr=False)
     unit: np.ndarray = field(repr=False)
+    label: np.ndarray = field(repr=False)
 
     @property
     def count(self) -> int:
@@ -228,6 +271,7 @@ def build_feature_index(mask: np.ndarray, tangent: np.ndarray) -> FeatureIndex:
         nearest=nearest,
         mask=m,
         unit=np.stack([np.cos(tangents), np.sin(tangents)], axis=1),
+        label=label,
     )
 
 
@@ -455,6 +499,114 @@ def _matching_costs_kernel(
     return out
 
 
+@kernel
+def _reverse_costs_kernel(
+    region: np.ndarray,
+    label: np.ndarray,
+    f_cos: np.ndarray,
+    f_sin: np.ndarray,
+    f_bucket: np.ndarray,
+    ctx_nearest: np.ndarray,
+    ctx_rows: np.ndarray,
+    ctx_cols: np.ndarray,
+    ctx_cos: np.ndarray,
+    ctx_sin: np.ndarray,
+    offsets: np.ndarray,
+    tau: float,
+    penalty: float,
+) -> np.ndarray:  # pragma: no cover - compiled; compared with reverse_cost_reference in the tests
+    """The reverse term at every offset: mean gdist from each region feature to its context partner."""
+    k = offsets.shape[0]
+    h, w = region.shape
+    out = np.empty(k, dtype=np.float64)
+    for q in range(k):
+        r0 = offsets[q, 0]
+        c0 = offsets[q, 1]
+        total = 0.0
+        n = 0
+        for lr in range(h):
+            for lc in range(w):
+                if not region[lr, lc]:
+                    continue
+                j = label[r0 + lr, c0 + lc]
+                if j < 0:
+                    continue
+                n += 1
+                best_g = penalty
+                for s in range(3):
+                    step = 0 if s == 0 else (-1 if s == 1 else 1)
+                    b = (f_bucket[j] + step + N_BUCKETS) % N_BUCKETS
+                    i = ctx_nearest[b, lr, lc]
+                    if i < 0:
+                        continue
+                    sign = 1.0 if ctx_cos[i] * f_cos[j] + ctx_sin[i] * f_sin[j] >= 0.0 else -1.0
+                    dv = math.hypot(f_cos[j] - sign * ctx_cos[i], f_sin[j] - sign * ctx_sin[i])
+                    g = math.hypot(ctx_rows[i] - lr, ctx_cols[i] - lc) + tau * dv
+                    if g < best_g:
+                        best_g = g
+                total += best_g
+        out[q] = total / n if n > 0 else 0.0
+    return out
+
+
+def _context_index(context: ContextFeatures) -> FeatureIndex:
+    """The context's features as a :class:`FeatureIndex` of the window (distance transforms per bucket)."""
+    mask = np.zeros(context.shape, dtype=bool)
+    mask[context.rows, context.cols] = True
+    tangent = np.full(context.shape, np.nan)
+    tangent[context.rows, context.cols] = context.tangent
+    return build_feature_index(mask, tangent)
+
+
+def reverse_costs(
+    context: ContextFeatures,
+    index: FeatureIndex,
+    offsets: np.ndarray,
+    *,
+    tau: float = MATCH_TAU,
+) -> np.ndarray:
+    """The reverse chamfer term ``(1/n) sum_j gdist(f_j^in, W_b(f_j^in))`` at many candidate positions.
+
+    The other direction of eq 2's first term (module docstring, "the reverse term"): every input
+    feature inside the overlapping region at the offset is matched to the nearest context feature
+    of its own and the two adjacent buckets (eq 1's ``gdist``; no partner: :func:`unmatched_penalty`
+    of the window), through four distance transforms of the context's features. A numba kernel,
+    O(region area) per candidate; :func:`reverse_cost_reference` is the brute-force spelling.
+
+    Parameters
+    ----------
+    context : ContextFeatures
+    index : FeatureIndex
+    offsets : ndarray of int, shape (k, 2)
+        Top-left ``(row, col)`` of each candidate window in the input map.
+    tau : float
+        Weight of tangent differences in eq 1.
+
+    Returns
+    -------
+    ndarray of float64, shape (k,)
+        0 where the region holds no input feature.
+    """
+    _check_tau_beta(tau)
+    off = _offsets(context, index, offsets)
+    ctx = _context_index(context)
+    return _reverse_costs_kernel(
+        np.ascontiguousarray(context.region),
+        index.label,
+        index.unit[:, 0].copy(),
+        index.unit[:, 1].copy(),
+        index.bucket,
+        ctx.nearest,
+        ctx.rows,
+        ctx.cols,
+        ctx.unit[:, 0].copy(),
+        ctx.unit[:, 1].copy(),
+        off,
+        float(tau),
+        unmatched_penalty(context.shape, float(tau)),
+    )
+
+
 def matching_costs(
     context: ContextFeatures,
     index: FeatureIndex,
@@ -462,6 +614,7 @@ def matching_costs(
     *,
     tau: float = MATCH_TAU,
     beta: float = BETA,
+    reverse_weight: float = 0.0,
 ) -> np.ndarray:
     """Matching cost of eq 2 at many candidate positions (a numba kernel, O(m) per candidate).
 
@@ -476,12 +629,16 @@ def matching_costs(
         every window must lie inside the map.
     tau, beta : float
         Weights of eqs 1 and 2 (paper: 0.1 and 0.3).
+    reverse_weight : float
+        ``lambda``, weight of the reverse chamfer term (:func:`reverse_costs`); 0 (default) is the
+        paper's eq 2 and computes nothing more.
 
     Returns
     -------
     ndarray of float64, shape (k,)
-        ``(1/m) sum_i gdist(f_i^out, W_f(f_i^out)) + beta (1/n) sum_j |B_f(f_j^in) - 1|``; the sum
-        over ``j`` runs over the input features inside the region at that offset.
+        ``(1/m) sum_i gdist(f_i^out, W_f(f_i^out)) + beta (1/n) sum_j |B_f(f_j^in) - 1|``
+        ``+ lambda (1/n) sum_j gdist(f_j^in, W_b(f_j^in))``; the sums over ``j`` run over the input
+        features inside the region at that offset.
 
     Notes
     -----
@@ -493,9 +650,10 @@ def matching_costs(
     brute-force spelling the tests compare it with.
     """
     _check_tau_beta(tau, beta)
+    _check_reverse_weight(reverse_weight)
     off = _offsets(context, index, offsets)
     n = _region_counts(context, index, off)
-    return _matching_costs_kernel(
+    costs = _matching_costs_kernel(
         context.rows,
         context.cols,
         context.unit[:, 0],
@@ -513,6 +671,9 @@ def matching_costs(
         float(beta),
         unmatched_penalty(index.shape, float(tau)),
     )
+    if reverse_weight > 0:
+        costs = costs + float(reverse_weight) * reverse_costs(context, index, off, tau=tau)
+    return costs
 
 
 def matching_cost(
@@ -522,9 +683,13 @@ def matching_cost(
     *,
     tau: float = MATCH_TAU,
     beta: float = BETA,
+    reverse_weight: float = 0.0,
 ) -> float:
-    """Matching cost of eq 2 for one candidate ``offset = (row, col)``: see :func:`matching_costs`."""
-    return float(matching_costs(context, index, np.asarray(offset)[None, :], tau=tau, beta=beta)[0])
+    """Matching cost for one candidate ``offset = (row, col)``: see :func:`matching_costs`."""
+    costs = matching_costs(
+        context, index, np.asarray(offset)[None, :], tau=tau, beta=beta, reverse_weight=reverse_weight
+    )
+    return float(costs[0])
 
 
 # --- brute-force references -------------------------------------------------------------------
@@ -584,12 +749,15 @@ def matching_cost_reference(
     tau: float = MATCH_TAU,
     beta: float = BETA,
     penalty: float = np.inf,
+    reverse_weight: float = 0.0,
+    reverse_penalty: float = np.inf,
 ) -> float:
     """Eq 2 by brute force: :func:`match_features_reference`, then ``B_f`` counted feature by feature.
 
     ``feature_points`` are all the input features that may be matched (the whole input map, in the
     context's frame); ``in_region[j]`` says whether feature ``j`` lies in the overlapping region (the
-    ``n`` features that the second term sums over).
+    ``n`` features that the second term sums over). With ``reverse_weight`` the reverse term
+    (:func:`reverse_cost_reference`, unmatched features at ``reverse_penalty``) is added.
     """
     match, gdist = match_features_reference(
         context_points, context_tangents, feature_points, feature_tangents, tau=tau, penalty=penalty
@@ -602,7 +770,43 @@ def matching_cost_reference(
             hits[int(j)] = hits.get(int(j), 0) + 1
     n = int(region.sum())
     second = sum(abs(hits.get(j, 0) - 1) for j in np.flatnonzero(region)) / n if n else 0.0
-    return first + beta * second
+    cost = first + beta * second
+    if reverse_weight > 0:
+        cost += reverse_weight * reverse_cost_reference(
+            context_points,
+            context_tangents,
+            feature_points,
+            feature_tangents,
+            region,
+            tau=tau,
+            penalty=reverse_penalty,
+        )
+    return cost
+
+
+def reverse_cost_reference(
+    context_points: np.ndarray,
+    context_tangents: np.ndarray,
+    feature_points: np.ndarray,
+    feature_tangents: np.ndarray,
+    in_region: np.ndarray,
+    *,
+    tau: float = MATCH_TAU,
+    penalty: float = np.inf,
+) -> float:
+    """The reverse term by brute force: :func:`match_features_reference` with the roles swapped.
+
+    Each input feature with ``in_region[j]`` is matched against all the context features (O(mn));
+    the mean of their ``gdist`` (0 when there is none) is the slow, obvious spelling of
+    :func:`reverse_costs`.
+    """
+    region = np.asarray(in_region, dtype=bool).reshape(-1)
+    fp = np.asarray(feature_points, dtype=np.float64).reshape(-1, 2)[region]
+    ft = np.asarray(feature_tangents, dtype=np.float64).reshape(-1)[region]
+    if len(fp) == 0:
+        return 0.0
+    _, gdist = match_features_reference(fp, ft, context_points, context_tangents, tau=tau, penalty=penalty)
+    return float(np.mean(gdist))
 
 
 # --- correspondences for the deformation ------------------------------------------------------

@@ -18,6 +18,8 @@ from synth.analysis.feature_matching import (
     matching_cost_reference,
     matching_costs,
     orientation_bucket,
+    reverse_cost_reference,
+    reverse_costs,
     tangent_difference,
     thin_correspondences,
     unmatched_penalty,
@@ -231,3 +233,88 @@ def test_thinning_keeps_spaced_controls_with_the_median_displacement():
     assert thin_correspondences(pairs, 0.0) is pairs
     with pytest.raises(InvalidParameter, match="spacing"):
         thin_correspondences(pairs, -1.0)
+
+
+def test_reverse_term_equals_the_brute_force_reference_on_random_feature_sets():
+    """The reverse chamfer term (kernel) and eq 2 + lambda * it against the O(mn) references."""
+    rng = np.random.default_rng(17)
+    H = W = 24
+    w = 10
+    region = _l_region(w, 3)
+    compared = 0
+    for _ in range(80):
+        index = build_feature_index(*_random_features(rng, (H, W), 0.08))
+        context = context_features(*_random_features(rng, (w, w), 0.15), region)
+        off = np.array([rng.integers(0, H - w + 1), rng.integers(0, W - w + 1)])
+        fp = np.stack([index.rows - off[0], index.cols - off[1]], axis=1)
+        cp = np.stack([context.rows, context.cols], axis=1)
+        inside = (fp[:, 0] >= 0) & (fp[:, 0] < w) & (fp[:, 1] >= 0) & (fp[:, 1] < w)
+        in_region = inside.copy()
+        in_region[inside] = region[fp[inside, 0], fp[inside, 1]]
+        # skip trials with ties either way (which of two equally near features is taken is arbitrary)
+        if _tied(fp[in_region], index.bucket[in_region], cp, context.bucket).any():
+            continue
+        if _tied(cp, context.bucket, fp, index.bucket).any():
+            continue
+        back_penalty = unmatched_penalty((w, w), 0.1)
+        ref = reverse_cost_reference(cp, context.tangent, fp, index.tangent, in_region, penalty=back_penalty)
+        assert reverse_costs(context, index, off[None, :])[0] == pytest.approx(ref, abs=1e-9)
+        full = matching_cost_reference(
+            cp,
+            context.tangent,
+            fp,
+            index.tangent,
+            in_region,
+            penalty=unmatched_penalty(index.shape, 0.1),
+            reverse_weight=0.7,
+            reverse_penalty=back_penalty,
+        )
+        assert matching_cost(context, index, off, reverse_weight=0.7) == pytest.approx(full, abs=1e-9)
+        compared += int(in_region.any())
+    assert compared >= 15
+
+
+def test_reverse_term_penalises_spurious_candidate_features_and_eq_2_does_not():
+    """A candidate with extra features that continue nothing costs more with lambda > 0, the same with 0."""
+    w = 16
+    region = _l_region(w, 5)
+    ctx_mask, ctx_tan = _line((w, w), 2, slice(None), 0.0)  # one horizontal context fringe in the top strip
+    context = context_features(ctx_mask, ctx_tan, region)
+    clean = np.zeros((w, 3 * w), dtype=bool)
+    clean[2, :] = True  # the input continues the fringe exactly
+    cluttered = clean.copy()
+    cluttered[4, 2 * w + 4 : 2 * w + 7] = True  # short pieces 2 rows below, in the second window only
+    cluttered[8:11, 2 * w + 1] = True  # and a vertical piece in the left strip
+    tangent_c = np.where(clean, 0.0, np.nan)
+    tangent_x = np.where(cluttered, 0.0, np.nan)
+    tangent_x[8:11, 2 * w + 1] = np.pi / 2
+    clean_index = build_feature_index(clean, tangent_c)
+    cluttered_index = build_feature_index(cluttered, tangent_x)
+    offsets = np.array([[0, 2 * w]])
+    # the paper's eq 2 (beta 0: the bijectivity term would count the extra features too): blind to them
+    paper_clean = matching_costs(context, clean_index, offsets, beta=0.0)
+    paper_cluttered = matching_costs(context, cluttered_index, offsets, beta=0.0)
+    assert paper_clean[0] == 0.0 and paper_cluttered[0] == 0.0
+    # the reverse term: 0 for the clean candidate, the mean distance of the extra features for the other
+    assert reverse_costs(context, clean_index, offsets)[0] == 0.0
+    back = reverse_costs(context, cluttered_index, offsets)[0]
+    n = 16 + 3 + 3
+    vertical = unmatched_penalty((w, w), 0.1)  # perpendicular to every context feature: no partner
+    assert back == pytest.approx((3 * 2.0 + 3 * vertical) / n, abs=1e-12)
+    sym = matching_costs(context, cluttered_index, offsets, beta=0.0, reverse_weight=0.5)
+    assert sym[0] == pytest.approx(0.5 * back, abs=1e-12)
+    assert matching_costs(context, clean_index, offsets, beta=0.0, reverse_weight=0.5)[0] == 0.0
+    # lambda = 0 is eq 2 exactly (the same numbers, with the paper's beta too)
+    np.testing.assert_array_equal(
+        matching_costs(context, cluttered_index, offsets, reverse_weight=0.0),
+        matching_costs(context, cluttered_index, offsets),
+    )
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf"), True, "1"])
+def test_reverse_weight_bad_values_are_named(bad):
+    mask, tangent = _line((16, 16), 4, slice(None), 0.0)
+    index = build_feature_index(mask, tangent)
+    context = context_features(mask[:8, :8], tangent[:8, :8])
+    with pytest.raises(InvalidParameter, match="reverse_weight"):
+        matching_cost(context, index, (0, 0), reverse_weight=bad)

@@ -79,6 +79,17 @@ def test_feature_weight_reranks_the_colour_candidates(laminae):
     assert colour_only.image.tobytes() != mixed.image.tobytes()
 
 
+def test_reverse_weight_changes_the_choice_and_zero_is_the_papers_cost(laminae):
+    """``reverse_weight`` adds the candidate-to-context chamfer term; 0 leaves eq 2 (and the bytes) alone."""
+    common = {**BASE, "deform": False, "tolerance": 0.0}
+    paper = synthesize("feature-guided", laminae, size=SIZE, params={**common, "reverse_weight": 0.0}, seed=2)
+    again = synthesize("feature-guided", laminae, size=SIZE, params={**common, "reverse_weight": 0.0}, seed=2)
+    both = synthesize("feature-guided", laminae, size=SIZE, params={**common, "reverse_weight": 4.0}, seed=2)
+    assert paper.image.tobytes() == again.image.tobytes()
+    assert both.image.tobytes() != paper.image.tobytes()
+    assert both.params["reverse_weight"] == 4.0
+
+
 def test_rotations_add_the_seven_copies(laminae):
     res = synthesize("feature-guided", laminae, size=SIZE, params={**BASE, "rotations": True}, seed=3)
     assert len(res.stats["variants"]) == 8 and res.stats["variants"][0] == "identity"
@@ -146,6 +157,7 @@ def test_cells_pattern_has_closed_walls():
         ({"patch_size": 16, "overlap": 16}, "overlap.*must be smaller than patch_size"),
         ({"features": "corners"}, "features"),
         ({"feature_weight": 1.5}, "feature_weight"),
+        ({"reverse_weight": -1.0}, "reverse_weight"),
         ({"candidates": 0}, "candidates"),
         ({"alpha": 0.0}, "alpha"),
         ({"max_shift": -1}, "max_shift"),

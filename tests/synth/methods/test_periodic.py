@@ -33,7 +33,13 @@ def exemplar() -> np.ndarray:
 
 
 def _tiles(measure: dict[str, float]) -> bool:
-    return measure["ratio"] < 1.3 and measure["rows_rank"] < 0.95 and measure["cols_rank"] < 0.95
+    """No seam: a border energy ratio below 1.3 and neither border the strongest line of the tiling.
+
+    A 96-pixel tiling has about 95 interior lines per direction, so a seamless border ranks above 0.95
+    now and then by chance (feature-guided's default, seed 1: cols rank 0.98 at ratio 1.23; over seeds
+    1-10 its mean ratio is 1.03); a seam ranks 1.0 (the runs without ``periodic`` below).
+    """
+    return measure["ratio"] < 1.3 and measure["rows_rank"] < 0.99 and measure["cols_rank"] < 0.99
 
 
 @pytest.mark.parametrize("method", list(PARAMS))
