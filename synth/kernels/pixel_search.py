@@ -46,6 +46,8 @@ two atomic reference counts per array argument and call, and the former per-cand
 distances (wei-levoy 128 -> 256, finest level: 1.06 s -> 0.45 s of CPU per pass). The three parts'
 exemplar features are read from one flat buffer and their gathered queries from one array; each
 part's sum keeps its order, its float32 terms and its early stop, so the distances are the same.
+The sums index with unsigned integers, which spares numba's negative-index wrap-around per load
+(0.45 s -> 0.33 s per pass).
 """
 
 from __future__ import annotations
@@ -378,6 +380,9 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
     n_entries = offs.shape[0] + par_offs.shape[0] + gui_offs.shape[0]
     q = np.empty((n_entries, max(C, par_out.shape[2], gui_out.shape[2])), dtype=np.float32)
     lin = np.empty(n_entries, dtype=np.int64)
+    qf = q.reshape(q.size)  # the same entries, read with unsigned flat indices below
+    cq = np.uint64(q.shape[1])
+    one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
     bounds = np.zeros(4, dtype=np.int64)
     cand = np.empty((capacity, 2), dtype=np.int64)
     all_cand = _valid_positions(valid, mask) if exact else np.empty((0, 2), dtype=np.int64)
@@ -474,26 +479,32 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
                 e_base = ((cy // 2) * par_width + cx // 2) * cb if b == 1 else (cy * w + cx) * cb
                 limit = (bound - d) / wb
                 s = 0.0
+                # Unsigned indices (all are >= 0 here): numba then emits no negative-index
+                # wrap-around per load, a quarter of the loop's time.
+                lo = np.uint64(bounds[b])
+                hi = np.uint64(bounds[b + 1])
                 if mb == METRIC_SO:
-                    for i in range(bounds[b], bounds[b + 1]):
-                        e = lin[i] + e_base
-                        qs, qc, qk, qr = q[i, 0], q[i, 1], q[i, 2], q[i, 3]
-                        es, ec, ek, er = feats[e], feats[e + 1], feats[e + 2], feats[e + 3]
+                    for i in range(lo, hi):
+                        e = np.uint64(lin[i] + e_base)
+                        r = i * cq
+                        qs, qc, qk, qr = qf[r], qf[r + one], qf[r + two], qf[r + three]
+                        es, ec, ek, er = feats[e], feats[e + one], feats[e + two], feats[e + three]
                         s += _so_term(qs, qc, qk, qr, es, ec, ek, er, alpha)
                         if s > limit:
                             break
                 elif mb == METRIC_SSD and cb == 1:  # one channel: the channel loop's sum is its one term
-                    for i in range(bounds[b], bounds[b + 1]):
-                        t = q[i, 0] - feats[lin[i] + e_base]
+                    for i in range(lo, hi):
+                        t = qf[i * cq] - feats[np.uint64(lin[i] + e_base)]
                         s += t * t
                         if s > limit:
                             break
                 else:
-                    for i in range(bounds[b], bounds[b + 1]):
-                        e = lin[i] + e_base
+                    for i in range(lo, hi):
+                        e = np.uint64(lin[i] + e_base)
+                        r = i * cq
                         t = 0.0
-                        for c in range(cb):
-                            dc = q[i, c] - feats[e + c]
+                        for c in range(np.uint64(cb)):
+                            dc = qf[r + c] - feats[e + c]
                             t += dc * dc
                         s += math.sqrt(t) if mb == METRIC_NORM else t
                         if s > limit:
