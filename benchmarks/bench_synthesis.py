@@ -7,9 +7,17 @@ state of each stage is frozen and, for a sample of output positions, the best-ma
 the k-coherence search is compared with that of the exhaustive search over every exemplar position
 (the definition), for the very same neighbourhood. Reported: the ratio of the mean best distances
 (1.00 = as good as exact) and the share of positions where the fast search found the exact optimum.
+
+OpenBLAS runs single-threaded here, as in the ``texsynth`` command (set before NumPy loads; see
+:mod:`synth.cli`): on the shared 2-core machine its threads spin against the other jobs and make the
+k-coherence PCA's small matrix products slower, never faster.
 """
 
 from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import resource
 import statistics
@@ -183,7 +191,9 @@ def table1_timings(runs: int = 3) -> list[tuple[str, str, float, list[float], fl
 
 def main() -> None:
     start = time.perf_counter()
+    load_before = os.getloadavg()[0]
     timings = table1_timings()
+    load = f"{min(load_before, os.getloadavg()[0]):.1f}-{max(load_before, os.getloadavg()[0]):.1f}"
     quality = search_quality()
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     targets = {"3": 2.0, "5": 6.0}
@@ -193,7 +203,8 @@ def main() -> None:
         "`tensor-constrained` at the three settings of Table 1 (defaults: k-coherence search, k = "
         f"{tc.TensorConstrainedParams().k}), median of 3 runs after a warm-up; `wei-levoy` at the same "
         "neighbourhood, texture levels and iterations for comparison "
-        "(`python -m benchmarks.bench_synthesis`).",
+        "(`python -m benchmarks.bench_synthesis`; OpenBLAS single-threaded, as the `texsynth` command "
+        f"runs it; load average {load} before and after the timings).",
         "",
         "| figure | size | tensor-constrained median (s) | runs (s) | wei-levoy median (s) | target (s) |",
         "|---|---|---|---|---|---|",
