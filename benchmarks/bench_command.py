@@ -255,9 +255,9 @@ def report(results: dict) -> str:
         f"(`python -m benchmarks.bench_command`). {results['cores']} cores, shared with other work: load "
         f"average {load} during the runs. "
         + (
-            "Before: the same command on the tree before this work (issue 13, 'a fast command'"
-            + (f"; {results['baseline_name']}" if results.get("baseline_name") else "")
-            + "), run alternately with the current one so that both saw the same load. "
+            "Before: the same command on an earlier tree"
+            + (f" ({results['baseline_name']})" if results.get("baseline_name") else "")
+            + ", run alternately with the current one so that both saw the same load. "
             if before
             else ""
         )
