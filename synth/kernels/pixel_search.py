@@ -176,11 +176,16 @@ def _splitmix(x: np.uint64) -> np.uint64:
 
 
 @kernel(inline="always")
+def _so_half(s1, c1, k1, s2, c2, k2):
+    """Akl 2014's SO dissimilarity (eq 8) at ``alpha = 0.5`` of features ``(sin O, cos O, C, ...)``:
+    ``M_or M_coh = |sin| min(C1, C2) max(C1, C2) / min(C1, C2) = |sin| max(C1, C2)``, square-rooted."""
+    return math.sqrt(abs(s1 * c2 - c1 * s2) * max(k1, k2))
+
+
+@kernel(inline="always")
 def _so_term(s1, c1, k1, r1, s2, c2, k2, r2, alpha):
-    """Akl 2014's SO dissimilarity of two positions' features ``(sin O, cos O, C, 1 / C)`` (eq 8)."""
+    """Akl 2014's SO dissimilarity (eq 8) of features ``(sin O, cos O, C, 1 / C)``, any ``alpha``."""
     sin_d = abs(s1 * c2 - c1 * s2)
-    if alpha == 0.5:  # M_or M_coh = |sin| min(C1, C2) max(C1, C2) / min(C1, C2) = |sin| max(C1, C2)
-        return math.sqrt(sin_d * max(k1, k2))
     m_or = sin_d * min(k1, k2)
     m_coh = max(k1 * r2, k2 * r1)  # channel 3 holds 1 / C: no division here
     return m_or**alpha * m_coh ** (1.0 - alpha)
@@ -483,7 +488,15 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
                 # wrap-around per load, a quarter of the loop's time.
                 lo = np.uint64(bounds[b])
                 hi = np.uint64(bounds[b + 1])
-                if mb == METRIC_SO:
+                if mb == METRIC_SO and alpha == 0.5:  # channel 3 (1 / C) is not read
+                    for i in range(lo, hi):
+                        e = np.uint64(lin[i] + e_base)
+                        r = i * cq
+                        qs, qc, qk = qf[r], qf[r + one], qf[r + two]
+                        s += _so_half(qs, qc, qk, feats[e], feats[e + one], feats[e + two])
+                        if s > limit:
+                            break
+                elif mb == METRIC_SO:
                     for i in range(lo, hi):
                         e = np.uint64(lin[i] + e_base)
                         r = i * cq
