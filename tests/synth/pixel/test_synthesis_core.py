@@ -158,6 +158,45 @@ def test_kernel_matches_reference_when_synthesizing_tensors(metric: str) -> None
     )
 
 
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+def test_how_a_pass_is_chunked_changes_no_byte(monkeypatch: pytest.MonkeyPatch, search: str) -> None:
+    """The kernel keeps nothing between calls but the state (its scratch buffers and the flat copy of
+    the exemplar features are rebuilt per call): one call per pass and one call per position give the
+    same bytes, with all three parts of a distance (pixels, parent level, SO tensor guidance) and
+    histogram matching on."""
+    import synth.pixel.synthesis as synthesis
+
+    ex = _rng_image((24, 24), seed=5)
+    ex_tensors = gaussian_pyramid(structure_tensor(ex), 2)
+    out_field = structure_tensor(_rng_image((14, 12), seed=6), mode="wrap")
+    out_tensors = gaussian_pyramid(out_field, 2, mode="wrap")
+    guidance = Guidance(
+        out_levels=[tensor_features(t, "SO")[0] for t in out_tensors],
+        ex_levels=[tensor_features(t, "SO")[0] for t in ex_tensors],
+        metric=METRIC_SO,
+        weight=0.4,
+        size=5,
+    )
+    settings = SearchSettings(
+        size=5, levels=2, parent_size=3, iterations=2, search=search, k=2, histogram_weight=2.0
+    )
+    runs = []
+    for chunks in (1, 10**9):  # one chunk per pass; one position per chunk
+        monkeypatch.setattr(synthesis, "_CHUNKS_PER_PASS", chunks)
+        srcs, report = synthesize_source_map(
+            ex_levels=gaussian_pyramid(ex[..., None], 2),
+            out_shapes=level_shapes((14, 12), 2),
+            settings=settings,
+            p=0.6,
+            guidance=guidance,
+            seed=4,
+        )
+        runs.append((srcs, report.mean_best_distance))
+    for a, b in zip(runs[0][0], runs[1][0], strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert runs[0][1] == runs[1][1]
+
+
 # ---------------------------------------------------------------- option semantics
 
 
