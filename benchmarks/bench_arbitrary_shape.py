@@ -1,12 +1,13 @@
 """Arbitrary-shape synthesis: time and constraint-following of a 128 exemplar on 256 x 256 constraints.
 
 Run ``python -m benchmarks.bench_arbitrary_shape``; writes the ``arbitrary-shape`` section of
-docs/benchmarks.md (``--strands``: the ``arbitrary-shape-strands`` section, issue 13's strands on
-strongly and weakly oriented exemplars with pictures; ``--time``: ``arbitrary-shape-time``, the
-defaults' time). Target (issue 4): under 10 s with ``restrict_rotations`` on 2 cores (M = 72, the
-paper's 5-degree step); coherence-weighted mean ``|sin(O_out - O_con)|`` under 0.15 (random: 0.64) with
-the grey-level histogram KL to the exemplar under 0.05, on wave, concentric and spiral constraints,
-with the HRTEM soot exemplar and a generated straight-fringe exemplar.
+docs/benchmarks.md. ``--strands``: the ``arbitrary-shape-strands`` section (issue 13's strands on
+strongly and weakly oriented exemplars, with pictures; ``--previous`` adds the defaults before issue
+13); ``--time``: the ``arbitrary-shape-time`` section (the defaults' time). Target (issue 4): under
+10 s with ``restrict_rotations`` on 2 cores (M = 72, the paper's 5-degree step); coherence-weighted
+mean ``|sin(O_out - O_con)|`` under 0.15 (random: 0.64) with the grey-level histogram KL to the
+exemplar under 0.05, on wave, concentric and spiral constraints, with the HRTEM soot exemplar and a
+generated straight-fringe exemplar.
 """
 
 from __future__ import annotations
@@ -327,7 +328,7 @@ def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndar
     }
 
 
-def strands(seeds: tuple[int, ...] = STRAND_SEEDS) -> None:
+def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> None:
     """The ``arbitrary-shape-strands`` section: defaults (recipe chosen from the exemplar's coherence)
     against the paper's settings (``recipe='paper'``), strongly and weakly oriented exemplars on waves,
     rings and spiral, 256 x 256, seeds 1-3; pictures docs/img/arbitrary-strands-<exemplar>.png."""
@@ -336,7 +337,12 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS) -> None:
 
     cons = constraints()
     rows = []
-    variants = {"paper (`recipe='paper'`)": {"recipe": "paper"}, "default (`auto`)": {}}
+    variants = {
+        "paper (`recipe='paper'`)": {"recipe": "paper"},
+        "default (`auto`)": {},
+    }
+    if previous:  # the defaults before issue 13: the paper's settings, proposals dropped outside the window
+        variants = {"previous defaults": {"recipe": "paper", "transfer_candidates": False}, **variants}
     loads = []
     for ex_name, ex in strand_exemplars().items():
         panels: dict[str, list[np.ndarray]] = {}
@@ -457,7 +463,7 @@ if __name__ == "__main__":
     import sys
 
     if "--strands" in sys.argv[1:]:
-        strands()
+        strands(previous="--previous" in sys.argv[1:])
     elif "--time" in sys.argv[1:]:
         default_timing()
     else:
