@@ -1,10 +1,13 @@
 """Arbitrary-shape synthesis: time and constraint-following of a 128 exemplar on 256 x 256 constraints.
 
 Run ``python -m benchmarks.bench_arbitrary_shape``; writes the ``arbitrary-shape`` section of
-docs/benchmarks.md. Target (issue 4): under 10 s with ``restrict_rotations`` on 2 cores (M = 72, the
-paper's 5-degree step); coherence-weighted mean ``|sin(O_out - O_con)|`` under 0.15 (random: 0.64) with
-the grey-level histogram KL to the exemplar under 0.05, on wave, concentric and spiral constraints,
-with the HRTEM soot exemplar and a generated straight-fringe exemplar.
+docs/benchmarks.md. ``--strands``: the ``arbitrary-shape-strands`` section (issue 13's strands on
+strongly and weakly oriented exemplars, with pictures; ``--previous`` adds the defaults before issue
+13); ``--time``: the ``arbitrary-shape-time`` section (the defaults' time). Target (issue 4): under
+10 s with ``restrict_rotations`` on 2 cores (M = 72, the paper's 5-degree step); coherence-weighted
+mean ``|sin(O_out - O_con)|`` under 0.15 (random: 0.64) with the grey-level histogram KL to the
+exemplar under 0.05, on wave, concentric and spiral constraints, with the HRTEM soot exemplar and a
+generated straight-fringe exemplar.
 """
 
 from __future__ import annotations
@@ -17,10 +20,10 @@ from benchmarks._report import DATA as SHARED_DATA
 from benchmarks._report import median_time, write_section
 from synth.analysis.tensor import dominant_orientation, structure_tensor
 from synth.api import synthesize
-from synth.evaluate import grey_histogram, kl_divergence
+from synth.evaluate import evaluate_pair, grey_histogram, kl_divergence
 from synth.io import load_image
-from synth.io.patterns import concentric_rings, grating, spiral, waves
-from synth.methods.arbitrary_shape import orientation_agreement
+from synth.io.patterns import concentric_rings, grating, spiral, undulating_laminae, waves, wood_grain
+from synth.methods.arbitrary_shape import RECIPES, orientation_agreement
 
 SIZE = 256
 RUNS = 3
@@ -34,15 +37,10 @@ DOC_IMG = Path(__file__).resolve().parent.parent / "docs" / "img"
 #: ('local'), analysed at a finer window (sigma_w = 2: the soot's short fringes), the paper's square
 #: neighbourhood with a random walk, 7 x 7, 4 passes, W = 0.2 (tuned on seeds 0 and 1 of the waves and
 #: rings constraints; docs/arbitrary-shape.md). The paper's own results use the causal defaults.
-WEAK_RECIPE = {
-    "rotation_reference": "local",
-    "sigma_w": 2.0,
-    "neighbourhood": "square",
-    "neighbourhood_size": 7,
-    "iterations": 4,
-    "w": 0.2,
-}
-#: The variants compared: name -> parameters.
+WEAK_RECIPE = dict(RECIPES["weak"])
+#: Every variant below runs its fields as given (``recipe='paper'``), not the recipe ``'auto'`` picks.
+PAPER = {"recipe": "paper"}
+#: The variants compared: name -> parameters (on top of PAPER).
 VARIANTS: dict[str, dict] = {
     "ours, restricted": {},
     "ours, restricted, hints only": {"window_search": "hints"},
@@ -50,6 +48,7 @@ VARIANTS: dict[str, dict] = {
     "ours, local reference": {"rotation_reference": "local"},
     "naive (I_con's tensors)": {"constraint_tensors": "constraint"},
     "weakly oriented recipe": WEAK_RECIPE,
+    "fibres recipe": dict(RECIPES["fibres"]),
 }
 
 #: Seeds of the recipe's spread table.
@@ -85,6 +84,7 @@ def exact_search_rows() -> list[str]:
     rows = []
     for name, restrict in (("restricted", True), ("unrestricted", False)):
         params = {
+            **PAPER,
             "search": "exact",
             "restrict_rotations": restrict,
             "neighbourhood_size": 9,
@@ -106,7 +106,11 @@ def exact_search_rows() -> list[str]:
 def main() -> None:
     exs, cons = exemplars(), constraints()
     timing_rows = []
-    for name, params in (("restricted", {}), ("unrestricted", {"restrict_rotations": False})):
+    for name, params in (
+        ("restricted", PAPER),
+        ("unrestricted", {**PAPER, "restrict_rotations": False}),
+        ("default (recipe auto: weak on soot)", {}),
+    ):
         ex, con = exs["hrtem-soot-128"], cons["waves"]
         median, times = median_time(
             lambda p=params, e=ex, c=con: synthesize("arbitrary-shape", e, constraint=c, params=p, seed=0),
@@ -126,7 +130,7 @@ def main() -> None:
         hist = grey_histogram(ex)
         for con_name, con in cons.items():
             for variant, params in VARIANTS.items():
-                res = synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=0)
+                res = synthesize("arbitrary-shape", ex, constraint=con, params={**PAPER, **params}, seed=0)
                 agree = orientation_agreement(res.image, con)
                 kl = kl_divergence(hist, grey_histogram(res.image))
                 ok = "yes" if agree < TARGET_AGREEMENT and kl < TARGET_KL else "no"
@@ -154,7 +158,7 @@ def main() -> None:
     for ex_name, ex in exs.items():
         for con_name, con in cons.items():
             runs = [
-                synthesize("arbitrary-shape", ex, constraint=con, params=WEAK_RECIPE, seed=s)
+                synthesize("arbitrary-shape", ex, constraint=con, params={**PAPER, **WEAK_RECIPE}, seed=s)
                 for s in RECIPE_SEEDS
             ]
             agree = [orientation_agreement(r.image, con) for r in runs]
@@ -170,7 +174,8 @@ def main() -> None:
             "",
             f"128 x 128 exemplar, {SIZE} x {SIZE} constraint (so an exemplar-like texture of the "
             "constraint's size is synthesized first, tensor-constrained method), M = 72 rotations "
-            "(5 degrees), default parameters (causal 13 x 13, 1 level, 2 passes, ED, W = 0.1), seed 0. "
+            "(5 degrees), the paper's parameters (`recipe='paper'`: causal 13 x 13, 1 level, 2 passes, "
+            "ED, W = 0.1) unless a row says otherwise, seed 0. "
             f"Timing: HRTEM soot on waves, median of {RUNS} runs after one warm-up "
             "(`python -m benchmarks.bench_arbitrary_shape`).",
             "",
@@ -227,14 +232,18 @@ def figure(exemplar_name: str, path: Path) -> None:
     ex = exemplars()[exemplar_name]
     rows = []
     for con_name, con in constraints().items():
-        ours = synthesize("arbitrary-shape", ex, constraint=con, seed=0)
+        ours = synthesize("arbitrary-shape", ex, constraint=con, params=PAPER, seed=0)
         naive = synthesize(
-            "arbitrary-shape", ex, constraint=con, params={"constraint_tensors": "constraint"}, seed=0
+            "arbitrary-shape",
+            ex,
+            constraint=con,
+            params={**PAPER, "constraint_tensors": "constraint"},
+            seed=0,
         )
         local = synthesize(
-            "arbitrary-shape", ex, constraint=con, params={"rotation_reference": "local"}, seed=0
+            "arbitrary-shape", ex, constraint=con, params={**PAPER, "rotation_reference": "local"}, seed=0
         )
-        recipe = synthesize("arbitrary-shape", ex, constraint=con, params=WEAK_RECIPE, seed=0)
+        recipe = synthesize("arbitrary-shape", ex, constraint=con, params={**PAPER, **WEAK_RECIPE}, seed=0)
         s_icon = structure_tensor(con)
         panels = [
             np.pad(ex, ((0, SIZE - ex.shape[0]), (0, SIZE - ex.shape[1])), constant_values=1.0),
@@ -282,7 +291,182 @@ def figure(exemplar_name: str, path: Path) -> None:
     final.save(path)
 
 
+#: Issue 13's targets for strongly oriented exemplars: strands as long as the exemplar's along the
+#: constraint, the exemplar's grey levels, the constraint followed.
+TARGET_STRAND = 0.8
+#: Seeds of the strands table.
+STRAND_SEEDS = (1, 2, 3)
+
+
+def strand_exemplars() -> dict[str, np.ndarray]:
+    """Two strongly oriented exemplars (issue 13's wood grain; the straight fringes above) and the
+    weakly oriented soot for contrast, 128 x 128 grey."""
+    return {
+        "wood-grain-128": wood_grain((128, 128), seed=1),
+        "fringes-128": exemplars()["fringes-128"],
+        "laminae-bent-128": undulating_laminae((128, 128), 7, 16, 128, noise=0.3),
+        "hrtem-soot-128": load_image(DATA, mode="grey"),
+    }
+
+
+def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndarray) -> dict[str, float]:
+    """Strand-length ratio, grey KL (both :func:`synth.evaluate.evaluate_pair`, as benchmarks/bench_quality)
+    and the orientation agreement with the constraint.
+
+    The strand ratio is the output's mean fringe length over the exemplar's, fringes extracted by
+    :func:`synth.analysis.fringes.extract_fringes` with its defaults on each whole image (bottom-hat
+    band-pass, Otsu threshold, skeleton, branches and fringes under 9 px dropped; closed loops left
+    out): a fringe is a dark line followed along its skeleton wherever it turns, so in the output it is
+    measured along the constraint's curves, in the exemplar along its own fibres.
+    """
+    m = evaluate_pair(exemplar, image)
+    fr = m["fringes"]
+    return {
+        "strand": fr["output"]["mean_length"] / fr["exemplar"]["mean_length"],
+        "kl": m["grey"]["kl"],
+        "agreement": orientation_agreement(image, constraint),
+    }
+
+
+def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> None:
+    """The ``arbitrary-shape-strands`` section: defaults (recipe chosen from the exemplar's coherence)
+    against the paper's settings (``recipe='paper'``), strongly and weakly oriented exemplars on waves,
+    rings and spiral, 256 x 256, seeds 1-3; pictures docs/img/arbitrary-strands-<exemplar>.png."""
+    import time
+    from os import getloadavg
+
+    cons = constraints()
+    rows = []
+    variants = {
+        "paper (`recipe='paper'`)": {"recipe": "paper"},
+        "default (`auto`)": {},
+    }
+    if previous:  # the defaults before issue 13: the paper's settings, proposals dropped outside the window
+        variants = {"previous defaults": {"recipe": "paper", "transfer_candidates": False}, **variants}
+    loads = []
+    for ex_name, ex in strand_exemplars().items():
+        panels: dict[str, list[np.ndarray]] = {}
+        for variant, params in variants.items():
+            for con_name, con in cons.items():
+                runs, times, chosen = [], [], ""
+                for seed in seeds:
+                    t0 = time.perf_counter()
+                    res = synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=seed)
+                    times.append(time.perf_counter() - t0)
+                    loads.append(getloadavg()[0])
+                    runs.append(strand_measures(ex, res.image, con))
+                    chosen = res.stats["recipe"]
+                    if seed == seeds[0]:
+                        panels.setdefault(con_name, [con]).append(res.image)
+                cells = []
+                for key in ("strand", "kl", "agreement"):
+                    vals = [r[key] for r in runs]
+                    cells.append(", ".join(f"{v:.3f}" for v in vals))
+                ok = all(
+                    r["strand"] > TARGET_STRAND and r["kl"] < TARGET_KL and r["agreement"] < TARGET_AGREEMENT
+                    for r in runs
+                )
+                rows.append(
+                    f"| {ex_name} | {con_name} | {variant} ({chosen}) | {' | '.join(cells)} | "
+                    f"{np.median(times):.1f} | {'yes' if ok else 'no'} |"
+                )
+                print(rows[-1], flush=True)
+        strand_figure(ex, panels, DOC_IMG / f"arbitrary-strands-{ex_name}.png")
+    markdown = "\n".join(
+        [
+            "## Arbitrary-shape: continuous strands (issue 13)",
+            "",
+            f"`python -m benchmarks.bench_arbitrary_shape --strands`. 128 x 128 exemplars, {SIZE} x {SIZE} "
+            f"constraints, seeds {', '.join(map(str, seeds))}; each cell lists the seeds' values. Strand = "
+            "the output's mean fringe length over the exemplar's (`evaluate_pair`'s fringe extraction, as "
+            "benchmarks/bench_quality.py: dark lines skeletonised and followed wherever they turn, so the "
+            "output's strands are measured along the constraint); KL = grey-level histogram KL to the "
+            "exemplar; agreement = `orientation_agreement` with the constraint (sigma_w = 4). Targets "
+            f"(strongly oriented exemplars): strand > {TARGET_STRAND}, KL < {TARGET_KL}, agreement < "
+            f"{TARGET_AGREEMENT}. Time: whole `synthesize` call, median over the seeds, on a machine shared "
+            f"with other jobs (1-minute load average {min(loads):.1f}-{max(loads):.1f} on 2 cores).",
+            "",
+            "| exemplar | constraint | parameters (recipe) | strand | KL | agreement | time (s) | meets |",
+            "|---|---|---|---|---|---|---|---|",
+            *rows,
+        ]
+    )
+    write_section("arbitrary-shape-strands", markdown)
+
+
+def default_timing(runs: int = RUNS) -> None:
+    """The ``arbitrary-shape-time`` section: the defaults' whole ``synthesize`` call, 128 -> 256 on waves,
+    wall and CPU seconds (median of ``runs`` after a warm-up) with the machine's load, for each recipe
+    the defaults choose and for the paper's settings."""
+    import time
+    from os import getloadavg
+
+    exs, con = strand_exemplars(), constraints()["waves"]
+    rows = []
+    cases = (
+        ("wood-grain-128", {}),
+        ("hrtem-soot-128", {}),
+        ("wood-grain-128", PAPER),
+    )
+    for ex_name, params in cases:
+        ex = exs[ex_name]
+        synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=1)  # warm-up (JIT caches)
+        walls, cpus, loads, res = [], [], [], None
+        for _ in range(runs):
+            w0, c0 = time.perf_counter(), time.process_time()
+            res = synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=1)
+            walls.append(time.perf_counter() - w0)
+            cpus.append(time.process_time() - c0)
+            loads.append(getloadavg()[0])
+        split = ", ".join(f"{k} {v:.2f}" for k, v in res.timings.items() if k != "total")
+        wall, cpu = float(np.median(walls)), float(np.median(cpus))
+        status = "meets" if wall < TARGET_SECONDS else "MISSES"
+        rows.append(
+            f"| {ex_name} | {res.stats['recipe']} | {wall:.2f} | {cpu:.2f} | {split} | "
+            f"{min(loads):.1f}-{max(loads):.1f} | {status} |"
+        )
+        print(rows[-1], flush=True)
+    markdown = "\n".join(
+        [
+            "## Arbitrary-shape: time of the defaults",
+            "",
+            "`python -m benchmarks.bench_arbitrary_shape --time`: 128 x 128 exemplar, 256 x 256 waves "
+            f"constraint, seed 1, whole `synthesize` call, median of {runs} runs after a warm-up. CPU = "
+            "process time (all threads), which the other jobs on the machine do not inflate; load = 1-minute "
+            f"load average during the runs (2 cores). Target: < {TARGET_SECONDS:.0f} s.",
+            "",
+            "| exemplar | recipe | wall (s) | CPU (s) | split, last run (s) | load | target |",
+            "|---|---|---|---|---|---|---|",
+            *rows,
+        ]
+    )
+    write_section("arbitrary-shape-time", markdown)
+
+
+def strand_figure(exemplar: np.ndarray, panels: dict[str, list[np.ndarray]], path: Path) -> None:
+    """One row per constraint: exemplar, constraint, then each variant's output (seed 1)."""
+    from synth.io import save_image
+
+    ex_tile = np.ones((SIZE, SIZE), np.float32)
+    ex_tile[: exemplar.shape[0], : exemplar.shape[1]] = exemplar
+    gap_v = np.ones((SIZE, 6), np.float32)
+    rows = []
+    for images in panels.values():
+        tiles = [ex_tile, *images]
+        rows.append(np.concatenate([x for t in tiles for x in (t.astype(np.float32), gap_v)][:-1], axis=1))
+        rows.append(np.ones((6, rows[-1].shape[1]), np.float32))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_image(path, np.concatenate(rows[:-1], axis=0))
+
+
 if __name__ == "__main__":
-    main()
-    figure("fringes-128", DOC_IMG / "arbitrary-fringes.png")
-    figure("hrtem-soot-128", DOC_IMG / "arbitrary-soot.png")
+    import sys
+
+    if "--strands" in sys.argv[1:]:
+        strands(previous="--previous" in sys.argv[1:])
+    elif "--time" in sys.argv[1:]:
+        default_timing()
+    else:
+        main()
+        figure("fringes-128", DOC_IMG / "arbitrary-fringes.png")
+        figure("hrtem-soot-128", DOC_IMG / "arbitrary-soot.png")

@@ -102,6 +102,30 @@ class RotatedDictionary:
         cols = np.rint(c0 + (tw - 1) / 2 + xr)
         return np.stack([rows, cols], axis=-1).astype(np.int64)
 
+    def affine_maps(self, level: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Every copy's map between its canvas positions and the exemplar's, at a pyramid ``level``.
+
+        Returns ``(to_exemplar, to_canvas)``, each ``(M, 2, 3)`` float64: ``to_canvas[m] @ (row, col, 1)``
+        is the (unrounded) canvas position of exemplar position ``(row, col)`` in copy ``m``, as
+        :meth:`to_canvas` before rounding; ``to_exemplar[m]`` is its inverse. At ``level`` ``l`` canvas
+        positions are subsampled by ``2^l`` (exemplar positions stay the finest level's), so that a
+        position of one copy can be moved to the same exemplar point of another copy at any level.
+        """
+        h, w = self.exemplar_shape
+        th, tw = self.tile_shape
+        r0, c0 = self.tile_origin(np.arange(self.n_rotations))
+        c, s = np.cos(self.angles), np.sin(self.angles)
+        cw, ch = (w - 1) / 2, (h - 1) / 2
+        fwd = np.empty((self.n_rotations, 2, 3))
+        fwd[:, 0] = np.stack([c, -s, r0 + (th - 1) / 2 + s * cw - c * ch], axis=-1)
+        fwd[:, 1] = np.stack([s, c, c0 + (tw - 1) / 2 - c * cw - s * ch], axis=-1)
+        fwd /= 2**level
+        back = np.empty_like(fwd)
+        inv = np.linalg.inv(fwd[:, :, :2])
+        back[:, :, :2] = inv
+        back[:, :, 2] = -np.einsum("mij,mj->mi", inv, fwd[:, :, 2])
+        return back, fwd
+
     def level_masks(self, radii: list[int], parent_radii: list[int]) -> list[np.ndarray]:
         """Per pyramid level (finest first), uint8 masks of the positions a search may copy.
 

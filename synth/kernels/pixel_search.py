@@ -33,7 +33,12 @@ weight is positive, and a candidate's distance is multiplied by
 Class window (optional, ``win.span >= 0``): every exemplar position has a class (e.g. the rotated
 copy of the exemplar it lies in) and every output position a wanted class; a candidate counts only
 when its class is within ``span`` of the wanted one, cyclically modulo ``period``. When no
-proposal qualifies, the position keeps its current source.
+proposal qualifies, the position keeps its current source. With a *transfer* (``to_common``,
+``from_common``: one affine map per class, from its exemplar positions to a frame all classes share
+and back), a proposal of another class is not dropped but moved to the same point of the wanted class
+(of the class among ``want + j period`` nearest its own): a coherent continuation from a neighbour
+copying another rotated copy continues in the wanted copy (arbitrary-shape: strands cross the copies'
+angle steps unbroken). Without a transfer (empty arrays), such proposals are dropped.
 
 The kernel's inputs come in named groups (:class:`SearchState`: three :class:`Part` blocks,
 :class:`Candidates`, :class:`Histogram`, :class:`ClassWindow` and the current :class:`Pass`), numba
@@ -130,6 +135,10 @@ class ClassWindow(NamedTuple):
     want: np.ndarray  # (H, W) int64: wanted class per output position
     period: int
     span: int  # -1 switches the window off
+    #: (n_classes, 2, 3) float64 affine maps, class positions (row, col, 1) -> shared frame, and back;
+    #: (0, 2, 3): no transfer (out-of-window proposals are dropped).
+    to_common: np.ndarray = np.zeros((0, 2, 3))
+    from_common: np.ndarray = np.zeros((0, 2, 3))
 
 
 class Pass(NamedTuple):
@@ -160,6 +169,12 @@ class SearchState:
     hist: Histogram
     win: ClassWindow
     run: Pass
+    #: The parts' exemplar features in one flat buffer (:func:`_concat_features`), built by the first
+    #: :func:`synthesize_chunk` of the level and kept with the exemplar arrays it was built from: a
+    #: level's exemplar features do not change between chunks and passes, and rebuilding the buffer at
+    #: every chunk copied the whole exemplar 64 times a pass (arbitrary-shape's rotated dictionary, about
+    #: 40 MB: its texture stage 1.4 -> 4.0 s).
+    flat: tuple | None = None
 
 
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -250,6 +265,15 @@ def _class_allowed(cls, key, want, period, span):
     return min(d, period - d) <= span
 
 
+@kernel(inline="always")
+def _transfer_class(c, want, period, n_classes):
+    """The class a proposal of class ``c`` moves to: among ``want + j period`` (cyclic, ``n_classes``),
+    the one nearest ``c`` (a rotated copy's half-turn twin is nearer when ``c`` is)."""
+    d = (c - want) % n_classes
+    j = (2 * d + period) // (2 * period)
+    return (want + j * period) % n_classes
+
+
 @kernel
 def _gather_candidates(
     cand,
@@ -271,13 +295,17 @@ def _gather_candidates(
     want,
     period,
     span,
+    to_c,
+    from_c,
 ):
     """The position's candidates into ``cand``, in proposal order, each once; return their number.
 
     Proposals first (the sources of the neighbours in ``cand_offs`` shifted by ``p - q``, each with
     its ``k`` similar positions (Tong et al.), from ``src`` and then ``hint``; then ``n_random``
     seeded random positions), then one pass keeps those inside ``valid`` and ``mask``, not seen yet
-    at this position (``stamp == tag``) and inside the class window, in place and in order.
+    at this position (``stamp == tag``) and inside the class window, in place and in order; with a
+    transfer (``to_c``, ``from_c`` not empty) a proposal of another class is first moved to the same
+    point of the wanted class and then checked the same way.
     """
     H = src.shape[0]
     W = src.shape[1]
@@ -323,7 +351,21 @@ def _gather_candidates(
         if stamp[key_j] == tag:
             continue
         if span >= 0 and not _class_allowed(cls, key_j, want, period, span):
-            continue
+            c = cls[key_j]
+            if to_c.shape[0] == 0 or c < 0:
+                continue
+            t = _transfer_class(c, want, period, to_c.shape[0])
+            ey = to_c[c, 0, 0] * cy + to_c[c, 0, 1] * cx + to_c[c, 0, 2]
+            ex = to_c[c, 1, 0] * cy + to_c[c, 1, 1] * cx + to_c[c, 1, 2]
+            cy = np.int64(math.floor(from_c[t, 0, 0] * ey + from_c[t, 0, 1] * ex + from_c[t, 0, 2] + 0.5))
+            cx = np.int64(math.floor(from_c[t, 1, 0] * ey + from_c[t, 1, 1] * ex + from_c[t, 1, 2] + 0.5))
+            if cy < valid[0] or cy >= valid[1] or cx < valid[2] or cx >= valid[3]:
+                continue
+            if mask[cy, cx] == 0:
+                continue
+            key_j = cy * w + cx
+            if stamp[key_j] == tag or not _class_allowed(cls, key_j, want, period, span):
+                continue
         stamp[key_j] = tag
         cand[n, 0] = cy
         cand[n, 1] = cx
@@ -362,14 +404,14 @@ def _histogram_factor(count, target, weight):
 
 
 @kernel
-def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win, run):
+def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win, run, feats, part_start):
     # Unpacked once, so the loop below reads as the algorithm (see SearchState for each name).
     out, ex, offs, metric, w_cur = cur
     par_out, par_ex, par_offs, par_metric, w_par = par
     gui_out, gui_ex, gui_offs, gui_metric, w_gui = gui
     src, hint, use_hint, valid, mask, kset, cand_offs, exact, n_random, capacity = cands
     labels, label_count, label_target, hist_weight = hist
-    cls, want_cls, cls_period, cls_span = win
+    cls, want_cls, cls_period, cls_span, to_common, from_common = win
     order, first_pass, done, seed_key, stamp, counter, best_out = run
     W = out.shape[1]
     w = ex.shape[1]
@@ -378,7 +420,6 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
     # The parts of a distance (0 = cur, 1 = par, 2 = gui), read in this order by one loop: their
     # weights, metrics and channels, the exemplar features in one flat buffer, and the gathered
     # query entries of the current position (part b holds entries bounds[b]:bounds[b + 1]).
-    feats, part_start = _concat_features(ex, par_ex, gui_ex)
     part_w = np.array([w_cur, w_par, w_gui], dtype=np.float64)
     part_metric = np.array([metric, par_metric, gui_metric], dtype=np.int64)
     part_c = np.array([C, par_ex.shape[2], gui_ex.shape[2]], dtype=np.int64)
@@ -451,6 +492,8 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
                 want,
                 cls_period,
                 cls_span,
+                to_common,
+                from_common,
             )
             if n == 0:  # every proposal fell outside the class window: keep the current source
                 cand[0, 0] = src[oy, ox, 0]
@@ -552,7 +595,13 @@ def synthesize_chunk(state: SearchState, start: int, stop: int) -> None:
     :mod:`synth.pixel.synthesis`, prepares them once per level and pass).
     """
     s = state
-    _synthesize_chunk_kernel(start, stop, s.cur, s.par, s.gui, float(s.alpha), s.cands, s.hist, s.win, s.run)
+    arrays = (s.cur.ex, s.par.ex, s.gui.ex)
+    if s.flat is None or any(a is not b for a, b in zip(s.flat[0], arrays, strict=True)):
+        s.flat = (arrays, *_concat_features(*arrays))
+    _, feats, part_start = s.flat
+    _synthesize_chunk_kernel(
+        start, stop, s.cur, s.par, s.gui, float(s.alpha), s.cands, s.hist, s.win, s.run, feats, part_start
+    )
 
 
 def position_distance(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -> np.ndarray:
@@ -606,10 +655,25 @@ def _candidates_reference(state: SearchState, oy: int, ox: int, key: int) -> np.
     H, W = s.cands.src.shape[:2]
     seen: list[tuple[int, int]] = []
 
+    def fits(cy: int, cx: int) -> bool:
+        return y0 <= cy < y1 and x0 <= cx < x1 and bool(s.cands.mask[cy, cx]) and (cy, cx) not in seen
+
     def add(cy: int, cx: int) -> None:
-        inside = y0 <= cy < y1 and x0 <= cx < x1 and s.cands.mask[cy, cx]
-        if inside and (cy, cx) not in seen and _in_class_window(s, np.array([[cy, cx]]), oy, ox)[0]:
-            seen.append((cy, cx))
+        if not fits(cy, cx):
+            return
+        if not _in_class_window(s, np.array([[cy, cx]]), oy, ox)[0]:
+            c = int(s.win.cls[cy * s.cur.ex.shape[1] + cx])
+            if len(s.win.to_common) == 0 or c < 0:
+                return
+            # moved to the same point of the wanted class nearest its own (want + j period)
+            n_cls, period, want = len(s.win.to_common), int(s.win.period), int(s.win.want[oy, ox])
+            t = (want + int(np.floor(((c - want) % n_cls) / period + 0.5)) * period) % n_cls
+            a, b = s.win.to_common[c], s.win.from_common[t]
+            ey, ex = (a[i, 0] * cy + a[i, 1] * cx + a[i, 2] for i in (0, 1))
+            cy, cx = (int(np.floor(b[i, 0] * ey + b[i, 1] * ex + b[i, 2] + 0.5)) for i in (0, 1))
+            if not fits(cy, cx) or not _in_class_window(s, np.array([[cy, cx]]), oy, ox)[0]:
+                return
+        seen.append((cy, cx))
 
     maps = [s.cands.src, s.cands.hint] if s.cands.use_hint else [s.cands.src]
     for smap in maps:

@@ -158,12 +158,19 @@ class CandidateWindow:
     position's wanted class, cyclically modulo ``period`` (the arbitrary-shape method's rotated
     copies of the exemplar near the local constraint angle). ``ex_levels`` (h_l, w_l) and
     ``out_levels`` (H_l, W_l) int arrays, finest first; a negative class is never searched.
+
+    ``transfer_levels`` (optional, finest first): per level, ``(to_common, from_common)``, each
+    ``(n_classes, 2, 3)`` affine maps from a class's exemplar positions ``(row, col, 1)`` to a frame all
+    classes share, and back. With them a proposal from another class is moved to the same point of the
+    wanted class instead of being dropped (:mod:`synth.kernels.pixel_search`), so coherent copying
+    continues across class changes.
     """
 
     ex_levels: Sequence[np.ndarray]
     out_levels: Sequence[np.ndarray]
     period: int
     span: int
+    transfer_levels: Sequence[tuple[np.ndarray, np.ndarray]] | None = None
 
 
 @dataclass
@@ -422,11 +429,17 @@ def _window_state(window: CandidateWindow | None, level: int) -> ClassWindow:
     """The kernel's class window at ``level`` (a span of -1 switches the window off)."""
     if window is None:
         return ClassWindow(np.zeros(1, np.int64), np.zeros((1, 1), np.int64), 1, -1)
+    transfer = (
+        window.transfer_levels[level]
+        if window.transfer_levels is not None
+        else (np.zeros((0, 2, 3)), np.zeros((0, 2, 3)))
+    )
     return ClassWindow(
         np.ascontiguousarray(window.ex_levels[level], dtype=np.int64).ravel(),
         np.ascontiguousarray(window.out_levels[level], dtype=np.int64),
         int(window.period),
         int(window.span),
+        *(np.ascontiguousarray(t, dtype=np.float64) for t in transfer),
     )
 
 

@@ -16,11 +16,13 @@ from synth.analysis.tensor import (
     wrap_angle,
 )
 from synth.api import available_methods, synthesize
-from synth.io.patterns import concentric_rings, grating, waves
+from synth.io.patterns import concentric_rings, grating, waves, wood_grain
 from synth.methods.arbitrary_shape import orientation_agreement
 
-# Small and fast: 15-degree steps (M = 24), 7x7 neighbourhoods.
-FAST = {"angular_step": 15.0, "neighbourhood_size": 7}
+# Small and fast: 15-degree steps (M = 24), 7x7 neighbourhoods; the parameters as given (the tests
+# below pin each field's meaning; the recipes have their own tests).
+FAST = {"angular_step": 15.0, "neighbourhood_size": 7, "recipe": "paper"}
+PAPER = {"recipe": "paper"}
 
 
 def _fringes(angle_deg: float, shape: tuple[int, int] = (32, 32), seed: int = 0) -> np.ndarray:
@@ -196,9 +198,12 @@ def test_naive_variant_is_guided_by_the_constraint_own_tensors() -> None:
 def test_restriction_copies_from_the_copies_at_the_local_angle() -> None:
     ex, con = _fringes(0), concentric_rings((32, 32))
     # Many copies (M = 72): without the hints, the global search rarely lands at the local angle.
-    on = synthesize("arbitrary-shape", ex, constraint=con, params={"neighbourhood_size": 7})
+    on = synthesize("arbitrary-shape", ex, constraint=con, params={"neighbourhood_size": 7} | PAPER)
     off = synthesize(
-        "arbitrary-shape", ex, constraint=con, params={"neighbourhood_size": 7, "restrict_rotations": False}
+        "arbitrary-shape",
+        ex,
+        constraint=con,
+        params={"neighbourhood_size": 7, "restrict_rotations": False} | PAPER,
     )
     assert on.stats["in_window_fraction"] > 0.98 > 0.5 > off.stats["in_window_fraction"]
 
@@ -206,7 +211,12 @@ def test_restriction_copies_from_the_copies_at_the_local_angle() -> None:
 def test_exact_search_with_restriction_searches_only_the_window() -> None:
     ex = _fringes(0, (16, 16))
     con = concentric_rings((16, 16))
-    params = {"angular_step": 30.0, "neighbourhood_size": 5, "search": "exact", "rotation_window": 0.0}
+    params = {
+        "angular_step": 30.0,
+        "neighbourhood_size": 5,
+        "search": "exact",
+        "rotation_window": 0.0,
+    } | PAPER
     res = synthesize("arbitrary-shape", ex, constraint=con, params=params)
     assert res.stats["in_window_fraction"] == 1.0
 
@@ -256,7 +266,8 @@ def test_exact_search_without_restriction() -> None:
             "neighbourhood_size": 5,
             "search": "exact",
             "restrict_rotations": False,
-        },
+        }
+        | PAPER,
     )
     assert res.image.shape == (16, 16)
 
@@ -272,7 +283,7 @@ def test_window_search_strict_or_hints() -> None:
     """'strict' copies only from the copies at the local angle; 'hints' lets other copies compete;
     the default is strict, and hints with the local reference."""
     ex, con = _fringes(0), concentric_rings((32, 32))
-    base = {"neighbourhood_size": 7}
+    base = {"neighbourhood_size": 7} | PAPER
     strict = synthesize("arbitrary-shape", ex, constraint=con, params=base | {"window_search": "strict"})
     hints = synthesize("arbitrary-shape", ex, constraint=con, params=base | {"window_search": "hints"})
     default = synthesize("arbitrary-shape", ex, constraint=con, params=base)
@@ -295,3 +306,111 @@ def test_square_random_walk_follows_a_constant_angle_too() -> None:
     assert res.params["scan"] is None and res.params["neighbourhood"] == "square"
     assert _angle_between(_dominant(res.image), np.radians(50)) < 8
     assert orientation_agreement(res.image, con) < 0.2
+
+
+# ---------------------------------------------------------------- strands: transfer, histogram, recipes
+
+
+def test_affine_maps_move_exemplar_positions_into_every_copy_and_back() -> None:
+    d = build_rotated_dictionary(_fringes(20, (20, 26)), 12)
+    pos = np.stack(np.mgrid[0:20, 0:26], axis=-1).reshape(-1, 2).astype(np.float64)
+    for level in (0, 1):
+        to_exemplar, to_canvas = d.affine_maps(level)
+        for m in range(12):
+            canvas = pos @ to_canvas[m][:, :2].T + to_canvas[m][:, 2]
+            if level == 0:  # to_canvas's positions before rounding
+                np.testing.assert_array_equal(np.rint(canvas), d.to_canvas(pos, np.full(len(pos), m)))
+            else:  # a level subsamples the canvas 2:1
+                np.testing.assert_allclose(
+                    canvas * 2, pos @ d.affine_maps(0)[1][m][:, :2].T + d.affine_maps(0)[1][m][:, 2]
+                )
+            np.testing.assert_allclose(
+                canvas @ to_exemplar[m][:, :2].T + to_exemplar[m][:, 2], pos, atol=1e-9
+            )
+
+
+def _strand_coherence(res, exemplar: np.ndarray, n_rotations: int) -> float:
+    """Share of adjacent output pixels whose sources are neighbouring points of the exemplar (within
+    1.5 px, in the exemplar's own frame, whichever rotated copies they were copied from)."""
+    d = build_rotated_dictionary(exemplar, n_rotations)
+    to_exemplar = d.affine_maps()[0]
+    src = res.extras["source_map"].astype(np.float64)
+    m = d.tile_index[src[..., 0].astype(int), src[..., 1].astype(int)]
+    e = np.einsum("...ij,...j->...i", to_exemplar[m][..., :2], src) + to_exemplar[m][..., 2]
+    steps = [np.linalg.norm(np.diff(e, axis=a), axis=-1) for a in (0, 1)]
+    return float(np.mean(np.concatenate([s.ravel() for s in steps]) <= 1.5))
+
+
+def test_transfer_candidates_keeps_the_window_and_continues_strands() -> None:
+    """With the strict window, proposals from copies outside it are moved into the copy at the local
+    angle (True) instead of dropped (False): every pixel still comes from the window, and more
+    neighbours keep copying neighbouring positions across the copies' angle steps."""
+    ex, con = wood_grain((48, 48), seed=1), concentric_rings((64, 64))
+    base = {"neighbourhood_size": 7, "angular_step": 5.0, "recipe": "paper"}
+    on = synthesize("arbitrary-shape", ex, constraint=con, params=base, seed=2)
+    off = synthesize(
+        "arbitrary-shape", ex, constraint=con, params=base | {"transfer_candidates": False}, seed=2
+    )
+    assert on.params["transfer_candidates"] is True
+    assert on.stats["in_window_fraction"] > 0.98 and off.stats["in_window_fraction"] > 0.98
+    assert _strand_coherence(on, ex, 72) > _strand_coherence(off, ex, 72) + 0.05
+
+
+def test_histogram_weight_pulls_the_grey_levels_toward_the_exemplar() -> None:
+    from synth.evaluate import grey_histogram, kl_divergence
+
+    # An exemplar whose dark quarter is rare: without matching the output over-uses some grey levels.
+    ex = _fringes(0, (48, 48), seed=3)
+    ex[:, :12] *= 0.4
+    con = waves((48, 48), period=8.0, amplitude=6.0, wavelength=48.0)
+    kls = {}
+    for weight in (0.0, 10.0):
+        res = _run(ex, con, seed=1, histogram_weight=weight, neighbourhood_size=5)
+        kls[weight] = kl_divergence(grey_histogram(ex), grey_histogram(res.image))
+    assert kls[10.0] < 0.7 * kls[0.0], kls
+
+
+def test_grey_labels_bin_the_levels_and_target_the_exemplar() -> None:
+    from synth.methods.arbitrary_shape import GREY_LABELS, grey_labels
+
+    ex = np.linspace(0, 1, 64, dtype=np.float32).reshape(8, 8)
+    ((labels, target),) = grey_labels([ex[..., None]], ex)
+    assert labels.shape == (8, 8) and labels.min() == 0 and labels.max() == GREY_LABELS - 1
+    np.testing.assert_allclose(target, np.full(GREY_LABELS, 1 / GREY_LABELS))
+
+
+def test_auto_recipe_follows_the_exemplar_coherence() -> None:
+    """'auto' picks 'fibres' for a strongly oriented exemplar and 'weak' for an isotropic one; a
+    recipe sets only the fields left at their defaults; 'paper' keeps the fields as given."""
+    from synth.methods.arbitrary_shape import RECIPES, ArbitraryShapeParams
+
+    fibres = _fringes(0)
+    noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    con = concentric_rings((32, 32))
+    auto = synthesize("arbitrary-shape", fibres, constraint=con, params={"angular_step": 15.0})
+    assert auto.stats["recipe"] == "fibres" and auto.stats["exemplar_coherence"] > 0.7
+    assert all(auto.params[k] == v for k, v in RECIPES["fibres"].items())
+    weak = synthesize("arbitrary-shape", noise, constraint=con, params={"angular_step": 15.0})
+    assert weak.stats["recipe"] == "weak" and weak.stats["exemplar_coherence"] < 0.7
+    assert all(weak.params[k] == v for k, v in RECIPES["weak"].items())
+    # A field changed from its default wins over the recipe.
+    kept = ArbitraryShapeParams(w=0.3).resolved(fibres)[0]
+    assert kept.w == 0.3 and kept.rotation_reference == "local" and kept.recipe == "fibres"
+    paper, name, _ = ArbitraryShapeParams(recipe="paper").resolved(noise)
+    assert name == "paper" and paper.rotation_reference == "dominant" and paper.w == 0.1
+    explicit = ArbitraryShapeParams(recipe="weak").resolved(fibres)[0]
+    assert explicit.neighbourhood == "square" and explicit.recipe == "weak"
+
+
+@pytest.mark.parametrize(
+    ("params", "name"),
+    [
+        ({"recipe": "fibre"}, "recipe"),
+        ({"histogram_weight": -1.0}, "histogram_weight"),
+        ({"histogram_weight": 1000.0}, "histogram_weight"),
+        ({"transfer_candidates": "sometimes"}, "transfer_candidates"),
+    ],
+)
+def test_invalid_strand_parameters_are_named(params: dict, name: str) -> None:
+    with pytest.raises(InvalidParameter, match=name):
+        _run(_fringes(0), grating((32, 32), 0.5), **params)

@@ -557,3 +557,55 @@ def test_the_neighbourhood_precheck_fails_exactly_when_the_run_would(side: int) 
     except SynthError as exc:
         during = str(exc)
     assert before == during
+
+
+# ---------------------------------------------------------------- transfer between classes
+
+
+def _tiled_window(
+    tile: np.ndarray, n_tiles: int, out_shape: tuple[int, int], period: int
+) -> tuple[np.ndarray, CandidateWindow]:
+    """``n_tiles`` copies of ``tile`` side by side, class = copy; output row ``r`` wants class
+    ``r % n_tiles``; the transfer maps a copy's positions to the tile's own and back."""
+    h, w = tile.shape[:2]
+    ex = np.ascontiguousarray(np.concatenate([tile] * n_tiles, axis=1))
+    cls = np.broadcast_to(np.arange(n_tiles * w) // w, (h, n_tiles * w)).copy()
+    want = np.broadcast_to((np.arange(out_shape[0]) % n_tiles)[:, None], out_shape).copy()
+    to_common = np.zeros((n_tiles, 2, 3))
+    to_common[:, 0, 0] = to_common[:, 1, 1] = 1.0
+    from_common = to_common.copy()
+    to_common[:, 1, 2] = -w * np.arange(n_tiles)
+    from_common[:, 1, 2] = w * np.arange(n_tiles)
+    return ex, CandidateWindow(
+        [cls], [want], period=period, span=0, transfer_levels=[(to_common, from_common)]
+    )
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize("period", [2, 4])
+def test_kernel_matches_reference_with_a_class_transfer(search: str, period: int) -> None:
+    ex, window = _tiled_window(_rng_image((14, 11, 1), seed=16), 4, (12, 10), period)
+    settings = SearchSettings(size=5, levels=1, iterations=2, search=search, k=2, random_candidates=3)
+    _run_both(ex_levels=[ex], out_shapes=[(12, 10)], settings=settings, seed=7, window=window)
+
+
+def test_class_transfer_continues_coherent_copying_across_classes() -> None:
+    """Every output row wants another copy of the same tile: without the transfer the neighbours'
+    coherent proposals (from the row above, another copy) are dropped; with it they are moved into the
+    wanted copy, so the output copies the tile coherently in the tile's own frame, and every copied
+    position lies in its wanted class."""
+    tile = _rng_image((24, 24, 1), seed=17)
+    shares = {}
+    for transfer in (False, True):
+        ex, window = _tiled_window(tile, 4, (16, 16), 4)
+        if not transfer:
+            window = replace(window, transfer_levels=None)
+        settings = SearchSettings(size=5, levels=1, iterations=2, k=0, random_candidates=2)
+        src = synthesize_source_map([ex], [(16, 16)], settings, seed=3, window=window)[0][0]
+        in_class = window.ex_levels[0][src[..., 0], src[..., 1]] == window.out_levels[0]
+        # without the transfer, a position whose every proposal was dropped keeps its initial source
+        assert in_class.all() if transfer else in_class.mean() > 0.95
+        own = src.copy()
+        own[..., 1] %= 24  # the tile's own frame
+        shares[transfer] = float(np.mean(np.all(own[1:] - own[:-1] == [1, 0], axis=-1)))
+    assert shares[True] > 0.5 > shares[False] + 0.3, shares
