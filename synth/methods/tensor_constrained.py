@@ -119,6 +119,14 @@ class TensorConstrainedParams(NeighbourhoodParams):
         description="Weight of the structure stage's histogram matching (ignored with 'none').",
     )
 
+    texture_histogram_weight: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description="Texture stage: position-histogram matching weight (Chen & Wang 2010, as wei-levoy's "
+        "histogram_weight); 0 = the paper's plain search.",
+    )
+
     def periodic_stages(self) -> list[tuple[str, Shape]]:
         return [
             ("structure_iterations", self.structure_neighbourhood or self.neighbourhood),
@@ -210,6 +218,7 @@ def run_tensor_constrained(
         levels=levels,
         iterations=params.texture_iterations,
         alpha=params.alpha,
+        histogram_weight=params.texture_histogram_weight,
     )
     srcs, stats_texture = synthesize_source_map(
         gaussian_pyramid(as_features(exemplar), levels),

@@ -90,6 +90,7 @@ __all__ = [
     "SearchSettings",
     "SynthesisReport",
     "check_neighbourhoods_fit",
+    "entry_weights",
     "level_neighbourhood_size",
     "source_map_pyramid",
     "synthesize_source_map",
@@ -132,6 +133,13 @@ class SearchSettings:
     #: Tileable output: the first pass compares every synthesized position of the square, the
     #: refinement passes the whole square in a random order (see the module docstring).
     periodic: bool = False
+    #: Gaussian falloff of the same-level neighbourhood (Efros & Leung 1999): entry ``o`` weighs
+    #: ``exp(-|o|^2 / (2 sigma^2))`` with ``sigma = falloff * side`` (normalised to mean 1); 0 = flat.
+    falloff: float = 0.0
+    #: Refinement passes (2, 3, ...) compare a full square of side ``refine_size`` (0: ``size``; at most
+    #: the level's side) in a random order, every neighbour proposing candidates (always on when periodic).
+    refine_square: bool = False
+    refine_size: int = 0
 
 
 @dataclass(frozen=True)
@@ -457,6 +465,17 @@ def _part_weights(
     return w_pix, gui, guidance.weight / (gunit * len(gui))
 
 
+def entry_weights(offsets: np.ndarray, side: int, falloff: float) -> np.ndarray:
+    """Per-entry weights of a neighbourhood's ``offsets``: a Gaussian of ``sigma = falloff * side``
+    normalised to mean 1 (so the typical-distance normalisation of eq 13 keeps its meaning), or an
+    empty array (all entries weigh 1) when ``falloff`` is 0."""
+    if falloff <= 0.0:
+        return np.ones(0, dtype=np.float64)
+    sigma = falloff * side
+    w = np.exp(-(offsets.astype(np.float64) ** 2).sum(axis=1) / (2.0 * sigma * sigma))
+    return np.ascontiguousarray(w / w.mean())
+
+
 def _empty_features(channels: int) -> np.ndarray:
     return np.zeros((1, 1, channels), dtype=np.float32)
 
@@ -515,7 +534,8 @@ def synthesize_source_map(
         raise InvalidParameter("levels", levels, "exemplar and output pyramids must have that many levels")
     rng = np.random.default_rng(seed)
     cand_offs = neighbourhood_offsets(2 * _CANDIDATE_RADIUS + 1, "square")
-    cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
+    cand_offs = all_cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
+    square_refinement = settings.periodic or settings.refine_square
     # Only already-synthesized neighbours propose in a causal scan; a periodic run lets every one
     # propose (the first rows and columns across the bottom and right borders among them).
     if settings.shape == "causal" and not settings.periodic:
@@ -584,7 +604,14 @@ def synthesize_source_map(
         gui_metric = guidance.metric if guidance is not None else METRIC_SSD
         best_out = np.zeros(shape, dtype=np.float32)
         state = SearchState(
-            cur=Part(np.ascontiguousarray(ex[src[..., 0], src[..., 1]]), ex, cur_offs, metric, w_pix),
+            cur=Part(
+                np.ascontiguousarray(ex[src[..., 0], src[..., 1]]),
+                ex,
+                cur_offs,
+                metric,
+                w_pix,
+                entry_weights(cur_offs, size, settings.falloff),
+            ),
             par=Part(par_out, par_ex, par_offs, metric, w_pix if has_parent else 0.0),
             gui=Part(gui_out, gui_ex, gui_offs, gui_metric, float(w_gui)),
             alpha=float(settings.alpha),
@@ -598,7 +625,12 @@ def synthesize_source_map(
                 cand_offs=cand_offs,
                 exact=exact,
                 n_random=0 if exact else settings.random_candidates,
-                capacity=candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
+                capacity=candidate_capacity(
+                    len(all_cand_offs if square_refinement else cand_offs),
+                    k,
+                    hint is not None,
+                    settings.random_candidates,
+                ),
             ),
             hist=_histogram_state(
                 histogram[level] if histogram is not None else None,
@@ -620,12 +652,19 @@ def synthesize_source_map(
         )
         n = shape[0] * shape[1]
         for it in range(settings.iterations):
-            refine = settings.periodic and it > 0
-            if refine and it == 1:  # periodic refinement: the whole square, weighed as such
-                w_ref, gui_ref, w_gui_ref = _part_weights(cur_offs, n_par, unit, p, guidance, gunit)
-                state.cur = state.cur._replace(weight=w_ref)
+            refine = square_refinement and it > 0
+            if refine and it == 1:  # square refinement: the whole square, weighed as such
+                side = min(settings.refine_size or size, size)
+                ref_offs = neighbourhood_offsets(side, "square")
+                w_ref, gui_ref, w_gui_ref = _part_weights(ref_offs, n_par, unit, p, guidance, gunit)
+                state.cur = state.cur._replace(
+                    offsets=ref_offs,
+                    weight=w_ref,
+                    entry_weights=entry_weights(ref_offs, side, settings.falloff),
+                )
                 state.par = state.par._replace(weight=w_ref if has_parent else 0.0)
                 state.gui = state.gui._replace(offsets=gui_ref, weight=float(w_gui_ref))
+                state.cands = state.cands._replace(cand_offs=all_cand_offs)
             state.run = Pass(
                 order=scan_order(shape, "random" if refine else settings.scan, rng),
                 first_pass=it == 0,
