@@ -95,8 +95,8 @@ class NeighbourhoodParams(MethodParams):
         None,
         ge=3,
         le=41,
-        description="Side of the square refinement neighbourhood (odd, at most neighbourhood_size; "
-        "default neighbourhood_size).",
+        description="Side of the square refinement neighbourhood (odd; capped at each level's "
+        "neighbourhood side; default neighbourhood_size).",
     )
     periodic: bool = Field(
         False,
@@ -107,12 +107,10 @@ class NeighbourhoodParams(MethodParams):
 
     @model_validator(mode="after")
     def _odd_sizes(self) -> NeighbourhoodParams:
-        for name in ("neighbourhood_size", "parent_size", "refinement_size"):
+        for name in ("neighbourhood_size", "parent_size", "refinement_size", "kset_size"):
             value = getattr(self, name, None)
             if value is not None and value % 2 == 0:
                 raise ValueError(f"{name} must be odd")
-        if self.refinement_size is not None and self.refinement_size > self.neighbourhood_size:
-            raise ValueError("refinement_size must be at most neighbourhood_size")
         return self
 
     @model_validator(mode="after")

@@ -88,12 +88,37 @@ class TensorConstrainedParams(NeighbourhoodParams):
         0.5, ge=0.0, le=1.0, description="SO metric: weight of orientation against coherence."
     )
     p: float = Field(
-        0.5, ge=0.0, le=1.0, description="Eq 13: weight of the pixel part against the tensor part."
+        0.8,
+        ge=0.0,
+        le=1.0,
+        description="Eq 13: weight of the pixel part against the tensor part (the paper leaves it open; "
+        "0.5 weighs both equally).",
     )
     sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
     sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
-    # Measured within 5% of exact search on both stages at k = 3 (docs/benchmarks.md).
-    k: int = Field(3, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
+    # Measured within 5% of exact search on both stages at k = 3 (docs/benchmarks.md); 2 with the
+    # falloff and square refinement below (docs/quality.md, issue 13).
+    k: int = Field(2, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
+    falloff: float = Field(
+        0.156,
+        ge=0.0,
+        le=2.0,
+        description="Gaussian weighting of both stages' same-level neighbourhood (Efros & Leung 1999): "
+        "sigma = falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper).",
+    )
+    refinement: Literal["same", "square"] = Field(
+        "square",
+        description="Neighbourhood of both stages' refinement passes: 'same' as the first pass (the "
+        "paper), or 'square': the full square of refinement_size in a random order, every neighbour "
+        "proposing candidates.",
+    )
+    refinement_size: int | None = Field(
+        7,
+        ge=3,
+        le=41,
+        description="Side of the square refinement neighbourhood (odd; capped at each level's "
+        "neighbourhood side; None = neighbourhood_size).",
+    )
     # The structure stage copies smooth tensor fields: k-coherent candidates there copy large coherent
     # patches and skew the field's orientation distribution (soot 128: field orientation KL 0.22 at
     # k = 3, 0.05 with 16 random candidates and no k-set; 8 measure the same and run 1.6x faster).
@@ -120,7 +145,7 @@ class TensorConstrainedParams(NeighbourhoodParams):
     )
 
     texture_histogram_weight: float = Field(
-        0.0,
+        10.0,
         ge=0.0,
         le=100.0,
         description="Texture stage: position-histogram matching weight (Chen & Wang 2010, as wei-levoy's "

@@ -476,6 +476,16 @@ def entry_weights(offsets: np.ndarray, side: int, falloff: float) -> np.ndarray:
     return np.ascontiguousarray(w / w.mean())
 
 
+def _nearest_first(offsets: np.ndarray, falloff: float) -> np.ndarray:
+    """With a falloff, the offsets from the nearest to the farthest (stable), so that the kernel's
+    partial distance, which stops once it exceeds the best so far, sums the heaviest entries first
+    and stops sooner (the same sum in another order: the same argmin up to rounding). Flat: unchanged."""
+    if falloff <= 0.0:
+        return offsets
+    order = np.argsort((offsets.astype(np.int64) ** 2).sum(axis=1), kind="stable")
+    return np.ascontiguousarray(offsets[order])
+
+
 def _empty_features(channels: int) -> np.ndarray:
     return np.zeros((1, 1, channels), dtype=np.float32)
 
@@ -567,6 +577,7 @@ def synthesize_source_map(
         # Periodic: the kernel holds the whole square; the first pass compares its synthesized
         # positions (``offs``'s entries inside a lexicographic scan), the refinement passes all of it.
         cur_offs = neighbourhood_offsets(size, "square") if settings.periodic else offs
+        cur_offs = _nearest_first(cur_offs, settings.falloff)
         par_offs = parent_offsets(parent_size) if has_parent else np.zeros((0, 2), np.int32)
         valid = _valid_region(
             ex.shape[:2], size // 2, (par_ex.shape[:2], parent_size // 2) if has_parent else None, level
@@ -655,7 +666,7 @@ def synthesize_source_map(
             refine = square_refinement and it > 0
             if refine and it == 1:  # square refinement: the whole square, weighed as such
                 side = min(settings.refine_size or size, size)
-                ref_offs = neighbourhood_offsets(side, "square")
+                ref_offs = _nearest_first(neighbourhood_offsets(side, "square"), settings.falloff)
                 w_ref, gui_ref, w_gui_ref = _part_weights(ref_offs, n_par, unit, p, guidance, gunit)
                 state.cur = state.cur._replace(
                     offsets=ref_offs,

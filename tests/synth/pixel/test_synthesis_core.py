@@ -736,7 +736,6 @@ def test_refinement_passes_compare_the_square_of_refine_size(
         ({"falloff": -0.1}, "falloff"),
         ({"refinement": "round"}, "refinement"),
         ({"refinement": "square", "refinement_size": 8}, "refinement_size"),
-        ({"refinement": "square", "refinement_size": 15}, "refinement_size"),
     ],
 )
 def test_falloff_and_refinement_parameters_are_checked(params: dict, field: str) -> None:
@@ -761,3 +760,57 @@ def test_texture_histogram_weight_is_checked_and_matters() -> None:
     ]
     use = [np.bincount((s[..., 0] * 32 + s[..., 1]).ravel(), minlength=32 * 32) for s in runs]
     assert use[1].max() < use[0].max()  # matched: no position copied as often as the plain search's most used
+
+
+@pytest.mark.parametrize(
+    ("params", "field"), [({"kset_size": 8}, "kset_size"), ({"kset_dims": 0}, "kset_dims")]
+)
+def test_kset_parameters_are_checked(params: dict, field: str) -> None:
+    with pytest.raises(InvalidParameter, match=field):
+        synthesize("wei-levoy", _rng_image((20, 20)), size=(16, 16), params=params)
+
+
+def test_kset_parameters_reach_the_k_coherence_sets(monkeypatch: pytest.MonkeyPatch) -> None:
+    import synth.pixel.synthesis as core
+
+    seen: list[tuple[int, int]] = []
+    real = core._k_coherence_sets
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append((args[5], args[6]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(core, "_k_coherence_sets", spy)
+    params = {"kset_size": 5, "kset_dims": 3, "neighbourhood_size": 7, "levels": 1}
+    synthesize("wei-levoy", _rng_image((24, 24)), size=(16, 16), params=params)
+    assert seen == [(5, 3)]
+
+
+def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
+    """The issue-13 defaults are departures; the earlier settings stay reachable by parameters."""
+    from synth.methods.tensor_constrained import TensorConstrainedParams
+    from synth.methods.wei_levoy import WeiLevoyParams
+
+    wl, tc = WeiLevoyParams(), TensorConstrainedParams()
+    assert (wl.levels, wl.falloff, wl.refinement, wl.kset_size, wl.kset_dims) == (2, 0.156, "square", 7, 8)
+    assert (tc.k, tc.p, tc.falloff, tc.refinement, tc.refinement_size, tc.texture_histogram_weight) == (
+        2,
+        0.8,
+        0.156,
+        "square",
+        7,
+        10.0,
+    )
+    ex = _rng_image((32, 32), seed=9)
+    old = {"levels": 3, "falloff": 0.0, "refinement": "same", "kset_size": 9, "kset_dims": 16}
+    a = synthesize("wei-levoy", ex, size=(24, 24), seed=1, params={**old, "neighbourhood_size": 7})
+    b = synthesize("wei-levoy", ex, size=(24, 24), seed=1, params={"neighbourhood_size": 7})
+    assert a.image.tobytes() != b.image.tobytes()
+
+
+def test_periodic_wei_levoy_gets_a_third_pass_unless_told() -> None:
+    from synth.methods.wei_levoy import WeiLevoyParams
+
+    assert WeiLevoyParams().iterations == 2
+    assert WeiLevoyParams(periodic=True).iterations == 3
+    assert WeiLevoyParams(periodic=True, iterations=2).iterations == 2
