@@ -20,6 +20,12 @@ level are left out of the comparison instead of being compared as initial noise 
 neighbourhood never reads an unsynthesized pixel); the fast search is k-coherence (Tong et al.
 2002), measured against the exact search in ``benchmarks/bench_synthesis.py``.
 
+Options of issue 13 (the defaults of ``wei-levoy`` and ``tensor-constrained``, measured there):
+``SearchSettings.falloff`` weighs the same-level neighbourhood by a Gaussian (Efros & Leung 1999,
+sigma = falloff x side, mean weight 1 so that eq 13's normalisation holds) and sums it nearest first;
+``refine_square`` makes the refinement passes compare the full square (of ``refine_size``) in a random
+order with every neighbour proposing candidates, what ``periodic`` already did.
+
 Tileable outputs (``SearchSettings.periodic``). Wrapped neighbourhoods alone do not make an output
 tile: a causal scan ends at the bottom and right borders, and its last rows and columns, matched only
 against what lies above and to the left, never meet the first ones they touch across the border.
