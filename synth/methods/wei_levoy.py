@@ -38,10 +38,11 @@ earlier bytes):
 
 Seams before -> after: gravel 1.54 -> 0.71, soot 1.92 -> 0.98; laminae orientation KL 0.104 (0.143) ->
 0.066 (0.088); wood strand ratio 0.75 (0.70) -> 0.92 (0.88); every cell of the table meets issue 13's
-targets but brick's strand ratio, which measures 3 strands of the exemplar (docs/quality.md). CPU per
-run, soot and wood 128 -> 256: 4.50 -> 4.28 s. Not helping (measured, seed 1): a coherence bias
-(Hertzmann et al. 2001's kappa; fewer, harder seams: soot 1.92 -> 2.26 at kappa 0.5), position-histogram
-targets that restore the border band's orientations (laminae worst 0.130 -> 0.116 only).
+targets but brick's strand ratio, which measures 3 strands of the exemplar (docs/quality.md). CPU
+per run, soot and wood 128 -> 256, the earlier settings then the defaults: 2.07 -> 1.70 s. Not helping
+(measured, seed 1): a coherence bias (Hertzmann et al. 2001's kappa; fewer, harder seams: soot 1.92 ->
+2.26 at kappa 0.5), position-histogram targets that restore the border band's orientations (laminae
+worst 0.130 -> 0.116 only).
 
 Tileable outputs: ``periodic=True`` (see :mod:`synth.pixel.synthesis`). The toroidal output of the
 paper wraps every neighbourhood, yet its causal scan ends at the bottom and right borders, which a
