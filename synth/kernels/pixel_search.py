@@ -99,6 +99,8 @@ class Part(NamedTuple):
     offsets: np.ndarray  # (K, 2) int32: (dy, dx) of the neighbourhood's entries
     metric: int  # METRIC_SSD | METRIC_NORM | METRIC_SO
     weight: float  # the part's weight, already divided by its typical distance and size
+    #: (K,) float64 weights of the ``offsets`` entries (a Gaussian falloff, Efros & Leung 1999); empty: all 1
+    entry_weights: np.ndarray = np.ones(0, dtype=np.float64)
 
 
 class Candidates(NamedTuple):
@@ -207,12 +209,13 @@ def _so_term(s1, c1, k1, r1, s2, c2, k2, r2, alpha):
 
 
 @kernel
-def _gather_query(img, oy, ox, offs, ex_width, channels, part_start, done, use_mask, q, lin, first):
+def _gather_query(img, oy, ox, offs, ex_width, channels, part_start, done, use_mask, q, lin, first, ew, wq):
     """Copy the (wrapped) output neighbourhood of ``(oy, ox)`` into ``q[first:]``; return its length.
 
     With ``use_mask`` the unsynthesized positions are skipped. ``lin`` receives, for every kept
     entry, its element offset in the flat feature buffer (see :func:`_concat_features`): the part's
-    start plus the entry's linear offset in the exemplar times its channels.
+    start plus the entry's linear offset in the exemplar times its channels; ``wq`` its weight
+    (``ew[i]``, or 1 when ``ew`` is empty: the same bytes as no weight).
     """
     H = img.shape[0]
     W = img.shape[1]
@@ -225,6 +228,7 @@ def _gather_query(img, oy, ox, offs, ex_width, channels, part_start, done, use_m
         for c in range(channels):
             q[n, c] = img[qy, qx, c]
         lin[n] = part_start + (offs[i, 0] * ex_width + offs[i, 1]) * channels
+        wq[n] = ew[i] if ew.shape[0] > 0 else 1.0
         n += 1
     return n - first
 
@@ -406,9 +410,9 @@ def _histogram_factor(count, target, weight):
 @kernel
 def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win, run, feats, part_start):
     # Unpacked once, so the loop below reads as the algorithm (see SearchState for each name).
-    out, ex, offs, metric, w_cur = cur
-    par_out, par_ex, par_offs, par_metric, w_par = par
-    gui_out, gui_ex, gui_offs, gui_metric, w_gui = gui
+    out, ex, offs, metric, w_cur, ew_cur = cur
+    par_out, par_ex, par_offs, par_metric, w_par, ew_par = par
+    gui_out, gui_ex, gui_offs, gui_metric, w_gui, ew_gui = gui
     src, hint, use_hint, valid, mask, kset, cand_offs, exact, n_random, capacity = cands
     labels, label_count, label_target, hist_weight = hist
     cls, want_cls, cls_period, cls_span, to_common, from_common = win
@@ -426,6 +430,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
     n_entries = offs.shape[0] + par_offs.shape[0] + gui_offs.shape[0]
     q = np.empty((n_entries, max(C, par_out.shape[2], gui_out.shape[2])), dtype=np.float32)
     lin = np.empty(n_entries, dtype=np.int64)
+    wq = np.empty(n_entries, dtype=np.float64)  # each gathered entry's weight (1 without a falloff)
     qf = q.reshape(q.size)  # the same entries, read with unsigned flat indices below
     cq = np.uint64(q.shape[1])
     one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
@@ -436,17 +441,43 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
         p = order[idx]
         oy = p // W
         ox = p % W
-        n_cur = _gather_query(out, oy, ox, offs, w, C, part_start[0], done, first_pass, q, lin, 0)
+        n_cur = _gather_query(out, oy, ox, offs, w, C, part_start[0], done, first_pass, q, lin, 0, ew_cur, wq)
         n_par = 0
         if w_par > 0.0:
             c_par, s_par = part_c[1], part_start[1]
             n_par = _gather_query(
-                par_out, oy // 2, ox // 2, par_offs, par_width, c_par, s_par, done, False, q, lin, n_cur
+                par_out,
+                oy // 2,
+                ox // 2,
+                par_offs,
+                par_width,
+                c_par,
+                s_par,
+                done,
+                False,
+                q,
+                lin,
+                n_cur,
+                ew_par,
+                wq,
             )
         n_gui = 0
         if w_gui > 0.0:
             n_gui = _gather_query(
-                gui_out, oy, ox, gui_offs, w, part_c[2], part_start[2], done, False, q, lin, n_cur + n_par
+                gui_out,
+                oy,
+                ox,
+                gui_offs,
+                w,
+                part_c[2],
+                part_start[2],
+                done,
+                False,
+                q,
+                lin,
+                n_cur + n_par,
+                ew_gui,
+                wq,
             )
         bounds[1] = n_cur
         bounds[2] = n_cur + n_par
@@ -536,7 +567,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
                         e = np.uint64(lin[i] + e_base)
                         r = i * cq
                         qs, qc, qk = qf[r], qf[r + one], qf[r + two]
-                        s += _so_half(qs, qc, qk, feats[e], feats[e + one], feats[e + two])
+                        s += wq[i] * _so_half(qs, qc, qk, feats[e], feats[e + one], feats[e + two])
                         if s > limit:
                             break
                 elif mb == METRIC_SO:
@@ -545,13 +576,13 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
                         r = i * cq
                         qs, qc, qk, qr = qf[r], qf[r + one], qf[r + two], qf[r + three]
                         es, ec, ek, er = feats[e], feats[e + one], feats[e + two], feats[e + three]
-                        s += _so_term(qs, qc, qk, qr, es, ec, ek, er, alpha)
+                        s += wq[i] * _so_term(qs, qc, qk, qr, es, ec, ek, er, alpha)
                         if s > limit:
                             break
                 elif mb == METRIC_SSD and cb == 1:  # one channel: the channel loop's sum is its one term
                     for i in range(lo, hi):
                         t = qf[i * cq] - feats[np.uint64(lin[i] + e_base)]
-                        s += t * t
+                        s += wq[i] * (t * t)
                         if s > limit:
                             break
                 else:
@@ -562,7 +593,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
                         for c in range(np.uint64(cb)):
                             dc = qf[r + c] - feats[e + c]
                             t += dc * dc
-                        s += math.sqrt(t) if mb == METRIC_NORM else t
+                        s += wq[i] * (math.sqrt(t) if mb == METRIC_NORM else t)
                         if s > limit:
                             break
                 d += wb * s
@@ -631,12 +662,13 @@ def position_distance(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -
 # Plain reference: the same algorithm, one position at a time, with NumPy and no early stopping.
 
 
-def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep):
+def _block_reference(out, oy, ox, ex, cands, offs, metric, alpha, keep, entry_weights=None):
     H, W = out.shape[:2]
-    offs = offs[keep]
+    wts = np.ones(len(offs)) if entry_weights is None or len(entry_weights) == 0 else entry_weights
+    offs, wts = offs[keep], wts[keep]
     q = out[(oy + offs[:, 0]) % H, (ox + offs[:, 1]) % W]  # (K, C)
     e = ex[cands[:, None, 0] + offs[None, :, 0], cands[:, None, 1] + offs[None, :, 1]]  # (N, K, C)
-    return position_distance(q[None], e, metric, alpha).sum(axis=1)
+    return (position_distance(q[None], e, metric, alpha) * wts).sum(axis=1)
 
 
 def _in_class_window(state: SearchState, cands: np.ndarray, oy: int, ox: int) -> np.ndarray:
@@ -723,7 +755,7 @@ def synthesize_chunk_reference(state: SearchState, start: int, stop: int) -> Non
         d = np.zeros(len(cands))
         if s.cur.weight > 0:
             d += s.cur.weight * _block_reference(
-                out, oy, ox, ex, cands, s.cur.offsets, s.cur.metric, s.alpha, keep
+                out, oy, ox, ex, cands, s.cur.offsets, s.cur.metric, s.alpha, keep, s.cur.entry_weights
             )
         if s.par.weight > 0:
             full = np.ones(len(s.par.offsets), dtype=bool)
@@ -737,11 +769,21 @@ def synthesize_chunk_reference(state: SearchState, start: int, stop: int) -> Non
                 s.par.metric,
                 s.alpha,
                 full,
+                s.par.entry_weights,
             )
         if s.gui.weight > 0:
             full = np.ones(len(s.gui.offsets), dtype=bool)
             d += s.gui.weight * _block_reference(
-                s.gui.out, oy, ox, s.gui.ex, cands, s.gui.offsets, s.gui.metric, s.alpha, full
+                s.gui.out,
+                oy,
+                ox,
+                s.gui.ex,
+                cands,
+                s.gui.offsets,
+                s.gui.metric,
+                s.alpha,
+                full,
+                s.gui.entry_weights,
             )
         labels, count, ew = s.hist.labels, s.hist.count, ex.shape[1]
         factor = np.ones(len(cands))

@@ -365,6 +365,13 @@ def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.
         sigma_d=params.sigma_d,
         sigma_w=params.sigma_w,
         periodic=params.periodic,
+        # tensor-constrained's settings before issue 13's defaults (this recipe was measured with them)
+        k=3,
+        p=0.5,
+        falloff=0.0,
+        refinement="same",
+        refinement_size=None,
+        texture_histogram_weight=0.0,
     )
 
     def sub_progress(stage: str, fraction: float) -> None:

@@ -78,6 +78,26 @@ class NeighbourhoodParams(MethodParams):
     random_candidates: int = Field(
         2, ge=0, le=64, description="k-coherence: random candidates added per pixel."
     )
+    falloff: float = Field(
+        0.0,
+        ge=0.0,
+        le=2.0,
+        description="Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
+        "side (Efros & Leung: 1 / 6.4); 0 = every entry weighs the same (Wei & Levoy).",
+    )
+    refinement: Literal["same", "square"] = Field(
+        "same",
+        description="Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
+        "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
+        "proposing candidates, so that a pixel is matched against the pixels after it too.",
+    )
+    refinement_size: int | None = Field(
+        None,
+        ge=3,
+        le=41,
+        description="Side of the square refinement neighbourhood (odd; capped at each level's "
+        "neighbourhood side; default neighbourhood_size).",
+    )
     periodic: bool = Field(
         False,
         description="Toroidal output: the output tiles seamlessly (every stage wraps around its borders). "
@@ -87,8 +107,9 @@ class NeighbourhoodParams(MethodParams):
 
     @model_validator(mode="after")
     def _odd_sizes(self) -> NeighbourhoodParams:
-        for name in ("neighbourhood_size", "parent_size"):
-            if getattr(self, name) % 2 == 0:
+        for name in ("neighbourhood_size", "parent_size", "refinement_size", "kset_size"):
+            value = getattr(self, name, None)
+            if value is not None and value % 2 == 0:
                 raise ValueError(f"{name} must be odd")
         return self
 
@@ -126,6 +147,9 @@ class NeighbourhoodParams(MethodParams):
             random_candidates=self.random_candidates,
             alpha=alpha,
             periodic=self.periodic,
+            falloff=self.falloff,
+            refine_square=self.refinement == "square",
+            refine_size=self.refinement_size or 0,
             **search,
         )
 

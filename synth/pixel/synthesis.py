@@ -20,6 +20,12 @@ level are left out of the comparison instead of being compared as initial noise 
 neighbourhood never reads an unsynthesized pixel); the fast search is k-coherence (Tong et al.
 2002), measured against the exact search in ``benchmarks/bench_synthesis.py``.
 
+Options of issue 13 (the defaults of ``wei-levoy`` and ``tensor-constrained``, measured there):
+``SearchSettings.falloff`` weighs the same-level neighbourhood by a Gaussian (Efros & Leung 1999,
+sigma = falloff x side, mean weight 1 so that eq 13's normalisation holds) and sums it nearest first;
+``refine_square`` makes the refinement passes compare the full square (of ``refine_size``) in a random
+order with every neighbour proposing candidates, what ``periodic`` already did.
+
 Tileable outputs (``SearchSettings.periodic``). Wrapped neighbourhoods alone do not make an output
 tile: a causal scan ends at the bottom and right borders, and its last rows and columns, matched only
 against what lies above and to the left, never meet the first ones they touch across the border.
@@ -90,6 +96,7 @@ __all__ = [
     "SearchSettings",
     "SynthesisReport",
     "check_neighbourhoods_fit",
+    "entry_weights",
     "level_neighbourhood_size",
     "source_map_pyramid",
     "synthesize_source_map",
@@ -132,6 +139,13 @@ class SearchSettings:
     #: Tileable output: the first pass compares every synthesized position of the square, the
     #: refinement passes the whole square in a random order (see the module docstring).
     periodic: bool = False
+    #: Gaussian falloff of the same-level neighbourhood (Efros & Leung 1999): entry ``o`` weighs
+    #: ``exp(-|o|^2 / (2 sigma^2))`` with ``sigma = falloff * side`` (normalised to mean 1); 0 = flat.
+    falloff: float = 0.0
+    #: Refinement passes (2, 3, ...) compare a full square of side ``refine_size`` (0: ``size``; at most
+    #: the level's side) in a random order, every neighbour proposing candidates (always on when periodic).
+    refine_square: bool = False
+    refine_size: int = 0
 
 
 @dataclass(frozen=True)
@@ -457,6 +471,27 @@ def _part_weights(
     return w_pix, gui, guidance.weight / (gunit * len(gui))
 
 
+def entry_weights(offsets: np.ndarray, side: int, falloff: float) -> np.ndarray:
+    """Per-entry weights of a neighbourhood's ``offsets``: a Gaussian of ``sigma = falloff * side``
+    normalised to mean 1 (so the typical-distance normalisation of eq 13 keeps its meaning), or an
+    empty array (all entries weigh 1) when ``falloff`` is 0."""
+    if falloff <= 0.0:
+        return np.ones(0, dtype=np.float64)
+    sigma = falloff * side
+    w = np.exp(-(offsets.astype(np.float64) ** 2).sum(axis=1) / (2.0 * sigma * sigma))
+    return np.ascontiguousarray(w / w.mean())
+
+
+def _nearest_first(offsets: np.ndarray, falloff: float) -> np.ndarray:
+    """With a falloff, the offsets from the nearest to the farthest (stable), so that the kernel's
+    partial distance, which stops once it exceeds the best so far, sums the heaviest entries first
+    and stops sooner (the same sum in another order: the same argmin up to rounding). Flat: unchanged."""
+    if falloff <= 0.0:
+        return offsets
+    order = np.argsort((offsets.astype(np.int64) ** 2).sum(axis=1), kind="stable")
+    return np.ascontiguousarray(offsets[order])
+
+
 def _empty_features(channels: int) -> np.ndarray:
     return np.zeros((1, 1, channels), dtype=np.float32)
 
@@ -515,7 +550,8 @@ def synthesize_source_map(
         raise InvalidParameter("levels", levels, "exemplar and output pyramids must have that many levels")
     rng = np.random.default_rng(seed)
     cand_offs = neighbourhood_offsets(2 * _CANDIDATE_RADIUS + 1, "square")
-    cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
+    cand_offs = all_cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
+    square_refinement = settings.periodic or settings.refine_square
     # Only already-synthesized neighbours propose in a causal scan; a periodic run lets every one
     # propose (the first rows and columns across the bottom and right borders among them).
     if settings.shape == "causal" and not settings.periodic:
@@ -547,6 +583,7 @@ def synthesize_source_map(
         # Periodic: the kernel holds the whole square; the first pass compares its synthesized
         # positions (``offs``'s entries inside a lexicographic scan), the refinement passes all of it.
         cur_offs = neighbourhood_offsets(size, "square") if settings.periodic else offs
+        cur_offs = _nearest_first(cur_offs, settings.falloff)
         par_offs = parent_offsets(parent_size) if has_parent else np.zeros((0, 2), np.int32)
         valid = _valid_region(
             ex.shape[:2], size // 2, (par_ex.shape[:2], parent_size // 2) if has_parent else None, level
@@ -584,7 +621,14 @@ def synthesize_source_map(
         gui_metric = guidance.metric if guidance is not None else METRIC_SSD
         best_out = np.zeros(shape, dtype=np.float32)
         state = SearchState(
-            cur=Part(np.ascontiguousarray(ex[src[..., 0], src[..., 1]]), ex, cur_offs, metric, w_pix),
+            cur=Part(
+                np.ascontiguousarray(ex[src[..., 0], src[..., 1]]),
+                ex,
+                cur_offs,
+                metric,
+                w_pix,
+                entry_weights(cur_offs, size, settings.falloff),
+            ),
             par=Part(par_out, par_ex, par_offs, metric, w_pix if has_parent else 0.0),
             gui=Part(gui_out, gui_ex, gui_offs, gui_metric, float(w_gui)),
             alpha=float(settings.alpha),
@@ -598,7 +642,12 @@ def synthesize_source_map(
                 cand_offs=cand_offs,
                 exact=exact,
                 n_random=0 if exact else settings.random_candidates,
-                capacity=candidate_capacity(len(cand_offs), k, hint is not None, settings.random_candidates),
+                capacity=candidate_capacity(
+                    len(all_cand_offs if square_refinement else cand_offs),
+                    k,
+                    hint is not None,
+                    settings.random_candidates,
+                ),
             ),
             hist=_histogram_state(
                 histogram[level] if histogram is not None else None,
@@ -620,12 +669,19 @@ def synthesize_source_map(
         )
         n = shape[0] * shape[1]
         for it in range(settings.iterations):
-            refine = settings.periodic and it > 0
-            if refine and it == 1:  # periodic refinement: the whole square, weighed as such
-                w_ref, gui_ref, w_gui_ref = _part_weights(cur_offs, n_par, unit, p, guidance, gunit)
-                state.cur = state.cur._replace(weight=w_ref)
+            refine = square_refinement and it > 0
+            if refine and it == 1:  # square refinement: the whole square, weighed as such
+                side = min(settings.refine_size or size, size)
+                ref_offs = _nearest_first(neighbourhood_offsets(side, "square"), settings.falloff)
+                w_ref, gui_ref, w_gui_ref = _part_weights(ref_offs, n_par, unit, p, guidance, gunit)
+                state.cur = state.cur._replace(
+                    offsets=ref_offs,
+                    weight=w_ref,
+                    entry_weights=entry_weights(ref_offs, side, settings.falloff),
+                )
                 state.par = state.par._replace(weight=w_ref if has_parent else 0.0)
                 state.gui = state.gui._replace(offsets=gui_ref, weight=float(w_gui_ref))
+                state.cands = state.cands._replace(cand_offs=all_cand_offs)
             state.run = Pass(
                 order=scan_order(shape, "random" if refine else settings.scan, rng),
                 first_pass=it == 0,

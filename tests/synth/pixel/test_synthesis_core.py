@@ -29,6 +29,7 @@ from synth.pixel.synthesis import (
     CandidateWindow,
     Guidance,
     SearchSettings,
+    entry_weights,
     synthesize_source_map,
     tensor_features,
 )
@@ -609,3 +610,207 @@ def test_class_transfer_continues_coherent_copying_across_classes() -> None:
         own[..., 1] %= 24  # the tile's own frame
         shares[transfer] = float(np.mean(np.all(own[1:] - own[:-1] == [1, 0], axis=-1)))
     assert shares[True] > 0.5 > shares[False] + 0.3, shares
+
+
+# ---------------------------------------------------------------- falloff and square refinement
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+@pytest.mark.parametrize(
+    "extra",
+    [
+        {"falloff": 0.156},
+        {"refine_square": True, "refine_size": 3},
+        {"falloff": 0.2, "refine_square": True},
+    ],
+)
+def test_kernel_matches_reference_with_falloff_and_square_refinement(search: str, extra: dict) -> None:
+    ex = _rng_image((22, 20, 1), seed=21)
+    levels = 2
+    settings = SearchSettings(
+        size=5, levels=levels, parent_size=3, iterations=2, search=search, k=3, histogram_weight=2.0, **extra
+    )
+    _run_both(
+        ex_levels=gaussian_pyramid(ex, levels),
+        out_shapes=level_shapes((14, 12), levels),
+        settings=settings,
+        seed=7,
+    )
+
+
+def test_entry_weights_are_a_gaussian_of_the_side_with_mean_one() -> None:
+    offs = neighbourhood_offsets(13, "causal")
+    assert entry_weights(offs, 13, 0.0).shape == (0,)  # flat: every entry weighs 1
+    w = entry_weights(offs, 13, 1 / 6.4)
+    assert w.mean() == pytest.approx(1.0)
+    sigma = 13 / 6.4
+    r2 = (offs.astype(float) ** 2).sum(axis=1)
+    np.testing.assert_allclose(w / w.max(), np.exp(-(r2 - r2.min()) / (2 * sigma**2)), rtol=1e-12)
+    assert w[np.argmin(r2)] > 5 * w[np.argmax(r2)]  # the nearest entries dominate the farthest
+
+
+def test_falloff_makes_the_nearest_neighbours_decide() -> None:
+    """A causal 5 x 5 neighbourhood whose near entries agree with one candidate and far ones with another:
+    flat weights pick the far-agreeing one, a steep falloff the near-agreeing one."""
+    ex = np.zeros((12, 12, 1), np.float32)
+    ex[:, 6:, 0] = 1.0  # region A: 0, region B: 1
+    out = np.full((9, 9, 1), np.nan, np.float32)
+    offs = neighbourhood_offsets(5, "causal")
+    near = (np.abs(offs) <= 1).all(axis=1)
+    # the output: near entries 0 (as region A), far entries 1 (as region B), which outnumber them
+    for (dy, dx), is_near in zip(offs, near, strict=True):
+        out[4 + dy, 4 + dx, 0] = 0.0 if is_near else 1.0
+    done = np.zeros((9, 9), np.uint8)
+    done[~np.isnan(out[..., 0])] = 1
+    picks = {}
+    for falloff in (0.0, 0.1):
+        state = SearchState(
+            cur=Part(out.copy(), ex, offs, METRIC_SSD, 1.0, entry_weights(offs, 5, falloff)),
+            par=Part(
+                np.zeros((1, 1, 1), np.float32), np.zeros((1, 1, 1), np.float32), parent_offsets(3), 0, 0.0
+            ),
+            gui=Part(
+                np.zeros((1, 1, 3), np.float32),
+                np.zeros((1, 1, 3), np.float32),
+                np.zeros((0, 2), np.int32),
+                0,
+                0.0,
+            ),
+            alpha=0.5,
+            cands=Candidates(
+                src=np.zeros((9, 9, 2), np.int64),
+                hint=np.zeros((9, 9, 2), np.int64),
+                use_hint=False,
+                valid=np.array([2, 10, 2, 10], np.int64),
+                mask=np.ones((12, 12), np.uint8),
+                kset=np.full((1, 1, 0, 2), -1, np.int64),
+                cand_offs=np.zeros((1, 2), np.int32),
+                exact=True,
+                n_random=0,
+                capacity=4,
+            ),
+            hist=Histogram(np.zeros(144, np.int64), np.array([144], np.int64), np.array([144.0]), 0.0),
+            win=ClassWindow(np.zeros(1, np.int64), np.zeros((1, 1), np.int64), 1, -1),
+            run=Pass(
+                np.array([4 * 9 + 4], np.int64),
+                True,
+                done.copy(),
+                np.uint64(1),
+                np.zeros(144, np.int64),
+                np.zeros(1, np.int64),
+                np.zeros((9, 9), np.float32),
+            ),
+        )
+        synthesize_chunk(state, 0, 1)
+        picks[falloff] = float(ex[state.cands.src[4, 4, 0], state.cands.src[4, 4, 1], 0])
+    assert picks == {0.0: 1.0, 0.1: 0.0}
+
+
+@pytest.mark.parametrize(
+    ("refine", "size", "side"), [(False, 0, None), (True, 0, 7), (True, 5, 5), (True, 9, 7)]
+)
+def test_refinement_passes_compare_the_square_of_refine_size(
+    refine: bool, size: int, side: int | None
+) -> None:
+    """The refinement passes compare the full square of ``refine_size`` (at most the neighbourhood's side),
+    every neighbour proposing candidates; without ``refine_square`` they keep the causal L-shape."""
+    ex = _rng_image((24, 24, 1), seed=3)
+    settings = SearchSettings(size=7, levels=1, iterations=2, refine_square=refine, refine_size=size)
+    seen = {}
+    synthesize_source_map(
+        [ex], [(16, 16)], settings, seed=1, on_level_done=lambda level, state: seen.update(state=state)
+    )
+    state = seen["state"]
+    if side is None:
+        np.testing.assert_array_equal(state.cur.offsets, neighbourhood_offsets(7, "causal"))
+        assert len(state.cands.cand_offs) == 5  # the pixel and its 4 causal neighbours
+    else:
+        np.testing.assert_array_equal(state.cur.offsets, neighbourhood_offsets(side, "square"))
+        assert len(state.cands.cand_offs) == 9  # the pixel and its 8 neighbours
+        assert len(state.gui.offsets) == 0 or len(state.gui.offsets) == side * side
+
+
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ({"falloff": -0.1}, "falloff"),
+        ({"refinement": "round"}, "refinement"),
+        ({"refinement": "square", "refinement_size": 8}, "refinement_size"),
+    ],
+)
+def test_falloff_and_refinement_parameters_are_checked(params: dict, field: str) -> None:
+    for method in ("wei-levoy", "tensor-constrained"):
+        with pytest.raises(InvalidParameter, match=field):
+            synthesize(method, _rng_image((20, 20)), size=(16, 16), params=params)
+
+
+def test_texture_histogram_weight_is_checked_and_matters() -> None:
+    with pytest.raises(InvalidParameter, match="texture_histogram_weight"):
+        synthesize("tensor-constrained", _rng_image((20, 20)), params={"texture_histogram_weight": -1})
+    ex = _rng_image((32, 32), seed=8)
+    runs = [
+        synthesize(
+            "tensor-constrained",
+            ex,
+            size=(40, 40),
+            seed=2,
+            params={"neighbourhood_size": 5, "structure_levels": 2, "texture_histogram_weight": w},
+        ).extras["source_map"]
+        for w in (0.0, 20.0)
+    ]
+    use = [np.bincount((s[..., 0] * 32 + s[..., 1]).ravel(), minlength=32 * 32) for s in runs]
+    assert use[1].max() < use[0].max()  # matched: no position copied as often as the plain search's most used
+
+
+@pytest.mark.parametrize(
+    ("params", "field"), [({"kset_size": 8}, "kset_size"), ({"kset_dims": 0}, "kset_dims")]
+)
+def test_kset_parameters_are_checked(params: dict, field: str) -> None:
+    with pytest.raises(InvalidParameter, match=field):
+        synthesize("wei-levoy", _rng_image((20, 20)), size=(16, 16), params=params)
+
+
+def test_kset_parameters_reach_the_k_coherence_sets(monkeypatch: pytest.MonkeyPatch) -> None:
+    import synth.pixel.synthesis as core
+
+    seen: list[tuple[int, int]] = []
+    real = core._k_coherence_sets
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append((args[5], args[6]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(core, "_k_coherence_sets", spy)
+    params = {"kset_size": 5, "kset_dims": 3, "neighbourhood_size": 7, "levels": 1}
+    synthesize("wei-levoy", _rng_image((24, 24)), size=(16, 16), params=params)
+    assert seen == [(5, 3)]
+
+
+def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
+    """The issue-13 defaults are departures; the earlier settings stay reachable by parameters."""
+    from synth.methods.tensor_constrained import TensorConstrainedParams
+    from synth.methods.wei_levoy import WeiLevoyParams
+
+    wl, tc = WeiLevoyParams(), TensorConstrainedParams()
+    assert (wl.levels, wl.falloff, wl.refinement, wl.kset_size, wl.kset_dims) == (2, 0.156, "square", 7, 8)
+    assert (tc.k, tc.p, tc.falloff, tc.refinement, tc.refinement_size, tc.texture_histogram_weight) == (
+        2,
+        0.8,
+        0.156,
+        "square",
+        7,
+        10.0,
+    )
+    ex = _rng_image((32, 32), seed=9)
+    old = {"levels": 3, "falloff": 0.0, "refinement": "same", "kset_size": 9, "kset_dims": 16}
+    a = synthesize("wei-levoy", ex, size=(24, 24), seed=1, params={**old, "neighbourhood_size": 7})
+    b = synthesize("wei-levoy", ex, size=(24, 24), seed=1, params={"neighbourhood_size": 7})
+    assert a.image.tobytes() != b.image.tobytes()
+
+
+def test_periodic_wei_levoy_gets_a_third_pass_unless_told() -> None:
+    from synth.methods.wei_levoy import WeiLevoyParams
+
+    assert WeiLevoyParams().iterations == 2
+    assert WeiLevoyParams(periodic=True).iterations == 3
+    assert WeiLevoyParams(periodic=True, iterations=2).iterations == 2
