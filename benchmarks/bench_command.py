@@ -332,16 +332,15 @@ def report(results: dict) -> str:
         "`OPENBLAS_NUM_THREADS` is set): the k-coherence PCA's covariance and `eigh` took 0.45 s of CPU "
         "with two threads spinning against other work, 0.005 s with one.",
         "",
-        "What remains of `wei-levoy`'s synthesis is half its k-coherence sets: one k-d tree query of "
-        "its 13,456 finest-level neighbourhoods (9 x 9 pixels on 16 principal components, 11 nearest "
-        "each) costs 1.09 s of CPU (`scipy.spatial.cKDTree`, both cores when they are free), against "
-        "0.8 s for its six passes. Faster exact searches were left alone: another tree layout "
-        "(`leafsize=32`: -20%) or a brute-force search returns the same neighbours but may order "
-        "exactly equal distances (duplicate neighbourhoods) differently, which would change bytes. "
-        "An algorithmic change would: the same query on 12 components costs 0.66 s, on 8 "
-        "components 0.29 s, with 5 neighbours instead of 10 on 16 components 0.85 s (CPU, the grass "
-        "crop; the 16 components were chosen to stay within 5% of exact search, see 'Fast search "
-        "against exact search').",
+        "Before the issue-13 defaults, half of `wei-levoy`'s synthesis was its k-coherence sets: one k-d "
+        "tree query of its 13,456 finest-level neighbourhoods (9 x 9 pixels on 16 principal components, "
+        "11 nearest each) cost 1.09 s of CPU (`scipy.spatial.cKDTree`), against 0.8 s for its passes; "
+        "the same query on 8 components cost 0.29 s. Its defaults now build 7 x 7 sets on 8 components "
+        "over two pyramid levels, with a Gaussian falloff and square refinement passes, chosen for "
+        "quality (docs/quality.md, 'Notes on the pixel methods' rows'). Faster exact tree searches "
+        "were left alone: another tree layout (`leafsize=32`: -20%) or a brute-force search returns "
+        "the same neighbours but may order exactly equal distances (duplicate neighbourhoods) "
+        "differently, which would change bytes.",
         "",
         "Earlier (issue 13, 'a fast command'): building the parser (`texsynth --help`) imports no "
         "numpy, numba, scipy or pydantic, and an engine command builds only its own parser; "
