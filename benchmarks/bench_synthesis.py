@@ -138,6 +138,10 @@ def _capture_states(module: Any) -> tuple[list[SearchState], Callable[[], None]]
     return states, restore
 
 
+#: The texture stage's distances before issue 13 (no falloff) and its k: the search compared on them.
+FLAT = {"falloff": 0.0, "k": 3}
+
+
 def search_quality(n_positions: int = 600) -> list[tuple[str, dict[str, float]]]:
     ex = exemplar(TABLE1[0][1])
     rows = []
@@ -151,6 +155,18 @@ def search_quality(n_positions: int = 600) -> list[tuple[str, dict[str, float]]]
     )
     rows.append(
         ("tensor-constrained, texture stage (eq 13)", frozen_search_comparison(states[1], n_positions))
+    )
+    # The same search with issue 3's texture distances (flat weights, k = 3): what the falloff changes.
+    states, restore = _capture_states(tc)
+    try:
+        synthesize("tensor-constrained", ex, size=(256, 256), params={**TABLE1[0][3], **FLAT}, seed=1)
+    finally:
+        restore()
+    rows.append(
+        (
+            "tensor-constrained, texture stage, flat weights and k = 3 (issue 3's)",
+            frozen_search_comparison(states[1], n_positions),
+        )
     )
     states, restore = _capture_states(wl)
     try:
@@ -250,7 +266,13 @@ def main() -> None:
         "After a full run at figure-3 settings, the final state is frozen and, at 600 random output "
         "positions, "
         "the k-coherence search and the exhaustive search answer the same query. Ratio = mean best distance "
-        "fast / exact (1.00 = as good as exact).",
+        "fast / exact (1.00 = as good as exact). The texture stage's default distance weighs the entries by "
+        "a Gaussian falloff (issue 13; docs/quality.md): the few pixels nearest the centre then decide, and "
+        "many exemplar positions that the k-coherent candidates do not propose match those few pixels as "
+        "well as a coherent continuation does, so the exhaustive search finds a smaller distance more often "
+        "(issue 3's 5% target is missed by the default texture stage). The defaults were chosen on the "
+        "outputs' measures, not on this ratio (docs/quality.md: the seams fell with the falloff); the last "
+        "row measures the search on the flat weights and k of issue 3's defaults.",
         "",
         "| stage | ratio fast / exact | exact optimum found |",
         "|---|---|---|",
