@@ -28,6 +28,7 @@ from synth.errors import InvalidParameter
 
 __all__ = [
     "METRICS",
+    "ORIENTED_COHERENCE",
     "Metric",
     "coherence",
     "dominant_orientation",
@@ -49,6 +50,10 @@ METRICS: tuple[Metric, ...] = ("ED", "SO", "FN", "LE")
 #: Added to eigenvalues before taking logarithms so that flat regions (zero tensors) stay
 #: positive definite; small against the tensors of images in [0, 1].
 LOG_EPSILON = 1e-6
+#: An image whose mean structure-tensor coherence (default scales) is at least this is strongly oriented:
+#: fibres, laminae, fringes, brick joints (0.83-0.97 on docs/quality.md's exemplars); below it, weakly
+#: oriented (HRTEM soot 0.39, grass and gravel 0.44). The 2D methods' automatic settings split on it.
+ORIENTED_COHERENCE = 0.7
 #: Below this trace (relative to nothing: images are in [0, 1]) a tensor counts as isotropic zero.
 _TRACE_FLOOR = 1e-12
 #: Coherences are clipped to at least this before the ratio of eq 9 (a zero would divide by zero).

@@ -93,6 +93,7 @@ from skimage.transform import resize
 
 from synth.analysis.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
 from synth.analysis.tensor import (
+    ORIENTED_COHERENCE,
     Metric,
     coherence,
     dominant_orientation,
@@ -134,10 +135,6 @@ FLAT_TRACE = 1e-8
 AGREEMENT_SIGMA_W = 4.0
 #: Grey-level bins of the histogram matching (``histogram_weight``).
 GREY_LABELS = 16
-#: ``recipe='auto'``: an exemplar whose mean structure-tensor coherence is at least this is strongly
-#: oriented (fibres, laminae, fringes: 0.84-0.97 on the benchmark's exemplars), below it weakly
-#: oriented (HRTEM soot 0.39; grass, gravel 0.44). Measured at the parameters' ``sigma_d``, ``sigma_w``.
-ORIENTED_COHERENCE = 0.7
 #: The settings each recipe gives the parameters left at their defaults (docs/arbitrary-shape.md has the
 #: measurements). 'fibres' (strongly oriented exemplars): every tensor of S_con turned to the constraint
 #: ('local'), the strict rotation window with proposals moved across copies (transfer_candidates, a

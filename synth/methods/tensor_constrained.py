@@ -30,14 +30,17 @@ give the earlier bytes. The texture stage copied the structure stage's coherent 
 tensor part is exactly 0 where it follows the stage-1 source map) and joined them with hard seams:
 ``seam_contrast`` of the source map 1.3-2.4 on five of six exemplars; brick and wood lost grey levels
 (KL 0.056 (0.071), 0.062 (0.088)). Now, in both stages, the Gaussian falloff (``falloff=0.156``) and a
-square refinement pass of 7 x 7 (``refinement='square', refinement_size=7``); in the texture stage
-Chen & Wang's position histogram (``texture_histogram_weight=10``), ``p = 0.8`` (the pixel part may
-leave a stage-1 region where the texture does not continue) and ``k = 2``. Seams grass 1.32 -> 0.67,
+square refinement pass (``refinement='square'``; ``refinement_size=None`` picks 7 x 7 for weakly
+oriented exemplars and the whole neighbourhood for strongly oriented ones, :func:`refinement_size_for`);
+in the texture stage Chen & Wang's position histogram (``texture_histogram_weight=10``), ``p = 0.8``
+(the pixel part may leave a stage-1 region where the texture does not continue) and ``k = 2``.
+Seams grass 1.32 -> 0.67,
 gravel 2.43 -> 0.97, soot 2.32 -> 1.01, wood 1.25 -> 0.90; grey KL brick 0.015 (0.019), wood 0.003;
-laminae orientation KL 0.039 -> 0.051 (0.066), still within issue 13's 0.10. Not met: brick's seam,
-1.45 (1.58) -> 1.77 (1.99) (mortar joints end in stubs, before and after), laminae strand ratio 0.944
-(0.755) -> 0.874 (0.774). CPU per run, soot and wood 128 -> 256, the earlier settings then the
-defaults: 1.38 -> 1.17 s.
+laminae orientation KL 0.039 -> 0.051 (0.066), still within issue 13's 0.10. With a 7 x 7 refinement
+everywhere brick's seam went 1.45 (1.58) -> 1.77 (1.99) and the laminae's strand ratio 0.944 (0.755) ->
+0.874 (0.774); the whole neighbourhood for strongly oriented exemplars gives 1.35 (1.52) and 0.913
+(0.843) (brick's seam still above 1.2: mortar joints end in stubs). CPU per run, soot and wood
+128 -> 256, the earlier settings then the defaults: 1.38 -> 1.17 s.
 
 Tileable outputs: ``periodic=True`` makes both stages' searches close the tile borders (see
 :mod:`synth.pixel.synthesis`; a causal neighbourhood then needs two or more passes in each stage).
@@ -58,7 +61,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.tensor import Metric, coherence, orientation, structure_tensor
+from synth.analysis.tensor import ORIENTED_COHERENCE, Metric, coherence, orientation, structure_tensor
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.neighbourhood import Shape
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
@@ -129,11 +132,12 @@ class TensorConstrainedParams(NeighbourhoodParams):
         "proposing candidates.",
     )
     refinement_size: int | None = Field(
-        7,
+        None,
         ge=3,
         le=41,
         description="Side of the square refinement neighbourhood (odd; capped at each level's "
-        "neighbourhood side; None = neighbourhood_size).",
+        "neighbourhood side). None: chosen from the exemplar, neighbourhood_size for strongly oriented "
+        "exemplars (mean coherence >= 0.7: laminae, fibres, joints), 7 for weakly oriented ones.",
     )
     # The structure stage copies smooth tensor fields: k-coherent candidates there copy large coherent
     # patches and skew the field's orientation distribution (soot 128: field orientation KL 0.22 at
@@ -173,6 +177,23 @@ class TensorConstrainedParams(NeighbourhoodParams):
             ("structure_iterations", self.structure_neighbourhood or self.neighbourhood),
             ("texture_iterations", self.neighbourhood),
         ]
+
+
+#: Square refinement side for weakly oriented exemplars (``refinement_size=None``).
+WEAK_REFINEMENT_SIZE = 7
+
+
+def refinement_size_for(s_in: np.ndarray, params: TensorConstrainedParams) -> int:
+    """The square refinement side ``refinement_size=None`` stands for, from the exemplar's tensors.
+
+    Measured (docs/quality.md, 128 -> 256, seeds 1-3, mean (worst)): a 7 x 7 refinement keeps weakly
+    oriented textures' seams low (soot ``seam_contrast`` 1.01 against 1.21 with 13 x 13; grass 0.67
+    against 0.78), while strongly oriented ones need the whole neighbourhood to continue their long
+    structures (bent laminae strand ratio 0.874 (0.774) -> 0.913 (0.843); brick seam 1.77 (1.99) ->
+    1.35 (1.52); wood grain within its targets either way). :data:`ORIENTED_COHERENCE` splits them.
+    """
+    oriented = float(coherence(s_in).mean()) >= ORIENTED_COHERENCE
+    return params.neighbourhood_size if oriented else min(WEAK_REFINEMENT_SIZE, params.neighbourhood_size)
 
 
 def orientation_labels(tensors: np.ndarray, bins: int = ORIENTATION_LABELS) -> tuple[np.ndarray, np.ndarray]:
@@ -236,6 +257,8 @@ def run_tensor_constrained(
     report = checked_progress(progress)
     t0 = time.perf_counter()
     s_in = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
+    if params.refinement_size is None:
+        params = params.model_copy(update={"refinement_size": refinement_size_for(s_in, params)})
     # Half the work estimate each: the structure stage runs on more levels, the texture on richer data.
     s_out, src_structure, stats_structure = synthesize_tensor_field(
         s_in, size, params, seed=seed, progress=report, span=(0.0, 0.5)

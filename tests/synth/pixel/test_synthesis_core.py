@@ -798,7 +798,7 @@ def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
         0.8,
         0.156,
         "square",
-        7,
+        None,
         10.0,
     )
     ex = _rng_image((32, 32), seed=9)
@@ -814,3 +814,26 @@ def test_periodic_wei_levoy_gets_a_third_pass_unless_told() -> None:
     assert WeiLevoyParams().iterations == 2
     assert WeiLevoyParams(periodic=True).iterations == 3
     assert WeiLevoyParams(periodic=True, iterations=2).iterations == 2
+
+
+def test_tensor_constrained_refinement_size_follows_the_exemplars_orientation() -> None:
+    """``refinement_size=None``: the whole neighbourhood for strongly oriented exemplars, 7 for weak ones,
+    and the run records the side it used; an explicit side is kept."""
+    from synth.analysis.tensor import structure_tensor
+    from synth.methods.tensor_constrained import TensorConstrainedParams, refinement_size_for
+
+    y, x = np.mgrid[0:48, 0:48]
+    stripes = (0.5 + 0.5 * np.sin(2 * np.pi * (x + 0.3 * y) / 6.0)).astype(np.float32)
+    noise = _rng_image((48, 48), seed=4)
+    params = TensorConstrainedParams(neighbourhood_size=9)
+    assert refinement_size_for(structure_tensor(stripes), params) == 9
+    assert refinement_size_for(structure_tensor(noise), params) == 7
+    common = {"neighbourhood_size": 9, "structure_levels": 2, "texture_levels": 1}
+    ran = synthesize("tensor-constrained", stripes, size=(32, 32), seed=1, params=common)
+    assert ran.params["refinement_size"] == 9
+    ran = synthesize("tensor-constrained", noise, size=(32, 32), seed=1, params=common)
+    assert ran.params["refinement_size"] == 7
+    kept = synthesize(
+        "tensor-constrained", noise, size=(32, 32), seed=1, params={**common, "refinement_size": 5}
+    )
+    assert kept.params["refinement_size"] == 5
