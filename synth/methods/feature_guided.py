@@ -37,7 +37,8 @@ Departures
   on soot (1.04 vs 1.10) and cells (1.11 vs 1.21) and as many on bent laminae (0.97 vs 0.97) and brick
   (1.04 vs 1.10, within the spread). Neither beats ``quilting`` on brick (0.90): the paper's claim
   holds on soot only.
-- ``reverse_weight`` (not the paper; default 4, 0 = the paper's eq 2): adds the reverse chamfer term
+- ``reverse_weight`` (not the paper; 0 = the paper's eq 2; default None: 4 on weakly oriented exemplars,
+  0 on strongly oriented ones, :func:`reverse_weight_for`): adds the reverse chamfer term
   (the candidate's overlap features matched against the context's,
   :func:`synth.analysis.feature_matching.reverse_costs`). It restores the mean fringe length on soot
   that eq 2 loses (19.9 vs 19.1 px, exemplar 20.0, quilting 19.8; seeds 0-29) at equal tortuosity
@@ -61,7 +62,9 @@ from pydantic import Field
 
 from synth.analysis.feature_matching import BETA, MATCH_TAU, REVERSE_WEIGHT, WARP_TAU
 from synth.analysis.features import feature_map, feature_overlay
+from synth.analysis.tensor import ORIENTED_COHERENCE, coherence, structure_tensor
 from synth.api import MethodSpec, Progress, Result, register
+from synth.colour import to_grey
 from synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
@@ -143,12 +146,14 @@ class FeatureGuidedParams(PatchParams):
         le=100.0,
         description="Weight of non-bijectivity in the matching cost (eq 2; paper: 0.3).",
     )
-    reverse_weight: float = Field(
-        REVERSE_WEIGHT,
+    reverse_weight: float | None = Field(
+        None,
         ge=0.0,
         le=100.0,
         description="Weight of the reverse chamfer term: mean gdist from the candidate's features in the "
-        "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq 2).",
+        "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq 2). "
+        "None: 4 for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes), 0 for strongly "
+        "oriented ones (laminae, fibres, brick joints).",
     )
     warp_tau: float = Field(
         WARP_TAU,
@@ -196,6 +201,22 @@ class FeatureGuidedParams(PatchParams):
         }
 
 
+def reverse_weight_for(exemplar: np.ndarray) -> float:
+    """The reverse chamfer term's weight ``reverse_weight=None`` stands for, from the exemplar.
+
+    The term penalises candidate features in the overlap that continue no context feature. On weakly
+    oriented exemplars (HRTEM soot, mean coherence 0.39) that is what cluttered, broken fringes do, and
+    the term brings the fringes back to the exemplar's length (docs/feature-guided.md). On strongly
+    oriented ones a feature that starts inside the overlap is often real (a brick's horizontal joint
+    meeting a vertical one): with weight 4 brick's orientation KL went 0.018 -> 0.098 (its horizontal
+    joints thinned out) and its grey KL 0.023 -> 0.037 (docs/quality.md, seeds 1-3). So
+    :data:`~synth.analysis.feature_matching.REVERSE_WEIGHT` below
+    :data:`~synth.analysis.tensor.ORIENTED_COHERENCE`, 0 (the paper's eq 2) at or above it.
+    """
+    coh = float(coherence(structure_tensor(to_grey(exemplar))).mean())
+    return REVERSE_WEIGHT if coh < ORIENTED_COHERENCE else 0.0
+
+
 def run_feature_guided(
     exemplar: np.ndarray,
     *,
@@ -210,6 +231,8 @@ def run_feature_guided(
     precheck_patch_method(params, {"exemplar": exemplar.shape, "output": size})
     report = checked_progress(progress)
     start = time.perf_counter()
+    if params.reverse_weight is None:
+        params = params.model_copy(update={"reverse_weight": reverse_weight_for(exemplar)})
     options = params.feature_options()
     report("features", 0.0)
     fmap = feature_map(exemplar, **options)  # type: ignore[arg-type]

@@ -49,7 +49,8 @@ Choices where the paper is silent, and departures
   them; the paper evaluates both costs at every translation. Measured in docs/feature-guided.md.
 - **Output feature map**: the synthesized one (section 3: "generates a new texture and its feature
   map simultaneously"): each patch's features (warped with it) are pasted where its pixels are.
-- **The reverse chamfer term** (``reverse_weight``, default 4; 0 is the paper's eq 2). Eq 2 only
+- **The reverse chamfer term** (``reverse_weight``, 4 here; 0 is the paper's eq 2; the method picks
+  4 or 0 from the exemplar's coherence, :func:`synth.methods.feature_guided.reverse_weight_for`). Eq 2 only
   asks how near each context feature lies to a candidate feature. Adding the other direction (the
   symmetric chamfer distance) brings the fringes of soot outputs back to the exemplar's mean length
   (weight 4: 19.9 px against 19.1 with eq 2 alone and 20.0 in the exemplar, seeds 0-29) with the

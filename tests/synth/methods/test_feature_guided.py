@@ -217,3 +217,17 @@ def test_warp_stats_and_the_kink_measure_are_reported(runs):
     assert on.stats["mean_warp_shift"] >= 0.5  # the applied warps move something by half a pixel
     broken = on.stats["broken_features"]
     assert {"end_ratio", "kink_ratio", "seam_kinks", "seam_crossings", "density_ratio"} <= set(broken)
+
+
+def test_reverse_weight_none_follows_the_exemplars_orientation(laminae):
+    """``reverse_weight=None`` (the default): 4 for weakly oriented exemplars, 0 (eq 2) for strongly
+    oriented ones, and the run records the weight it used."""
+    from synth.methods.feature_guided import reverse_weight_for
+
+    noise = np.random.default_rng(3).random((64, 64)).astype(np.float32)
+    assert reverse_weight_for(laminae) == 0.0
+    assert reverse_weight_for(noise) == 4.0
+    ran = synthesize("feature-guided", laminae, size=SIZE, params=BASE, seed=2)
+    assert ran.params["reverse_weight"] == 0.0
+    paper = synthesize("feature-guided", laminae, size=SIZE, params={**BASE, "reverse_weight": 0}, seed=2)
+    assert ran.image.tobytes() == paper.image.tobytes()
