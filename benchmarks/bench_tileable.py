@@ -75,8 +75,8 @@ NOTES = (
     "1.08 +- 0.09 on gravel, 1.75 +- 0.42 on brick). Limit seen in the pictures: `gaussian-patch` on brick "
     "cannot fit joints on both sides of its last column / row with N = 5 neighbours (broken joints there), "
     "and the mending smears a joint that only one side has. With issue 13's defaults `tensor-constrained` "
-    "on brick does not tile (periodic ratio 3.67, ranks 1.00 / 1.00; 1.25 with the earlier defaults): its "
-    "brick output has broken joints ending in stubs throughout (docs/quality.md, its brick seam 1.77), and "
+    "on brick does not tile (periodic ratio 3.98, cols rank 1.00; 1.25 with the earlier defaults): its "
+    "brick output has broken joints ending in stubs throughout (docs/quality.md, its brick seam 1.35), and "
     "the periodic passes do not close the joints across the borders.",
 )
 
