@@ -24,6 +24,7 @@ from typing import Literal
 import numpy as np
 from scipy import ndimage as ndi
 
+from synth.colour import to_grey
 from synth.errors import InvalidParameter
 
 __all__ = [
@@ -34,6 +35,7 @@ __all__ = [
     "dominant_orientation",
     "eigenvalues",
     "log_tensors",
+    "mean_coherence",
     "neighbourhood_dissimilarity",
     "orientation",
     "orientation_histogram",
@@ -135,6 +137,15 @@ def eigenvalues(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     half_trace = 0.5 * (a + c)
     radius = np.sqrt((0.5 * (a - c)) ** 2 + b * b)
     return half_trace + radius, half_trace - radius
+
+
+def mean_coherence(image: np.ndarray, sigma_d: float = 1.0, sigma_w: float = 3.0) -> float:
+    """Mean coherence of a (grey or RGB) image's structure tensors: how strongly oriented it is.
+
+    The number the methods' automatic settings compare with :data:`ORIENTED_COHERENCE` (and the solid
+    methods with their own threshold): fibres, laminae, fringes, brick joints 0.83-0.97; HRTEM soot 0.39.
+    """
+    return float(coherence(structure_tensor(to_grey(image), sigma_d, sigma_w)).mean())
 
 
 def coherence(tensors: np.ndarray) -> np.ndarray:

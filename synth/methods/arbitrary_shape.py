@@ -97,6 +97,7 @@ from synth.analysis.tensor import (
     Metric,
     coherence,
     dominant_orientation,
+    mean_coherence,
     orientation,
     rotate_tensors,
     structure_tensor,
@@ -263,7 +264,7 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         only the fields left at their defaults (a field set to its default value counts as left: pass
         ``recipe='paper'`` for the defaults themselves); ``recipe`` becomes the chosen name.
         """
-        coh = float(coherence(structure_tensor(to_grey(exemplar), self.sigma_d, self.sigma_w)).mean())
+        coh = mean_coherence(exemplar, self.sigma_d, self.sigma_w)
         name = self.recipe
         if name == "auto":
             name = "fibres" if coh >= ORIENTED_COHERENCE else "weak"

@@ -62,9 +62,8 @@ from pydantic import Field
 
 from synth.analysis.feature_matching import BETA, MATCH_TAU, REVERSE_WEIGHT, WARP_TAU
 from synth.analysis.features import feature_map, feature_overlay
-from synth.analysis.tensor import ORIENTED_COHERENCE, coherence, structure_tensor
+from synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
 from synth.api import MethodSpec, Progress, Result, register
-from synth.colour import to_grey
 from synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
@@ -213,8 +212,7 @@ def reverse_weight_for(exemplar: np.ndarray) -> float:
     :data:`~synth.analysis.feature_matching.REVERSE_WEIGHT` below
     :data:`~synth.analysis.tensor.ORIENTED_COHERENCE`, 0 (the paper's eq 2) at or above it.
     """
-    coh = float(coherence(structure_tensor(to_grey(exemplar))).mean())
-    return REVERSE_WEIGHT if coh < ORIENTED_COHERENCE else 0.0
+    return REVERSE_WEIGHT if mean_coherence(exemplar) < ORIENTED_COHERENCE else 0.0
 
 
 def run_feature_guided(

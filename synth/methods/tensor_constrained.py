@@ -257,7 +257,7 @@ def run_tensor_constrained(
     report = checked_progress(progress)
     t0 = time.perf_counter()
     s_in = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
-    if params.refinement_size is None:
+    if params.refinement == "square" and params.refinement_size is None:  # unused by 'same' passes
         params = params.model_copy(update={"refinement_size": refinement_size_for(s_in, params)})
     # Half the work estimate each: the structure stage runs on more levels, the texture on richer data.
     s_out, src_structure, stats_structure = synthesize_tensor_field(

@@ -402,3 +402,15 @@ def test_neighbourhood_dissimilarity_is_sum_over_tensors(metric: str) -> None:
     np.testing.assert_allclose(
         neighbourhood_dissimilarity(f1, f2, metric), tensor_dissimilarity(f1, f2, metric).sum(axis=-1)
     )
+
+
+def test_mean_coherence_of_stripes_noise_and_rgb() -> None:
+    """Straight stripes are fully oriented, white noise is not, and RGB is measured on its grey."""
+    from synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
+
+    _, x = np.mgrid[0:64, 0:64]
+    stripes = (0.5 + 0.5 * np.sin(2 * np.pi * x / 8.0)).astype(np.float32)
+    noise = np.random.default_rng(0).random((64, 64)).astype(np.float32)
+    assert mean_coherence(stripes) > 0.95 > ORIENTED_COHERENCE > mean_coherence(noise)
+    rgb = np.repeat(stripes[..., None], 3, axis=2)
+    assert mean_coherence(rgb) == pytest.approx(mean_coherence(stripes), abs=1e-6)
