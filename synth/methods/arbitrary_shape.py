@@ -52,6 +52,15 @@ Choices the paper leaves open, and departures (why)
   (:data:`ORIENTED_COHERENCE`): strongly oriented exemplars get :data:`RECIPES` ``'fibres'``, weakly
   oriented ones (soot) ``'weak'``; a recipe sets only the fields left at their defaults, and
   ``recipe='paper'`` keeps every field as given (their defaults: the paper's settings).
+- The ``'fibres'`` recipe adds square refinement passes (``iterations=4, refinement='square'``; the
+  paper allows a causal or a square neighbourhood, section 3, and uses 2 causal passes): the causal
+  lexicographic first pass lays the strands down, and three passes that compare the whole 13 x 13
+  square in a random order, every neighbour proposing its continuation, mend the kinks it leaves where
+  strands turn against the scan (the waves' crests and troughs, whose kinks repeated down the rows).
+  Wood grain on waves, seeds 1-3: strand ratio 0.72, 0.66, 0.72 -> 0.89, 0.83, 0.82 at agreement
+  0.08-0.09 (docs/arbitrary-shape.md). The previous recipe (a recipe sets only fields whose value
+  is the default, so ``iterations=2`` alone would be replaced): ``recipe='paper',
+  rotation_reference='local', window_search='strict', w=0.5, histogram_weight=5``.
 - k-coherence sets over ``D_M`` cost memory in proportion to ``M`` times the exemplar's area times
   the neighbourhood: ``k`` defaults to 0 here and is refused when the sets would not fit
   (:data:`K_SET_MEMORY_LIMIT`).
@@ -140,11 +149,21 @@ GREY_LABELS = 16
 #: measurements). 'fibres' (strongly oriented exemplars): every tensor of S_con turned to the constraint
 #: ('local'), the strict rotation window with proposals moved across copies (transfer_candidates, a
 #: field default), intensities and tensors weighed equally (W = 0.5) and grey-level histogram matching,
-#: so that strands continue along the constraint with the exemplar's grey levels. 'weak' (soot-like
+#: so that strands continue along the constraint with the exemplar's grey levels; then three square
+#: refinement passes in a random order (4 passes, refinement='square', the whole 13 x 13 square), which
+#: mend the kinks the causal lexicographic first pass leaves where the strands turn (the waves' crests).
+#: 'weak' (soot-like
 #: exemplars, whose own orientations scatter): 'local', the soot's short fringes' scale (sigma_w = 2),
 #: the paper's square neighbourhood with a random walk, 7 x 7, 4 passes, W = 0.2.
 RECIPES: dict[str, dict[str, object]] = {
-    "fibres": {"rotation_reference": "local", "window_search": "strict", "w": 0.5, "histogram_weight": 5.0},
+    "fibres": {
+        "rotation_reference": "local",
+        "window_search": "strict",
+        "w": 0.5,
+        "histogram_weight": 5.0,
+        "iterations": 4,
+        "refinement": "square",
+    },
     "weak": {
         "rotation_reference": "local",
         "sigma_w": 2.0,

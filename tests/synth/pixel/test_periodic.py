@@ -87,10 +87,10 @@ def test_the_default_output_shows_the_seam_the_measure_catches(method: str) -> N
     """The same check fails without ``periodic``: a causal scan closes at the tile borders.
 
     arbitrary-shape with the paper's settings and proposals dropped outside the rotation window (the
-    configuration this test was written for). Its defaults (fibres recipe, transfer_candidates) keep a
-    seam too, less far above the interior on this case (mean ratio 1.30, rank 0.79; with
-    transfer_candidates alone 1.44, 0.70): the interior's lines vary more. wei-levoy with the paper's
-    passes: its default square refinement already looks across the borders."""
+    configuration this test was written for). The fibres recipe's causal passes alone keep a seam too,
+    less far above the interior on this case (mean ratio 1.30, rank 0.79; with transfer_candidates alone
+    1.44, 0.70); its square refinement passes (the defaults since) look across the borders: 0.86, 0.30.
+    wei-levoy with the paper's passes: its default square refinement already looks across the borders."""
     paper = {"recipe": "paper", "transfer_candidates": False} if method == "arbitrary-shape" else PAPER_WL
     ratio, rank = _mean_seam(method, periodic=False, extra=paper)
     assert ratio > 1.3 and rank > 0.85, (ratio, rank)
