@@ -132,7 +132,7 @@ class NeighbourhoodParams(MethodParams):
         return self.scan or ("lexicographic" if self.neighbourhood == "causal" else "random")
 
     def search_settings(
-        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5, **search: float
+        self, *, size: int, levels: int, iterations: int, alpha: float = 0.5, **search: float | None
     ) -> SearchSettings:
         """The driver's settings from these parameters; ``search`` overrides internal knobs (k-set size)."""
         return SearchSettings(

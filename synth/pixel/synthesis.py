@@ -146,6 +146,9 @@ class SearchSettings:
     #: the level's side) in a random order, every neighbour proposing candidates (always on when periodic).
     refine_square: bool = False
     refine_size: int = 0
+    #: With guidance: eq 13's ``p`` in the refinement passes (2, 3, ...); None = the first pass's ``p``.
+    #: 1 makes them match pixels only, the guidance having laid out the first pass.
+    refine_p: float | None = None
 
 
 @dataclass(frozen=True)
@@ -458,17 +461,25 @@ def _window_state(window: CandidateWindow | None, level: int) -> ClassWindow:
 
 
 def _part_weights(
-    compared: np.ndarray, n_par: int, unit: float, p: float, guidance: Guidance | None, gunit: float
+    compared: np.ndarray,
+    n_par: int,
+    unit: float,
+    p: float,
+    guidance: Guidance | None,
+    gunit: float,
+    gweight: float | None = None,
 ) -> tuple[float, np.ndarray, float]:
     """Per-entry weights of the pixel part (same and parent level) and of the guidance part, and the
     guidance offsets, when a pass compares the same-level offsets ``compared`` (eq 13, each part
-    divided by its typical distance times the number of positions it compares)."""
+    divided by its typical distance times the number of positions it compares; the guidance part
+    weighs ``gweight``, by default ``guidance.weight``)."""
     w_pix = (p if guidance is not None else 1.0) / (unit * (len(compared) + n_par))
     if guidance is None:
         return w_pix, np.zeros((0, 2), np.int32), 0.0
     # The guidance (tensor) part has the pixel part's shape, centre included: the field is known there.
     gui = np.ascontiguousarray(np.vstack([[0, 0], compared]), dtype=np.int32)
-    return w_pix, gui, guidance.weight / (gunit * len(gui))
+    weight = guidance.weight if gweight is None else gweight
+    return w_pix, gui, weight / (gunit * len(gui))
 
 
 def entry_weights(offsets: np.ndarray, side: int, falloff: float) -> np.ndarray:
@@ -601,6 +612,10 @@ def synthesize_source_map(
 
         n_par = len(par_offs) if has_parent else 0
         w_pix, gui_offs, w_gui = _part_weights(offs, n_par, unit, p, guidance, gunit)
+        # Refinement passes may weigh eq 13 otherwise (``refine_p``); None keeps the first pass's weights.
+        p_ref, gw_ref = (p, None)
+        if settings.refine_p is not None:
+            p_ref, gw_ref = settings.refine_p, 1.0 - settings.refine_p
         mask = _level_mask(ex_masks, level, ex.shape[:2], valid)
         src = _initial_sources(shape, valid, mask, srcs[level + 1] if has_parent else None, rng)
         exact = settings.search == "exact"
@@ -673,7 +688,9 @@ def synthesize_source_map(
             if refine and it == 1:  # square refinement: the whole square, weighed as such
                 side = min(settings.refine_size or size, size)
                 ref_offs = _nearest_first(neighbourhood_offsets(side, "square"), settings.falloff)
-                w_ref, gui_ref, w_gui_ref = _part_weights(ref_offs, n_par, unit, p, guidance, gunit)
+                w_ref, gui_ref, w_gui_ref = _part_weights(
+                    ref_offs, n_par, unit, p_ref, guidance, gunit, gw_ref
+                )
                 state.cur = state.cur._replace(
                     offsets=ref_offs,
                     weight=w_ref,

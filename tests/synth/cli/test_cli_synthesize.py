@@ -67,7 +67,7 @@ def test_tensor_method_writes_every_artifact(exemplar: Path, tmp_path: Path) -> 
     assert np.asarray(Image.open(out / "output.png")).shape == (32, 48)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["method"] == "tensor-constrained" and manifest["seed"] == 4
-    assert manifest["params"]["structure_levels"] == 2 and manifest["params"]["metric"] == "SO"
+    assert manifest["params"]["structure_levels"] == 2 and manifest["params"]["metric"] == "LE"
     assert {"texsynth", "numpy", "numba"} <= set(manifest["versions"])
     assert "total" in manifest["timings"]
     metrics = json.loads((out / "metrics.json").read_text())

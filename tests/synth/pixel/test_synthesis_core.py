@@ -799,7 +799,7 @@ def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
         0.156,
         "square",
         None,
-        10.0,
+        3.0,
     )
     ex = _rng_image((32, 32), seed=9)
     old = {"levels": 3, "falloff": 0.0, "refinement": "same", "kset_size": 9, "kset_dims": 16}
@@ -837,3 +837,46 @@ def test_tensor_constrained_refinement_size_follows_the_exemplars_orientation() 
         "tensor-constrained", noise, size=(32, 32), seed=1, params={**common, "refinement_size": 5}
     )
     assert kept.params["refinement_size"] == 5
+
+
+def test_brick_seam_defaults_and_the_earlier_settings_differ() -> None:
+    """The brick-seam defaults (LE metric, pixel-only refinement passes, texture histogram weight 3) are
+    departures; ``metric='SO', refinement_p=None, texture_histogram_weight=10`` restore the earlier run."""
+    from synth.methods.tensor_constrained import TensorConstrainedParams
+
+    tc = TensorConstrainedParams()
+    assert (tc.metric, tc.refinement_p, tc.texture_histogram_weight) == ("LE", 1.0, 3.0)
+    ex = _rng_image((40, 40), seed=3)
+    common = {"neighbourhood_size": 7, "structure_levels": 2, "parent_size": 3}
+    old = {**common, "metric": "SO", "refinement_p": None, "texture_histogram_weight": 10.0}
+    a = synthesize("tensor-constrained", ex, size=(32, 32), seed=1, params=old)
+    b = synthesize("tensor-constrained", ex, size=(32, 32), seed=1, params=common)
+    assert a.image.tobytes() != b.image.tobytes()
+
+
+@pytest.mark.parametrize("value", [-0.1, 1.5])
+def test_refinement_p_is_checked(value: float) -> None:
+    with pytest.raises(InvalidParameter, match="refinement_p"):
+        synthesize("tensor-constrained", _rng_image((40, 40)), size=(24, 24), params={"refinement_p": value})
+
+
+@pytest.mark.parametrize("search", ["exact", "kcoherence"])
+def test_kernel_matches_reference_with_pixel_only_refinement(search: str) -> None:
+    """``refine_p=1``: the square refinement passes drop the guidance part (weight 0); kernel and
+    reference agree, and the run differs from one whose refinement keeps eq 13's weights."""
+    ex = _rng_image((24, 24), seed=5)
+    feats, code = tensor_features(structure_tensor(ex), "LE")
+    out_tensors = structure_tensor(_rng_image((12, 12), seed=6), mode="wrap")
+    guidance = Guidance(
+        out_levels=[tensor_features(out_tensors, "LE")[0]], ex_levels=[feats], metric=code, weight=0.4, size=3
+    )
+    base = {"size": 5, "levels": 1, "iterations": 2, "search": search, "k": 2, "refine_square": True}
+    kwargs = {"ex_levels": [ex[..., None]], "out_shapes": [(12, 12)], "p": 0.6, "guidance": guidance}
+    kwargs["seed"] = 2
+    _run_both(settings=SearchSettings(**base, refine_p=1.0), **kwargs)  # type: ignore[arg-type]
+    same = synthesize_source_map(settings=SearchSettings(**base), **kwargs)[0][0]  # type: ignore[arg-type]
+    # refine_p equal to p weighs the refinement as refine_p=None does: the same bytes
+    alike = synthesize_source_map(settings=SearchSettings(**base, refine_p=0.6), **kwargs)[0][0]  # type: ignore[arg-type]
+    pixels = synthesize_source_map(settings=SearchSettings(**base, refine_p=1.0), **kwargs)[0][0]  # type: ignore[arg-type]
+    np.testing.assert_array_equal(same, alike)
+    assert same.tobytes() != pixels.tobytes()
