@@ -103,7 +103,9 @@ field and more stubs on seed 2), 16 structure candidates (0.80, stubs), p 0.9 (0
 levels (0.63 (0.66): fewer stubs but some, CPU 1.81 s). On top of the flat neighbourhoods: 2 texture
 levels (0.68 (0.84), the cleanest joints seen, but CPU 2.43 s, +50 %), texture histogram weight 1
 (0.72, more stubs), 3 structure passes (0.97 (1.20)), 5 structure levels (0.90 (1.03), stubs), 16
-structure candidates (0.91, stubs on seed 3), p 0.9 (0.80; periodic tile_seam 1.29 (1.72)).
+structure candidates (0.91, stubs on seed 3), p 0.9 (0.80; periodic tile_seam 1.29 (1.72)), 3 texture
+passes (0.78 (0.80), about the same stubs, CPU 2.00 s), k 3 (0.90, more stubs), texture histogram
+weight 5 (1.06 (1.10)).
 
 Tileable outputs: ``periodic=True`` makes both stages' searches close the tile borders (see
 :mod:`synth.pixel.synthesis`; a causal neighbourhood then needs two or more passes in each stage).
