@@ -80,6 +80,33 @@ CPU per run (128 -> 256, seeds 1-3, earlier settings then defaults, alternating 
 Tileable brick (``periodic=True``, :func:`synth.evaluate.tile_seam` ratio, seeds 1-3): 3.98 (6.09) ->
 1.65 (2.06); soot 0.96 (1.13), gravel 1.08 (1.23): brick's tile borders still show.
 
+Default departure of the brick-stubs work (128 -> 256, seeds 1-3, mean (worst), measured like
+docs/quality.md; ``falloff=0.156`` gives the earlier bytes). Brick's outputs still showed short horizontal
+joint pieces ending mid-brick (stubs), and the structure stage's own source map showed them too. The
+falloff (sigma = 0.156 x 13 = 2 pixels) left a 13 x 13 neighbourhood about 5 x 5 effective pixels, too
+few to see whether a joint meets a vertical one 10 pixels away. ``falloff=None`` (the default now) is
+flat (0, the paper) for strongly oriented exemplars with structures in two directions, 0.156 otherwise
+(:func:`falloff_for`: mean coherence >= :data:`ORIENTED_COHERENCE` and a coherence-weighted fraction
+>= 0.05 oriented more than 45 degrees off the dominant orientation, :func:`cross_orientation_fraction`:
+brick 0.14, bent laminae 0.001, wood grain 0.000; grass, gravel and soot are weakly oriented). Only
+brick moves (the five others give the same bytes as before). Brick: grey KL 0.009 (0.011) -> 0.006
+(0.007), orientation KL 0.026 (0.033) -> 0.036 (0.047), seam 0.83 (0.90) -> 0.91 (0.95), strand ratio
+1.37 (1.42) -> 1.25 (1.30); by eye most stubs are gone (a few short ones remain, 1-3 per output, where
+wei-levoy has none); periodic ``tile_seam`` 1.65 (2.06) -> 0.72 (1.02), no joints lined up along the
+tile border. CPU per brick run 1.62 -> 1.70 s (median of 6, alternating). Flat everywhere would cost
+the one-directional oriented exemplars: laminae seam 0.95 -> 1.00, orientation KL 0.045 -> 0.062
+(0.090); wood seam 0.93 -> 1.07. Not kept (brick, seeds 1-3): flat in the structure stage only (seam
+0.89 (0.95), stubs) or in the texture stage only (0.90 (1.10), stubs); falloff 0.3 in both (0.84
+(1.01), stubs); with the falloff, 3 or 4 texture passes (0.75, 0.70: the same stubs, pixel-only
+passes keep them), 4 structure passes (0.87, stubs), structure_k 2 (0.76, smeared joint regions in the
+field and more stubs on seed 2), 16 structure candidates (0.80, stubs), p 0.9 (0.72, stubs), 2 texture
+levels (0.63 (0.66): fewer stubs but some, CPU 1.81 s). On top of the flat neighbourhoods: 2 texture
+levels (0.68 (0.84), the cleanest joints seen, but CPU 2.43 s, +50 %), texture histogram weight 1
+(0.72, more stubs), 3 structure passes (0.97 (1.20)), 5 structure levels (0.90 (1.03), stubs), 16
+structure candidates (0.91, stubs on seed 3), p 0.9 (0.80; periodic tile_seam 1.29 (1.72)), 3 texture
+passes (0.78 (0.80), about the same stubs, CPU 2.00 s), k 3 (0.90, more stubs), texture histogram
+weight 5 (1.06 (1.10)).
+
 Tileable outputs: ``periodic=True`` makes both stages' searches close the tile borders (see
 :mod:`synth.pixel.synthesis`; a causal neighbourhood then needs two or more passes in each stage).
 The structure field needs nothing else to wrap: ``S_out`` is copied from ``S_in`` and its pyramid
@@ -114,6 +141,8 @@ from synth.pixel.synthesis import (
 
 __all__ = [
     "TensorConstrainedParams",
+    "cross_orientation_fraction",
+    "falloff_for",
     "orientation_labels",
     "run_tensor_constrained",
     "synthesize_tensor_field",
@@ -168,12 +197,14 @@ class TensorConstrainedParams(NeighbourhoodParams):
     # Measured within 5% of exact search on both stages at k = 3 (docs/benchmarks.md); 2 with the
     # falloff and square refinement below (docs/quality.md, issue 13).
     k: int = Field(2, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
-    falloff: float = Field(
-        0.156,
+    falloff: float | None = Field(
+        None,
         ge=0.0,
         le=2.0,
         description="Gaussian weighting of both stages' same-level neighbourhood (Efros & Leung 1999): "
-        "sigma = falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper).",
+        "sigma = falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper). None: chosen "
+        "from the exemplar, 0 for strongly oriented exemplars with structures in two directions (brick's "
+        "joints: the whole neighbourhood must see whether a joint meets another), 0.156 otherwise.",
     )
     refinement: Literal["same", "square"] = Field(
         "square",
@@ -246,6 +277,44 @@ def refinement_size_for(s_in: np.ndarray, params: TensorConstrainedParams) -> in
     return params.neighbourhood_size if oriented else min(WEAK_REFINEMENT_SIZE, params.neighbourhood_size)
 
 
+#: Falloff of every exemplar but the crossed oriented ones (``falloff=None``; issue 13's value).
+DEFAULT_FALLOFF = 0.156
+#: An oriented exemplar whose cross fraction (:func:`cross_orientation_fraction`) reaches this has
+#: structures in two directions (brick 0.14; bent laminae 0.001, wood grain 0.000).
+CROSSED_FRACTION = 0.05
+
+
+def cross_orientation_fraction(s_in: np.ndarray) -> float:
+    """The coherence-weighted fraction of positions oriented more than 45 degrees away from the
+    exemplar's dominant orientation (the coherence-weighted mean of the doubled angles): how much of
+    its oriented structure runs across the rest (brick's horizontal joints across the vertical ones)."""
+    coh = coherence(s_in).astype(np.float64)
+    theta = orientation(s_in).astype(np.float64)
+    total = float(coh.sum())
+    if total <= 0.0:
+        return 0.0
+    dominant = 0.5 * np.angle(np.sum(coh * np.exp(2j * theta)))
+    off = 0.5 * np.abs(np.angle(np.exp(2j * (theta - dominant))))
+    return float(coh[off > np.pi / 4].sum() / total)
+
+
+def falloff_for(s_in: np.ndarray) -> float:
+    """The falloff ``falloff=None`` stands for, from the exemplar's tensors.
+
+    Why flat for crossed oriented exemplars (Akl 2014 compares flat neighbourhoods; the falloff is issue
+    13's departure): a falloff of 0.156 x 13 leaves a 13 x 13 neighbourhood about 5 x 5 effective pixels,
+    too few to see whether a brick's horizontal joint meets a vertical one 10 pixels away, so both stages
+    laid down joint pieces ending mid-brick (stubs). Measured on brick (128 -> 256, seeds 1-3, mean
+    (worst)), flat in both stages: stubs mostly gone by eye, seam 0.83 (0.90) -> 0.91 (0.95), periodic
+    ``tile_seam`` 1.65 (2.06) -> 0.72 (1.02); flat in one stage only leaves the stubs. Flat on bent
+    laminae and wood grain (oriented in one direction) raises their seams (0.95 -> 1.00, 0.93 -> 1.07),
+    hence the split by :data:`CROSSED_FRACTION` within the oriented exemplars (:data:`ORIENTED_COHERENCE`).
+    """
+    oriented = float(coherence(s_in).mean()) >= ORIENTED_COHERENCE
+    crossed = oriented and cross_orientation_fraction(s_in) >= CROSSED_FRACTION
+    return 0.0 if crossed else DEFAULT_FALLOFF
+
+
 def orientation_labels(tensors: np.ndarray, bins: int = ORIENTATION_LABELS) -> tuple[np.ndarray, np.ndarray]:
     """Each position's orientation bin over ``(-pi/2, pi/2]`` and the fraction of positions per bin:
     the labels and target of orientation-histogram matching in the structure stage."""
@@ -258,6 +327,8 @@ def synthesize_tensor_field(
     s_in: np.ndarray, size: tuple[int, int], params: TensorConstrainedParams, *, seed: int, progress, span
 ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """Stage 1: synthesize ``S_out`` from ``S_in``; returns ``(S_out, source map, stats)``."""
+    if params.falloff is None:
+        params = params.model_copy(update={"falloff": falloff_for(s_in)})
     levels = params.structure_levels
     code = tensor_features(s_in[:1, :1], params.metric)[1]
     tensor_levels = gaussian_pyramid(s_in, levels)
@@ -307,6 +378,8 @@ def run_tensor_constrained(
     report = checked_progress(progress)
     t0 = time.perf_counter()
     s_in = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
+    if params.falloff is None:
+        params = params.model_copy(update={"falloff": falloff_for(s_in)})
     if params.refinement == "square" and params.refinement_size is None:  # unused by 'same' passes
         params = params.model_copy(update={"refinement_size": refinement_size_for(s_in, params)})
     # Half the work estimate each: the structure stage runs on more levels, the texture on richer data.

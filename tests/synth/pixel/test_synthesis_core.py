@@ -793,10 +793,11 @@ def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
 
     wl, tc = WeiLevoyParams(), TensorConstrainedParams()
     assert (wl.levels, wl.falloff, wl.refinement, wl.kset_size, wl.kset_dims) == (2, 0.156, "square", 7, 8)
+    # falloff None: 0.156 (issue 13's value) unless the exemplar is crossed and oriented (brick-stubs work).
     assert (tc.k, tc.p, tc.falloff, tc.refinement, tc.refinement_size, tc.texture_histogram_weight) == (
         2,
         0.8,
-        0.156,
+        None,
         "square",
         None,
         3.0,
@@ -837,6 +838,32 @@ def test_tensor_constrained_refinement_size_follows_the_exemplars_orientation() 
         "tensor-constrained", noise, size=(32, 32), seed=1, params={**common, "refinement_size": 5}
     )
     assert kept.params["refinement_size"] == 5
+
+
+def test_tensor_constrained_falloff_is_flat_only_for_crossed_oriented_exemplars() -> None:
+    """``falloff=None``: flat for an oriented exemplar with structures in two directions (brick's joints),
+    0.156 for one-directional stripes and for weakly oriented noise; the run records the value it used and
+    an explicit falloff is kept."""
+    from synth.analysis.tensor import structure_tensor
+    from synth.methods.tensor_constrained import DEFAULT_FALLOFF, cross_orientation_fraction, falloff_for
+
+    y, x = np.mgrid[0:48, 0:48]
+    stripes = (0.5 + 0.5 * np.sin(2 * np.pi * (x + 0.3 * y) / 6.0)).astype(np.float32)
+    from skimage import data as skdata
+
+    bricks = skdata.brick()[:128, :128].astype(np.float32) / 255.0  # bench_quality's brick crop
+    noise = _rng_image((48, 48), seed=4)
+    assert cross_orientation_fraction(structure_tensor(stripes)) < 0.01
+    assert cross_orientation_fraction(structure_tensor(bricks)) > 0.1
+    assert falloff_for(structure_tensor(bricks)) == 0.0
+    assert falloff_for(structure_tensor(stripes)) == DEFAULT_FALLOFF
+    assert falloff_for(structure_tensor(noise)) == DEFAULT_FALLOFF
+    common = {"neighbourhood_size": 9, "structure_levels": 2, "texture_levels": 1}
+    assert synthesize("tensor-constrained", stripes, size=(32, 32), seed=1, params=common).params[
+        "falloff"
+    ] == DEFAULT_FALLOFF
+    kept = synthesize("tensor-constrained", noise, size=(32, 32), seed=1, params={**common, "falloff": 0.3})
+    assert kept.params["falloff"] == 0.3
 
 
 def test_brick_seam_defaults_and_the_earlier_settings_differ() -> None:
