@@ -32,6 +32,7 @@ __all__ = [
     "ORIENTED_COHERENCE",
     "Metric",
     "coherence",
+    "cross_orientation_fraction",
     "dominant_orientation",
     "eigenvalues",
     "log_tensors",
@@ -146,6 +147,20 @@ def mean_coherence(image: np.ndarray, sigma_d: float = 1.0, sigma_w: float = 3.0
     methods with their own threshold): fibres, laminae, fringes, brick joints 0.83-0.97; HRTEM soot 0.39.
     """
     return float(coherence(structure_tensor(to_grey(image), sigma_d, sigma_w)).mean())
+
+
+def cross_orientation_fraction(tensors: np.ndarray) -> float:
+    """The coherence-weighted fraction of positions oriented more than 45 degrees away from the
+    exemplar's dominant orientation (the coherence-weighted mean of the doubled angles): how much of
+    its oriented structure runs across the rest (brick's horizontal joints across the vertical ones)."""
+    coh = coherence(tensors).astype(np.float64)
+    theta = orientation(tensors).astype(np.float64)
+    total = float(coh.sum())
+    if total <= 0.0:
+        return 0.0
+    dominant = 0.5 * np.angle(np.sum(coh * np.exp(2j * theta)))
+    off = 0.5 * np.abs(np.angle(np.exp(2j * (theta - dominant))))
+    return float(coh[off > np.pi / 4].sum() / total)
 
 
 def coherence(tensors: np.ndarray) -> np.ndarray:

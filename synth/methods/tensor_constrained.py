@@ -87,7 +87,8 @@ falloff (sigma = 0.156 x 13 = 2 pixels) left a 13 x 13 neighbourhood about 5 x 5
 few to see whether a joint meets a vertical one 10 pixels away. ``falloff=None`` (the default now) is
 flat (0, the paper) for strongly oriented exemplars with structures in two directions, 0.156 otherwise
 (:func:`falloff_for`: mean coherence >= :data:`ORIENTED_COHERENCE` and a coherence-weighted fraction
->= 0.05 oriented more than 45 degrees off the dominant orientation, :func:`cross_orientation_fraction`:
+>= 0.05 oriented more than 45 degrees off the dominant orientation,
+:func:`synth.analysis.tensor.cross_orientation_fraction`:
 brick 0.14, bent laminae 0.001, wood grain 0.000; grass, gravel and soot are weakly oriented). Only
 brick moves (the five others give the same bytes as before). Brick: grey KL 0.009 (0.011) -> 0.006
 (0.007), orientation KL 0.026 (0.033) -> 0.036 (0.047), seam 0.83 (0.90) -> 0.91 (0.95), strand ratio
@@ -126,7 +127,14 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.tensor import ORIENTED_COHERENCE, Metric, coherence, orientation, structure_tensor
+from synth.analysis.tensor import (
+    ORIENTED_COHERENCE,
+    Metric,
+    coherence,
+    cross_orientation_fraction,
+    orientation,
+    structure_tensor,
+)
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.neighbourhood import Shape
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
@@ -141,7 +149,6 @@ from synth.pixel.synthesis import (
 
 __all__ = [
     "TensorConstrainedParams",
-    "cross_orientation_fraction",
     "falloff_for",
     "orientation_labels",
     "run_tensor_constrained",
@@ -279,23 +286,9 @@ def refinement_size_for(s_in: np.ndarray, params: TensorConstrainedParams) -> in
 
 #: Falloff of every exemplar but the crossed oriented ones (``falloff=None``; issue 13's value).
 DEFAULT_FALLOFF = 0.156
-#: An oriented exemplar whose cross fraction (:func:`cross_orientation_fraction`) reaches this has
-#: structures in two directions (brick 0.14; bent laminae 0.001, wood grain 0.000).
+#: An oriented exemplar whose cross fraction (:func:`synth.analysis.tensor.cross_orientation_fraction`)
+#: reaches this has structures in two directions (brick 0.14; bent laminae 0.001, wood grain 0.000).
 CROSSED_FRACTION = 0.05
-
-
-def cross_orientation_fraction(s_in: np.ndarray) -> float:
-    """The coherence-weighted fraction of positions oriented more than 45 degrees away from the
-    exemplar's dominant orientation (the coherence-weighted mean of the doubled angles): how much of
-    its oriented structure runs across the rest (brick's horizontal joints across the vertical ones)."""
-    coh = coherence(s_in).astype(np.float64)
-    theta = orientation(s_in).astype(np.float64)
-    total = float(coh.sum())
-    if total <= 0.0:
-        return 0.0
-    dominant = 0.5 * np.angle(np.sum(coh * np.exp(2j * theta)))
-    off = 0.5 * np.abs(np.angle(np.exp(2j * (theta - dominant))))
-    return float(coh[off > np.pi / 4].sum() / total)
 
 
 def falloff_for(s_in: np.ndarray) -> float:

@@ -844,8 +844,8 @@ def test_tensor_constrained_falloff_is_flat_only_for_crossed_oriented_exemplars(
     """``falloff=None``: flat for an oriented exemplar with structures in two directions (brick's joints),
     0.156 for one-directional stripes and for weakly oriented noise; the run records the value it used and
     an explicit falloff is kept."""
-    from synth.analysis.tensor import structure_tensor
-    from synth.methods.tensor_constrained import DEFAULT_FALLOFF, cross_orientation_fraction, falloff_for
+    from synth.analysis.tensor import cross_orientation_fraction, structure_tensor
+    from synth.methods.tensor_constrained import DEFAULT_FALLOFF, falloff_for
 
     y, x = np.mgrid[0:48, 0:48]
     stripes = (0.5 + 0.5 * np.sin(2 * np.pi * (x + 0.3 * y) / 6.0)).astype(np.float32)
