@@ -837,3 +837,24 @@ def test_tensor_constrained_refinement_size_follows_the_exemplars_orientation() 
         "tensor-constrained", noise, size=(32, 32), seed=1, params={**common, "refinement_size": 5}
     )
     assert kept.params["refinement_size"] == 5
+
+
+def test_initial_source_map_starts_the_synthesis_and_every_pass_refines() -> None:
+    """``initial``: the output starts from the given sources and every pass compares the square in a
+    random order; started from the exemplar itself (each neighbourhood matches its own), the interior
+    (away from the output's wrapped borders) stays the exemplar, kernel and reference alike; without
+    ``initial`` it does not."""
+    ex = np.random.default_rng(0).random((24, 24, 1)).astype(np.float32)
+    ident = np.stack(np.mgrid[0:24, 0:24], axis=-1).astype(np.int64)
+    settings = SearchSettings(size=5, shape="square", scan="random", iterations=1, k=2, refine_square=True)
+    inner = (slice(4, 20), slice(4, 20))
+    kept = []
+    for reference in (False, True):
+        srcs, _ = synthesize_source_map(
+            [ex], [(24, 24)], settings, seed=1, initial=[ident], reference=reference
+        )
+        kept.append(srcs[0])
+        assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() > 0.95
+    np.testing.assert_array_equal(kept[0], kept[1])
+    srcs, _ = synthesize_source_map([ex], [(24, 24)], settings, seed=1)
+    assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() < 0.1
