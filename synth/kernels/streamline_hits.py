@@ -44,6 +44,21 @@ def _sample(field, r, c, periodic):
     return top * (1 - fr) + bot * fr
 
 
+@kernel(inline="always")
+def _half_angle(c2, s2):
+    """Unit direction ``(d_row, d_col)`` of the angle half of the doubled angle ``(c2, s2)`` (any
+    length; y up): ``(-sin phi, cos phi)`` by the half-angle formulas, no trigonometric call."""
+    n = math.sqrt(c2 * c2 + s2 * s2)
+    if n == 0.0:
+        return 0.0, 1.0
+    c = c2 / n
+    cp = math.sqrt(max(0.5 * (1.0 + c), 0.0))
+    sp = math.sqrt(max(0.5 * (1.0 - c), 0.0))
+    if s2 < 0:
+        sp = -sp
+    return -sp, cp
+
+
 @kernel
 def first_hits(c2, s2, label, max_steps, step, periodic):
     """Per pixel: steps to the first cut pixel (-1: none within ``max_steps``), the hit position
@@ -57,8 +72,7 @@ def first_hits(c2, s2, label, max_steps, step, periodic):
     first = np.zeros((h, w, 2))
     for y in range(h):
         for x in range(w):
-            phi = 0.5 * math.atan2(s2[y, x], c2[y, x])
-            pr, pc = -math.sin(phi), math.cos(phi)
+            pr, pc = _half_angle(c2[y, x], s2[y, x])
             if pc < 0 or (pc == 0 and pr < 0):
                 pr, pc = -pr, -pc
             if label[y, x] >= 0:
@@ -72,13 +86,11 @@ def first_hits(c2, s2, label, max_steps, step, periodic):
                 r, c = float(y), float(x)
                 vr, vc = sign * pr, sign * pc
                 for k in range(1, min(max_steps, best - 1) + 1):
-                    a = 0.5 * math.atan2(_sample(s2, r, c, periodic), _sample(c2, r, c, periodic))
-                    k1r, k1c = -math.sin(a), math.cos(a)
+                    k1r, k1c = _half_angle(_sample(c2, r, c, periodic), _sample(s2, r, c, periodic))
                     if k1r * vr + k1c * vc < 0:
                         k1r, k1c = -k1r, -k1c
                     mr, mc = r + 0.5 * step * k1r, c + 0.5 * step * k1c
-                    a = 0.5 * math.atan2(_sample(s2, mr, mc, periodic), _sample(c2, mr, mc, periodic))
-                    k2r, k2c = -math.sin(a), math.cos(a)
+                    k2r, k2c = _half_angle(_sample(c2, mr, mc, periodic), _sample(s2, mr, mc, periodic))
                     if k2r * k1r + k2c * k1c < 0:
                         k2r, k2c = -k2r, -k2c
                     r, c = r + step * k2r, c + step * k2c
