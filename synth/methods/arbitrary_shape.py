@@ -58,7 +58,7 @@ Choices the paper leaves open, and departures (why)
   output from the hints (an initialisation by the exemplar laid along the constraint) and makes every
   pass a square refinement pass (:func:`synth.pixel.synthesis.synthesize_source_map`'s ``initial``).
   Wood grain, 256 x 256, seeds 1-3: grey variance along the strands over across them
-  (:mod:`synth.evaluate.strands`) 0.51-0.70 -> 0.14-0.26, agreement 0.076-0.091 -> 0.023-0.041; not the
+  (:mod:`synth.evaluate.strands`) 0.51-0.70 -> 0.14-0.25, agreement 0.076-0.091 -> 0.023-0.041; not the
   default, since the strand ratio drops on rings for fringes and laminae (their rings come out closed,
   and the measure leaves closed loops out; docs/arbitrary-shape.md).
 - ``recipe`` (default ``'auto'``): the settings are chosen from the exemplar's mean coherence
