@@ -18,9 +18,10 @@ import numpy as np
 
 from benchmarks._report import DATA as SHARED_DATA
 from benchmarks._report import median_time, write_section
-from synth.analysis.tensor import dominant_orientation, structure_tensor
+from synth.analysis.tensor import dominant_orientation, orientation, structure_tensor
 from synth.api import synthesize
 from synth.evaluate import evaluate_pair, grey_histogram, kl_divergence
+from synth.evaluate.strands import exemplar_strand_grey, strand_grey
 from synth.io import load_image
 from synth.io.patterns import concentric_rings, grating, spiral, undulating_laminae, waves, wood_grain
 from synth.methods.arbitrary_shape import RECIPES, orientation_agreement
@@ -296,6 +297,8 @@ def figure(exemplar_name: str, path: Path) -> None:
 TARGET_STRAND = 0.8
 #: Seeds of the strands table.
 STRAND_SEEDS = (1, 2, 3)
+#: Hints laid along the constraint's strands and the output started from them (docs/arbitrary-shape.md).
+STRAND_HINTS = {"hint_layout": "strands", "initial_sources": "hints"}
 
 
 def strand_exemplars() -> dict[str, np.ndarray]:
@@ -310,8 +313,11 @@ def strand_exemplars() -> dict[str, np.ndarray]:
 
 
 def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndarray) -> dict[str, float]:
-    """Strand-length ratio, grey KL (both :func:`synth.evaluate.evaluate_pair`, as benchmarks/bench_quality)
-    and the orientation agreement with the constraint.
+    """Strand-length ratio, grey KL (both :func:`synth.evaluate.evaluate_pair`, as benchmarks/bench_quality),
+    the orientation agreement with the constraint, and ``grey``: the grey-level variance along the
+    constraint's strands over across them (:func:`synth.evaluate.strands.strand_grey`, the constraint's
+    strand direction at the methods' scale, sigma_d = 1, sigma_w = 3; the exemplar's own along its
+    fibres is :func:`synth.evaluate.strands.exemplar_strand_grey`).
 
     The strand ratio is the output's mean fringe length over the exemplar's, fringes extracted by
     :func:`synth.analysis.fringes.extract_fringes` with its defaults on each whole image (bottom-hat
@@ -325,6 +331,7 @@ def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndar
         "strand": fr["output"]["mean_length"] / fr["exemplar"]["mean_length"],
         "kl": m["grey"]["kl"],
         "agreement": orientation_agreement(image, constraint),
+        "grey": strand_grey(image, orientation(structure_tensor(constraint, 1.0, 3.0)) + np.pi / 2)["ratio"],
     }
 
 
@@ -340,6 +347,7 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
     variants = {
         "paper (`recipe='paper'`)": {"recipe": "paper"},
         "default (`auto`)": {},
+        "strand hints": STRAND_HINTS,
     }
     if previous:  # the defaults before issue 13: the paper's settings, proposals dropped outside the window
         variants = {"previous defaults": {"recipe": "paper", "transfer_candidates": False}, **variants}
@@ -359,7 +367,7 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
                     if seed == seeds[0]:
                         panels.setdefault(con_name, [con]).append(res.image)
                 cells = []
-                for key in ("strand", "kl", "agreement"):
+                for key in ("strand", "kl", "agreement", "grey"):
                     vals = [r[key] for r in runs]
                     cells.append(", ".join(f"{v:.3f}" for v in vals))
                 ok = all(
@@ -383,11 +391,19 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
             "output's strands are measured along the constraint); KL = grey-level histogram KL to the "
             "exemplar; agreement = `orientation_agreement` with the constraint (sigma_w = 4). Targets "
             f"(strongly oriented exemplars): strand > {TARGET_STRAND}, KL < {TARGET_KL}, agreement < "
-            f"{TARGET_AGREEMENT}. Time: whole `synthesize` call, median over the seeds, on a machine shared "
+            f"{TARGET_AGREEMENT}. Grey = the grey-level variance along the constraint's strands over across "
+            "them (`synth.evaluate.strands.strand_grey`; lower: each strand keeps its grey level); the "
+            "exemplars' own, along their fibres: "
+            + ", ".join(f"{n} {exemplar_strand_grey(e)['ratio']:.3f}" for n, e in strand_exemplars().items())
+            + ". Strand hints = `"
+            + ", ".join(f"{k}={v!r}" for k, v in STRAND_HINTS.items())
+            + "` on top of the recipe. "
+            f"Time: whole `synthesize` call, median over the seeds, on a machine shared "
             f"with other jobs (1-minute load average {min(loads):.1f}-{max(loads):.1f} on 2 cores).",
             "",
-            "| exemplar | constraint | parameters (recipe) | strand | KL | agreement | time (s) | meets |",
-            "|---|---|---|---|---|---|---|---|",
+            "| exemplar | constraint | parameters (recipe) | strand | KL | agreement | grey | time (s) "
+            "| meets |",
+            "|---|---|---|---|---|---|---|---|---|",
             *rows,
         ]
     )

@@ -48,6 +48,19 @@ Choices the paper leaves open, and departures (why)
 - ``histogram_weight`` (grey-level histogram matching, 16 bins; Kopf et al. 2007, eq 4's re-weighting,
   the engine's :func:`synth.kernels.pixel_search._histogram_factor`): over-used grey levels lose
   against equally good under-used ones; 0 (off) is the paper.
+- ``hint_layout='strands'`` (a departure; default ``'texture'``, the paper's route): the hints and
+  ``S_en`` come from the exemplar's fibres laid along the constraint's strands
+  (:mod:`synth.methods.strand_hints`: each strand is given one exemplar fibre along its length, cut
+  regions ``strand_hint_spacing`` apart linked so that a strand keeps its fibre across them) instead of
+  an exemplar-like texture synthesized in the exemplar's frame, whose hints jump from fibre to fibre
+  along a strand that crosses the exemplar's fibres (a patchwork of grey levels along the strands of a
+  wood grain). No exemplar-like texture is synthesized then. ``initial_sources='hints'`` starts the
+  output from the hints (an initialisation by the exemplar laid along the constraint) and makes every
+  pass a square refinement pass (:func:`synth.pixel.synthesis.synthesize_source_map`'s ``initial``).
+  Wood grain, 256 x 256, seeds 1-3: grey variance along the strands over across them
+  (:mod:`synth.evaluate.strands`) 0.51-0.70 -> 0.14-0.25, agreement 0.076-0.091 -> 0.023-0.041; not the
+  default, since the strand ratio drops on rings for fringes and laminae (their rings come out closed,
+  and the measure leaves closed loops out; docs/arbitrary-shape.md).
 - ``recipe`` (default ``'auto'``): the settings are chosen from the exemplar's mean coherence
   (:data:`ORIENTED_COHERENCE`): strongly oriented exemplars get :data:`RECIPES` ``'fibres'``, weakly
   oriented ones (soot) ``'weak'``; a recipe sets only the fields left at their defaults, and
@@ -109,6 +122,7 @@ from synth.analysis.tensor import (
     mean_coherence,
     orientation,
     rotate_tensors,
+    structure_direction,
     structure_tensor,
     wrap_angle,
 )
@@ -117,6 +131,7 @@ from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from synth.methods.strand_hints import StrandHints, fibre_table, strand_hints
 from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
 from synth.pixel.synthesis import (
     CandidateWindow,
@@ -254,6 +269,28 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         "rotated-exemplar",
         description="'rotated-exemplar': S_con, the exemplar's tensors turned by O_con (the method); "
         "'constraint': the constraint image's own tensors (the paper's naive I_sor/O, for comparison).",
+    )
+    hint_layout: Literal["texture", "strands"] = Field(
+        "texture",
+        description="Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized "
+        "in the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
+        "constraint's strands, so that each output strand is offered one fibre (one grey level) along its "
+        "length (synth.methods.strand_hints).",
+    )
+    strand_hint_spacing: int = Field(
+        128,
+        ge=8,
+        le=1024,
+        description="With hint_layout='strands': pixels between the cuts across the strands where a strand's "
+        "hinted fibre changes (longer runs of one fibre with a larger spacing).",
+    )
+    initial_sources: Literal["random", "hints"] = Field(
+        "random",
+        description="How the output starts: 'random' sources and a first pass in the neighbourhood's scan "
+        "(the paper); 'hints', every position starts from its hint (with hint_layout='strands': the "
+        "exemplar's fibres laid along the constraint) and every pass, the first included, compares the "
+        "square refinement neighbourhood in a random order (refinement='square'). Needs "
+        "restrict_rotations (the hints).",
     )
     sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
     sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
@@ -399,6 +436,34 @@ def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.
     return res.image, res.extras["source_map"].astype(np.int64), res.stats
 
 
+def _strand_layout(s_ex: np.ndarray, o_con: np.ndarray, params, radius: int, seed: int) -> StrandHints:
+    """``hint_layout='strands'``: the exemplar's fibres laid along the constraint's strands
+    (:mod:`synth.methods.strand_hints`), fibres at least a neighbourhood's radius (+2) inside the
+    exemplar so that every rotated copy holds their neighbourhoods."""
+    table = fibre_table(structure_direction(s_ex), float(dominant_orientation(s_ex)) + np.pi / 2, radius + 2)
+    return strand_hints(
+        o_con.astype(np.float64) + np.pi / 2,
+        table,
+        params.strand_hint_spacing,
+        np.random.default_rng([seed, 13]),
+        periodic=params.periodic,
+    )
+
+
+def _signed_copies(delta: np.ndarray, copy_angle: np.ndarray, dictionary: RotatedDictionary) -> np.ndarray:
+    """The copy nearest the local angle ``delta`` (modulo pi), or its half-turn twin, whichever is
+    nearer ``copy_angle`` (modulo 2 pi): the one that carries the hinted fibre's direction onto the
+    strand's, so that neighbouring hints keep the exemplar's handedness."""
+    m = dictionary.n_rotations
+    step = 2 * np.pi / m
+    want = np.mod(np.rint(wrap_angle(delta) / step).astype(np.int64), m)
+    if m % 2:
+        return want
+    twin = np.mod(want + m // 2, m)
+    off = np.abs(np.angle(np.exp(1j * (dictionary.angles[want] - copy_angle))))
+    return np.where(off <= np.pi / 2, want, twin)
+
+
 def rotation_window(
     dictionary: RotatedDictionary,
     delta: np.ndarray,
@@ -495,6 +560,12 @@ def run_arbitrary_shape(
     report = checked_progress(progress)
     t0 = time.perf_counter()
     params, recipe, exemplar_coherence = params.resolved(exemplar)
+    if params.initial_sources == "hints" and not params.restrict_rotations:
+        raise InvalidParameter(
+            "initial_sources",
+            "hints",
+            "needs restrict_rotations=True (the hints come with the rotation window)",
+        )
     size = (int(size[0]), int(size[1]))
     mode = "wrap" if params.periodic else "reflect"  # filters on output-sized fields
     con, s_icon = constraint_field(constraint, size, params.sigma_d, params.sigma_w, periodic=params.periodic)
@@ -503,9 +574,15 @@ def run_arbitrary_shape(
     o_dom = dominant_orientation(s_ex)
 
     # Step 1: S_con, the exemplar-like texture's tensors turned by the constraint's angle (eqs 2-3).
-    base, base_src, base_stats = _base_texture(exemplar, size, params, seed, report)
+    radius = params.neighbourhood_size // 2
+    strand = _strand_layout(s_ex, o_con, params, radius, seed) if params.hint_layout == "strands" else None
+    if strand is not None:  # S_en: the exemplar's tensors at the fibres laid along the strands
+        base, base_src, base_stats = None, strand.source, {"strand_hints_missed": strand.missed}
+        s_en = s_ex[base_src[..., 0], base_src[..., 1]]
+    else:
+        base, base_src, base_stats = _base_texture(exemplar, size, params, seed, report)
+        s_en = s_ex if base is exemplar else structure_tensor(base, params.sigma_d, params.sigma_w, mode=mode)
     t1 = time.perf_counter()
-    s_en = s_ex if base is exemplar else structure_tensor(base, params.sigma_d, params.sigma_w, mode=mode)
     reference = {"dominant": o_dom, "absolute": 0.0, "local": None}[params.rotation_reference]
     reference = orientation(s_en).astype(np.float64) if reference is None else reference
     delta = wrap_angle(o_con.astype(np.float64) - reference)
@@ -536,6 +613,8 @@ def run_arbitrary_shape(
     strict = False
     if params.restrict_rotations:
         m_hint = rotation_candidates(delta, params.n_rotations, window, rng)
+        if strand is not None:
+            m_hint = _signed_copies(delta, strand.copy_angle, dictionary)
         candidate_window = rotation_window(
             dictionary, delta, window, shapes, level_shapes(size, levels), transfer=params.transfer_candidates
         )
@@ -577,10 +656,11 @@ def run_arbitrary_shape(
         seed=seed + 2,
         progress=report,
         stage="texture",
-        span=(0.4 if base is not exemplar else 0.0, 1.0),
+        span=(0.4 if base is not exemplar and base is not None else 0.0, 1.0),
         ex_masks=masks,
         window=candidate_window if params.restrict_rotations and strict else None,
         histogram=grey_labels(ex_levels, exemplar) if params.histogram_weight > 0 else None,
+        initial=hint if params.initial_sources == "hints" else None,
     )
     src = srcs[0]
     image = dictionary.image[src[..., 0], src[..., 1]]

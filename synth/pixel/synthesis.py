@@ -524,6 +524,7 @@ def synthesize_source_map(
     on_level_done: Callable[[int, dict], None] | None = None,
     histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
     window: CandidateWindow | None = None,
+    initial: Sequence[np.ndarray] | None = None,
 ) -> tuple[list[np.ndarray], SynthesisReport]:
     """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
 
@@ -555,6 +556,11 @@ def synthesize_source_map(
         histogram). Default: Chen & Wang's position histogram (every copyable position used equally).
     window : CandidateWindow, optional
         Restricts, per output position, the exemplar positions searched (exact and fast search).
+    initial : list of ndarray (H_l, W_l, 2) int, finest first, optional
+        Initial source maps (e.g. an exemplar laid out along a constraint): every level starts from
+        its map instead of random sources (or its parent's), and with ``settings.refine_square`` every
+        pass, the first included, is a square refinement pass (the whole square, random order), since
+        every position already holds a source.
     """
     levels = settings.levels
     if len(ex_levels) != levels or len(out_shapes) != levels:
@@ -618,6 +624,8 @@ def synthesize_source_map(
             p_ref, gw_ref = settings.refine_p, 1.0 - settings.refine_p
         mask = _level_mask(ex_masks, level, ex.shape[:2], valid)
         src = _initial_sources(shape, valid, mask, srcs[level + 1] if has_parent else None, rng)
+        if initial is not None:
+            src = np.ascontiguousarray(initial[level], dtype=np.int64).copy()
         exact = settings.search == "exact"
         embeds = [(_euclidean_embedding(ex, metric), w_pix)]
         if guidance is not None:
@@ -683,9 +691,10 @@ def synthesize_source_map(
             ),
         )
         n = shape[0] * shape[1]
+        started = initial is not None  # every position holds a source: no first (causal) pass
         for it in range(settings.iterations):
-            refine = square_refinement and it > 0
-            if refine and it == 1:  # square refinement: the whole square, weighed as such
+            refine = square_refinement and (it > 0 or started)
+            if refine and it == (0 if started else 1):  # square refinement: the whole square, weighed as such
                 side = min(settings.refine_size or size, size)
                 ref_offs = _nearest_first(neighbourhood_offsets(side, "square"), settings.falloff)
                 w_ref, gui_ref, w_gui_ref = _part_weights(
@@ -701,8 +710,8 @@ def synthesize_source_map(
                 state.cands = state.cands._replace(cand_offs=all_cand_offs)
             state.run = Pass(
                 order=scan_order(shape, "random" if refine else settings.scan, rng),
-                first_pass=it == 0,
-                done=np.zeros(shape, dtype=np.uint8) if it == 0 else state.run.done,
+                first_pass=it == 0 and not started,
+                done=state.run.done if it > 0 else np.full(shape, 1 if started else 0, np.uint8),
                 seed_key=np.uint64(int(rng.integers(0, 2**63))),
                 stamp=stamp,
                 counter=counter,

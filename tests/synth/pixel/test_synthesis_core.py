@@ -859,9 +859,10 @@ def test_tensor_constrained_falloff_is_flat_only_for_crossed_oriented_exemplars(
     assert falloff_for(structure_tensor(stripes)) == DEFAULT_FALLOFF
     assert falloff_for(structure_tensor(noise)) == DEFAULT_FALLOFF
     common = {"neighbourhood_size": 9, "structure_levels": 2, "texture_levels": 1}
-    assert synthesize("tensor-constrained", stripes, size=(32, 32), seed=1, params=common).params[
-        "falloff"
-    ] == DEFAULT_FALLOFF
+    assert (
+        synthesize("tensor-constrained", stripes, size=(32, 32), seed=1, params=common).params["falloff"]
+        == DEFAULT_FALLOFF
+    )
     kept = synthesize("tensor-constrained", noise, size=(32, 32), seed=1, params={**common, "falloff": 0.3})
     assert kept.params["falloff"] == 0.3
 
@@ -907,3 +908,24 @@ def test_kernel_matches_reference_with_pixel_only_refinement(search: str) -> Non
     pixels = synthesize_source_map(settings=SearchSettings(**base, refine_p=1.0), **kwargs)[0][0]  # type: ignore[arg-type]
     np.testing.assert_array_equal(same, alike)
     assert same.tobytes() != pixels.tobytes()
+
+
+def test_initial_source_map_starts_the_synthesis_and_every_pass_refines() -> None:
+    """``initial``: the output starts from the given sources and every pass compares the square in a
+    random order; started from the exemplar itself (each neighbourhood matches its own), the interior
+    (away from the output's wrapped borders) stays the exemplar, kernel and reference alike; without
+    ``initial`` it does not."""
+    ex = np.random.default_rng(0).random((24, 24, 1)).astype(np.float32)
+    ident = np.stack(np.mgrid[0:24, 0:24], axis=-1).astype(np.int64)
+    settings = SearchSettings(size=5, shape="square", scan="random", iterations=1, k=2, refine_square=True)
+    inner = (slice(4, 20), slice(4, 20))
+    kept = []
+    for reference in (False, True):
+        srcs, _ = synthesize_source_map(
+            [ex], [(24, 24)], settings, seed=1, initial=[ident], reference=reference
+        )
+        kept.append(srcs[0])
+        assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() > 0.95
+    np.testing.assert_array_equal(kept[0], kept[1])
+    srcs, _ = synthesize_source_map([ex], [(24, 24)], settings, seed=1)
+    assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() < 0.1
