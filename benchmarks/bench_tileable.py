@@ -74,10 +74,9 @@ NOTES = (
     "the border (brick's strongest interior lines reach 5-7 times the mean; over 8 seeds the border averaged "
     "1.08 +- 0.09 on gravel, 1.75 +- 0.42 on brick). Limit seen in the pictures: `gaussian-patch` on brick "
     "cannot fit joints on both sides of its last column / row with N = 5 neighbours (broken joints there), "
-    "and the mending smears a joint that only one side has. With issue 13's defaults `tensor-constrained` "
-    "on brick does not tile (periodic ratio 3.98, cols rank 1.00; 1.25 with the earlier defaults): its "
-    "brick output has broken joints ending in stubs throughout (docs/quality.md, its brick seam 1.35), and "
-    "the periodic passes do not close the joints across the borders.",
+    "and the mending smears a joint that only one side has. `tensor-constrained` on brick tiles since its "
+    "brick defaults (flat neighbourhoods for exemplars oriented in two directions, LE, pixel-only "
+    "refinement: periodic ratio 3.98 -> 0.72; its module docstring); a few joint stubs remain inside.",
 )
 
 
