@@ -364,26 +364,26 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
         panels: dict[str, list[np.ndarray]] = {}
         done: dict[tuple[str, str, int], tuple] = {}
         for variant, params in variants.items():
-            key = repr(sorted(ArbitraryShapeParams(**params).resolved(ex).params.model_dump().items()))
+            run_key = repr(sorted(ArbitraryShapeParams(**params).resolved(ex).params.model_dump().items()))
             for con_name, con in cons.items():
                 runs, times, chosen = [], [], ""
                 for seed in seeds:
-                    if (key, con_name, seed) not in done:
+                    if (run_key, con_name, seed) not in done:
                         t0 = time.perf_counter()
                         res = synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=seed)
                         elapsed = time.perf_counter() - t0
                         loads.append(getloadavg()[0])
-                        done[(key, con_name, seed)] = (res, elapsed, strand_measures(ex, res.image, con))
-                    res, elapsed, measures = done[(key, con_name, seed)]
+                        done[(run_key, con_name, seed)] = (res, elapsed, strand_measures(ex, res.image, con))
+                    res, elapsed, measures = done[(run_key, con_name, seed)]
                     times.append(elapsed)
                     runs.append(measures)
-                    hinted = res.stats["strand_hints_chosen"]
+                    hinted = res.params["hint_layout"] == "strands"
                     chosen = res.stats["recipe"] + (", strand hints" if hinted else "")
                     if seed == seeds[0]:
                         panels.setdefault(con_name, [con]).append(res.image)
                 cells = []
-                for key in ("strand", "kl", "agreement", "grey"):
-                    vals = [r[key] for r in runs]
+                for measure in ("strand", "kl", "agreement", "grey"):
+                    vals = [r[measure] for r in runs]
                     cells.append(", ".join(f"{v:.3f}" for v in vals))
                 ok = all(
                     r["strand"] > TARGET_STRAND and r["kl"] < TARGET_KL and r["agreement"] < TARGET_AGREEMENT
@@ -417,8 +417,8 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
             + ", ".join(f"{k}={v!r}" for k, v in STRAND_HINTS.items())
             + "`, paper's hints = `"
             + ", ".join(f"{k}={v!r}" for k, v in PAPER_HINTS.items())
-            + "`, on top of the recipe; the parameters column names the recipe (and the strand hints when "
-            "the defaults chose them). "
+            + "`, on top of the recipe; the parameters column names the recipe (and the strand hints where "
+            "they ran). "
             f"Time: whole `synthesize` call, median over the seeds, on a machine shared "
             f"with other jobs (1-minute load average {min(loads):.1f}-{max(loads):.1f} on 2 cores).",
             "",

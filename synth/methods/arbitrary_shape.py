@@ -68,8 +68,9 @@ Choices the paper leaves open, and departures (why)
   periodic stripes: fringes 0.007, bent laminae 0.012) the paper's route (:data:`PAPER_HINTS`), as
   does every other recipe. Why not always: on fringes and laminae over rings the strand hints close
   the rings into loops that the strand measure leaves out (strand ratio 0.67-0.74 < 0.8), and they
-  streak the soot (KL 8-10x). ``stats['fibre_grey_spread']`` and ``stats['strand_hints_chosen']``
-  record the choice; a value given for either field is kept (docs/arbitrary-shape.md).
+  streak the soot (KL 8-10x). ``stats['fibre_grey_spread']`` and ``stats['own_grey_fibres']``
+  (spread >= threshold) record what the choice read, ``params`` what ran; a value given for either
+  field is kept (docs/arbitrary-shape.md).
 - ``recipe`` (default ``'auto'``): the settings are chosen from the exemplar's mean coherence
   (:data:`ORIENTED_COHERENCE`): strongly oriented exemplars get :data:`RECIPES` ``'fibres'``, weakly
   oriented ones (soot) ``'weak'``; a recipe sets only the fields left at their defaults, and
@@ -362,11 +363,11 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         fields = type(self).model_fields
         update = {k: v for k, v in RECIPES[name].items() if getattr(self, k) == fields[k].default}
         spread = fibre_grey_spread(exemplar, self.sigma_d, self.sigma_w) if name == "fibres" else None
-        strands = spread is not None and spread >= OWN_GREY_FIBRES and self.restrict_rotations
-        chosen = STRAND_HINTS if strands else PAPER_HINTS
+        own_grey = spread is not None and spread >= OWN_GREY_FIBRES
+        chosen = STRAND_HINTS if own_grey and self.restrict_rotations else PAPER_HINTS
         update.update({k: v for k, v in chosen.items() if getattr(self, k) is None})
         params = self.model_copy(update={**update, "recipe": name})
-        return Resolution(params, name, coh, spread, strands)
+        return Resolution(params, name, coh, spread, own_grey)
 
 
 class Resolution(NamedTuple):
@@ -377,6 +378,7 @@ class Resolution(NamedTuple):
     recipe: str
     coherence: float
     fibre_grey_spread: float | None
+    #: the spread is at least OWN_GREY_FIBRES (the strand hints' condition, with restrict_rotations)
     own_grey_fibres: bool
 
 
@@ -741,7 +743,7 @@ def run_arbitrary_shape(
             "recipe": resolution.recipe,
             "exemplar_coherence": resolution.coherence,
             "fibre_grey_spread": resolution.fibre_grey_spread,
-            "strand_hints_chosen": resolution.own_grey_fibres,
+            "own_grey_fibres": resolution.own_grey_fibres,
             "n_rotations": params.n_rotations,
             "dominant_orientation": float(o_dom),
             "in_window_fraction": float(in_window.mean()),

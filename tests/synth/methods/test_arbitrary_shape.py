@@ -543,7 +543,7 @@ def test_fibres_with_their_own_grey_levels_get_the_strand_hints_by_default() -> 
     small = {"neighbourhood_size": 7, "angular_step": 15.0, "strand_hint_spacing": 32}
     wood, fringes = wood_grain((48, 48), seed=1), _fringes(30, (48, 48))
     res = synthesize("arbitrary-shape", wood, constraint=con, params=small, seed=1)
-    assert res.stats["recipe"] == "fibres" and res.stats["strand_hints_chosen"] is True
+    assert res.stats["recipe"] == "fibres" and res.stats["own_grey_fibres"] is True
     assert res.stats["fibre_grey_spread"] >= OWN_GREY_FIBRES
     assert res.params["hint_layout"] == "strands" and res.params["initial_sources"] == "hints"
     same = synthesize("arbitrary-shape", wood, constraint=con, params=small | STRANDS, seed=1)
@@ -555,7 +555,7 @@ def test_fibres_with_their_own_grey_levels_get_the_strand_hints_by_default() -> 
     assert np.array_equal(res.image, rerun.image)
 
     other = synthesize("arbitrary-shape", fringes, constraint=con, params=small, seed=1)
-    assert other.stats["recipe"] == "fibres" and other.stats["strand_hints_chosen"] is False
+    assert other.stats["recipe"] == "fibres" and other.stats["own_grey_fibres"] is False
     assert other.stats["fibre_grey_spread"] < OWN_GREY_FIBRES
     assert other.params["hint_layout"] == "texture" and other.params["initial_sources"] == "random"
     paper = synthesize("arbitrary-shape", fringes, constraint=con, params=small | PAPER_HINTS, seed=1)
@@ -566,7 +566,8 @@ def test_fibres_with_their_own_grey_levels_get_the_strand_hints_by_default() -> 
     assert kept.hint_layout == "texture" and kept.initial_sources == "hints"
     assert ArbitraryShapeParams(initial_sources="random").resolved(wood).params.hint_layout == "strands"
     unrestricted = ArbitraryShapeParams(restrict_rotations=False).resolved(wood)
-    assert not unrestricted.own_grey_fibres and unrestricted.params.initial_sources == "random"
+    assert unrestricted.own_grey_fibres and unrestricted.params.initial_sources == "random"
+    assert unrestricted.params.hint_layout == "texture"
     for recipe in ("paper", "weak"):
         r = ArbitraryShapeParams(recipe=recipe).resolved(wood)
         assert r.fibre_grey_spread is None and r.params.hint_layout == "texture"
