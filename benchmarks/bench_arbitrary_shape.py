@@ -18,13 +18,16 @@ import numpy as np
 
 from benchmarks._report import DATA as SHARED_DATA
 from benchmarks._report import median_time, write_section
+from synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
 from synth.analysis.tensor import dominant_orientation, orientation, structure_tensor
 from synth.api import synthesize
 from synth.evaluate import evaluate_pair, grey_histogram, kl_divergence
 from synth.evaluate.strands import exemplar_strand_grey, strand_grey
 from synth.io import load_image
 from synth.io.patterns import concentric_rings, grating, spiral, undulating_laminae, waves, wood_grain
-from synth.methods.arbitrary_shape import RECIPES, orientation_agreement
+from synth.methods.arbitrary_shape import PAPER_HINTS as _PAPER_HINTS
+from synth.methods.arbitrary_shape import RECIPES, ArbitraryShapeParams, orientation_agreement
+from synth.methods.arbitrary_shape import STRAND_HINTS as _STRAND_HINTS
 
 SIZE = 256
 RUNS = 3
@@ -297,8 +300,11 @@ def figure(exemplar_name: str, path: Path) -> None:
 TARGET_STRAND = 0.8
 #: Seeds of the strands table.
 STRAND_SEEDS = (1, 2, 3)
-#: Hints laid along the constraint's strands and the output started from them (docs/arbitrary-shape.md).
-STRAND_HINTS = {"hint_layout": "strands", "initial_sources": "hints"}
+#: Hints laid along the constraint's strands and the output started from them (docs/arbitrary-shape.md);
+#: the default with the 'fibres' recipe for fibres with their own grey levels.
+STRAND_HINTS = dict(_STRAND_HINTS)
+#: The paper's hints (from an exemplar-like texture, random start): the default before the automatic choice.
+PAPER_HINTS = dict(_PAPER_HINTS)
 
 
 def strand_exemplars() -> dict[str, np.ndarray]:
@@ -336,39 +342,48 @@ def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndar
 
 
 def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> None:
-    """The ``arbitrary-shape-strands`` section: defaults (recipe chosen from the exemplar's coherence)
-    against the paper's settings (``recipe='paper'``), strongly and weakly oriented exemplars on waves,
-    rings and spiral, 256 x 256, seeds 1-3; pictures docs/img/arbitrary-strands-<exemplar>.png."""
+    """The ``arbitrary-shape-strands`` section: the defaults (recipe chosen from the exemplar's coherence,
+    strand hints from its fibre grey spread) against the paper's hints (the defaults before the automatic
+    choice) and the strand hints, strongly and weakly oriented exemplars on waves, rings and spiral,
+    256 x 256, seeds 1-3; pictures docs/img/arbitrary-strands-<exemplar>.png. A variant whose resolved
+    parameters equal an earlier one's reuses its runs (same parameters and seed, same bytes)."""
     import time
     from os import getloadavg
 
     cons = constraints()
     rows = []
     variants = {
-        "paper (`recipe='paper'`)": {"recipe": "paper"},
+        "paper's hints (previous default)": PAPER_HINTS,
         "default (`auto`)": {},
         "strand hints": STRAND_HINTS,
     }
     if previous:  # the defaults before issue 13: the paper's settings, proposals dropped outside the window
         variants = {"previous defaults": {"recipe": "paper", "transfer_candidates": False}, **variants}
-    loads = []
+    loads: list[float] = []
     for ex_name, ex in strand_exemplars().items():
         panels: dict[str, list[np.ndarray]] = {}
+        done: dict[tuple[str, str, int], tuple] = {}
         for variant, params in variants.items():
+            run_key = repr(sorted(ArbitraryShapeParams(**params).resolved(ex).params.model_dump().items()))
             for con_name, con in cons.items():
                 runs, times, chosen = [], [], ""
                 for seed in seeds:
-                    t0 = time.perf_counter()
-                    res = synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=seed)
-                    times.append(time.perf_counter() - t0)
-                    loads.append(getloadavg()[0])
-                    runs.append(strand_measures(ex, res.image, con))
-                    chosen = res.stats["recipe"]
+                    if (run_key, con_name, seed) not in done:
+                        t0 = time.perf_counter()
+                        res = synthesize("arbitrary-shape", ex, constraint=con, params=params, seed=seed)
+                        elapsed = time.perf_counter() - t0
+                        loads.append(getloadavg()[0])
+                        done[(run_key, con_name, seed)] = (res, elapsed, strand_measures(ex, res.image, con))
+                    res, elapsed, measures = done[(run_key, con_name, seed)]
+                    times.append(elapsed)
+                    runs.append(measures)
+                    hinted = res.params["hint_layout"] == "strands"
+                    chosen = res.stats["recipe"] + (", strand hints" if hinted else "")
                     if seed == seeds[0]:
                         panels.setdefault(con_name, [con]).append(res.image)
                 cells = []
-                for key in ("strand", "kl", "agreement", "grey"):
-                    vals = [r[key] for r in runs]
+                for measure in ("strand", "kl", "agreement", "grey"):
+                    vals = [r[measure] for r in runs]
                     cells.append(", ".join(f"{v:.3f}" for v in vals))
                 ok = all(
                     r["strand"] > TARGET_STRAND and r["kl"] < TARGET_KL and r["agreement"] < TARGET_AGREEMENT
@@ -395,9 +410,15 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
             "them (`synth.evaluate.strands.strand_grey`; lower: each strand keeps its grey level); the "
             "exemplars' own, along their fibres: "
             + ", ".join(f"{n} {exemplar_strand_grey(e)['ratio']:.3f}" for n, e in strand_exemplars().items())
+            + ". Fibre grey spread (`synth.analysis.fibre_grey.fibre_grey_spread`; the defaults take the "
+            f"strand hints with the `fibres` recipe at >= {OWN_GREY_FIBRES}): "
+            + ", ".join(f"{n} {fibre_grey_spread(e):.3f}" for n, e in strand_exemplars().items())
             + ". Strand hints = `"
             + ", ".join(f"{k}={v!r}" for k, v in STRAND_HINTS.items())
-            + "` on top of the recipe. "
+            + "`, paper's hints = `"
+            + ", ".join(f"{k}={v!r}" for k, v in PAPER_HINTS.items())
+            + "`, on top of the recipe; the parameters column names the recipe (and the strand hints where "
+            "they ran). "
             f"Time: whole `synthesize` call, median over the seeds, on a machine shared "
             f"with other jobs (1-minute load average {min(loads):.1f}-{max(loads):.1f} on 2 cores).",
             "",

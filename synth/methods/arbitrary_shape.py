@@ -48,7 +48,7 @@ Choices the paper leaves open, and departures (why)
 - ``histogram_weight`` (grey-level histogram matching, 16 bins; Kopf et al. 2007, eq 4's re-weighting,
   the engine's :func:`synth.kernels.pixel_search._histogram_factor`): over-used grey levels lose
   against equally good under-used ones; 0 (off) is the paper.
-- ``hint_layout='strands'`` (a departure; default ``'texture'``, the paper's route): the hints and
+- ``hint_layout='strands'`` (a departure; the paper's route is ``'texture'``): the hints and
   ``S_en`` come from the exemplar's fibres laid along the constraint's strands
   (:mod:`synth.methods.strand_hints`: each strand is given one exemplar fibre along its length, cut
   regions ``strand_hint_spacing`` apart linked so that a strand keeps its fibre across them) instead of
@@ -58,9 +58,19 @@ Choices the paper leaves open, and departures (why)
   output from the hints (an initialisation by the exemplar laid along the constraint) and makes every
   pass a square refinement pass (:func:`synth.pixel.synthesis.synthesize_source_map`'s ``initial``).
   Wood grain, 256 x 256, seeds 1-3: grey variance along the strands over across them
-  (:mod:`synth.evaluate.strands`) 0.51-0.70 -> 0.14-0.25, agreement 0.076-0.091 -> 0.023-0.041; not the
-  default, since the strand ratio drops on rings for fringes and laminae (their rings come out closed,
-  and the measure leaves closed loops out; docs/arbitrary-shape.md).
+  (:mod:`synth.evaluate.strands`) 0.51-0.70 -> 0.14-0.25, agreement 0.076-0.091 -> 0.023-0.041.
+- Both fields default to an automatic choice (None) made from a measured exemplar property, the
+  *fibre grey spread* (:func:`synth.analysis.fibre_grey.fibre_grey_spread`: the variance of the grey
+  levels of the fibres' crests, the exemplar averaged along its fibres, over the exemplar's grey
+  variance). With the ``'fibres'`` recipe and ``restrict_rotations``, a spread of at least
+  :data:`~synth.analysis.fibre_grey.OWN_GREY_FIBRES` (0.35: fibres with their own grey levels, wood
+  grain 0.68, brick 1.71) takes the strand hints (:data:`STRAND_HINTS`), a lower one (uniform
+  periodic stripes: fringes 0.007, bent laminae 0.012) the paper's route (:data:`PAPER_HINTS`), as
+  does every other recipe. Why not always: on fringes and laminae over rings the strand hints close
+  the rings into loops that the strand measure leaves out (strand ratio 0.67-0.74 < 0.8), and they
+  streak the soot (KL 8-10x). ``stats['fibre_grey_spread']`` and ``stats['own_grey_fibres']``
+  (spread >= threshold) record what the choice read, ``params`` what ran; a value given for either
+  field is kept (docs/arbitrary-shape.md).
 - ``recipe`` (default ``'auto'``): the settings are chosen from the exemplar's mean coherence
   (:data:`ORIENTED_COHERENCE`): strongly oriented exemplars get :data:`RECIPES` ``'fibres'``, weakly
   oriented ones (soot) ``'weak'``; a recipe sets only the fields left at their defaults, and
@@ -106,13 +116,14 @@ directional textures for virtual material design", IEEE ICIP 2014.
 from __future__ import annotations
 
 import time
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 from skimage.transform import resize
 
+from synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
 from synth.analysis.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
 from synth.analysis.tensor import (
     ORIENTED_COHERENCE,
@@ -144,7 +155,10 @@ from synth.pixel.synthesis import (
 
 __all__ = [
     "K_SET_MEMORY_LIMIT",
+    "PAPER_HINTS",
+    "STRAND_HINTS",
     "ArbitraryShapeParams",
+    "Resolution",
     "constraint_field",
     "orientation_agreement",
     "rotation_window",
@@ -189,6 +203,11 @@ RECIPES: dict[str, dict[str, object]] = {
     },
     "paper": {},
 }
+#: The strand hints (:mod:`synth.methods.strand_hints`, the output started from them) that
+#: :meth:`ArbitraryShapeParams.resolved` gives the 'fibres' recipe for fibres with their own grey levels.
+STRAND_HINTS: dict[str, object] = {"hint_layout": "strands", "initial_sources": "hints"}
+#: The paper's route, chosen otherwise: hints from an exemplar-like texture, a random start.
+PAPER_HINTS: dict[str, object] = {"hint_layout": "texture", "initial_sources": "random"}
 
 
 class ArbitraryShapeParams(NeighbourhoodParams):
@@ -198,7 +217,9 @@ class ArbitraryShapeParams(NeighbourhoodParams):
     ``recipe`` (default ``'auto'``) then sets the fields left at their defaults from the exemplar's mean
     coherence: :data:`RECIPES` ``'fibres'`` for strongly oriented exemplars, ``'weak'`` for weakly
     oriented ones (HRTEM soot, whose own orientations scatter widely); ``recipe='paper'`` runs the
-    fields as given (docs/arbitrary-shape.md has the measurements).
+    fields as given (docs/arbitrary-shape.md has the measurements). ``hint_layout`` and
+    ``initial_sources`` left unset are chosen from the exemplar's fibre grey spread (the strand hints
+    for the 'fibres' recipe on fibres with their own grey levels; :meth:`resolved`).
     """
 
     recipe: Literal["auto", "fibres", "weak", "paper"] = Field(
@@ -270,12 +291,14 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         description="'rotated-exemplar': S_con, the exemplar's tensors turned by O_con (the method); "
         "'constraint': the constraint image's own tensors (the paper's naive I_sor/O, for comparison).",
     )
-    hint_layout: Literal["texture", "strands"] = Field(
-        "texture",
+    hint_layout: Literal["texture", "strands"] | None = Field(
+        None,
         description="Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized "
         "in the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
         "constraint's strands, so that each output strand is offered one fibre (one grey level) along its "
-        "length (synth.methods.strand_hints).",
+        "length (synth.methods.strand_hints). Default: 'strands' with the 'fibres' recipe when the "
+        "exemplar's fibres carry their own grey levels (fibre grey spread at least 0.35, e.g. a wood "
+        "grain) and restrict_rotations is on, else 'texture'.",
     )
     strand_hint_spacing: int = Field(
         128,
@@ -284,13 +307,14 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         description="With hint_layout='strands': pixels between the cuts across the strands where a strand's "
         "hinted fibre changes (longer runs of one fibre with a larger spacing).",
     )
-    initial_sources: Literal["random", "hints"] = Field(
-        "random",
+    initial_sources: Literal["random", "hints"] | None = Field(
+        None,
         description="How the output starts: 'random' sources and a first pass in the neighbourhood's scan "
         "(the paper); 'hints', every position starts from its hint (with hint_layout='strands': the "
         "exemplar's fibres laid along the constraint) and every pass, the first included, compares the "
         "square refinement neighbourhood in a random order (refinement='square'). Needs "
-        "restrict_rotations (the hints).",
+        "restrict_rotations (the hints). Default: 'hints' where hint_layout's default is 'strands', else "
+        "'random'.",
     )
     sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
     sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
@@ -312,13 +336,25 @@ class ArbitraryShapeParams(NeighbourhoodParams):
     def n_rotations(self) -> int:
         return round(360.0 / self.angular_step)
 
-    def resolved(self, exemplar: np.ndarray) -> tuple[ArbitraryShapeParams, str, float]:
-        """These parameters with the recipe applied, the recipe's name and the exemplar's coherence.
+    def resolved(self, exemplar: np.ndarray) -> Resolution:
+        """These parameters with the recipe and the hint choice applied, and the measured exemplar
+        properties they were chosen from (:class:`Resolution`).
 
         'auto' picks 'fibres' when the exemplar's mean structure-tensor coherence (this ``sigma_d``,
         ``sigma_w``) is at least :data:`ORIENTED_COHERENCE`, else 'weak'. The recipe's settings replace
         only the fields left at their defaults (a field set to its default value counts as left: pass
         ``recipe='paper'`` for the defaults themselves); ``recipe`` becomes the chosen name.
+
+        ``hint_layout`` and ``initial_sources`` left unset (None) are chosen next: the strand hints
+        (:data:`STRAND_HINTS`) with the 'fibres' recipe (auto or explicit) when the exemplar's fibres
+        carry their own grey levels, i.e. its fibre grey spread
+        (:func:`synth.analysis.fibre_grey.fibre_grey_spread`, these scales) is at least
+        :data:`OWN_GREY_FIBRES`, and ``restrict_rotations`` is on (the hints come with the rotation
+        window); else the paper's route ('texture', 'random'). Why: the strand hints keep each strand's
+        grey level for a wood grain (grey along/across 0.51-0.70 -> 0.14-0.25) but close the rings of
+        uniform stripes (fringes, laminae) into loops the strand measure leaves out, and streak the soot
+        (docs/arbitrary-shape.md). A value given (either field) is kept. The spread is measured only
+        with the 'fibres' recipe (else None).
         """
         coh = mean_coherence(exemplar, self.sigma_d, self.sigma_w)
         name = self.recipe
@@ -326,7 +362,24 @@ class ArbitraryShapeParams(NeighbourhoodParams):
             name = "fibres" if coh >= ORIENTED_COHERENCE else "weak"
         fields = type(self).model_fields
         update = {k: v for k, v in RECIPES[name].items() if getattr(self, k) == fields[k].default}
-        return self.model_copy(update={**update, "recipe": name}), name, coh
+        spread = fibre_grey_spread(exemplar, self.sigma_d, self.sigma_w) if name == "fibres" else None
+        own_grey = spread is not None and spread >= OWN_GREY_FIBRES
+        chosen = STRAND_HINTS if own_grey and self.restrict_rotations else PAPER_HINTS
+        update.update({k: v for k, v in chosen.items() if getattr(self, k) is None})
+        params = self.model_copy(update={**update, "recipe": name})
+        return Resolution(params, name, coh, spread, own_grey)
+
+
+class Resolution(NamedTuple):
+    """What :meth:`ArbitraryShapeParams.resolved` chose and the measured exemplar properties it chose from
+    (recorded in the run's stats)."""
+
+    params: ArbitraryShapeParams
+    recipe: str
+    coherence: float
+    fibre_grey_spread: float | None
+    #: the spread is at least OWN_GREY_FIBRES (the strand hints' condition, with restrict_rotations)
+    own_grey_fibres: bool
 
 
 def orientation_agreement(
@@ -559,7 +612,8 @@ def run_arbitrary_shape(
         raise InvalidInput("constraint", "arbitrary-shape synthesis needs a constraint image")
     report = checked_progress(progress)
     t0 = time.perf_counter()
-    params, recipe, exemplar_coherence = params.resolved(exemplar)
+    resolution = params.resolved(exemplar)
+    params = resolution.params
     if params.initial_sources == "hints" and not params.restrict_rotations:
         raise InvalidParameter(
             "initial_sources",
@@ -686,8 +740,10 @@ def run_arbitrary_shape(
             "source_map": src.astype(np.int32),
         },
         stats={
-            "recipe": recipe,
-            "exemplar_coherence": exemplar_coherence,
+            "recipe": resolution.recipe,
+            "exemplar_coherence": resolution.coherence,
+            "fibre_grey_spread": resolution.fibre_grey_spread,
+            "own_grey_fibres": resolution.own_grey_fibres,
             "n_rotations": params.n_rotations,
             "dominant_orientation": float(o_dom),
             "in_window_fraction": float(in_window.mean()),

@@ -396,7 +396,7 @@ def test_auto_recipe_follows_the_exemplar_coherence() -> None:
     # A field changed from its default wins over the recipe.
     kept = ArbitraryShapeParams(w=0.3).resolved(fibres)[0]
     assert kept.w == 0.3 and kept.rotation_reference == "local" and kept.recipe == "fibres"
-    paper, name, _ = ArbitraryShapeParams(recipe="paper").resolved(noise)
+    paper, name = ArbitraryShapeParams(recipe="paper").resolved(noise)[:2]
     assert name == "paper" and paper.rotation_reference == "dominant" and paper.w == 0.1
     explicit = ArbitraryShapeParams(recipe="weak").resolved(fibres)[0]
     assert explicit.neighbourhood == "square" and explicit.recipe == "weak"
@@ -446,7 +446,8 @@ def test_fibres_square_refinement_mends_strands_on_waves() -> None:
     changes less along the strands (seeds 1-3 of this case: 0.078-0.089 against 0.097-0.099) while the
     contrast across them stays; the previous recipe stays reachable with ``FIBRES_BEFORE``."""
     ex, con = wood_grain((48, 48), seed=1), waves((64, 64), amplitude=8.0, wavelength=64.0)
-    small = {"neighbourhood_size": 7, "angular_step": 5.0}
+    # the paper's hints (wood grain's default is the strand hints: tested below)
+    small = {"neighbourhood_size": 7, "angular_step": 5.0} | PAPER_HINTS
     now = synthesize("arbitrary-shape", ex, constraint=con, params=small, seed=1)
     before = synthesize("arbitrary-shape", ex, constraint=con, params=small | FIBRES_BEFORE, seed=1)
     assert now.stats["recipe"] == "fibres"
@@ -461,6 +462,9 @@ def test_fibres_square_refinement_mends_strands_on_waves() -> None:
 
 #: Hints laid along the constraint's strands, and the output started from them.
 STRANDS = {"hint_layout": "strands", "initial_sources": "hints"}
+#: The paper's route: hints from an exemplar-like texture, a random start (the default before the
+#: automatic choice, and still for exemplars whose fibres do not carry their own grey levels).
+PAPER_HINTS = {"hint_layout": "texture", "initial_sources": "random"}
 
 
 def _grey_ratio(res) -> float:
@@ -478,7 +482,7 @@ def test_strand_hints_keep_each_strands_grey_level_on_waves() -> None:
 
     ex, con = wood_grain((48, 48), seed=1), waves((64, 64), amplitude=8.0, wavelength=64.0)
     small = {"neighbourhood_size": 7, "strand_hint_spacing": 32}
-    before = synthesize("arbitrary-shape", ex, constraint=con, params=small, seed=1)
+    before = synthesize("arbitrary-shape", ex, constraint=con, params=small | PAPER_HINTS, seed=1)
     now = synthesize("arbitrary-shape", ex, constraint=con, params=small | STRANDS, seed=1)
     assert now.stats["recipe"] == "fibres" and now.params["hint_layout"] == "strands"
     assert now.stats["exemplar_like"]["strand_hints_missed"] < 0.05
@@ -502,3 +506,68 @@ def test_initial_sources_from_hints_needs_the_rotation_window() -> None:
         )
     with pytest.raises(InvalidParameter, match="strand_hint_spacing"):
         synthesize("arbitrary-shape", ex, constraint=con, params={"strand_hint_spacing": 4}, seed=0)
+
+
+# ---------------------------------------------------------------- the automatic choice of the strand hints
+
+
+def test_fibre_grey_spread_separates_fibres_with_their_own_grey_from_uniform_stripes() -> None:
+    """The measured property behind the choice: a wood grain's fibres each have their own grey level
+    (spread well above the threshold), straight and bent uniform stripes do not (below it, whatever
+    their period or noise); a flat image is 0."""
+    from synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
+    from synth.io.patterns import undulating_laminae
+
+    for seed in (1, 2, 3):
+        assert fibre_grey_spread(wood_grain((48, 48), seed=seed)) > 1.3 * OWN_GREY_FIBRES
+    stripes = [
+        grating((48, 48), 0.5, period, noise=noise, seed=1)
+        for period in (4.0, 6.0, 12.0)
+        for noise in (0.1, 0.3)
+    ] + [undulating_laminae((64, 64), 7, 8, 64, noise=0.3)]
+    spreads = [fibre_grey_spread(img) for img in stripes]
+    # all below the threshold; all but one far below (0.002-0.02; wide stripes under heavy noise on a
+    # 48 px crop, period 12 noise 0.3: 0.22, their crests' orientation is noise there; 0.02 at 128 px)
+    assert max(spreads) < OWN_GREY_FIBRES and sorted(spreads)[-2] < 0.1 * OWN_GREY_FIBRES, spreads
+    assert fibre_grey_spread(np.full((32, 32), 0.5, np.float32)) == 0.0
+
+
+def test_fibres_with_their_own_grey_levels_get_the_strand_hints_by_default() -> None:
+    """With the 'fibres' recipe the strand hints are chosen from the exemplar's fibre grey spread: a wood
+    grain (above the threshold) gets them, straight fringes (below) keep the paper's hints; the choice
+    and the measure are recorded in params and stats; a value given wins; without the rotation window
+    there are no hints to lay; same seed, same bytes."""
+    from synth.methods.arbitrary_shape import OWN_GREY_FIBRES, ArbitraryShapeParams
+
+    con = waves((48, 48), amplitude=6.0, wavelength=48.0)
+    small = {"neighbourhood_size": 7, "angular_step": 15.0, "strand_hint_spacing": 32}
+    wood, fringes = wood_grain((48, 48), seed=1), _fringes(30, (48, 48))
+    res = synthesize("arbitrary-shape", wood, constraint=con, params=small, seed=1)
+    assert res.stats["recipe"] == "fibres" and res.stats["own_grey_fibres"] is True
+    assert res.stats["fibre_grey_spread"] >= OWN_GREY_FIBRES
+    assert res.params["hint_layout"] == "strands" and res.params["initial_sources"] == "hints"
+    same = synthesize("arbitrary-shape", wood, constraint=con, params=small | STRANDS, seed=1)
+    assert np.array_equal(res.image, same.image)  # the choice is the explicit strand hints, byte for byte
+    again = synthesize("arbitrary-shape", wood, constraint=con, params=small, seed=1)
+    assert np.array_equal(res.image, again.image)
+    # the recorded parameters run again give the same output
+    rerun = synthesize("arbitrary-shape", wood, constraint=con, params=res.params, seed=1)
+    assert np.array_equal(res.image, rerun.image)
+
+    other = synthesize("arbitrary-shape", fringes, constraint=con, params=small, seed=1)
+    assert other.stats["recipe"] == "fibres" and other.stats["own_grey_fibres"] is False
+    assert other.stats["fibre_grey_spread"] < OWN_GREY_FIBRES
+    assert other.params["hint_layout"] == "texture" and other.params["initial_sources"] == "random"
+    paper = synthesize("arbitrary-shape", fringes, constraint=con, params=small | PAPER_HINTS, seed=1)
+    assert np.array_equal(other.image, paper.image)
+
+    # explicit values win, field by field; no window, no hints; other recipes keep the paper's route
+    kept = ArbitraryShapeParams(hint_layout="texture").resolved(wood).params
+    assert kept.hint_layout == "texture" and kept.initial_sources == "hints"
+    assert ArbitraryShapeParams(initial_sources="random").resolved(wood).params.hint_layout == "strands"
+    unrestricted = ArbitraryShapeParams(restrict_rotations=False).resolved(wood)
+    assert unrestricted.own_grey_fibres and unrestricted.params.initial_sources == "random"
+    assert unrestricted.params.hint_layout == "texture"
+    for recipe in ("paper", "weak"):
+        r = ArbitraryShapeParams(recipe=recipe).resolved(wood)
+        assert r.fibre_grey_spread is None and r.params.hint_layout == "texture"
