@@ -474,6 +474,7 @@ def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.
         periodic=params.periodic,
         # tensor-constrained's settings before issue 13's defaults (this recipe was measured with them)
         metric="SO",
+        refinement_p=None,
         k=3,
         p=0.5,
         falloff=0.0,
