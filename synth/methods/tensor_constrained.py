@@ -266,6 +266,18 @@ class TensorConstrainedParams(NeighbourhoodParams):
             ("texture_iterations", self.neighbourhood),
         ]
 
+    def resolved(self, s_in: np.ndarray) -> TensorConstrainedParams:
+        """These parameters with the automatic choices made from the exemplar's tensors ``s_in``:
+        ``falloff=None`` (:func:`falloff_for`) and, for square refinement passes (the only ones that use
+        it), ``refinement_size=None`` (:func:`refinement_size_for`). Fields already set are kept, so
+        resolving twice changes nothing; the run records the resolved values."""
+        update: dict[str, object] = {}
+        if self.falloff is None:
+            update["falloff"] = falloff_for(s_in)
+        if self.refinement == "square" and self.refinement_size is None:
+            update["refinement_size"] = refinement_size_for(s_in, self)
+        return self.model_copy(update=update) if update else self
+
 
 #: Square refinement side for weakly oriented exemplars (``refinement_size=None``).
 WEAK_REFINEMENT_SIZE = 7
@@ -320,8 +332,7 @@ def synthesize_tensor_field(
     s_in: np.ndarray, size: tuple[int, int], params: TensorConstrainedParams, *, seed: int, progress, span
 ) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """Stage 1: synthesize ``S_out`` from ``S_in``; returns ``(S_out, source map, stats)``."""
-    if params.falloff is None:
-        params = params.model_copy(update={"falloff": falloff_for(s_in)})
+    params = params.resolved(s_in)
     levels = params.structure_levels
     code = tensor_features(s_in[:1, :1], params.metric)[1]
     tensor_levels = gaussian_pyramid(s_in, levels)
@@ -371,10 +382,7 @@ def run_tensor_constrained(
     report = checked_progress(progress)
     t0 = time.perf_counter()
     s_in = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
-    if params.falloff is None:
-        params = params.model_copy(update={"falloff": falloff_for(s_in)})
-    if params.refinement == "square" and params.refinement_size is None:  # unused by 'same' passes
-        params = params.model_copy(update={"refinement_size": refinement_size_for(s_in, params)})
+    params = params.resolved(s_in)
     # Half the work estimate each: the structure stage runs on more levels, the texture on richer data.
     s_out, src_structure, stats_structure = synthesize_tensor_field(
         s_in, size, params, seed=seed, progress=report, span=(0.0, 0.5)
