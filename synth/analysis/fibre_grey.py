@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage as ndi
 
-from synth.analysis.streamlines import trace
+from synth.analysis.streamlines import sample_along
 from synth.analysis.tensor import structure_direction, structure_tensor
 from synth.colour import to_grey
 
@@ -66,11 +66,7 @@ def fibre_means(image: np.ndarray, direction: np.ndarray, length: int = FIBRE_GR
     out = np.empty(h * w, np.float64)
     for lo in range(0, h * w, CHUNK):
         chunk = starts[lo : lo + CHUNK]
-        ahead = trace(direction, chunk, length)
-        behind = trace(direction, chunk, length, forward=-(ahead[1] - ahead[0]))
-        pts = np.concatenate([behind[:0:-1], ahead], axis=0)  # (2 length + 1, n, 2)
-        inside = (pts[..., 0] >= 0) & (pts[..., 0] <= h - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= w - 1)
-        vals = ndi.map_coordinates(img, pts.reshape(-1, 2).T, order=1, mode="nearest").reshape(inside.shape)
+        vals, inside = sample_along(img, direction, chunk, length)
         out[lo : lo + len(chunk)] = np.where(inside, vals, 0.0).sum(axis=0) / inside.sum(axis=0)
     return out.reshape(h, w)
 

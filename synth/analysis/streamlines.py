@@ -1,7 +1,7 @@
 """Streamlines of an orientation field: curves that follow a line field (an angle mod pi) wherever it turns.
 
 Used to measure grey levels along a texture's strands (:mod:`synth.evaluate.strands`) and to lay
-arbitrary-shape synthesis's hints along the constraint's strands (:mod:`synth.methods.flow_hints`).
+arbitrary-shape synthesis's hints along the constraint's strands (:mod:`synth.methods.strand_hints`).
 
 How: every start point moves by ``step`` pixels per step along the field's direction at its position,
 second-order (midpoint) Runge-Kutta. The field is an *orientation* (defined modulo pi), so it is
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage as ndi
 
-__all__ = ["doubled_angle", "trace"]
+__all__ = ["doubled_angle", "sample_along", "trace"]
 
 
 def doubled_angle(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -70,3 +70,18 @@ def trace(
         prev = k2
         out[i + 1] = pos
     return out
+
+
+def sample_along(
+    image: np.ndarray, angle: np.ndarray, starts: np.ndarray, length: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The grey levels (bilinear) of ``image`` (H, W) along the streamline of ``angle`` through each of
+    ``starts`` (N, 2), ``length`` pixels each way: ``(values, inside)``, both ``(2 length + 1, N)``,
+    ``inside`` False where the curve has left the image (those values are meaningless)."""
+    ahead = trace(angle, starts, length)
+    behind = trace(angle, starts, length, forward=-(ahead[1] - ahead[0]))
+    pts = np.concatenate([behind[:0:-1], ahead], axis=0)  # (2 length + 1, N, 2)
+    h, w = image.shape
+    inside = (pts[..., 0] >= 0) & (pts[..., 0] <= h - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= w - 1)
+    vals = ndi.map_coordinates(image, pts.reshape(-1, 2).T, order=1, mode="nearest").reshape(inside.shape)
+    return vals, inside

@@ -22,9 +22,8 @@ Reference: the measure is this project's (issue 13's wood grain; docs/arbitrary-
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage as ndi
 
-from synth.analysis.streamlines import trace
+from synth.analysis.streamlines import sample_along
 from synth.analysis.tensor import structure_direction, structure_tensor
 from synth.colour import to_grey
 
@@ -36,13 +35,7 @@ STRAND_LENGTH = 24
 
 
 def _variance_along(img: np.ndarray, angle: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
-    ahead = trace(angle, starts, length)
-    first = ahead[1] - ahead[0]
-    behind = trace(angle, starts, length, forward=-first)
-    pts = np.concatenate([behind[:0:-1], ahead], axis=0)  # (2 length + 1, N, 2)
-    h, w = img.shape
-    inside = (pts[..., 0] >= 0) & (pts[..., 0] <= h - 1) & (pts[..., 1] >= 0) & (pts[..., 1] <= w - 1)
-    vals = ndi.map_coordinates(img, pts.reshape(-1, 2).T, order=1, mode="nearest").reshape(inside.shape)
+    vals, inside = sample_along(img, angle, starts, length)
     n = inside.sum(axis=0)
     mean = np.where(inside, vals, 0.0).sum(axis=0) / np.maximum(n, 1)
     var = np.where(inside, (vals - mean) ** 2, 0.0).sum(axis=0) / np.maximum(n, 1)
