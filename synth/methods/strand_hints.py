@@ -36,6 +36,7 @@ random fibre. Same inputs and seed, same hints.
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
 
 import numpy as np
@@ -197,7 +198,6 @@ def _link_cuts(strand_angle, label, data, cut_pts, cut_u, spacing, fibre_of, s0,
     fibre_of, s0, flip = fibre_of.copy(), s0.copy(), np.ones(n_cuts)
     grid = cut_u[0]
     done = np.zeros(n_cuts, bool)
-    import heapq
 
     for root in range(n_cuts):
         if done[root]:
