@@ -4,11 +4,14 @@ With no ``REDIS_URL`` everything runs on the embedded default (filesystem broker
 the data directory), so a fresh machine needs no server. The worker is a child process group that
 is restarted if it dies; stopping ``serve`` (Ctrl-C) stops it too.
 
-``serve`` owns its worker: on Linux the worker's main process gets SIGQUIT (Celery's cold shutdown,
-which ends its pool children too) the moment ``serve`` dies, even by ``kill -9``
-(``PR_SET_PDEATHSIG``); and ``<data dir>/serve.pid`` records ``serve`` and its worker's process
-group, so a ``serve`` that starts after one that vanished stops the worker left over, and one that
-finds another ``serve`` alive on the same data directory refuses to start.
+``serve`` owns its worker (issue 30): stopping ``serve`` sends SIGTERM to the worker's main process
+(a warm shutdown: its running jobs have ``TEXSYNTH_SHUTDOWN_GRACE`` seconds), waits that long and a
+little more, then SIGKILLs the worker's process group. If ``serve`` dies, even by ``kill -9``, the
+worker's main process gets SIGKILL from the kernel (Linux ``PR_SET_PDEATHSIG``; its pool children
+follow) and sees the end of a pipe from ``serve`` (``--parent-fd``, :mod:`worker.lifeline`): never
+Celery's cold shutdown, which can hang. ``<data dir>/serve.pid`` records ``serve`` and its worker's
+process group, so a ``serve`` that starts after one that vanished stops the worker left over, and one
+that finds another ``serve`` alive on the same data directory refuses to start.
 
 Without API tokens (``TEXSYNTH_API_TOKENS``, ``TEXSYNTH_API_TOKEN_FILE``, ``TEXSYNTH_ADMIN_TOKEN``)
 anyone who reaches the port can submit, read and delete every job, so ``serve`` listens on 127.0.0.1
@@ -86,7 +89,12 @@ class ServeLock:
                 f"another texsynth serve (pid {pid}) is running on this data directory; stop it first, "
                 "or give this one its own --data-dir"
             )
-        if isinstance(group, int) and group > 1 and (not pid_alive(group) or _cmdline_has(group, b"worker")):
+        if (
+            isinstance(group, int)
+            and group > 1
+            and _group_has_live_member(group)  # zombies of a worker that ended are no worker
+            and (not pid_alive(group) or _cmdline_has(group, b"worker"))
+        ):
             try:
                 os.killpg(group, signal.SIGKILL)
             except (ProcessLookupError, PermissionError):
@@ -119,6 +127,29 @@ def _cmdline_has(pid: int, word: bytes) -> bool:
         return True  # no /proc: trust the record
 
 
+def _group_has_live_member(pgid: int) -> bool:
+    """Whether process group ``pgid`` has a member that is not a zombie (any member, without /proc)."""
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        entries = [e for e in os.listdir("/proc") if e.isdigit()]
+    except OSError:
+        return True
+    for entry in entries:
+        try:
+            with open(f"/proc/{entry}/stat") as fh:
+                state, _, group = fh.read().rsplit(")", 1)[1].split()[:3]
+        except (OSError, ValueError, IndexError):
+            continue
+        if int(group) == pgid and state not in ("Z", "X"):
+            return True
+    return False
+
+
 def _libc() -> ctypes.CDLL | None:
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -129,14 +160,24 @@ def _libc() -> ctypes.CDLL | None:
 
 
 class WorkerSupervisor(threading.Thread):
-    """Keeps one ``python -m worker`` process group running; restarts it if it dies."""
+    """Keeps one ``python -m worker`` process group running; restarts it if it dies; stops it.
 
-    def __init__(self, env: dict[str, str], lock: ServeLock | None = None) -> None:
+    This thread starts every worker and stops the last one itself, so it outlives them: the kernel's
+    parent-death signal fires when the parent *thread* ends, not only the process.
+    """
+
+    #: Seconds ``serve`` waits beyond the worker's grace before it kills the worker's process group.
+    MARGIN = 5.0
+
+    def __init__(self, env: dict[str, str], lock: ServeLock | None = None, grace: float = 30.0) -> None:
         super().__init__(name="texsynth-worker-supervisor", daemon=True)
         self.env = env
         self.lock = lock
+        self.grace = grace
         self.proc: subprocess.Popen | None = None
+        self._lifeline: int | None = None  # write end of the worker's --parent-fd pipe
         self._stopping = threading.Event()
+        self._stopped = threading.Event()
         self._libc = _libc()
 
     def _spawn(self) -> None:
@@ -144,37 +185,62 @@ class WorkerSupervisor(threading.Thread):
 
         def die_with_serve() -> None:  # in the child, between fork and exec
             if libc is not None:
-                libc.prctl(_PR_SET_PDEATHSIG, signal.SIGQUIT)  # serve gone -> cold shutdown
+                libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)  # serve gone -> gone, whatever Celery does
             if os.getppid() != parent:  # serve died before that took effect
                 os._exit(1)
 
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "worker", "--loglevel=WARNING", "--quiet"],
-            env=self.env,
-            start_new_session=True,
-            preexec_fn=die_with_serve,
-        )
+        if self._lifeline is not None:  # the previous worker's: it is dead
+            os.close(self._lifeline)
+        read, self._lifeline = os.pipe()  # the write end stays here only (not inheritable)
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "worker", "--loglevel=WARNING", "--quiet", f"--parent-fd={read}"],
+                env=self.env,
+                start_new_session=True,
+                preexec_fn=die_with_serve,
+                pass_fds=(read,),
+            )
+        finally:
+            os.close(read)
         if self.lock is not None:
             self.lock.record(self.proc.pid)
 
     def run(self) -> None:
-        self._spawn()
-        while not self._stopping.wait(1.0):
-            if self.proc is not None and self.proc.poll() is not None:
-                print(
-                    f"texsynth serve: the worker exited ({self.proc.returncode}); restarting it", flush=True
-                )
-                _kill_group(self.proc.pid, signal.SIGKILL)  # orphaned pool children, if any
-                self._spawn()
+        try:
+            self._spawn()
+            while not self._stopping.wait(1.0):
+                if self.proc is not None and self.proc.poll() is not None:
+                    print(
+                        f"texsynth serve: the worker exited ({self.proc.returncode}); restarting it",
+                        flush=True,
+                    )
+                    _kill_group(self.proc.pid, signal.SIGKILL)  # orphaned pool children, if any
+                    self._spawn()
+        finally:
+            self._stop_worker()
+            self._stopped.set()
 
-    def stop(self) -> None:
-        self._stopping.set()
+    def _stop_worker(self) -> None:
+        """SIGTERM to the worker's main process, at most grace + MARGIN s, SIGKILL to its group."""
         if self.proc is None:
             return
-        _kill_group(self.proc.pid, signal.SIGTERM)
+        # the main process only: SIGTERM ends a pool child at once, the main process waits for its jobs
+        with contextlib.suppress(ProcessLookupError):
+            if self.proc.poll() is None:
+                os.kill(self.proc.pid, signal.SIGTERM)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(timeout=self.grace + self.MARGIN)
+        _kill_group(self.proc.pid, signal.SIGKILL)
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(timeout=5)
-        _kill_group(self.proc.pid, signal.SIGKILL)
+
+    def stop(self) -> None:
+        """Stop the worker (bounded: grace + MARGIN + a few s) and return when it is gone."""
+        self._stopping.set()
+        if self.is_alive():
+            self.join(timeout=self.grace + self.MARGIN + 10)
+        elif not self._stopped.is_set():  # never started
+            self._stop_worker()
 
 
 def _kill_group(pgid: int, sig: int) -> None:
@@ -233,7 +299,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"texsynth serve: {refusal}", file=sys.stderr)
             return 2
         lock.record(None)
-    supervisor = None if args.no_worker else WorkerSupervisor(env, lock)
+    supervisor = None if args.no_worker else WorkerSupervisor(env, lock, settings.shutdown_grace)
     config = uvicorn.Config(
         create_app(settings), host=host, port=args.port, log_level="warning", timeout_graceful_shutdown=3
     )

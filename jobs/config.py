@@ -66,6 +66,11 @@ class Settings(BaseModel):
     heartbeat_seconds: float = Field(1.0, description="how often a running job proves it is alive")
     stale_seconds: float = Field(10.0, description="a run silent this long is dead (other machines)")
     cancel_grace_seconds: float = Field(2.0, description="after this, a cancel terminates the worker child")
+    shutdown_grace: float = Field(
+        30.0,
+        ge=0.0,
+        description="seconds a stopping worker gives its running jobs; then, or at a second signal, it exits",
+    )
     resend_seconds: float = Field(
         30.0,
         description="a queued job that no worker received this long while workers have room is sent again",

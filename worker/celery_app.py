@@ -1,7 +1,8 @@
 """The workers' Celery application: ``celery -A worker.celery_app worker`` (or ``texsynth worker``).
 
 Configuration comes from :func:`jobs.queue.create_celery` with the environment's :class:`Settings`;
-the signal handlers below keep the service's job records honest about which process holds a job.
+the signal handlers below keep the service's job records honest about which process holds a job, and
+:func:`last_heartbeat` is the worker's last word before :mod:`worker.lifeline` ends it.
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ from celery import signals
 from jobs.config import Settings
 from jobs.queue import TASK_NAME, create_celery
 from jobs.store import JobStore
+from worker.lifeline import ShutdownGuard
 
-__all__ = ["app", "settings", "store"]
+__all__ = ["app", "last_heartbeat", "settings", "store"]
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +27,7 @@ log = logging.getLogger(__name__)
 settings = Settings.from_env()
 app = create_celery(settings)
 _store: JobStore | None = None
+_identity: tuple[str, int, float] | None = None  # this worker's (name, pid, start) once it is ready
 
 
 def store() -> JobStore:
@@ -44,8 +47,10 @@ def _on_received(request=None, **_):
 
 @signals.worker_ready.connect
 def _on_ready(sender=None, **_):
+    global _identity
     name = getattr(sender, "hostname", None) or f"worker@{os.getpid()}"
     started, pid = time.time(), os.getpid()
+    _identity = (name, pid, started)
 
     def beat() -> None:
         while True:
@@ -58,10 +63,17 @@ def _on_ready(sender=None, **_):
     threading.Thread(target=beat, name="texsynth-worker-heartbeat", daemon=True).start()
 
 
+def last_heartbeat() -> None:
+    """The worker main process's heartbeat, once more (before a hard exit); nothing before it was ready."""
+    if _identity is not None:
+        store().worker_heartbeat(*_identity)
+
+
 @signals.worker_process_init.connect
 def _on_child_start(**_):
     global _store
     _store = None  # never share an SQLite connection across a fork
+    ShutdownGuard.forget_in_child()  # a child's signals are its own, not its main process's
     if settings.worker_nice:
         os.nice(settings.worker_nice)  # the API stays responsive on a machine busy with jobs
     import importlib

@@ -1,7 +1,9 @@
 """``texsynth worker``: start a Celery worker (prefork pool) on the configured broker.
 
 Run as many as you like, on as many machines as share the broker (``REDIS_URL``) and the data
-directory. ``python -m worker`` does the same (``texsynth serve`` starts one that way).
+directory. ``python -m worker`` does the same (``texsynth serve`` starts one that way, with
+``--parent-fd``). A stop signal gives the running jobs ``TEXSYNTH_SHUTDOWN_GRACE`` seconds; a second
+one, or the end of the grace, ends the worker for certain (:mod:`worker.lifeline`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="worker node name (default: texsynth-<pid>@<host>)")
     p.add_argument("--loglevel", default="INFO")
     p.add_argument("--quiet", action="store_true", help="no start-up banner")
+    p.add_argument(
+        "--parent-fd",
+        type=int,
+        help="read end of a pipe from the process that started this worker: exit when it closes",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
         os.environ["TEXSYNTH_DATA_DIR"] = os.path.abspath(args.data_dir)
     if args.concurrency:
         os.environ["TEXSYNTH_CONCURRENCY"] = str(args.concurrency)
-    from worker.celery_app import app, settings
+    from worker.celery_app import app, last_heartbeat, settings
+    from worker.lifeline import ShutdownGuard
 
     name = args.name or f"texsynth-{os.getpid()}@{socket.gethostname()}"
     if not args.quiet:
@@ -48,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
             f"broker {'redis' if settings.redis_url else 'filesystem (embedded)'}",
             flush=True,
         )
+    # before Celery forks its pool and installs its signal handlers: its shutdown can hang (issue 30)
+    ShutdownGuard(settings.shutdown_grace, last_heartbeat, args.parent_fd).install()
     app.worker_main(
         [
             *(["--quiet"] if args.quiet else []),
