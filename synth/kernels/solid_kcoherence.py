@@ -46,8 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import prange
 
+from synth.kernels.common import histogram_factor, splitmix
 from synth.kernels.options import kernel
-from synth.kernels.pixel_search import _histogram_factor, _splitmix
 
 __all__ = [
     "PARALLEL_BLOCKS",
@@ -287,7 +287,7 @@ def _index_factor(index_factor, index_count, index_target, index_weight, g, old)
     """The index-histogram factor of candidate ``g`` for a voxel whose old match is ``old``: the call's
     precomputed factor, except for ``old`` itself, whose own use does not count against it."""
     if g == old:
-        return _histogram_factor(index_count[g] - 1, index_target[g], index_weight)
+        return histogram_factor(index_count[g] - 1, index_target[g], index_weight)
     return index_factor[g]
 
 
@@ -449,9 +449,9 @@ def _search_kernel(
                 if n_random > 0:
                     span_y = np.uint64(y1 - y0)
                     span_x = np.uint64(x1 - x0)
-                    key = _splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
+                    key = splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
                     for j in range(n_random):
-                        r = _splitmix(key + np.uint64(j))
+                        r = splitmix(key + np.uint64(j))
                         gy = y0 + np.int64(r % span_y)
                         gx = x0 + np.int64((r >> np.uint64(32)) % span_x)
                         nc = _add_shifted(
@@ -762,9 +762,9 @@ def _solve_pick_kernel(
             g = cand[row, j]
             s = cost[row, j]
             if position_weight > 0.0:
-                s *= _histogram_factor(position_count[g], position_target[g], position_weight)
+                s *= histogram_factor(position_count[g], position_target[g], position_weight)
             if grey_weight > 0.0:
-                s *= _histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
+                s *= histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
             if s < best:
                 best = s
                 bg = g
@@ -1013,9 +1013,9 @@ def search_reference(
                 if c < weights.kset_window:
                     proposals.extend((int(kk), dr, dc) for kk in b.kset[m] if kk >= 0)
             if weights.n_random > 0:
-                key = _splitmix(np.uint64(weights.seed_key) ^ np.uint64(int(v) * 3 + p))
+                key = splitmix(np.uint64(weights.seed_key) ^ np.uint64(int(v) * 3 + p))
                 for j in range(weights.n_random):
-                    r = int(_splitmix(np.uint64((int(key) + j) & ((1 << 64) - 1))))
+                    r = int(splitmix(np.uint64((int(key) + j) & ((1 << 64) - 1))))
                     gy = y0 + r % (y1 - y0)
                     gx = x0 + (r >> 32) % (x1 - x0)
                     proposals.append((off + gy * w + gx, 0, 0))

@@ -38,6 +38,7 @@ import numba
 import numpy as np
 from numba import prange
 
+from synth.kernels.common import splitmix, splitmix_reference
 from synth.kernels.options import kernel
 
 __all__ = [
@@ -60,7 +61,6 @@ __all__ = [
     "nearest_exact_reference",
     "rerank",
     "rerank_reference",
-    "splitmix",
 ]
 
 
@@ -276,28 +276,6 @@ def rerank_reference(
 # ---------------------------------------------------------------------------------------------
 # k-coherence search (Tong et al. 2002) on slice neighbourhoods
 
-_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
-_MIX2 = np.uint64(0x94D049BB133111EB)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-
-
-@kernel(inline="always")
-def _splitmix(x):
-    z = x + _GOLDEN
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return z ^ (z >> np.uint64(31))
-
-
-def splitmix(x: int) -> int:
-    """The kernels' 64-bit hash (SplitMix64 finaliser) in plain Python integers."""
-    mask = (1 << 64) - 1
-    z = (x + 0x9E3779B97F4A7C15) & mask
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
-    return z ^ (z >> 31)
-
-
 @dataclass
 class CoherenceSets:
     """One exemplar's k-coherence data, every array indexed by flat exemplar position ``row * width + col``.
@@ -404,9 +382,9 @@ def _kcoherence_one(
                 if d < best:
                     best = d
                     bp = pos
-    key = _splitmix(seed_key ^ np.uint64(index0 + m))
+    key = splitmix(seed_key ^ np.uint64(index0 + m))
     for j in range(n_random):
-        r = _splitmix(key + np.uint64(j))
+        r = splitmix(key + np.uint64(j))
         pos = valid_pos[np.int64(r % np.uint64(n_valid))]
         if stamp[pos] == tag:
             continue
@@ -566,9 +544,9 @@ def kcoherence_candidates_reference(
                 if 0 <= er < h and 0 <= ec < w and sets.valid[er * w + ec] and er * w + ec not in seen:
                     seen.append(er * w + ec)
     mask = (1 << 64) - 1
-    key = splitmix((int(seed_key) ^ index) & mask)
+    key = splitmix_reference((int(seed_key) ^ index) & mask)
     for j in range(n_random):
-        pos = int(sets.valid_pos[splitmix((key + j) & mask) % len(sets.valid_pos)])
+        pos = int(sets.valid_pos[splitmix_reference((key + j) & mask) % len(sets.valid_pos)])
         if pos not in seen:
             seen.append(pos)
     return seen

@@ -6,7 +6,7 @@ discrete solver (Han et al. 2006) and two histograms:
 
 1. **Learning.** For every exemplar pixel (every plane's exemplar, every pyramid level) its ``k = 15``
    most similar exemplar pixels, by their ``n x n`` neighbourhoods (PCA + k-d tree,
-   :func:`synth.pixel.synthesis._k_coherence_sets`).
+   :func:`synth.pixel.synthesis.k_coherence_sets`).
 2. **Energy** (Kopf, eq. 1): ``E = sum_v sum_p ||s_{v,p} - e_{v,p}||^r``, ``r = 0.8``, over the
    constrained planes ``p`` (``planes``: the three, or two of ``xy, xz, yz``): ``s_{v,p}`` the slice
    neighbourhood of voxel ``v`` in plane ``p``, ``e_{v,p}`` its matched exemplar neighbourhood. Minimised by
@@ -179,7 +179,7 @@ from synth.pixel.solid import (
     plane_offsets,
     structure_schedule,
 )
-from synth.pixel.synthesis import _k_coherence_sets
+from synth.pixel.synthesis import k_coherence_sets
 
 __all__ = ["SolidChenWangParams", "run_solid_chen_wang", "synthesize_solid_chen_wang"]
 
@@ -303,7 +303,7 @@ def _bank(plan: SolidPlan, level: int, k: int) -> ExemplarBank:
             continue
         layout[p] = (total, h, w)
         parts.append(img.ravel())
-        local = _k_coherence_sets(
+        local = k_coherence_sets(
             [(img[..., None], 1.0)], size, valid[p], k, np.ones((h, w), np.uint8), size, _KSET_DIMS
         )
         glob = np.where(local[..., 0] >= 0, total + local[..., 0] * w + local[..., 1], -1)
