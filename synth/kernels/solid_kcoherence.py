@@ -42,6 +42,7 @@ tests compare with; the public ``x_pass`` functions run the kernels on grouped, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -67,8 +68,7 @@ __all__ = [
 _WEIGHT_EPS = 1e-4
 
 
-@dataclass(frozen=True)
-class ExemplarBank:
+class ExemplarBank(NamedTuple):
     """The three planes' exemplars at one pyramid level, in one flat buffer.
 
     Attributes
@@ -101,8 +101,7 @@ class ExemplarBank:
     grey_bin: np.ndarray
 
 
-@dataclass(frozen=True)
-class SliceGeometry:
+class SliceGeometry(NamedTuple):
     """The slice neighbourhoods and candidate windows of the three planes, as volume and exemplar offsets.
 
     Attributes
@@ -132,8 +131,7 @@ class SliceGeometry:
     entry_weight: np.ndarray
 
 
-@dataclass
-class SolidState:
+class SolidState(NamedTuple):
     """The synthesis state at one level (arrays updated in place by the passes).
 
     Attributes
@@ -199,6 +197,36 @@ class SolverWeights:
     kset_window: int = 5
     consensus: float = 0.5
     grey_weight: float = 5.0
+
+
+class SearchKnobs(NamedTuple):
+    """The search kernel's scalar settings (from :class:`SolverWeights`, typed for numba)."""
+
+    index_weight: float
+    exponent: float
+    n_random: int
+    seed_key: np.uint64
+    rerank: int
+    kset_window: int
+
+
+class SearchWork(NamedTuple):
+    """What one search call reads besides the state, and writes besides it."""
+
+    prev: np.ndarray  # (3, D, H, W) int32: the matches as the pass found them (candidates come from them)
+    index_factor: np.ndarray  # (N,) float64: the index-histogram factor, frozen during the call
+    stamp: np.ndarray  # (PARALLEL_BLOCKS, N) int64: de-duplication stamps, one row per block
+    tags: np.ndarray  # (PARALLEL_BLOCKS,) int64: each block's current stamp
+    msd_out: np.ndarray  # (stop - start, 3) float64: each match's mean squared difference
+    n_cand_out: np.ndarray  # (stop - start, 3) int64: each search's number of candidates
+
+
+class SolveWork(NamedTuple):
+    """One solve block's candidates and their costs before the histogram factors."""
+
+    cand: np.ndarray  # (M, n_max) int64
+    cost: np.ndarray  # (M, n_max) float64
+    n_cand: np.ndarray  # (M,) int64
 
 
 # ---------------------------------------------------------------------------------------------- kernels
@@ -323,42 +351,39 @@ PARALLEL_BLOCKS = 16
 
 
 @kernel(parallel=True)
-def _search_kernel(
-    order,
-    start,
-    stop,
-    vol,
-    prev,
-    match,
-    weight,
-    index_count,
-    index_target,
-    index_factor,
-    orient_factor,
-    ex,
-    layout,
-    valid,
-    kset,
-    features,
-    mean,
-    basis,
-    offsets,
-    lin,
-    cand_offsets,
-    cand_rc,
-    periodic,
-    index_weight,
-    exponent,
-    n_random,
-    seed_key,
-    rerank,
-    kset_window,
-    active,
-    stamp,
-    tags,
-    msd_out,
-    n_cand_out,
-):
+def _search_kernel(order, start, stop, bank, geometry, state, knobs, work):
+    """Search phase on ``order[start:stop]`` (see :func:`search_pass`), in :data:`PARALLEL_BLOCKS` blocks."""
+    vol = state.volume
+    match = state.match
+    weight = state.weight
+    index_count = state.index_count
+    index_target = state.index_target
+    orient_factor = state.orientation_factor
+    ex = bank.values
+    layout = bank.layout
+    valid = bank.valid
+    kset = bank.kset
+    features = bank.features
+    mean = bank.mean
+    basis = bank.basis
+    offsets = geometry.offsets
+    lin = geometry.lin
+    cand_offsets = geometry.cand_offsets
+    cand_rc = geometry.cand_rc
+    periodic = geometry.periodic
+    active = geometry.active
+    index_weight = knobs.index_weight
+    exponent = knobs.exponent
+    n_random = knobs.n_random
+    seed_key = knobs.seed_key
+    rerank = knobs.rerank
+    kset_window = knobs.kset_window
+    prev = work.prev
+    index_factor = work.index_factor
+    stamp = work.stamp
+    tags = work.tags
+    msd_out = work.msd_out
+    n_cand_out = work.n_cand_out
     D, H, W = vol.shape
     n_dims = basis.shape[2]
     K = offsets.shape[1]
@@ -586,28 +611,21 @@ def _consensus_kernel(match, weight, ex, offsets, lin, periodic, active, mu):
 
 
 @kernel(parallel=True)
-def _solve_fit_kernel(
-    order,
-    start,
-    stop,
-    vol,
-    match,
-    consensus_mean,
-    ex,
-    layout,
-    valid,
-    offsets,
-    lin,
-    periodic,
-    active,
-    entry_weight,
-    consensus,
-    radius,
-    cand_out,
-    cost_out,
-    n_out,
-):
+def _solve_fit_kernel(order, start, stop, bank, geometry, state, consensus_mean, consensus, radius, out):
     """Each voxel's candidates and their costs before the histogram factors (see :func:`solve_pass`)."""
+    vol = state.volume
+    match = state.match
+    ex = bank.values
+    layout = bank.layout
+    valid = bank.valid
+    offsets = geometry.offsets
+    lin = geometry.lin
+    periodic = geometry.periodic
+    active = geometry.active
+    entry_weight = geometry.entry_weight
+    cand_out = out.cand
+    cost_out = out.cost
+    n_out = out.n_cand
     D, H, W = vol.shape
     K = offsets.shape[1]
     n_vox = D * H * W
@@ -726,27 +744,20 @@ def _solve_fit_kernel(
 
 
 @kernel
-def _solve_pick_kernel(
-    order,
-    start,
-    stop,
-    vol,
-    origin,
-    position_count,
-    position_target,
-    grey_bin,
-    grey_count,
-    grey_target,
-    ex,
-    position_weight,
-    grey_weight,
-    cand,
-    cost,
-    n_cand,
-    acc,
-):
+def _solve_pick_kernel(order, start, stop, bank, state, position_weight, grey_weight, fit, acc):
     """The voxels of a block, in scan order: each takes its candidate of lowest cost times the position
     and grey-level histogram factors (the first lowest wins), and the histograms follow at once."""
+    vol = state.volume
+    origin = state.origin
+    position_count = state.position_count
+    position_target = state.position_target
+    grey_count = state.grey_count
+    grey_target = state.grey_target
+    grey_bin = bank.grey_bin
+    ex = bank.values
+    cand = fit.cand
+    cost = fit.cost
+    n_cand = fit.n_cand
     volf = vol.ravel()
     originf = origin.ravel()
     for idx in range(start, stop):
@@ -823,42 +834,17 @@ def search_pass(
     # The index histogram is frozen during the call: every position's factor, once.
     excess = state.index_count / state.index_target - 1.0
     factor = np.where(excess > 0.0, 1.0 + float(weights.index_weight) * excess, 1.0)
-    _search_kernel(
-        order,
-        start,
-        stop,
-        state.volume,
-        scratch["previous"],
-        state.match,
-        state.weight,
-        state.index_count,
-        state.index_target,
-        factor,
-        state.orientation_factor,
-        bank.values,
-        bank.layout,
-        bank.valid,
-        bank.kset,
-        bank.features,
-        bank.mean,
-        bank.basis,
-        geometry.offsets,
-        geometry.lin,
-        geometry.cand_offsets,
-        geometry.cand_rc,
-        geometry.periodic,
+    knobs = SearchKnobs(
         float(weights.index_weight),
         float(weights.exponent),
         int(weights.n_random),
         np.uint64(weights.seed_key),
         int(weights.rerank),
         int(weights.kset_window),
-        geometry.active,
-        scratch["search_stamp"],
-        scratch["search_tags"],
-        msd,
-        n_cand,
     )
+    stamps, tags = scratch["search_stamp"], scratch["search_tags"]
+    work = SearchWork(scratch["previous"], factor, stamps, tags, msd, n_cand)
+    _search_kernel(order, start, stop, bank, geometry, state, knobs, work)
     _search_tally(
         order,
         start,
@@ -910,46 +896,13 @@ def solve_pass(
         cand = np.full((hi - lo, n_max), -1, dtype=np.int64)
         cost = np.zeros((hi - lo, n_max), dtype=np.float64)
         n_cand = np.zeros(hi - lo, dtype=np.int64)
-        _solve_fit_kernel(
-            order,
-            lo,
-            hi,
-            state.volume,
-            state.match,
-            scratch["consensus"].ravel(),
-            bank.values,
-            bank.layout,
-            bank.valid,
-            geometry.offsets,
-            geometry.lin,
-            geometry.periodic,
-            geometry.active,
-            geometry.entry_weight,
-            float(weights.consensus),
-            radius,
-            cand,
-            cost,
-            n_cand,
-        )
-        _solve_pick_kernel(
-            order,
-            lo,
-            hi,
-            state.volume,
-            state.origin,
-            state.position_count,
-            state.position_target,
-            bank.grey_bin,
-            state.grey_count,
-            state.grey_target,
-            bank.values,
-            float(weights.position_weight),
-            float(weights.grey_weight),
-            cand,
-            cost,
-            n_cand,
-            scratch["acc"],
-        )
+        fit = SolveWork(cand, cost, n_cand)
+        consensus = scratch["consensus"].ravel()
+        lam = float(weights.consensus)
+        _solve_fit_kernel(order, lo, hi, bank, geometry, state, consensus, lam, radius, fit)
+        position_weight = float(weights.position_weight)
+        grey_weight = float(weights.grey_weight)
+        _solve_pick_kernel(order, lo, hi, bank, state, position_weight, grey_weight, fit, scratch["acc"])
 
 
 # ---------------------------------------------------------------------------------------------- references

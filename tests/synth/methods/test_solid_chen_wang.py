@@ -73,7 +73,7 @@ def _setup(shape=(6, 7, 8), periodic=True, k=4, anisotropic=False, seed=0, plane
 
 
 def _copy(state: SolidState) -> SolidState:
-    return SolidState(*(np.array(getattr(state, f)) for f in state.__dataclass_fields__))
+    return SolidState(*(np.array(getattr(state, f)) for f in state._fields))
 
 
 def _scratch(bank, state) -> dict[str, np.ndarray]:
@@ -81,7 +81,7 @@ def _scratch(bank, state) -> dict[str, np.ndarray]:
 
 
 def _assert_same(a: SolidState, b: SolidState) -> None:
-    for name in a.__dataclass_fields__:
+    for name in a._fields:
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
 
