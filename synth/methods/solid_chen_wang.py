@@ -144,6 +144,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from pydantic import Field
@@ -164,19 +165,20 @@ from synth.kernels.solid_kcoherence import (
     SolverWeights,
     new_scratch,
     search_pass,
-    search_reference,
     solve_pass,
-    solve_reference,
 )
 from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANE_AXES,
+    LevelStep,
     ProgressMeter,
     SolidPlan,
+    SolidRun,
     exemplar_offsets,
     is_laminar,
     plan_levels,
     plane_offsets,
+    run_levels,
     structure_schedule,
 )
 from synth.pixel.synthesis import k_coherence_sets
@@ -451,130 +453,99 @@ def _usage_spread(origin: np.ndarray, bank: ExemplarBank, active: np.ndarray) ->
 # ------------------------------------------------------------------------------------------------ driver
 
 
-def _run_phase(
-    fn: Callable[..., None],
-    cost: float,
-    stage: str,
-    weights: SolverWeights,
-    ctx: tuple,
-    meter: ProgressMeter,
-    rng: np.random.Generator,
-) -> None:
-    """One pass of ``fn`` (search or solve) over the level's scan order, in progress-sized chunks."""
-    bank, geometry, state, scratch, shape, fixed_order = ctx
-    order = fixed_order if fixed_order is not None else scan_order(shape, "random", rng)
-    n_vox = len(order)
-    step = meter.chunk(cost)
-    for start in range(0, n_vox, step):
-        stop = min(n_vox, start + step)
-        fn(bank, geometry, state, weights, order, start, stop, scratch)
-        meter.advance(cost * (stop - start), stage)
+@dataclass(frozen=True)
+class _Schedule:
+    """The run's automatic choices, resolved once from the parameters and the constrained exemplars."""
+
+    iterations: int
+    coarse_iterations: int
+    orientation_gain: float
+    solve_radius: int
+
+    @classmethod
+    def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
+        """Laminae (``adapt_to_structure``, :func:`synth.pixel.solid.is_laminar`) get at least 10 iterations
+        per level and the laminar settings of the parameters left ``None``; fewer levels hurt this method,
+        so they stay."""
+        iterations = params.iterations
+        orientation_gain = params.orientation_gain or 0.0
+        solve_radius = params.solve_radius or 0
+        coarse_iterations = params.coarse_iterations
+        if params.adapt_to_structure:
+            constrained = [exemplars[name] for name in params.planes]
+            _, iterations = structure_schedule(constrained, 1, iterations)
+            laminar = is_laminar(constrained)
+            if params.orientation_gain is None and laminar:
+                orientation_gain = LAMINAR_ORIENTATION_GAIN
+            if params.solve_radius is None and laminar:
+                solve_radius = LAMINAR_SOLVE_RADIUS
+            if coarse_iterations is None and laminar:
+                coarse_iterations = LAMINAR_COARSE_ITERATIONS
+        if coarse_iterations is None:
+            coarse_iterations = iterations
+        return cls(iterations, coarse_iterations, orientation_gain, solve_radius)
+
+    def per_level(self, levels: int) -> list[int]:
+        """Iterations of each pyramid level (0 the finest)."""
+        return [self.iterations if level == 0 else self.coarse_iterations for level in range(levels)]
 
 
-def synthesize_solid_chen_wang(
-    exemplars: Mapping[str, np.ndarray],
-    size: tuple[int, int, int],
-    params: SolidChenWangParams,
-    *,
-    seed: int = 0,
-    progress: Progress | None = None,
-    reference: bool = False,
-) -> tuple[np.ndarray, dict]:
-    """The volume ``size = (D, H, W)`` and the run's statistics.
+class _ChenWangLoop:
+    """Search and discrete-solver passes at each level (:func:`synth.pixel.solid.run_levels`)."""
 
-    Parameters
-    ----------
-    exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray (h, w) float32``
-        One grey exemplar per plane (the same array three times for an isotropic material).
-    size : (D, H, W)
-    params : SolidChenWangParams
-    seed : int
-        Every random choice comes from ``numpy.random.default_rng(seed)``.
-    progress : callable ``(stage, fraction)``, optional
-        Called at least every 2% of the work; whatever it raises stops the run.
-    reference : bool
-        Run the plain NumPy references instead of the kernels (tests only: very slow).
+    def __init__(
+        self, params: SolidChenWangParams, plan: SolidPlan, run: SolidRun, schedule: _Schedule
+    ) -> None:
+        self.params, self.plan, self.run, self.schedule = params, plan, run, schedule
+        self.weights0 = SolverWeights(
+            index_weight=params.index_weight,
+            position_weight=params.position_weight,
+            exponent=params.exponent,
+            n_random=params.random_candidates,
+            solve_radius=schedule.solve_radius,
+            kset_window=params.kset_window,
+            consensus=params.consensus,
+            grey_weight=params.grey_weight,
+        )
+        total = sum(
+            (1 + iterations * (1 + _SEARCH_COST)) * int(np.prod(s))
+            for iterations, s in zip(schedule.per_level(plan.levels), plan.shapes, strict=True)
+        )
+        self.meter = ProgressMeter(run.report, total)
+        self.stats: dict = {
+            "levels": plan.levels,
+            "iterations": schedule.iterations,
+            "coarse_iterations": schedule.coarse_iterations,
+            "orientation_gain": schedule.orientation_gain,
+            "solve_radius": schedule.solve_radius,
+            "sizes": list(plan.sizes),
+            "mean_match_distance": {},
+            "mean_candidates": {},
+            "level_seconds": {},
+        }
+        self.match: np.ndarray | None = None
+        self.prev_bank: ExemplarBank | None = None
 
-    Returns
-    -------
-    volume : ndarray (D, H, W) float32
-        Every voxel is an exemplar pixel of the finest level.
-    stats : dict
-        ``levels``, ``sizes``, ``mean_match_distance`` and ``mean_candidates`` (per level and iteration of
-        the search), ``usage_spread``
-        (coefficient of variation of the exemplar pixels' use at the finest level) and ``level_seconds``.
-    """
-    for plane in PLANES:
-        img = np.asarray(exemplars[plane])
-        if not np.all(np.isfinite(img)):
-            raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
-    iterations = params.iterations
-    orientation_gain = params.orientation_gain or 0.0
-    solve_radius = params.solve_radius or 0
-    coarse_iterations = params.coarse_iterations
-    if params.adapt_to_structure:  # the iterations only: fewer levels hurt this method (see above)
-        constrained = [exemplars[name] for name in params.planes]
-        _, iterations = structure_schedule(constrained, 1, iterations)
-        laminar = is_laminar(constrained)
-        if params.orientation_gain is None and laminar:
-            orientation_gain = LAMINAR_ORIENTATION_GAIN
-        if params.solve_radius is None and laminar:
-            solve_radius = LAMINAR_SOLVE_RADIUS
-        if coarse_iterations is None and laminar:
-            coarse_iterations = LAMINAR_COARSE_ITERATIONS
-    if coarse_iterations is None:
-        coarse_iterations = iterations
-    levels = params.levels
-    plan = plan_levels(exemplars, tuple(int(s) for s in size), levels, params.neighbourhood_size)
-    rng = np.random.default_rng(seed)
-    weights0 = SolverWeights(
-        index_weight=params.index_weight,
-        position_weight=params.position_weight,
-        exponent=params.exponent,
-        n_random=params.random_candidates,
-        solve_radius=solve_radius,
-        kset_window=params.kset_window,
-        consensus=params.consensus,
-        grey_weight=params.grey_weight,
-    )
-    search_fn = search_reference if reference else search_pass
-    solve_fn = solve_reference if reference else solve_pass
-    total = sum(
-        (1 + (iterations if level == 0 else coarse_iterations) * (1 + _SEARCH_COST)) * int(np.prod(s))
-        for level, s in enumerate(plan.shapes)
-    )
-    meter = ProgressMeter(progress or (lambda stage, fraction: None), total)
-    stats: dict = {
-        "levels": plan.levels,
-        "iterations": iterations,
-        "coarse_iterations": coarse_iterations,
-        "orientation_gain": orientation_gain,
-        "solve_radius": solve_radius,
-        "sizes": list(plan.sizes),
-        "mean_match_distance": {},
-        "mean_candidates": {},
-        "level_seconds": {},
-    }
-    match: np.ndarray | None = None
-    prev_bank: ExemplarBank | None = None
-    state: SolidState | None = None
-    bank: ExemplarBank | None = None
-    for level in range(plan.levels - 1, -1, -1):
-        t0 = time.perf_counter()
-        shape = plan.shapes[level]
-        n_vox = int(np.prod(shape))
-        bank = _bank(plan, level, params.k)
-        geometry = _geometry(plan.sizes[level], bank.layout, params.periodic, params.planes, params.sigma)
-        if match is None or prev_bank is None:
+    def start_level(self, step: LevelStep) -> None:
+        """The level's bank and geometry, its matches (upsampled, or random at the coarsest), its first
+        voxels and histograms, and the solve pass that precedes the first search."""
+        params, plan, rng = self.params, self.plan, self.run.rng
+        self.t0 = time.perf_counter()
+        shape, n_vox = step.shape, step.voxels
+        bank = self.bank = _bank(plan, step.level, params.k)
+        geometry = self.geometry = _geometry(
+            step.size, bank.layout, params.periodic, params.planes, params.sigma
+        )
+        if self.match is None or self.prev_bank is None:
             match = _random_matches(bank, shape, rng)
         else:
-            match = _upsampled_matches(match, prev_bank, bank, shape)
+            match = _upsampled_matches(self.match, self.prev_bank, bank, shape)
         index_target, position_target = _targets(bank, n_vox, geometry.active)
         # The first voxels: the pixels the first constrained plane's matches are centred on (coherent
         # 2 x 2 blocks of the coarser solution, or random pixels at the coarsest level).
         # A copy: a view would alias the plane's matches, and every solve would overwrite them.
         origin = np.array(match[int(np.flatnonzero(geometry.active)[0])], dtype=np.int32)
-        state = SolidState(
+        self.state = SolidState(
             volume=np.ascontiguousarray(bank.values[origin]),
             match=np.ascontiguousarray(match),
             weight=np.ones((3, *shape), dtype=np.float32),
@@ -589,31 +560,88 @@ def synthesize_solid_chen_wang(
             grey_target=_grey_target(bank, n_vox, geometry.active),
             orientation_factor=np.ones((3, len(bank.values)), dtype=np.float64),
         )
-        orientations = _bank_orientations(plan, level, bank) if orientation_gain > 0 else None
-        scratch = new_scratch(bank, state)
-        fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
-        ctx = (bank, geometry, state, scratch, shape, fixed_order)
-        label = f"level {plan.levels - level}/{plan.levels}"
-        _run_phase(solve_fn, 1.0, f"{label}: initial voxels", weights0, ctx, meter, rng)
+        gain = self.schedule.orientation_gain
+        self.orientations = _bank_orientations(plan, step.level, bank) if gain > 0 else None
+        self.scratch = new_scratch(bank, self.state)
+        self.fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
+        self.label = f"level {step.levels - step.level}/{step.levels}"
+        self._phase(solve_pass, 1.0, f"{self.label}: initial voxels", self.weights0)
 
-        for it in range(iterations if level == 0 else coarse_iterations):
-            weights = SolverWeights(**{**weights0.__dict__, "seed_key": int(rng.integers(0, 2**63))})
-            scratch["acc"][:] = 0.0
-            if orientations is not None:
-                _update_orientation_factor(state, orientations, geometry.active, orientation_gain)
-            _run_phase(
-                search_fn, _SEARCH_COST, f"{label}, iteration {it + 1}: search", weights, ctx, meter, rng
-            )
-            key = f"level {plan.levels - level} iteration {it + 1}"
-            stats["mean_match_distance"][key] = float(scratch["acc"][0] / max(scratch["acc"][1], 1.0))
-            stats["mean_candidates"][key] = float(scratch["acc"][2] / max(scratch["acc"][1], 1.0))
-            _run_phase(solve_fn, 1.0, f"{label}, iteration {it + 1}: optimisation", weights, ctx, meter, rng)
-        match = state.match
-        prev_bank = bank
-        stats["level_seconds"][f"level {plan.levels - level}"] = time.perf_counter() - t0
-    assert state is not None and bank is not None
-    stats["usage_spread"] = _usage_spread(state.origin, bank, geometry.active)
-    return np.clip(state.volume, 0.0, 1.0).astype(np.float32), stats
+    def iterate(self, step: LevelStep, it: int) -> bool:
+        """A search pass (index and orientation histograms frozen per call), then a solve pass."""
+        weights = SolverWeights(
+            **{**self.weights0.__dict__, "seed_key": int(self.run.rng.integers(0, 2**63))}
+        )
+        acc = self.scratch["acc"]
+        acc[:] = 0.0
+        if self.orientations is not None:
+            gain = self.schedule.orientation_gain
+            _update_orientation_factor(self.state, self.orientations, self.geometry.active, gain)
+        self._phase(search_pass, _SEARCH_COST, f"{self.label}, iteration {it + 1}: search", weights)
+        key = f"level {step.levels - step.level} iteration {it + 1}"
+        self.stats["mean_match_distance"][key] = float(acc[0] / max(acc[1], 1.0))
+        self.stats["mean_candidates"][key] = float(acc[2] / max(acc[1], 1.0))
+        self._phase(solve_pass, 1.0, f"{self.label}, iteration {it + 1}: optimisation", weights)
+        return True
+
+    def end_level(self, step: LevelStep) -> None:
+        self.match = self.state.match
+        self.prev_bank = self.bank
+        self.stats["level_seconds"][f"level {step.levels - step.level}"] = time.perf_counter() - self.t0
+
+    def _phase(self, fn: Callable[..., None], cost: float, stage: str, weights: SolverWeights) -> None:
+        """One pass of ``fn`` (search or solve) over the level's scan order, in progress-sized chunks."""
+        shape = self.state.volume.shape
+        order = (
+            self.fixed_order if self.fixed_order is not None else scan_order(shape, "random", self.run.rng)
+        )
+        for start, stop in self.meter.chunks(len(order), cost, stage):
+            fn(self.bank, self.geometry, self.state, weights, order, start, stop, self.scratch)
+
+    def finish(self) -> tuple[np.ndarray, dict]:
+        self.stats["usage_spread"] = _usage_spread(self.state.origin, self.bank, self.geometry.active)
+        return np.clip(self.state.volume, 0.0, 1.0).astype(np.float32), self.stats
+
+
+def synthesize_solid_chen_wang(
+    exemplars: Mapping[str, np.ndarray],
+    size: tuple[int, int, int],
+    params: SolidChenWangParams,
+    *,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> tuple[np.ndarray, dict]:
+    """The volume ``size = (D, H, W)`` and the run's statistics.
+
+    Parameters
+    ----------
+    exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray (h, w) float32``
+        One grey exemplar per plane (the same array three times for an isotropic material).
+    size : (D, H, W)
+    params : SolidChenWangParams
+    seed : int
+        Every random choice comes from ``numpy.random.default_rng(seed)``.
+    progress : callable ``(stage, fraction)``, optional
+        Called at least every 2% of the work; whatever it raises stops the run.
+
+    Returns
+    -------
+    volume : ndarray (D, H, W) float32
+        Every voxel is an exemplar pixel of the finest level.
+    stats : dict
+        ``levels``, ``sizes``, ``mean_match_distance`` and ``mean_candidates`` (per level and iteration of
+        the search), ``usage_spread``
+        (coefficient of variation of the exemplar pixels' use at the finest level) and ``level_seconds``.
+    """
+    for plane in PLANES:
+        if not np.all(np.isfinite(np.asarray(exemplars[plane]))):
+            raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
+    schedule = _Schedule.resolve(params, exemplars)
+    plan = plan_levels(exemplars, tuple(int(s) for s in size), params.levels, params.neighbourhood_size)
+    run = SolidRun.start(None, exemplars, params.planes, seed, progress or (lambda stage, fraction: None))
+    loop = _ChenWangLoop(params, plan, run, schedule)
+    run_levels(plan, schedule.per_level(plan.levels), loop)
+    return loop.finish()
 
 
 def run_solid_chen_wang(

@@ -156,18 +156,24 @@ from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
+    LevelStep,
     ProgressMeter,
+    SolidPlan,
+    SolidRun,
     dense_sources,
     exemplar_offsets,
     gather_plane,
+    initial_sources,
     initial_volume,
     match_histogram,
     plan_levels,
     plane_centres,
     plane_offsets,
+    run_levels,
+    search_plane,
     slice_geometry,
     structure_schedule,
-    upsample_sources,
+    upsample_plane_sources,
     upsample_volume,
 )
 
@@ -265,8 +271,159 @@ def _orientation_factors(
     return (1.0 / usage_factors(labels, excess, match, gain)).astype(np.float32)
 
 
-def _active_planes(params: SolidKopfParams) -> list[int]:
-    return [PLANES.index(plane) for plane in params.planes]
+class _KopfLoop:
+    """Kopf's search and optimisation steps at each level (:func:`synth.pixel.solid.run_levels`)."""
+
+    def __init__(self, params: SolidKopfParams, plan: SolidPlan, run: SolidRun, iterations: int) -> None:
+        self.params, self.plan, self.run, self.iterations = params, plan, run, iterations
+        s = params.stride
+        total = sum(
+            iterations * np.prod(shape) * (len(run.active) * SEARCH_COST / s**2 + UPDATE_COST)
+            for shape in plan.shapes
+        )
+        self.meter = ProgressMeter(run.report, float(total))
+        self.timings = {"search": 0.0, "optimisation": 0.0}
+        self.energies: dict[str, list[float]] = {}
+        self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
+        self.src = np.zeros((3, 0), dtype=np.int64)
+        self.pooled = np.zeros(0, dtype=np.float32)
+
+    def start_level(self, step: LevelStep) -> None:
+        """Upsample the volume and the coherent sources (or draw them), and build the level's tables."""
+        params, plan, active = self.params, self.plan, self.run.active
+        n = step.size
+        self.nbhs = plan.neighbourhoods(step.level)
+        images = [plan.exemplars[p][step.level] for p in range(3)]
+        self.images = images
+        if step.coarsest:
+            self.src = initial_sources(self.nbhs, step.voxels, self.run.rng)
+        else:
+            self.vol = upsample_volume(self.vol, step.shape, params.periodic)
+            self.src = upsample_plane_sources(self.src, plan, step.level)
+        self.vol = np.ascontiguousarray(self.vol, dtype=np.float32)
+        self.field = MatchField(
+            match=np.full((3, self.vol.size), -1, dtype=np.int64),
+            weight=np.zeros((3, self.vol.size), dtype=np.float32),
+            offsets=np.ascontiguousarray(np.stack([plane_offsets(p, n) for p in PLANES]), dtype=np.int32),
+            ex_offsets=np.ascontiguousarray(np.stack([exemplar_offsets(n, im.shape[1]) for im in images])),
+            axes=np.array([PLANE_AXES[p] for p in PLANES], dtype=np.int64),
+            phase=np.zeros((3, 2), dtype=np.int64),
+            stride=params.stride,
+            active=np.array([p in active for p in range(3)], dtype=np.uint8),
+        )
+        self.packed = PackedExemplars.pack(images)
+        self.orient: dict[int, OrientationLabels] = {}
+        if params.orientation_gain > 0:
+            known: dict[int, OrientationLabels] = {}
+            for p in active:
+                if id(images[p]) not in known:
+                    known[id(images[p])] = orientation_labels(images[p])
+                self.orient[p] = known[id(images[p])]
+        self.pooled = np.concatenate([images[p].ravel() for p in active])
+        self.hist = HistogramState.start(
+            self.vol, self.pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN if params.histogram_matching else 0.0
+        )
+        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
+        self.scratch = (stamps, np.zeros(1, dtype=np.int64))
+
+    def iterate(self, step: LevelStep, it: int) -> bool:
+        """The search step on every active plane, then the optimisation step (eqs 2-4)."""
+        params, rng, meter = self.params, self.run.rng, self.meter
+        stage = f"solid-kopf: level {step.level + 1} of {step.levels}, iteration {it + 1}/{step.iterations}"
+        t0 = time.perf_counter()
+        self.field.match.fill(-1)
+        sum_d2, count = 0.0, 0
+        for p in self.run.active:
+            sum_d2, count = self._search_plane(step, it, p, stage, sum_d2, count)
+        t1 = time.perf_counter()
+        order = scan_order(step.shape, params.scan, rng)
+        block = max(UPDATE_BLOCK, self.vol.size // UPDATE_BLOCKS_PER_SWEEP)
+        # the chunks are fixed by the sizes: the same blocks on every run
+        for a, b in meter.chunks(len(order), UPDATE_COST, stage):
+            irls_update(
+                self.vol, order, a, b, self.field, self.packed, self.hist, params.periodic, block=block
+            )
+        self.timings["search"] += t1 - t0
+        self.timings["optimisation"] += time.perf_counter() - t1
+        self.energies.setdefault(f"level {step.level + 1}", []).append(sum_d2 / max(count, 1))
+        return True
+
+    def _search_plane(
+        self, step: LevelStep, it: int, p: int, stage: str, sum_d2: float, count: int
+    ) -> tuple[float, int]:
+        """Plane ``p``'s search step on a sparse grid of a fresh phase, and its weights (IRLS, usage);
+        adds its squared distances and searches to the running ``sum_d2`` and ``count``."""
+        params, rng, field, s = self.params, self.run.rng, self.field, self.params.stride
+        plane, shape, n = PLANES[p], step.shape, step.size
+        phase = (int(rng.integers(0, s)), int(rng.integers(0, s)))
+        field.phase[p] = phase
+        centres = plane_centres(shape, plane, s, phase)
+        flat = np.ravel_multi_index(tuple(centres.T), shape)
+        geometry = slice_geometry(shape, plane, params.periodic)
+        seed_key = int(rng.integers(0, 2**63))
+        for a, b in self.meter.chunks(len(centres), SEARCH_COST, stage):
+            queries = gather_plane(self.vol, centres[a:b], plane, n, params.periodic)
+            pos, d2 = search_plane(
+                self.nbhs[p],
+                queries,
+                centres[a:b],
+                exact=params.search == "exact",
+                tree=step.coarsest and it == 0,
+                geometry=geometry,
+                src=self.src[p],
+                n_random=RANDOM_CANDIDATES,
+                seed_key=seed_key,
+                index0=a,
+                scratch=self.scratch,
+                k=COHERENCE_USED,
+            )
+            rms = np.maximum(np.sqrt(d2 / queries.shape[1]), DISTANCE_FLOOR)
+            field.match[p, flat[a:b]] = pos
+            field.weight[p, flat[a:b]] = (rms ** (params.r - 2.0)).astype(np.float32)
+            sum_d2 += float(np.sum(d2 / queries.shape[1]))
+            count += b - a
+        self.src[p] = dense_sources(field.match[p], shape, plane, s, phase, self.images[p].shape)
+        if POSITION_GAIN > 0:
+            field.weight[p, flat] *= _position_factors(field.match[p, flat], self.images[p].shape)
+        if params.orientation_gain > 0:
+            field.weight[p, flat] *= _orientation_factors(
+                field.match[p, flat], self.orient[p], field.weight[p, flat], params.orientation_gain
+            )
+        return sum_d2, count
+
+    def end_level(self, step: LevelStep) -> None:
+        pass
+
+    def result(self, seed: int) -> Result:
+        """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""
+        params, vol = self.params, self.vol
+        # The optimisation's own contrast (std against the exemplars'), before the final remap: near 0 means
+        # the volume collapsed toward a flat grey, as it did with eq 4's gain 1.
+        contrast = float(vol.std() / max(float(self.pooled.std()), 1e-12))
+        if params.histogram_matching:  # final rank remap onto the exemplars' grey levels (see Departures)
+            vol = match_histogram(vol, self.pooled)
+        image = np.clip(vol, 0.0, 1.0).astype(np.float32)
+        self.run.report("done", 1.0)
+        self.timings["total"] = self.run.seconds()
+        energies = self.energies
+        return Result(
+            method="solid-kopf",
+            image=image,
+            params=params.model_dump(),
+            seed=seed,
+            timings=self.timings,
+            stats={
+                # Mean squared difference per neighbourhood entry of the search step, every iteration
+                # (the energy the iterations lower), per level (coarse first); and its last value per level.
+                "energy": energies,
+                "mean_best_distance": {k: v[-1] for k, v in energies.items()},
+                "levels": self.plan.levels,
+                "iterations": self.iterations,
+                "neighbourhood_sizes": list(self.plan.sizes),
+                "planes": list(params.planes),
+                "contrast_before_remap": contrast,
+            },
+        )
 
 
 def run_solid_kopf(
@@ -280,161 +437,14 @@ def run_solid_kopf(
     exemplars: dict[str, np.ndarray] | None = None,
 ) -> Result:
     """Synthesize a ``size = (D, H, W)`` volume whose slices in ``params.planes`` match their exemplars."""
-    start = time.perf_counter()
-    report = checked_progress(progress)
-    views = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
-    active = _active_planes(params)
+    run = SolidRun.start(exemplar, exemplars, params.planes, seed, checked_progress(progress))
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
-        levels, iterations = structure_schedule([views[PLANES[p]] for p in active], levels, iterations)
-    plan = plan_levels(views, size, levels, params.neighbourhood_size)
-    rng = np.random.default_rng(seed)
-    s = params.stride
-    total = sum(
-        iterations * np.prod(shape) * (len(active) * SEARCH_COST / s**2 + UPDATE_COST)
-        for shape in plan.shapes
-    )
-    meter = ProgressMeter(report, float(total))
-    timings = {"search": 0.0, "optimisation": 0.0}
-    energies: dict[str, list[float]] = {}
-    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in active], rng)
-    src = np.zeros((3, 0), dtype=np.int64)
-    pooled = np.zeros(0, dtype=np.float32)
-    for level in range(plan.levels - 1, -1, -1):
-        shape = plan.shapes[level]
-        n = plan.sizes[level]
-        nbhs = plan.neighbourhoods(level)
-        images = [plan.exemplars[p][level] for p in range(3)]
-        coarsest = level == plan.levels - 1
-        if coarsest:
-            src = np.stack(
-                [
-                    nbhs[p].centres[rng.integers(0, len(nbhs[p].centres), int(np.prod(shape)))]
-                    for p in range(3)
-                ]
-            )
-        else:
-            vol = upsample_volume(vol, shape, params.periodic)
-            src = np.stack(
-                [
-                    upsample_sources(
-                        src[p],
-                        plan.shapes[level + 1],
-                        shape,
-                        plane,
-                        images[p].shape,
-                        plan.exemplars[p][level + 1].shape,
-                    )
-                    for p, plane in enumerate(PLANES)
-                ]
-            )
-        vol = np.ascontiguousarray(vol, dtype=np.float32)
-        field = MatchField(
-            match=np.full((3, vol.size), -1, dtype=np.int64),
-            weight=np.zeros((3, vol.size), dtype=np.float32),
-            offsets=np.ascontiguousarray(np.stack([plane_offsets(p, n) for p in PLANES]), dtype=np.int32),
-            ex_offsets=np.ascontiguousarray(np.stack([exemplar_offsets(n, im.shape[1]) for im in images])),
-            axes=np.array([PLANE_AXES[p] for p in PLANES], dtype=np.int64),
-            phase=np.zeros((3, 2), dtype=np.int64),
-            stride=s,
-            active=np.array([p in active for p in range(3)], dtype=np.uint8),
-        )
-        packed = PackedExemplars.pack(images)
-        orient: dict[int, OrientationLabels] = {}
-        if params.orientation_gain > 0:
-            known: dict[int, OrientationLabels] = {}
-            for p in active:
-                if id(images[p]) not in known:
-                    known[id(images[p])] = orientation_labels(images[p])
-                orient[p] = known[id(images[p])]
-        pooled = np.concatenate([images[p].ravel() for p in active])
-        hist = HistogramState.start(
-            vol, pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN if params.histogram_matching else 0.0
-        )
-        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
-        scratch = (stamps, np.zeros(1, dtype=np.int64))
-        for it in range(iterations):
-            stage = f"solid-kopf: level {level + 1} of {plan.levels}, iteration {it + 1}/{iterations}"
-            t0 = time.perf_counter()
-            field.match.fill(-1)
-            sum_d2 = 0.0
-            count = 0
-            for p in active:
-                plane = PLANES[p]
-                phase = (int(rng.integers(0, s)), int(rng.integers(0, s)))
-                field.phase[p] = phase
-                centres = plane_centres(shape, plane, s, phase)
-                flat = np.ravel_multi_index(tuple(centres.T), shape)
-                geometry = slice_geometry(shape, plane, params.periodic)
-                seed_key = int(rng.integers(0, 2**63))
-                step = meter.chunk(SEARCH_COST)
-                for a in range(0, len(centres), step):
-                    b = min(len(centres), a + step)
-                    queries = gather_plane(vol, centres[a:b], plane, n, params.periodic)
-                    if params.search == "exact" or (coarsest and it == 0):
-                        pos, d2 = nbhs[p].search(queries, exact=params.search == "exact")
-                    else:
-                        pos, d2 = nbhs[p].search_coherent(
-                            queries,
-                            centres[a:b],
-                            geometry,
-                            src[p],
-                            n_random=RANDOM_CANDIDATES,
-                            seed_key=seed_key,
-                            index0=a,
-                            scratch=scratch,
-                            k=COHERENCE_USED,
-                        )
-                    rms = np.maximum(np.sqrt(d2 / queries.shape[1]), DISTANCE_FLOOR)
-                    field.match[p, flat[a:b]] = pos
-                    field.weight[p, flat[a:b]] = (rms ** (params.r - 2.0)).astype(np.float32)
-                    sum_d2 += float(np.sum(d2 / queries.shape[1]))
-                    count += b - a
-                    meter.advance((b - a) * SEARCH_COST, stage)
-                src[p] = dense_sources(field.match[p], shape, plane, s, phase, images[p].shape)
-                if POSITION_GAIN > 0:
-                    field.weight[p, flat] *= _position_factors(field.match[p, flat], images[p].shape)
-                if params.orientation_gain > 0:
-                    field.weight[p, flat] *= _orientation_factors(
-                        field.match[p, flat], orient[p], field.weight[p, flat], params.orientation_gain
-                    )
-            t1 = time.perf_counter()
-            order = scan_order(shape, params.scan, rng)
-            step = meter.chunk(UPDATE_COST)  # fixed by the sizes: the same blocks on every run
-            block = max(UPDATE_BLOCK, vol.size // UPDATE_BLOCKS_PER_SWEEP)
-            for a in range(0, len(order), step):
-                b = min(len(order), a + step)
-                irls_update(vol, order, a, b, field, packed, hist, params.periodic, block=block)
-                meter.advance((b - a) * UPDATE_COST, stage)
-            timings["search"] += t1 - t0
-            timings["optimisation"] += time.perf_counter() - t1
-            energies.setdefault(f"level {level + 1}", []).append(sum_d2 / max(count, 1))
-    # The optimisation's own contrast (std against the exemplars'), before the final remap: near 0 means
-    # the volume collapsed toward a flat grey, as it did with eq 4's gain 1.
-    contrast = float(vol.std() / max(float(pooled.std()), 1e-12))
-    if params.histogram_matching:  # final rank remap onto the exemplars' grey levels (see Departures)
-        vol = match_histogram(vol, pooled)
-    image = np.clip(vol, 0.0, 1.0).astype(np.float32)
-    report("done", 1.0)
-    timings["total"] = time.perf_counter() - start
-    return Result(
-        method="solid-kopf",
-        image=image,
-        params=params.model_dump(),
-        seed=seed,
-        timings=timings,
-        stats={
-            # Mean squared difference per neighbourhood entry of the search step, every iteration
-            # (the energy the iterations lower), per level (coarse first); and its last value per level.
-            "energy": energies,
-            "mean_best_distance": {k: v[-1] for k, v in energies.items()},
-            "levels": plan.levels,
-            "iterations": iterations,
-            "neighbourhood_sizes": list(plan.sizes),
-            "planes": list(params.planes),
-            "contrast_before_remap": contrast,
-        },
-    )
+        levels, iterations = structure_schedule(run.constrained(), levels, iterations)
+    plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
+    loop = _KopfLoop(params, plan, run, iterations)
+    run_levels(plan, [iterations] * plan.levels, loop)
+    return loop.result(seed)
 
 
 SPEC = register(
