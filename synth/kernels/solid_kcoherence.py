@@ -1,42 +1,30 @@
 """k-coherence search and discrete solver over the three slice neighbourhoods of a volume (Chen & Wang 2010).
 
-The volume ``(D, H, W) = (z, y, x)`` is synthesized as in Kopf et al. (2007) by alternating two phases,
-each a pass over a scan order:
+The volume ``(D, H, W) = (z, y, x)`` is synthesized as in Kopf et al. (2007) by alternating two passes:
 
-- **search** (:func:`search_pass`): for every voxel ``v`` and every plane ``p`` in ``xy, xz, yz``, the
-  ``n x n`` slice of the volume through ``v`` in that plane is compared (SSD) with exemplar
-  neighbourhoods of plane ``p``'s exemplar, and the best one's centre is stored in ``match[p, v]``.
-  The candidates are k-coherent (Tong et al. 2002): for each voxel ``u = v + d`` of a small window of
-  the slice, ``match[p, u] - d`` and the ``k`` exemplar positions most similar to ``match[p, u]``, each
-  also shifted by ``-d``. A candidate's distance is multiplied by the **index histogram** factor
-  ``1 + index_weight * max(0, count / target - 1)``, where ``count`` is how many (voxel, plane) pairs
-  already match that exemplar neighbourhood and ``target`` is their number under uniform use.
-  The match's IRLS weight ``(mean squared difference + eps) ** ((r - 2) / 2)`` (Kopf's
-  ``||s - e||^(r - 2)`` per entry, ``r = 0.8``) is stored in ``weight[p, v]``.
-- **solve** (:func:`solve_pass`, Chen & Wang's discrete solver): the candidates of voxel ``v`` are the
-  exemplar pixels its matches lay on it, from the matched neighbourhoods centred within ``solve_radius``
-  voxels of ``v`` in each constrained plane (``radius 0``: its own three matches). Candidate ``g`` of plane
-  ``p``'s exemplar costs ``(mean_q D_q(g) + consensus * (ex[g] - mu)^2) * h_pos(g) * h_grey(g)``:
-  ``D_q(g)`` the (entry-weighted) mean squared difference between ``g``'s exemplar neighbourhood and the
-  slice of ``v`` in every constrained plane ``q`` sharing ``p``'s exemplar; ``mu`` the mean of the values
-  that every matched neighbourhood covering ``v`` proposes, weighted by their IRLS weights (Kopf's
-  least-squares voxel); ``h_pos = 1 + position_weight * max(0, count / target - 1)`` the **position
-  histogram** factor (``count``: voxels that copy that pixel) and ``h_grey`` the same on grey-level bins
-  (Kopf's histogram matching, off when ``grey_weight = 0``). With ``rerank > 0`` the candidates are first
-  ranked with ``D_q`` computed in the principal subspace and the ``rerank`` best are scored in full; the
-  first lowest cost wins, and ``v`` copies it: ``volume[v] = ex[g]``, ``origin[v] = g`` (every voxel
-  value is an exemplar pixel, never an average).
-- Only the constrained planes (``geometry.active``) are searched, counted and scored.
+- **search** (:func:`search_pass`): for every voxel ``v`` and constrained plane ``p``, the ``n x n`` slice
+  through ``v`` is compared (SSD) with plane ``p``'s exemplar neighbourhoods; the best centre goes to
+  ``match[p, v]``. Candidates are k-coherent (Tong et al. 2002): for each voxel ``u = v + d`` of a small
+  slice window, ``match[p, u] - d`` and the ``k`` positions most similar to ``match[p, u]``, shifted by
+  ``-d``. A distance is multiplied by the **index histogram** factor ``1 + index_weight * max(0, count /
+  target - 1)`` (``count``: (voxel, plane) pairs matching that neighbourhood). The IRLS weight
+  ``(msd + eps) ** ((r - 2) / 2)`` (Kopf's ``||s - e||^(r - 2)`` per entry) goes to ``weight[p, v]``.
+- **solve** (:func:`solve_pass`, Chen & Wang's discrete solver): voxel ``v``'s candidates are the exemplar
+  pixels the matches centred within ``solve_radius`` lay on it. Candidate ``g`` costs
+  ``(mean_q D_q(g) + consensus * (ex[g] - mu)^2) * h_pos(g) * h_grey(g)``: ``D_q`` the entry-weighted mean
+  squared difference of ``g``'s neighbourhood and ``v``'s slice in every plane sharing the exemplar;
+  ``mu`` the IRLS-weighted mean of the values the covering matches propose (Kopf's least-squares voxel);
+  ``h_pos``, ``h_grey`` the **position** and grey-level histogram factors. With ``rerank > 0`` candidates
+  are ranked in the principal subspace first. ``v`` copies the winner: every voxel is an exemplar pixel.
 
-Exemplar storage: the three planes' exemplars are concatenated into one flat ``values`` buffer (a plane
-whose exemplar is the same as an earlier plane's shares its storage, so an isotropic material has one
-position and index histogram); an exemplar position is its *global index* ``offset_p + row * w_p + col``.
-Exemplar neighbourhoods never wrap: matches lie in each plane's ``valid`` rectangle. The volume wraps when
-``periodic`` (a tileable volume); otherwise slice entries outside it are left out.
+Storage: the planes' exemplars are concatenated into one flat ``values`` buffer (planes with the same
+exemplar share it, and so their histograms); a position is its *global index* ``offset_p + row * w_p +
+col``. Exemplar neighbourhoods never wrap; the volume wraps when ``periodic``.
 
-Every kernel ``_x_kernel`` has a plain NumPy ``x_reference`` with the same arguments and results, which the
-tests compare with; the public ``x_pass`` functions run the kernels on grouped, prepared inputs (built by
-:mod:`synth.methods.solid_chen_wang` from :mod:`synth.pixel.solid`'s offset tables).
+The kernels take their inputs in named groups (:class:`ExemplarBank`, :class:`SliceGeometry`,
+:class:`SolidState`, :class:`SearchKnobs`, :class:`SearchWork`, :class:`SolveWork`), numba named tuples;
+:func:`search_reference` and :func:`solve_reference` are plain NumPy versions of the passes with the same
+arguments and results, which the tests compare with.
 """
 
 from __future__ import annotations

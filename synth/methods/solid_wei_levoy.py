@@ -5,7 +5,8 @@ through it (``xy``, ``xz``, ``yz``; the study's "front and side views" plus the 
 in that plane's exemplar (SSD), and the voxel takes the **average of the matched centres**. Passes
 repeat until the matches stop changing (the fraction of voxels whose match changed in any plane falls
 below ``tolerance``, the study's "same neighbourhoods after 2 consecutive iterations") or
-``iterations`` passes. Multi-resolution over Gaussian pyramids, coarse to fine.
+``iterations`` passes. Multi-resolution over Gaussian pyramids, coarse to fine
+(:func:`synth.pixel.solid.run_levels`).
 
 References
 ----------
@@ -16,23 +17,12 @@ R. D. Urs, J.-P. Da Costa, J.-M. Leyssale, G. Vignoles, C. Germain, "Non-paramet
 laminar volumetric textures from a 2D sample", BMVC 2012, section 2.1: the 2D/3D variant and its
 settings (5 levels, 7x7 non-causal neighbourhoods, Hilbert scan).
 
-Departures, and why
--------------------
-- **Search**: k-coherence (Tong et al. 2002) on each slice (candidates from the in-plane neighbours'
-  matches, shifted, their 8 most similar exemplar positions, and 2 random positions), seeded at each
-  level by the coarser level's matches upsampled; the very first pass of the coarsest level uses a
-  PCA + k-d tree search. Wei's thesis uses TSVQ. ``search='exact'`` compares every exemplar
-  neighbourhood (the definition).
-- **Batches**: voxels are visited in scan order in batches (at most 4096 voxels, about 1% of the
-  run); the voxels of one batch are matched against the volume as it was before the batch
-  (Jacobi inside a batch, Gauss-Seidel between batches), so that the searches run in bulk.
-- **Multi-resolution** by initialisation: each level starts from the coarser volume upsampled and its
-  matches upsampled; the parent level's neighbourhood is not part of the comparison.
-- **Exemplar borders**: only neighbourhoods fully inside the exemplar are matched; the volume wraps
-  (``periodic``) or is mirrored at its faces.
-- **Views**: ``planes`` (default all three, ALGORITHMS.md: "use three and allow two"); with two, e.g.
-  ``('xz', 'yz')``, the study's front and side views, the voxel averages two matched centres and
-  the third plane's slices are free (laminar materials).
+Departures (why: docs/solid.md, "Departures from the papers"):
+- k-coherence search (Tong et al. 2002) seeded by the coarser level, not Wei's TSVQ (``search='exact'``);
+- batches of at most 4096 voxels matched together (Jacobi inside a batch, Gauss-Seidel between);
+- multi-resolution by initialisation only: the parent level is not part of the neighbourhood;
+- neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
+- ``planes``: all three by default, or two (the study's front and side views) for laminae.
 """
 
 from __future__ import annotations
