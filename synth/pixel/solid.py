@@ -1,26 +1,24 @@
-"""Solid textures from 2D exemplars: the machinery the slice-based solid methods share.
+"""Solid textures from 2D exemplars: the machinery and the driver the slice-based solid methods share.
 
 A voxel of a volume ``(D, H, W) = (z, y, x)`` lies in three orthogonal slices: ``xy`` (rows ``y``,
 columns ``x``), ``xz`` (rows ``z``, columns ``x``) and ``yz`` (rows ``z``, columns ``y``)
 (:data:`synth.api.PLANES`). Its *slice neighbourhoods* are the ``n x n`` squares around it in those
-slices, and each is compared with the neighbourhoods of that plane's own exemplar (the same image
-three times for an isotropic material). This module holds what every such method needs:
+slices, each compared with the neighbourhoods of that plane's own exemplar. This module holds:
 
 - :func:`plane_offsets` / :func:`exemplar_offsets`: one plane's square as volume offsets and as flat
-  exemplar offsets, entry by entry in the same (raster) order, so that a gathered slice
-  neighbourhood and an exemplar neighbourhood are comparable vectors;
-- :class:`ExemplarNeighbourhoods`: every neighbourhood fully inside an exemplar, as vectors, their
-  principal axes, and a k-d tree on the projections: :meth:`ExemplarNeighbourhoods.search` answers
-  nearest-neighbour queries exactly (exhaustive) or fast (PCA + tree, re-ranked exactly);
+  exemplar offsets, in the same (raster) order, so that slice and exemplar neighbourhoods compare;
+- :class:`ExemplarNeighbourhoods`: every neighbourhood fully inside an exemplar, its principal axes
+  and a k-d tree: exact, fast (PCA + tree, re-ranked) or k-coherent search (:func:`search_plane`);
 - :class:`SolidPlan` (:func:`plan_levels`): exemplar pyramids per plane, the volume's level shapes
-  and the neighbourhood side at each level, validated once (:class:`~synth.errors.InvalidInput`
-  naming the exemplar that is too small);
+  and each level's neighbourhood side, validated once (:class:`~synth.errors.InvalidInput`);
 - :func:`checked_planes`: the views a method matches (all three, or two for laminar materials);
-- volumes between levels (:func:`initial_volume`, :func:`upsample_volume`, :func:`volume_pyramid`),
-  Kopf's sparse neighbourhood centres (:func:`plane_centres`), and :class:`ProgressMeter`, which
-  turns units of work into ``progress(stage, fraction)`` calls at least every 2% of the run.
-
-Randomness comes only from the ``numpy.random.Generator`` passed in (seeded by the method).
+- volumes and coherent sources between levels (:func:`initial_volume`, :func:`upsample_volume`,
+  :func:`initial_sources`, :func:`upsample_plane_sources`), Kopf's sparse centres (:func:`plane_centres`);
+- the driver: :class:`SolidRun` (views, constrained planes, the one random generator, progress),
+  :func:`run_levels` (coarse to fine, per-level iteration counts, a method's :class:`LevelLoop` at
+  each level) and :class:`ProgressMeter` (``progress(stage, fraction)`` at least every 2%; a report
+  may cancel). A method is a :class:`LevelLoop`; another stage (e.g. a structure field before the
+  texture levels) is another loop run over its own plan.
 
 References
 ----------
