@@ -63,6 +63,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from synth.kernels.common import histogram_factor, splitmix
 from synth.kernels.options import kernel
 
 __all__ = [
@@ -177,19 +178,6 @@ class SearchState:
     #: every chunk copied the whole exemplar 64 times a pass (arbitrary-shape's rotated dictionary, about
     #: 40 MB: its texture stage 1.4 -> 4.0 s).
     flat: tuple | None = None
-
-
-_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
-_MIX2 = np.uint64(0x94D049BB133111EB)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-
-
-@kernel(inline="always")
-def _splitmix(x: np.uint64) -> np.uint64:
-    z = x + _GOLDEN
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return z ^ (z >> np.uint64(31))
 
 
 @kernel(inline="always")
@@ -339,7 +327,7 @@ def _gather_candidates(
     span_y = np.uint64(valid[1] - valid[0])
     span_x = np.uint64(valid[3] - valid[2])
     for j in range(n_random):
-        r = _splitmix(key + np.uint64(j))
+        r = splitmix(key + np.uint64(j))
         cand[m, 0] = valid[0] + np.int64(r % span_y)
         cand[m, 1] = valid[2] + np.int64((r >> np.uint64(32)) % span_x)
         m += 1
@@ -394,17 +382,6 @@ def _valid_positions(valid, mask):
                 out[n, 1] = cx
                 n += 1
     return out
-
-
-@kernel(inline="always")
-def _histogram_factor(count, target, weight):
-    """Histogram-matching penalty: a candidate whose label (its exemplar position, Chen & Wang's
-    position histogram, or its orientation bin) the output already holds ``count`` times, against
-    ``target`` wanted, has its distance multiplied by ``1 + weight * max(0, count / target - 1)``:
-    over-represented labels lose against equally good, under-represented ones. A verbatim
-    continuation (distance 0) is never penalised: the matching acts where copied patches meet."""
-    excess = count / target - 1.0
-    return 1.0 + weight * excess if excess > 0.0 else 1.0
 
 
 @kernel
@@ -502,7 +479,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
             n = all_cand.shape[0]
         else:
             counter[0] += 1
-            key = _splitmix(seed_key ^ np.uint64(p))
+            key = splitmix(seed_key ^ np.uint64(p))
             n = _gather_candidates(
                 cand,
                 oy,
@@ -542,7 +519,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
             f = 1.0
             if hist_weight > 0.0:
                 lab = labels[cy * w + cx]
-                f = _histogram_factor(label_count[lab], label_target[lab], hist_weight)
+                f = histogram_factor(label_count[lab], label_target[lab], hist_weight)
             # The distance, part by part, cheapest first (plain SSD over pixels), each part's sum
             # stopping once it exceeds what is left below the best so far (the argmin is unchanged).
             bound = best / f
@@ -717,7 +694,7 @@ def _candidates_reference(state: SearchState, oy: int, ox: int, key: int) -> np.
                     add(int(ky) - dy, int(kx) - dx)
     mask = (1 << 64) - 1
     for j in range(s.cands.n_random):
-        r = int(_splitmix(np.uint64((key + j) & mask)))
+        r = int(splitmix(np.uint64((key + j) & mask)))
         add(y0 + r % (y1 - y0), x0 + (r >> 32) % (x1 - x0))
     if not seen:  # every proposal fell outside the class window: the current source
         seen.append((int(s.cands.src[oy, ox, 0]), int(s.cands.src[oy, ox, 1])))
@@ -750,7 +727,7 @@ def synthesize_chunk_reference(state: SearchState, start: int, stop: int) -> Non
                 done[oy, ox] = 1
                 continue
         else:
-            key = int(_splitmix(np.uint64(s.run.seed_key) ^ np.uint64(p)))
+            key = int(splitmix(np.uint64(s.run.seed_key) ^ np.uint64(p)))
             cands = _candidates_reference(s, oy, ox, key)
         d = np.zeros(len(cands))
         if s.cur.weight > 0:

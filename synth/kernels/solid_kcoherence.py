@@ -1,53 +1,42 @@
 """k-coherence search and discrete solver over the three slice neighbourhoods of a volume (Chen & Wang 2010).
 
-The volume ``(D, H, W) = (z, y, x)`` is synthesized as in Kopf et al. (2007) by alternating two phases,
-each a pass over a scan order:
+The volume ``(D, H, W) = (z, y, x)`` is synthesized as in Kopf et al. (2007) by alternating two passes:
 
-- **search** (:func:`search_pass`): for every voxel ``v`` and every plane ``p`` in ``xy, xz, yz``, the
-  ``n x n`` slice of the volume through ``v`` in that plane is compared (SSD) with exemplar
-  neighbourhoods of plane ``p``'s exemplar, and the best one's centre is stored in ``match[p, v]``.
-  The candidates are k-coherent (Tong et al. 2002): for each voxel ``u = v + d`` of a small window of
-  the slice, ``match[p, u] - d`` and the ``k`` exemplar positions most similar to ``match[p, u]``, each
-  also shifted by ``-d``. A candidate's distance is multiplied by the **index histogram** factor
-  ``1 + index_weight * max(0, count / target - 1)``, where ``count`` is how many (voxel, plane) pairs
-  already match that exemplar neighbourhood and ``target`` is their number under uniform use.
-  The match's IRLS weight ``(mean squared difference + eps) ** ((r - 2) / 2)`` (Kopf's
-  ``||s - e||^(r - 2)`` per entry, ``r = 0.8``) is stored in ``weight[p, v]``.
-- **solve** (:func:`solve_pass`, Chen & Wang's discrete solver): the candidates of voxel ``v`` are the
-  exemplar pixels its matches lay on it, from the matched neighbourhoods centred within ``solve_radius``
-  voxels of ``v`` in each constrained plane (``radius 0``: its own three matches). Candidate ``g`` of plane
-  ``p``'s exemplar costs ``(mean_q D_q(g) + consensus * (ex[g] - mu)^2) * h_pos(g) * h_grey(g)``:
-  ``D_q(g)`` the (entry-weighted) mean squared difference between ``g``'s exemplar neighbourhood and the
-  slice of ``v`` in every constrained plane ``q`` sharing ``p``'s exemplar; ``mu`` the mean of the values
-  that every matched neighbourhood covering ``v`` proposes, weighted by their IRLS weights (Kopf's
-  least-squares voxel); ``h_pos = 1 + position_weight * max(0, count / target - 1)`` the **position
-  histogram** factor (``count``: voxels that copy that pixel) and ``h_grey`` the same on grey-level bins
-  (Kopf's histogram matching, off when ``grey_weight = 0``). With ``rerank > 0`` the candidates are first
-  ranked with ``D_q`` computed in the principal subspace and the ``rerank`` best are scored in full; the
-  first lowest cost wins, and ``v`` copies it: ``volume[v] = ex[g]``, ``origin[v] = g`` (every voxel
-  value is an exemplar pixel, never an average).
-- Only the constrained planes (``geometry.active``) are searched, counted and scored.
+- **search** (:func:`search_pass`): for every voxel ``v`` and constrained plane ``p``, the ``n x n`` slice
+  through ``v`` is compared (SSD) with plane ``p``'s exemplar neighbourhoods; the best centre goes to
+  ``match[p, v]``. Candidates are k-coherent (Tong et al. 2002): for each voxel ``u = v + d`` of a small
+  slice window, ``match[p, u] - d`` and the ``k`` positions most similar to ``match[p, u]``, shifted by
+  ``-d``. A distance is multiplied by the **index histogram** factor ``1 + index_weight * max(0, count /
+  target - 1)`` (``count``: (voxel, plane) pairs matching that neighbourhood). The IRLS weight
+  ``(msd + eps) ** ((r - 2) / 2)`` (Kopf's ``||s - e||^(r - 2)`` per entry) goes to ``weight[p, v]``.
+- **solve** (:func:`solve_pass`, Chen & Wang's discrete solver): voxel ``v``'s candidates are the exemplar
+  pixels the matches centred within ``solve_radius`` lay on it. Candidate ``g`` costs
+  ``(mean_q D_q(g) + consensus * (ex[g] - mu)^2) * h_pos(g) * h_grey(g)``: ``D_q`` the entry-weighted mean
+  squared difference of ``g``'s neighbourhood and ``v``'s slice in every plane sharing the exemplar;
+  ``mu`` the IRLS-weighted mean of the values the covering matches propose (Kopf's least-squares voxel);
+  ``h_pos``, ``h_grey`` the **position** and grey-level histogram factors. With ``rerank > 0`` candidates
+  are ranked in the principal subspace first. ``v`` copies the winner: every voxel is an exemplar pixel.
 
-Exemplar storage: the three planes' exemplars are concatenated into one flat ``values`` buffer (a plane
-whose exemplar is the same as an earlier plane's shares its storage, so an isotropic material has one
-position and index histogram); an exemplar position is its *global index* ``offset_p + row * w_p + col``.
-Exemplar neighbourhoods never wrap: matches lie in each plane's ``valid`` rectangle. The volume wraps when
-``periodic`` (a tileable volume); otherwise slice entries outside it are left out.
+Storage: the planes' exemplars are concatenated into one flat ``values`` buffer (planes with the same
+exemplar share it, and so their histograms); a position is its *global index* ``offset_p + row * w_p +
+col``. Exemplar neighbourhoods never wrap; the volume wraps when ``periodic``.
 
-Every kernel ``_x_kernel`` has a plain NumPy ``x_reference`` with the same arguments and results, which the
-tests compare with; the public ``x_pass`` functions run the kernels on grouped, prepared inputs (built by
-:mod:`synth.methods.solid_chen_wang` from :mod:`synth.pixel.solid`'s offset tables).
+The kernels take their inputs in named groups (:class:`ExemplarBank`, :class:`SliceGeometry`,
+:class:`SolidState`, :class:`SearchKnobs`, :class:`SearchWork`, :class:`SolveWork`), numba named tuples;
+:func:`search_reference` and :func:`solve_reference` are plain NumPy versions of the passes with the same
+arguments and results, which the tests compare with.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
 
+from synth.kernels.common import histogram_factor, splitmix
 from synth.kernels.options import kernel
-from synth.kernels.pixel_search import _histogram_factor, _splitmix
 
 __all__ = [
     "PARALLEL_BLOCKS",
@@ -67,8 +56,7 @@ __all__ = [
 _WEIGHT_EPS = 1e-4
 
 
-@dataclass(frozen=True)
-class ExemplarBank:
+class ExemplarBank(NamedTuple):
     """The three planes' exemplars at one pyramid level, in one flat buffer.
 
     Attributes
@@ -101,8 +89,7 @@ class ExemplarBank:
     grey_bin: np.ndarray
 
 
-@dataclass(frozen=True)
-class SliceGeometry:
+class SliceGeometry(NamedTuple):
     """The slice neighbourhoods and candidate windows of the three planes, as volume and exemplar offsets.
 
     Attributes
@@ -132,8 +119,7 @@ class SliceGeometry:
     entry_weight: np.ndarray
 
 
-@dataclass
-class SolidState:
+class SolidState(NamedTuple):
     """The synthesis state at one level (arrays updated in place by the passes).
 
     Attributes
@@ -199,6 +185,36 @@ class SolverWeights:
     kset_window: int = 5
     consensus: float = 0.5
     grey_weight: float = 5.0
+
+
+class SearchKnobs(NamedTuple):
+    """The search kernel's scalar settings (from :class:`SolverWeights`, typed for numba)."""
+
+    index_weight: float
+    exponent: float
+    n_random: int
+    seed_key: np.uint64
+    rerank: int
+    kset_window: int
+
+
+class SearchWork(NamedTuple):
+    """What one search call reads besides the state, and writes besides it."""
+
+    prev: np.ndarray  # (3, D, H, W) int32: the matches as the pass found them (candidates come from them)
+    index_factor: np.ndarray  # (N,) float64: the index-histogram factor, frozen during the call
+    stamp: np.ndarray  # (PARALLEL_BLOCKS, N) int64: de-duplication stamps, one row per block
+    tags: np.ndarray  # (PARALLEL_BLOCKS,) int64: each block's current stamp
+    msd_out: np.ndarray  # (stop - start, 3) float64: each match's mean squared difference
+    n_cand_out: np.ndarray  # (stop - start, 3) int64: each search's number of candidates
+
+
+class SolveWork(NamedTuple):
+    """One solve block's candidates and their costs before the histogram factors."""
+
+    cand: np.ndarray  # (M, n_max) int64
+    cost: np.ndarray  # (M, n_max) float64
+    n_cand: np.ndarray  # (M,) int64
 
 
 # ---------------------------------------------------------------------------------------------- kernels
@@ -287,7 +303,7 @@ def _index_factor(index_factor, index_count, index_target, index_weight, g, old)
     """The index-histogram factor of candidate ``g`` for a voxel whose old match is ``old``: the call's
     precomputed factor, except for ``old`` itself, whose own use does not count against it."""
     if g == old:
-        return _histogram_factor(index_count[g] - 1, index_target[g], index_weight)
+        return histogram_factor(index_count[g] - 1, index_target[g], index_weight)
     return index_factor[g]
 
 
@@ -323,42 +339,39 @@ PARALLEL_BLOCKS = 16
 
 
 @kernel(parallel=True)
-def _search_kernel(
-    order,
-    start,
-    stop,
-    vol,
-    prev,
-    match,
-    weight,
-    index_count,
-    index_target,
-    index_factor,
-    orient_factor,
-    ex,
-    layout,
-    valid,
-    kset,
-    features,
-    mean,
-    basis,
-    offsets,
-    lin,
-    cand_offsets,
-    cand_rc,
-    periodic,
-    index_weight,
-    exponent,
-    n_random,
-    seed_key,
-    rerank,
-    kset_window,
-    active,
-    stamp,
-    tags,
-    msd_out,
-    n_cand_out,
-):
+def _search_kernel(order, start, stop, bank, geometry, state, knobs, work):
+    """Search phase on ``order[start:stop]`` (see :func:`search_pass`), in :data:`PARALLEL_BLOCKS` blocks."""
+    vol = state.volume
+    match = state.match
+    weight = state.weight
+    index_count = state.index_count
+    index_target = state.index_target
+    orient_factor = state.orientation_factor
+    ex = bank.values
+    layout = bank.layout
+    valid = bank.valid
+    kset = bank.kset
+    features = bank.features
+    mean = bank.mean
+    basis = bank.basis
+    offsets = geometry.offsets
+    lin = geometry.lin
+    cand_offsets = geometry.cand_offsets
+    cand_rc = geometry.cand_rc
+    periodic = geometry.periodic
+    active = geometry.active
+    index_weight = knobs.index_weight
+    exponent = knobs.exponent
+    n_random = knobs.n_random
+    seed_key = knobs.seed_key
+    rerank = knobs.rerank
+    kset_window = knobs.kset_window
+    prev = work.prev
+    index_factor = work.index_factor
+    stamp = work.stamp
+    tags = work.tags
+    msd_out = work.msd_out
+    n_cand_out = work.n_cand_out
     D, H, W = vol.shape
     n_dims = basis.shape[2]
     K = offsets.shape[1]
@@ -449,9 +462,9 @@ def _search_kernel(
                 if n_random > 0:
                     span_y = np.uint64(y1 - y0)
                     span_x = np.uint64(x1 - x0)
-                    key = _splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
+                    key = splitmix(np.uint64(seed_key) ^ np.uint64(v * 3 + p))
                     for j in range(n_random):
-                        r = _splitmix(key + np.uint64(j))
+                        r = splitmix(key + np.uint64(j))
                         gy = y0 + np.int64(r % span_y)
                         gx = x0 + np.int64((r >> np.uint64(32)) % span_x)
                         nc = _add_shifted(
@@ -586,28 +599,21 @@ def _consensus_kernel(match, weight, ex, offsets, lin, periodic, active, mu):
 
 
 @kernel(parallel=True)
-def _solve_fit_kernel(
-    order,
-    start,
-    stop,
-    vol,
-    match,
-    consensus_mean,
-    ex,
-    layout,
-    valid,
-    offsets,
-    lin,
-    periodic,
-    active,
-    entry_weight,
-    consensus,
-    radius,
-    cand_out,
-    cost_out,
-    n_out,
-):
+def _solve_fit_kernel(order, start, stop, bank, geometry, state, consensus_mean, consensus, radius, out):
     """Each voxel's candidates and their costs before the histogram factors (see :func:`solve_pass`)."""
+    vol = state.volume
+    match = state.match
+    ex = bank.values
+    layout = bank.layout
+    valid = bank.valid
+    offsets = geometry.offsets
+    lin = geometry.lin
+    periodic = geometry.periodic
+    active = geometry.active
+    entry_weight = geometry.entry_weight
+    cand_out = out.cand
+    cost_out = out.cost
+    n_out = out.n_cand
     D, H, W = vol.shape
     K = offsets.shape[1]
     n_vox = D * H * W
@@ -726,27 +732,20 @@ def _solve_fit_kernel(
 
 
 @kernel
-def _solve_pick_kernel(
-    order,
-    start,
-    stop,
-    vol,
-    origin,
-    position_count,
-    position_target,
-    grey_bin,
-    grey_count,
-    grey_target,
-    ex,
-    position_weight,
-    grey_weight,
-    cand,
-    cost,
-    n_cand,
-    acc,
-):
+def _solve_pick_kernel(order, start, stop, bank, state, position_weight, grey_weight, fit, acc):
     """The voxels of a block, in scan order: each takes its candidate of lowest cost times the position
     and grey-level histogram factors (the first lowest wins), and the histograms follow at once."""
+    vol = state.volume
+    origin = state.origin
+    position_count = state.position_count
+    position_target = state.position_target
+    grey_count = state.grey_count
+    grey_target = state.grey_target
+    grey_bin = bank.grey_bin
+    ex = bank.values
+    cand = fit.cand
+    cost = fit.cost
+    n_cand = fit.n_cand
     volf = vol.ravel()
     originf = origin.ravel()
     for idx in range(start, stop):
@@ -762,9 +761,9 @@ def _solve_pick_kernel(
             g = cand[row, j]
             s = cost[row, j]
             if position_weight > 0.0:
-                s *= _histogram_factor(position_count[g], position_target[g], position_weight)
+                s *= histogram_factor(position_count[g], position_target[g], position_weight)
             if grey_weight > 0.0:
-                s *= _histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
+                s *= histogram_factor(grey_count[grey_bin[g]], grey_target[grey_bin[g]], grey_weight)
             if s < best:
                 best = s
                 bg = g
@@ -823,42 +822,17 @@ def search_pass(
     # The index histogram is frozen during the call: every position's factor, once.
     excess = state.index_count / state.index_target - 1.0
     factor = np.where(excess > 0.0, 1.0 + float(weights.index_weight) * excess, 1.0)
-    _search_kernel(
-        order,
-        start,
-        stop,
-        state.volume,
-        scratch["previous"],
-        state.match,
-        state.weight,
-        state.index_count,
-        state.index_target,
-        factor,
-        state.orientation_factor,
-        bank.values,
-        bank.layout,
-        bank.valid,
-        bank.kset,
-        bank.features,
-        bank.mean,
-        bank.basis,
-        geometry.offsets,
-        geometry.lin,
-        geometry.cand_offsets,
-        geometry.cand_rc,
-        geometry.periodic,
+    knobs = SearchKnobs(
         float(weights.index_weight),
         float(weights.exponent),
         int(weights.n_random),
         np.uint64(weights.seed_key),
         int(weights.rerank),
         int(weights.kset_window),
-        geometry.active,
-        scratch["search_stamp"],
-        scratch["search_tags"],
-        msd,
-        n_cand,
     )
+    stamps, tags = scratch["search_stamp"], scratch["search_tags"]
+    work = SearchWork(scratch["previous"], factor, stamps, tags, msd, n_cand)
+    _search_kernel(order, start, stop, bank, geometry, state, knobs, work)
     _search_tally(
         order,
         start,
@@ -910,46 +884,13 @@ def solve_pass(
         cand = np.full((hi - lo, n_max), -1, dtype=np.int64)
         cost = np.zeros((hi - lo, n_max), dtype=np.float64)
         n_cand = np.zeros(hi - lo, dtype=np.int64)
-        _solve_fit_kernel(
-            order,
-            lo,
-            hi,
-            state.volume,
-            state.match,
-            scratch["consensus"].ravel(),
-            bank.values,
-            bank.layout,
-            bank.valid,
-            geometry.offsets,
-            geometry.lin,
-            geometry.periodic,
-            geometry.active,
-            geometry.entry_weight,
-            float(weights.consensus),
-            radius,
-            cand,
-            cost,
-            n_cand,
-        )
-        _solve_pick_kernel(
-            order,
-            lo,
-            hi,
-            state.volume,
-            state.origin,
-            state.position_count,
-            state.position_target,
-            bank.grey_bin,
-            state.grey_count,
-            state.grey_target,
-            bank.values,
-            float(weights.position_weight),
-            float(weights.grey_weight),
-            cand,
-            cost,
-            n_cand,
-            scratch["acc"],
-        )
+        fit = SolveWork(cand, cost, n_cand)
+        consensus = scratch["consensus"].ravel()
+        lam = float(weights.consensus)
+        _solve_fit_kernel(order, lo, hi, bank, geometry, state, consensus, lam, radius, fit)
+        position_weight = float(weights.position_weight)
+        grey_weight = float(weights.grey_weight)
+        _solve_pick_kernel(order, lo, hi, bank, state, position_weight, grey_weight, fit, scratch["acc"])
 
 
 # ---------------------------------------------------------------------------------------------- references
@@ -1013,9 +954,9 @@ def search_reference(
                 if c < weights.kset_window:
                     proposals.extend((int(kk), dr, dc) for kk in b.kset[m] if kk >= 0)
             if weights.n_random > 0:
-                key = _splitmix(np.uint64(weights.seed_key) ^ np.uint64(int(v) * 3 + p))
+                key = splitmix(np.uint64(weights.seed_key) ^ np.uint64(int(v) * 3 + p))
                 for j in range(weights.n_random):
-                    r = int(_splitmix(np.uint64((int(key) + j) & ((1 << 64) - 1))))
+                    r = int(splitmix(np.uint64((int(key) + j) & ((1 << 64) - 1))))
                     gy = y0 + r % (y1 - y0)
                     gx = x0 + (r >> 32) % (x1 - x0)
                     proposals.append((off + gy * w + gx, 0, 0))

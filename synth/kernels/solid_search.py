@@ -33,11 +33,13 @@ import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba import prange
 
+from synth.kernels.common import splitmix, splitmix_reference
 from synth.kernels.options import kernel
 
 __all__ = [
@@ -60,7 +62,6 @@ __all__ = [
     "nearest_exact_reference",
     "rerank",
     "rerank_reference",
-    "splitmix",
 ]
 
 
@@ -276,30 +277,8 @@ def rerank_reference(
 # ---------------------------------------------------------------------------------------------
 # k-coherence search (Tong et al. 2002) on slice neighbourhoods
 
-_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
-_MIX2 = np.uint64(0x94D049BB133111EB)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
-
-@kernel(inline="always")
-def _splitmix(x):
-    z = x + _GOLDEN
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return z ^ (z >> np.uint64(31))
-
-
-def splitmix(x: int) -> int:
-    """The kernels' 64-bit hash (SplitMix64 finaliser) in plain Python integers."""
-    mask = (1 << 64) - 1
-    z = (x + 0x9E3779B97F4A7C15) & mask
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
-    return z ^ (z >> 31)
-
-
-@dataclass
-class CoherenceSets:
+class CoherenceSets(NamedTuple):
     """One exemplar's k-coherence data, every array indexed by flat exemplar position ``row * width + col``.
 
     ``image``: the exemplar, flat float32; ``valid``: 1 where a neighbourhood fits (uint8);
@@ -316,8 +295,7 @@ class CoherenceSets:
     width: int
 
 
-@dataclass
-class SliceGeometry:
+class SliceGeometry(NamedTuple):
     """Where the queries sit: volume ``shape`` (int64 (3,)), the plane's volume ``axes`` (row axis,
     column axis) and whether the volume wraps (``periodic``)."""
 
@@ -337,35 +315,37 @@ def _candidate_distance(queries, m, image, pos, offsets, limit):
     return s
 
 
+class RandomDraw(NamedTuple):
+    """The random candidates of a k-coherence call: ``n_random`` per query, drawn from the hash of
+    ``(seed_key, index0 + m)`` for query ``m``."""
+
+    n_random: int
+    seed_key: np.uint64
+    index0: int
+
+
 #: Queries of one k-coherence call are split into this many blocks, run in parallel, each with its own
 #: de-duplication stamps: a fixed number, so the split (and the answer) does not depend on the threads.
 KCOHERENCE_BLOCKS = 16
 
 
 @kernel(inline="always")
-def _kcoherence_one(
-    queries,
-    m,
-    centres,
-    D,
-    H,
-    W,
-    a,
-    b,
-    periodic,
-    src,
-    image,
-    valid,
-    valid_pos,
-    kset,
-    offsets,
-    width,
-    n_random,
-    seed_key,
-    index0,
-    stamp,
-    tag,
-):
+def _kcoherence_one(queries, m, centres, geometry, src, sets, draw, stamp, tag):
+    D = geometry.shape[0]
+    H = geometry.shape[1]
+    W = geometry.shape[2]
+    a = geometry.axes[0]
+    b = geometry.axes[1]
+    periodic = geometry.periodic
+    image = sets.image
+    valid = sets.valid
+    valid_pos = sets.valid_pos
+    kset = sets.kset
+    offsets = sets.offsets
+    width = sets.width
+    n_random = draw.n_random
+    seed_key = draw.seed_key
+    index0 = draw.index0
     h = image.shape[0] // width
     k = kset.shape[1]
     n_valid = valid_pos.shape[0]
@@ -404,9 +384,9 @@ def _kcoherence_one(
                 if d < best:
                     best = d
                     bp = pos
-    key = _splitmix(seed_key ^ np.uint64(index0 + m))
+    key = splitmix(seed_key ^ np.uint64(index0 + m))
     for j in range(n_random):
-        r = _splitmix(key + np.uint64(j))
+        r = splitmix(key + np.uint64(j))
         pos = valid_pos[np.int64(r % np.uint64(n_valid))]
         if stamp[pos] == tag:
             continue
@@ -422,60 +402,14 @@ def _kcoherence_one(
 
 
 @kernel(parallel=True)
-def _kcoherence_kernel(
-    queries,
-    centres,
-    shape,
-    axes,
-    periodic,
-    src,
-    image,
-    valid,
-    valid_pos,
-    kset,
-    offsets,
-    width,
-    n_random,
-    seed_key,
-    index0,
-    stamp,
-    tag0,
-    best_pos,
-    best_d2,
-):
-    D = shape[0]
-    H = shape[1]
-    W = shape[2]
-    a = axes[0]
-    b = axes[1]
+def _kcoherence_kernel(queries, centres, geometry, src, sets, draw, stamp, tag0, best_pos, best_d2):
     M = queries.shape[0]
     blocks = stamp.shape[0]
     per = (M + blocks - 1) // blocks
     for blk in prange(blocks):
         for m in range(blk * per, min(M, (blk + 1) * per)):
-            bp, best = _kcoherence_one(
-                queries,
-                m,
-                centres,
-                D,
-                H,
-                W,
-                a,
-                b,
-                periodic,
-                src,
-                image,
-                valid,
-                valid_pos,
-                kset,
-                offsets,
-                width,
-                n_random,
-                seed_key,
-                index0,
-                stamp[blk],
-                tag0 + m + 1,
-            )
+            tag = tag0 + m + 1
+            bp, best = _kcoherence_one(queries, m, centres, geometry, src, sets, draw, stamp[blk], tag)
             best_pos[m] = bp
             best_d2[m] = best
 
@@ -509,23 +443,15 @@ def kcoherence_search(
     stamps = stamp if stamp.ndim == 2 else stamp[None, :]
     tag0 = int(counter[0])
     counter[0] += m + 1  # tags only grow: stamps never need clearing
+    kset = sets.kset if k is None or k >= sets.kset.shape[1] else np.ascontiguousarray(sets.kset[:, :k])
     with _threads_for(m):
         _kcoherence_kernel(
             np.ascontiguousarray(queries, dtype=np.float32),
             np.ascontiguousarray(centres, dtype=np.int64),
-            geometry.shape,
-            geometry.axes,
-            bool(geometry.periodic),
+            geometry._replace(periodic=bool(geometry.periodic)),
             src,
-            sets.image,
-            sets.valid,
-            sets.valid_pos,
-            sets.kset if k is None or k >= sets.kset.shape[1] else np.ascontiguousarray(sets.kset[:, :k]),
-            sets.offsets,
-            int(sets.width),
-            int(n_random),
-            np.uint64(seed_key),
-            int(index0),
+            sets._replace(kset=kset, width=int(sets.width)),
+            RandomDraw(int(n_random), np.uint64(seed_key), int(index0)),
             stamps,
             tag0,
             pos,
@@ -566,9 +492,9 @@ def kcoherence_candidates_reference(
                 if 0 <= er < h and 0 <= ec < w and sets.valid[er * w + ec] and er * w + ec not in seen:
                     seen.append(er * w + ec)
     mask = (1 << 64) - 1
-    key = splitmix((int(seed_key) ^ index) & mask)
+    key = splitmix_reference((int(seed_key) ^ index) & mask)
     for j in range(n_random):
-        pos = int(sets.valid_pos[splitmix((key + j) & mask) % len(sets.valid_pos)])
+        pos = int(sets.valid_pos[splitmix_reference((key + j) & mask) % len(sets.valid_pos)])
         if pos not in seen:
             seen.append(pos)
     return seen
@@ -626,8 +552,7 @@ class MatchField:
     active: np.ndarray = field(default_factory=lambda: np.ones(3, dtype=np.uint8))  # (3,) planes in use
 
 
-@dataclass
-class PackedExemplars:
+class PackedExemplars(NamedTuple):
     """The three planes' exemplars, flattened one after another: plane ``p`` is
     ``values[start[p] : start[p] + h_p * w_p]`` (they may differ in size)."""
 
@@ -642,8 +567,7 @@ class PackedExemplars:
         return cls(values=values, start=start)
 
 
-@dataclass
-class HistogramState:
+class HistogramState(NamedTuple):
     """Kopf's histogram matching (eq 4): the volume's grey-level counts ``count`` (kept up to date by
     the update), the exemplar's expected counts at the volume's size ``target``, and ``gain``
     (0 switches the matching off). Bins are equal-width on [0, 1]."""
@@ -670,6 +594,18 @@ def _bin(value, bins):
     return min(max(b, 0), bins - 1)
 
 
+class _Proposals(NamedTuple):
+    """The kernel's view of a :class:`MatchField`: the matches, their weights and where they lie."""
+
+    match: np.ndarray  # (3, N) int64
+    weight: np.ndarray  # (3, N) float32
+    ex_offsets: np.ndarray  # (3, K) int64
+    axes: np.ndarray  # (3, 2) int64
+    on_grid: np.ndarray  # (3, 2, max side) uint8: :func:`_grid_tables`
+    active: np.ndarray  # (3,) uint8
+    size: int  # the neighbourhood side
+
+
 #: The optimisation step updates voxels in blocks of this many (in scan order), in parallel within a block;
 #: the volume's histogram is brought up to date between blocks.
 UPDATE_BLOCK = 4096
@@ -687,23 +623,19 @@ def _centre_coordinate(c, n, periodic):
 
 
 @kernel(inline="always")
-def _irls_voxel(
-    vol,
-    v,
-    match,
-    weight,
-    ex_offsets,
-    axes,
-    on_grid,
-    active,
-    size,
-    ex_values,
-    ex_start,
-    periodic,
-    count,
-    target,
-    gain,
-):
+def _irls_voxel(vol, v, proposals, exemplars, histogram, periodic):
+    match = proposals.match
+    weight = proposals.weight
+    ex_offsets = proposals.ex_offsets
+    axes = proposals.axes
+    on_grid = proposals.on_grid
+    active = proposals.active
+    size = proposals.size
+    ex_values = exemplars.values
+    ex_start = exemplars.start
+    count = histogram.count
+    target = histogram.target
+    gain = histogram.gain
     D, H, W = vol.shape
     HW = H * W
     n_total = D * HW
@@ -756,27 +688,10 @@ def _irls_voxel(
 
 
 @kernel(parallel=True)
-def _irls_update_kernel(
-    vol,
-    order,
-    start,
-    stop,
-    match,
-    weight,
-    ex_offsets,
-    axes,
-    on_grid,
-    active,
-    size,
-    ex_values,
-    ex_start,
-    periodic,
-    count,
-    target,
-    gain,
-    block,
-):
+def _irls_update_kernel(vol, order, start, stop, proposals, exemplars, histogram, periodic, block):
     flat = vol.reshape(-1)
+    count = histogram.count
+    gain = histogram.gain
     bins = count.shape[0]
     old = np.empty(block, dtype=np.float32)
     lo = start
@@ -785,23 +700,7 @@ def _irls_update_kernel(
         voxels = np.sort(order[lo:hi])  # the block's voxels in memory order: same answer, fewer misses
         for idx in prange(lo, hi):
             v = voxels[idx - lo]
-            num, den = _irls_voxel(
-                vol,
-                v,
-                match,
-                weight,
-                ex_offsets,
-                axes,
-                on_grid,
-                active,
-                size,
-                ex_values,
-                ex_start,
-                periodic,
-                count,
-                target,
-                gain,
-            )
+            num, den = _irls_voxel(vol, v, proposals, exemplars, histogram, periodic)
             old[idx - lo] = flat[v]
             if den > 0.0:
                 flat[v] = np.float32(num / den)
@@ -853,11 +752,7 @@ def irls_update(
     """
     size = math.isqrt(field.ex_offsets.shape[1])
     with _threads_for(int(stop) - int(start)):
-        _irls_update_kernel(
-            vol,
-            order,
-            int(start),
-            int(stop),
+        proposals = _Proposals(
             field.match,
             field.weight,
             field.ex_offsets,
@@ -865,13 +760,10 @@ def irls_update(
             _grid_tables(vol.shape, field),
             field.active,
             size,
-            exemplars.values,
-            exemplars.start,
-            bool(periodic),
-            histogram.count,
-            histogram.target,
-            float(histogram.gain),
-            int(block),
+        )
+        histogram = histogram._replace(gain=float(histogram.gain))
+        _irls_update_kernel(
+            vol, order, int(start), int(stop), proposals, exemplars, histogram, bool(periodic), int(block)
         )
 
 

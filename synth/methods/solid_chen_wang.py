@@ -2,148 +2,37 @@
 
 A volume ``(D, H, W)`` whose slices along two or three axes look like the 2D exemplar(s), by texture
 optimisation (Kwatra et al. 2005; Kopf et al. 2007) with a k-coherence search (Tong et al. 2002), a
-discrete solver (Han et al. 2006) and two histograms:
+discrete solver (Han et al. 2006) and two histograms. It minimises Kopf's eq 1,
+``E = sum_v sum_p ||s_{v,p} - e_{v,p}||^r``, ``r = 0.8``, over the constrained planes ``p``, alternating
+a **search** pass (each ``e_{v,p}``: the best k-coherent candidate, its distance times the **index
+histogram** factor ``1 + w_idx max(0, H_idx / T_idx - 1)``) and a **discrete solver** pass (each voxel
+copies the candidate exemplar pixel of least ``fit + consensus * (e - mu)^2`` times the **position
+histogram** factor; every voxel is an exemplar pixel). Coarse to fine (:func:`synth.pixel.solid.run_levels`);
+:mod:`synth.kernels.solid_kcoherence` has the formulas. One exemplar per plane for anisotropic materials;
+``planes=('xz', 'yz')`` for laminae (ALGORITHMS.md, section 4).
 
-1. **Learning.** For every exemplar pixel (every plane's exemplar, every pyramid level) its ``k = 15``
-   most similar exemplar pixels, by their ``n x n`` neighbourhoods (PCA + k-d tree,
-   :func:`synth.pixel.synthesis._k_coherence_sets`).
-2. **Energy** (Kopf, eq. 1): ``E = sum_v sum_p ||s_{v,p} - e_{v,p}||^r``, ``r = 0.8``, over the
-   constrained planes ``p`` (``planes``: the three, or two of ``xy, xz, yz``): ``s_{v,p}`` the slice
-   neighbourhood of voxel ``v`` in plane ``p``, ``e_{v,p}`` its matched exemplar neighbourhood. Minimised by
-   alternating two phases, each a pass in the chosen scan order (:mod:`synth.kernels.solid_kcoherence` has
-   the formulas):
-   - **search**: each ``e_{v,p}`` is the best k-coherent candidate (the voxel's own match and its k most
-     similar positions, and its four slice neighbours' matches, shifted), its distance multiplied by the
-     **index histogram** factor ``1 + w_idx max(0, H_idx / T_idx - 1)``;
-   - **discrete solver** (Chen & Wang: "choose among the candidates the one minimising the local energy",
-     no averaging): the candidates are the exemplar pixels the voxel's own matches are centred on (one per
-     constrained plane); each is scored by how well *its* exemplar neighbourhood fits the voxel's slices in
-     every plane sharing its exemplar (mean squared difference, averaged over the planes) plus
-     ``consensus * (e - mu)^2``, ``mu`` the IRLS-weighted mean of the values all matched neighbourhoods
-     covering ``v`` propose (Kopf's least-squares voxel), times the **position histogram** factor (and,
-     optionally, Kopf's grey-level histogram factor). The voxel copies the winner: every voxel is an
-     exemplar pixel.
-3. **Multi-resolution**: Gaussian pyramids of the exemplars (:func:`synth.pixel.solid.plan_levels`),
-   coarse to fine; at a finer level each plane's matches are the parent's, doubled, plus the voxel's
-   parity; the first voxels are the pixels the first constrained plane's matches are centred on, and a
-   solve pass precedes the first search.
+References: J. Chen, B. Wang, "High quality solid texture synthesis using position and index histogram
+matching", The Visual Computer 26(4):253-262, 2010. J. Kopf et al., "Solid texture synthesis from 2D
+exemplars", SIGGRAPH 2007. X. Tong et al., SIGGRAPH 2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et
+al., "Fast example-based surface texture synthesis via discrete optimization", The Visual Computer 22, 2006.
 
-Anisotropic materials give one exemplar per plane (``exemplar_xy``, ``exemplar_xz``, ``exemplar_yz``):
-each plane's slices are matched against its own exemplar, and its pixels have their own histograms.
-Laminar materials cannot be consistent on three planes with one horizontal-laminae exemplar (the slices
-across the sheets are contour mazes): ``planes=('xz', 'yz')`` constrains two and leaves the ``xy`` slices
-free (ALGORITHMS.md, section 4: "use three and allow two").
-
-References
-----------
-J. Chen, B. Wang, "High quality solid texture synthesis using position and index histogram matching",
-The Visual Computer 26(4):253-262, 2010 (doi:10.1007/s00371-009-0408-3).
-J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid texture synthesis from 2D
-exemplars", ACM TOG 26(3), SIGGRAPH 2007. X. Tong et al., "Synthesis of bidirectional texture functions
-on arbitrary surfaces", SIGGRAPH 2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et al., "Fast
-example-based surface texture synthesis via discrete optimization", The Visual Computer 22, 2006.
-
-Departures, and why (measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL)
---------------------------------------------------------------------------------------------------------
-- The paper's exact histogram formulas were not available to us; the study (``papers/
-  solid-synthesis-from-2d-sample.txt``) describes them only in words. We use Kopf's form of histogram
-  re-weighting (a factor ``1 + w max(0, H / T - 1)``, as the 2D engine does) for both histograms.
-- **The solver.** The first cut gave each voxel the proposal nearest the weighted mean of the ~147
-  proposals of the covering neighbourhoods: a denoiser (grey KL 0.18-0.32, std 0.13 against 0.162,
-  smooth low-contrast blobs). Scoring candidates by their neighbourhoods' fit alone (the paper's reading)
-  keeps the contrast (grey KL 0.004-0.02) but is speckled: the centre is 1/49 of each distance, so
-  neighbouring voxels choose independently, and without the histograms it collapses to flat grey (grey
-  KL 1.5). The ``consensus`` term restores coherence: 0.3 / 0.5 / 1.0 give (``grey_weight`` 0) grey
-  KL 0.037 / 0.048 / 0.053 and worst-axis orientation KL 0.095 / 0.084 / 0.126; 0.5 (default) looks
-  cleanest for its KL. Tried
-  and dropped: mean shift to the proposals' mode (grey KL 0.19-0.37), a Gaussian weighting of the fit
-  (``sigma``, no visible gain at 32^3), a grey-level histogram term strong enough for exact
-  histograms (``grey_weight`` 100: grey KL 0.016 but streaked slices; with ``consensus`` 1 and weight 10
-  the fringes all turn one way, orientation KL 0.36 on one axis). Kopf's grey-level histogram sits
-  beside the position histogram, which alone does not hold the grey levels (~2-20 uses per pixel: the
-  over-use of mid-tones is spread over many pixels). Its weight, measured in session 5 with the
-  parallel passes below (seeds 1-3): 5 against 20 gives soot 64^3 grey KL 0.047 / 0.034 (orientation
-  KL at most 0.044 / 0.038), per-plane laminae 0.04 / 0.18 / 0.14 against 0.04 / 0.17 / 0.18, and on the
-  known answer's two-phase field a volume fraction of 0.32-0.35 / 0.37 (truth 0.40), S2 error
-  0.09-0.21 / 0.05-0.08. Default 20.
-- **Candidates** (speed): the solver scores only the voxel's own three matches (``solve_radius=0``;
-  radius 1, 27 candidates, costs 1.3x the run time and radius 3, up to 147, over 2x, for no better KL);
-  the search adds the k-coherence sets of the voxel's own match only (``kset_window=1``: 20 candidates
-  instead of ~80; soot 64^3, seeds 1-3: grey KL 0.047 against 0.050, worst orientation KL 0.044
-  against 0.026, 6.5 s against 10.8 s). Candidates are ranked on 8 principal components and
-  the best 4 compared in full. ``k`` stays the paper's 15: the search's cost grows with it (k = 4: 12.7 s
-  against 19-24 s; k = 8: 15.0 s) and the KLs stay within run-to-run noise (grey 0.046 / 0.051 / 0.048),
-  but at 4 and 8 the slices look fragmented or blobby rather than fringed.
-- The first voxels of a level are copied from the first constrained plane's (upsampled) matches, then
-  one solve pass scores the three planes' matches against them before the first search (a solve from an
-  empty volume chose dark pixels; without the extra pass the last plane lagged: bent laminae with
-  ``planes=('xz', 'yz')``, orientation KL 0.29 / 0.80 -> 0.27 / 0.38; soot worst axis 0.092 -> 0.065).
-- Coarse levels use smaller neighbourhoods (at most a quarter of the exemplar's shorter side) and the
-  number of levels shrinks so that the coarsest exemplar keeps 8 pixels and the volume 4 voxels a side
-  (:func:`synth.pixel.solid.plan_levels`).
-- Default 3 iterations per level (the study ran 10): on soot the energy stops falling after 2-3
-  iterations (``stats['mean_match_distance']``). Laminae get 10 (``adapt_to_structure``, as
-  ``solid-kopf``; :func:`synth.pixel.solid.structure_schedule`): per-plane laminae, seeds 1-3, mean
-  orientation KL 0.09 / 0.26 / 0.30 with 3 -> 0.04 / 0.18 / 0.14 with 10. Kopf's other half of that
-  schedule, 2 levels for micro-structures, is not taken: it doubled the known answer's S2 error here
-  (0.13 against 0.06) and saved little time (the finest level is 85-90% of a run).
-- **Parallel passes** (session 5). The search is Jacobi, as Kopf's: every voxel's candidates come from
-  the matches as the pass found them, the index histogram is frozen during a call (about 1% of the
-  run) and brought up to date after it, and the voxels of a call are searched in parallel in a fixed
-  number of blocks. The solve takes blocks of 2048 voxels in scan order: their candidates' costs are
-  computed in parallel from the volume as the block found it, then the voxels choose one after the other
-  with the position and grey histograms kept up to date voxel by voxel; the consensus means of the whole
-  volume are computed once per pass (the matches do not change during it). The same bytes with 1 or 2
-  threads. Session 3's fully sequential version kept the histograms fresher but ran on one core (an
-  earlier parallel attempt froze the position histogram for 2% of the voxels: grey KL 0.19); the
-  parallel one measures as well (soot grey KL 0.034, orientation 0.03 per axis) and is about 3x faster.
-  The same session fixed the first voxels' origins, which aliased the first plane's matches so that
-  every solve overwrote them.
-- Measured with the defaults (2 cores, load below 1.3, see docs/benchmarks.md): soot 64^3 from 64^2
-  in about 5 s, 128^3 from 128^2 in about 39 s (``solid-kopf``: 5.7 s and 33 s). It searches every
-  voxel of every slice where Kopf searches a sparse grid (every second voxel of each slice axis), four
-  times the searches per iteration. Kopf's sparse grid was tried here (stride 2; the solver's candidates
-  then the grid points within one voxel, up to 12): soot 64^3 orientation KL 0.05 / 0.17 / 0.18 against
-  0.03 per axis, and no faster (6.2-6.9 s against 5.8-6.9 s from 128^2): the solver's extra candidates
-  cost what the search saved. Dropped.
-- **Orientation re-weighting for laminae** (session 6; ``orientation_gain``, :data:`LAMINAR_ORIENTATION_GAIN`
-  when the constrained exemplars are laminar and ``adapt_to_structure`` is on, else off): each search
-  pass multiplies a candidate's distance by ``1 + gain * excess`` of its orientation bin in the plane's
-  current matches (:mod:`synth.grid.orientation_histogram`, as ``solid-kopf``'s default). Bent laminae on
-  the two views that admit a volume (``planes=('xz', 'yz')``, 64^3 from 128^2, seeds 1-3, orientation KL
-  xz / yz): 0.52 / 0.43 without, 0.20 / 0.17 with gain 32, 0.21 / 0.18 with 64 (the tilted planar stack
-  is gone; more dislocations than Kopf's remain). Per-plane laminae barely move (0.04 / 0.17 / 0.16
-  against 0.04 / 0.17 / 0.18): their error is dislocations, not the orientation mix. Not for
-  micro-structures: on soot the gain raised the orientation KL from 0.024-0.038 to 0.04-0.08 and the S2
-  error from 0.05 to 0.11, hence laminae only.
-- **Annealing schedule for laminae** (session 6; ``coarse_iterations``, :data:`LAMINAR_COARSE_ITERATIONS`
-  = 60, and ``solve_radius``, :data:`LAMINAR_SOLVE_RADIUS` = 1, when the constrained exemplars are
-  laminar and ``adapt_to_structure`` is on; else the finest level's iterations and radius 0). Diagnosis
-  (mid-slices beside ``solid-kopf``'s, and the orientation histograms): the laminae had the right
-  spacing but were short, ragged segments with many dislocations and too few of the exemplar's
-  +-35-40 degree tilts. Two causes. (1) The solver chose each voxel among its own two or three matches
-  only, so neighbouring voxels copied from unrelated matches and the lamina edges frayed; radius 1 also
-  scores the neighbours' matches, shifted (Han et al.'s coherent candidates). (2) Ten iterations do not
-  anneal the dislocations, and at the finest level they are expensive to move; at the coarser levels
-  (where the laminae first appear: 32^3 from 64^2) passes cost 1/8 or less. Bent laminae, two views,
-  64^3 from 128^2, orientation KL xz / yz, mean (worst) over seeds 1-3: 0.198 (0.234) / 0.165 (0.188)
-  before; radius 1 alone 0.128 (0.140) / 0.147 (0.160); 60 coarse iterations alone 0.140 (0.158) /
-  0.159 (0.182); both 0.084 (0.090) / 0.095 (0.104) (seeds 4-5: 0.064-0.101 / 0.099-0.153). With
-  radius 1: 30 coarse iterations 0.124 / 0.117, 100 0.075 / 0.087 (17 s), 20 at every level 0.111 /
-  0.097 (1.3x the time), ``k`` 5 0.177 / 0.244. Radius 2: 0.141 / 0.177. Radius 0: ``levels`` 3
-  0.145 / 0.136; ``consensus`` 2 and ``neighbourhood_size`` 9 no better (solid-kopf: 0.098 / 0.100).
-  Per-plane laminae 0.036 / 0.171 / 0.158 -> 0.022 / 0.078 / 0.076 (Kopf 0.023 / 0.077 / 0.077). Cost:
-  7.0 -> 13.8 s (two views), 12.0 -> 20.4 s (per-plane) at 64^3, 2 cores. Soot and the known answer are
-  not laminar: their bytes are unchanged.
-- ``scan`` (lexicographic, random, Morton, Hilbert; default Hilbert, the study's recommendation) orders
-  both phases; ``periodic`` makes the volume wrap (tileable); ``random_candidates`` adds random exemplar
-  positions to the k-coherent ones (0 = the paper).
+Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
+- Kopf's form of histogram re-weighting for both histograms (the paper's formulas are not available);
+- the solver adds a ``consensus`` term (the fit alone is speckled) and Kopf's grey-level histogram;
+- fewer candidates: the voxel's own matches (``solve_radius`` 0), its own k-set (``kset_window`` 1);
+- a level's first voxels come from the first plane's matches, then a solve pass precedes the first search;
+- 3 iterations per level (the study: 10); laminae get 10 (``adapt_to_structure``);
+- parallel passes: the search is Jacobi with the index histogram frozen per call, the solve in blocks;
+- every voxel is searched (Kopf's sparse grid was tried here: worse, no faster);
+- laminae only: orientation re-weighting (``orientation_gain`` 32) and an annealing schedule
+  (60 ``coarse_iterations``, ``solve_radius`` 1).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 from pydantic import Field
@@ -164,22 +53,23 @@ from synth.kernels.solid_kcoherence import (
     SolverWeights,
     new_scratch,
     search_pass,
-    search_reference,
     solve_pass,
-    solve_reference,
 )
 from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANE_AXES,
+    LevelStep,
     ProgressMeter,
     SolidPlan,
+    SolidRun,
     exemplar_offsets,
     is_laminar,
     plan_levels,
     plane_offsets,
+    run_levels,
     structure_schedule,
 )
-from synth.pixel.synthesis import _k_coherence_sets
+from synth.pixel.synthesis import k_coherence_sets
 
 __all__ = ["SolidChenWangParams", "run_solid_chen_wang", "synthesize_solid_chen_wang"]
 
@@ -194,11 +84,11 @@ _RANK_DIMS = 8
 _GREY_BINS = 32
 #: Relative cost of a search pass against an optimisation pass (for progress).
 _SEARCH_COST = 4.0
-#: The orientation re-weighting's gain for laminar exemplars (``orientation_gain=None``; module notes).
+#: The orientation re-weighting's gain for laminar exemplars (``orientation_gain=None``; docs/solid.md).
 LAMINAR_ORIENTATION_GAIN = 32.0
-#: The solver's candidate radius for laminar exemplars (``solve_radius=None``; module notes).
+#: The solver's candidate radius for laminar exemplars (``solve_radius=None``; docs/solid.md).
 LAMINAR_SOLVE_RADIUS = 1
-#: Iterations per level above the finest for laminar exemplars (``coarse_iterations=None``; module notes).
+#: Iterations per level above the finest for laminar exemplars (``coarse_iterations=None``; docs/solid.md).
 LAMINAR_COARSE_ITERATIONS = 60
 
 
@@ -222,8 +112,7 @@ class SolidChenWangParams(SolidParams):
         "finest level's.",
     )
     k: int = Field(15, ge=0, le=32, description="k-coherence: similar exemplar positions per pixel.")
-    # Not given by the paper; measured on the soot exemplar (32^3): 5 narrows the usage spread and the
-    # grey-level KL more than 1 (0.35 against 0.45), 10 and 50 add little.
+    # Not given by the paper; measured (docs/solid.md, "Departures from the papers").
     position_weight: float = Field(
         5.0, ge=0.0, le=100.0, description="Position-histogram weight: 0 = off; larger = more uniform use."
     )
@@ -235,9 +124,7 @@ class SolidChenWangParams(SolidParams):
     random_candidates: int = Field(
         0, ge=0, le=16, description="Random exemplar positions added to the k-coherent candidates (0: paper)."
     )
-    # Measured (soot 64^3, seed 0): 0 / 5 / 100 give grey KL 0.048 / 0.038 / 0.016 and worst-axis orientation
-    # KL 0.084 / 0.092 / 0.070, but 100 streaks the slices; on binary exemplars (the known-answer test's
-    # two-phase field) 0 lets the majority phase grow (volume fraction 0.18 against 0.40), 5 gives 0.25.
+    # Measured on soot, laminae and the known answer (docs/solid.md, "Departures from the papers").
     grey_weight: float = Field(
         20.0,
         ge=0.0,
@@ -303,7 +190,7 @@ def _bank(plan: SolidPlan, level: int, k: int) -> ExemplarBank:
             continue
         layout[p] = (total, h, w)
         parts.append(img.ravel())
-        local = _k_coherence_sets(
+        local = k_coherence_sets(
             [(img[..., None], 1.0)], size, valid[p], k, np.ones((h, w), np.uint8), size, _KSET_DIMS
         )
         glob = np.where(local[..., 0] >= 0, total + local[..., 0] * w + local[..., 1], -1)
@@ -451,130 +338,99 @@ def _usage_spread(origin: np.ndarray, bank: ExemplarBank, active: np.ndarray) ->
 # ------------------------------------------------------------------------------------------------ driver
 
 
-def _run_phase(
-    fn: Callable[..., None],
-    cost: float,
-    stage: str,
-    weights: SolverWeights,
-    ctx: tuple,
-    meter: ProgressMeter,
-    rng: np.random.Generator,
-) -> None:
-    """One pass of ``fn`` (search or solve) over the level's scan order, in progress-sized chunks."""
-    bank, geometry, state, scratch, shape, fixed_order = ctx
-    order = fixed_order if fixed_order is not None else scan_order(shape, "random", rng)
-    n_vox = len(order)
-    step = meter.chunk(cost)
-    for start in range(0, n_vox, step):
-        stop = min(n_vox, start + step)
-        fn(bank, geometry, state, weights, order, start, stop, scratch)
-        meter.advance(cost * (stop - start), stage)
+@dataclass(frozen=True)
+class _Schedule:
+    """The run's automatic choices, resolved once from the parameters and the constrained exemplars."""
+
+    iterations: int
+    coarse_iterations: int
+    orientation_gain: float
+    solve_radius: int
+
+    @classmethod
+    def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
+        """Laminae (``adapt_to_structure``, :func:`synth.pixel.solid.is_laminar`) get at least 10 iterations
+        per level and the laminar settings of the parameters left ``None``; fewer levels hurt this method,
+        so they stay."""
+        iterations = params.iterations
+        orientation_gain = params.orientation_gain or 0.0
+        solve_radius = params.solve_radius or 0
+        coarse_iterations = params.coarse_iterations
+        if params.adapt_to_structure:
+            constrained = [exemplars[name] for name in params.planes]
+            _, iterations = structure_schedule(constrained, 1, iterations)
+            laminar = is_laminar(constrained)
+            if params.orientation_gain is None and laminar:
+                orientation_gain = LAMINAR_ORIENTATION_GAIN
+            if params.solve_radius is None and laminar:
+                solve_radius = LAMINAR_SOLVE_RADIUS
+            if coarse_iterations is None and laminar:
+                coarse_iterations = LAMINAR_COARSE_ITERATIONS
+        if coarse_iterations is None:
+            coarse_iterations = iterations
+        return cls(iterations, coarse_iterations, orientation_gain, solve_radius)
+
+    def per_level(self, levels: int) -> list[int]:
+        """Iterations of each pyramid level (0 the finest)."""
+        return [self.iterations if level == 0 else self.coarse_iterations for level in range(levels)]
 
 
-def synthesize_solid_chen_wang(
-    exemplars: Mapping[str, np.ndarray],
-    size: tuple[int, int, int],
-    params: SolidChenWangParams,
-    *,
-    seed: int = 0,
-    progress: Progress | None = None,
-    reference: bool = False,
-) -> tuple[np.ndarray, dict]:
-    """The volume ``size = (D, H, W)`` and the run's statistics.
+class _ChenWangLoop:
+    """Search and discrete-solver passes at each level (:func:`synth.pixel.solid.run_levels`)."""
 
-    Parameters
-    ----------
-    exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray (h, w) float32``
-        One grey exemplar per plane (the same array three times for an isotropic material).
-    size : (D, H, W)
-    params : SolidChenWangParams
-    seed : int
-        Every random choice comes from ``numpy.random.default_rng(seed)``.
-    progress : callable ``(stage, fraction)``, optional
-        Called at least every 2% of the work; whatever it raises stops the run.
-    reference : bool
-        Run the plain NumPy references instead of the kernels (tests only: very slow).
+    def __init__(
+        self, params: SolidChenWangParams, plan: SolidPlan, run: SolidRun, schedule: _Schedule
+    ) -> None:
+        self.params, self.plan, self.run, self.schedule = params, plan, run, schedule
+        self.weights0 = SolverWeights(
+            index_weight=params.index_weight,
+            position_weight=params.position_weight,
+            exponent=params.exponent,
+            n_random=params.random_candidates,
+            solve_radius=schedule.solve_radius,
+            kset_window=params.kset_window,
+            consensus=params.consensus,
+            grey_weight=params.grey_weight,
+        )
+        total = sum(
+            (1 + iterations * (1 + _SEARCH_COST)) * int(np.prod(s))
+            for iterations, s in zip(schedule.per_level(plan.levels), plan.shapes, strict=True)
+        )
+        self.meter = ProgressMeter(run.report, total)
+        self.stats: dict = {
+            "levels": plan.levels,
+            "iterations": schedule.iterations,
+            "coarse_iterations": schedule.coarse_iterations,
+            "orientation_gain": schedule.orientation_gain,
+            "solve_radius": schedule.solve_radius,
+            "sizes": list(plan.sizes),
+            "mean_match_distance": {},
+            "mean_candidates": {},
+            "level_seconds": {},
+        }
+        self.match: np.ndarray | None = None
+        self.prev_bank: ExemplarBank | None = None
 
-    Returns
-    -------
-    volume : ndarray (D, H, W) float32
-        Every voxel is an exemplar pixel of the finest level.
-    stats : dict
-        ``levels``, ``sizes``, ``mean_match_distance`` and ``mean_candidates`` (per level and iteration of
-        the search), ``usage_spread``
-        (coefficient of variation of the exemplar pixels' use at the finest level) and ``level_seconds``.
-    """
-    for plane in PLANES:
-        img = np.asarray(exemplars[plane])
-        if not np.all(np.isfinite(img)):
-            raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
-    iterations = params.iterations
-    orientation_gain = params.orientation_gain or 0.0
-    solve_radius = params.solve_radius or 0
-    coarse_iterations = params.coarse_iterations
-    if params.adapt_to_structure:  # the iterations only: fewer levels hurt this method (see above)
-        constrained = [exemplars[name] for name in params.planes]
-        _, iterations = structure_schedule(constrained, 1, iterations)
-        laminar = is_laminar(constrained)
-        if params.orientation_gain is None and laminar:
-            orientation_gain = LAMINAR_ORIENTATION_GAIN
-        if params.solve_radius is None and laminar:
-            solve_radius = LAMINAR_SOLVE_RADIUS
-        if coarse_iterations is None and laminar:
-            coarse_iterations = LAMINAR_COARSE_ITERATIONS
-    if coarse_iterations is None:
-        coarse_iterations = iterations
-    levels = params.levels
-    plan = plan_levels(exemplars, tuple(int(s) for s in size), levels, params.neighbourhood_size)
-    rng = np.random.default_rng(seed)
-    weights0 = SolverWeights(
-        index_weight=params.index_weight,
-        position_weight=params.position_weight,
-        exponent=params.exponent,
-        n_random=params.random_candidates,
-        solve_radius=solve_radius,
-        kset_window=params.kset_window,
-        consensus=params.consensus,
-        grey_weight=params.grey_weight,
-    )
-    search_fn = search_reference if reference else search_pass
-    solve_fn = solve_reference if reference else solve_pass
-    total = sum(
-        (1 + (iterations if level == 0 else coarse_iterations) * (1 + _SEARCH_COST)) * int(np.prod(s))
-        for level, s in enumerate(plan.shapes)
-    )
-    meter = ProgressMeter(progress or (lambda stage, fraction: None), total)
-    stats: dict = {
-        "levels": plan.levels,
-        "iterations": iterations,
-        "coarse_iterations": coarse_iterations,
-        "orientation_gain": orientation_gain,
-        "solve_radius": solve_radius,
-        "sizes": list(plan.sizes),
-        "mean_match_distance": {},
-        "mean_candidates": {},
-        "level_seconds": {},
-    }
-    match: np.ndarray | None = None
-    prev_bank: ExemplarBank | None = None
-    state: SolidState | None = None
-    bank: ExemplarBank | None = None
-    for level in range(plan.levels - 1, -1, -1):
-        t0 = time.perf_counter()
-        shape = plan.shapes[level]
-        n_vox = int(np.prod(shape))
-        bank = _bank(plan, level, params.k)
-        geometry = _geometry(plan.sizes[level], bank.layout, params.periodic, params.planes, params.sigma)
-        if match is None or prev_bank is None:
+    def start_level(self, step: LevelStep) -> None:
+        """The level's bank and geometry, its matches (upsampled, or random at the coarsest), its first
+        voxels and histograms, and the solve pass that precedes the first search."""
+        params, plan, rng = self.params, self.plan, self.run.rng
+        self.t0 = time.perf_counter()
+        shape, n_vox = step.shape, step.voxels
+        bank = self.bank = _bank(plan, step.level, params.k)
+        geometry = self.geometry = _geometry(
+            step.size, bank.layout, params.periodic, params.planes, params.sigma
+        )
+        if self.match is None or self.prev_bank is None:
             match = _random_matches(bank, shape, rng)
         else:
-            match = _upsampled_matches(match, prev_bank, bank, shape)
+            match = _upsampled_matches(self.match, self.prev_bank, bank, shape)
         index_target, position_target = _targets(bank, n_vox, geometry.active)
         # The first voxels: the pixels the first constrained plane's matches are centred on (coherent
         # 2 x 2 blocks of the coarser solution, or random pixels at the coarsest level).
         # A copy: a view would alias the plane's matches, and every solve would overwrite them.
         origin = np.array(match[int(np.flatnonzero(geometry.active)[0])], dtype=np.int32)
-        state = SolidState(
+        self.state = SolidState(
             volume=np.ascontiguousarray(bank.values[origin]),
             match=np.ascontiguousarray(match),
             weight=np.ones((3, *shape), dtype=np.float32),
@@ -589,31 +445,88 @@ def synthesize_solid_chen_wang(
             grey_target=_grey_target(bank, n_vox, geometry.active),
             orientation_factor=np.ones((3, len(bank.values)), dtype=np.float64),
         )
-        orientations = _bank_orientations(plan, level, bank) if orientation_gain > 0 else None
-        scratch = new_scratch(bank, state)
-        fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
-        ctx = (bank, geometry, state, scratch, shape, fixed_order)
-        label = f"level {plan.levels - level}/{plan.levels}"
-        _run_phase(solve_fn, 1.0, f"{label}: initial voxels", weights0, ctx, meter, rng)
+        gain = self.schedule.orientation_gain
+        self.orientations = _bank_orientations(plan, step.level, bank) if gain > 0 else None
+        self.scratch = new_scratch(bank, self.state)
+        self.fixed_order = None if params.scan == "random" else scan_order(shape, params.scan)
+        self.label = f"level {step.levels - step.level}/{step.levels}"
+        self._phase(solve_pass, 1.0, f"{self.label}: initial voxels", self.weights0)
 
-        for it in range(iterations if level == 0 else coarse_iterations):
-            weights = SolverWeights(**{**weights0.__dict__, "seed_key": int(rng.integers(0, 2**63))})
-            scratch["acc"][:] = 0.0
-            if orientations is not None:
-                _update_orientation_factor(state, orientations, geometry.active, orientation_gain)
-            _run_phase(
-                search_fn, _SEARCH_COST, f"{label}, iteration {it + 1}: search", weights, ctx, meter, rng
-            )
-            key = f"level {plan.levels - level} iteration {it + 1}"
-            stats["mean_match_distance"][key] = float(scratch["acc"][0] / max(scratch["acc"][1], 1.0))
-            stats["mean_candidates"][key] = float(scratch["acc"][2] / max(scratch["acc"][1], 1.0))
-            _run_phase(solve_fn, 1.0, f"{label}, iteration {it + 1}: optimisation", weights, ctx, meter, rng)
-        match = state.match
-        prev_bank = bank
-        stats["level_seconds"][f"level {plan.levels - level}"] = time.perf_counter() - t0
-    assert state is not None and bank is not None
-    stats["usage_spread"] = _usage_spread(state.origin, bank, geometry.active)
-    return np.clip(state.volume, 0.0, 1.0).astype(np.float32), stats
+    def iterate(self, step: LevelStep, it: int) -> bool:
+        """A search pass (index and orientation histograms frozen per call), then a solve pass."""
+        weights = SolverWeights(
+            **{**self.weights0.__dict__, "seed_key": int(self.run.rng.integers(0, 2**63))}
+        )
+        acc = self.scratch["acc"]
+        acc[:] = 0.0
+        if self.orientations is not None:
+            gain = self.schedule.orientation_gain
+            _update_orientation_factor(self.state, self.orientations, self.geometry.active, gain)
+        self._phase(search_pass, _SEARCH_COST, f"{self.label}, iteration {it + 1}: search", weights)
+        key = f"level {step.levels - step.level} iteration {it + 1}"
+        self.stats["mean_match_distance"][key] = float(acc[0] / max(acc[1], 1.0))
+        self.stats["mean_candidates"][key] = float(acc[2] / max(acc[1], 1.0))
+        self._phase(solve_pass, 1.0, f"{self.label}, iteration {it + 1}: optimisation", weights)
+        return True
+
+    def end_level(self, step: LevelStep) -> None:
+        self.match = self.state.match
+        self.prev_bank = self.bank
+        self.stats["level_seconds"][f"level {step.levels - step.level}"] = time.perf_counter() - self.t0
+
+    def _phase(self, fn: Callable[..., None], cost: float, stage: str, weights: SolverWeights) -> None:
+        """One pass of ``fn`` (search or solve) over the level's scan order, in progress-sized chunks."""
+        shape = self.state.volume.shape
+        order = (
+            self.fixed_order if self.fixed_order is not None else scan_order(shape, "random", self.run.rng)
+        )
+        for start, stop in self.meter.chunks(len(order), cost, stage):
+            fn(self.bank, self.geometry, self.state, weights, order, start, stop, self.scratch)
+
+    def finish(self) -> tuple[np.ndarray, dict]:
+        self.stats["usage_spread"] = _usage_spread(self.state.origin, self.bank, self.geometry.active)
+        return np.clip(self.state.volume, 0.0, 1.0).astype(np.float32), self.stats
+
+
+def synthesize_solid_chen_wang(
+    exemplars: Mapping[str, np.ndarray],
+    size: tuple[int, int, int],
+    params: SolidChenWangParams,
+    *,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> tuple[np.ndarray, dict]:
+    """The volume ``size = (D, H, W)`` and the run's statistics.
+
+    Parameters
+    ----------
+    exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray (h, w) float32``
+        One grey exemplar per plane (the same array three times for an isotropic material).
+    size : (D, H, W)
+    params : SolidChenWangParams
+    seed : int
+        Every random choice comes from ``numpy.random.default_rng(seed)``.
+    progress : callable ``(stage, fraction)``, optional
+        Called at least every 2% of the work; whatever it raises stops the run.
+
+    Returns
+    -------
+    volume : ndarray (D, H, W) float32
+        Every voxel is an exemplar pixel of the finest level.
+    stats : dict
+        ``levels``, ``sizes``, ``mean_match_distance`` and ``mean_candidates`` (per level and iteration of
+        the search), ``usage_spread``
+        (coefficient of variation of the exemplar pixels' use at the finest level) and ``level_seconds``.
+    """
+    for plane in PLANES:
+        if not np.all(np.isfinite(np.asarray(exemplars[plane]))):
+            raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
+    schedule = _Schedule.resolve(params, exemplars)
+    plan = plan_levels(exemplars, tuple(int(s) for s in size), params.levels, params.neighbourhood_size)
+    run = SolidRun.start(None, exemplars, params.planes, seed, progress or (lambda stage, fraction: None))
+    loop = _ChenWangLoop(params, plan, run, schedule)
+    run_levels(plan, schedule.per_level(plan.levels), loop)
+    return loop.finish()
 
 
 def run_solid_chen_wang(

@@ -1,131 +1,30 @@
 """Solid texture synthesis by global optimisation (Kopf et al. 2007): a volume from 2D exemplars.
 
-The volume ``s`` minimises ``E(s, {e}) = sum_v sum_{i in planes} ||s_{v,i} - e_{v,i}||^r`` (eq 1), where
-``s_{v,i}`` is the ``n x n`` neighbourhood of voxel ``v`` in the slice orthogonal to axis ``i`` and
-``e_{v,i}`` the most similar neighbourhood of that plane's exemplar. Each iteration alternates
+The volume ``s`` minimises ``E(s, {e}) = sum_v sum_{i in planes} ||s_{v,i} - e_{v,i}||^r`` (eq 1), ``s_{v,i}``
+the ``n x n`` neighbourhood of voxel ``v`` in the slice orthogonal to axis ``i``, ``e_{v,i}`` the most similar
+neighbourhood of that plane's exemplar. Each iteration alternates the **search step** (every ``e_{v,i}``)
+and the **optimisation step**: every voxel becomes the weighted average of the values the matched
+neighbourhoods covering it propose (eq 2), IRLS weights ``||s_{v,i} - e_{v,i}||^(r-2)``, ``r = 0.8`` (eq 3),
+divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (eq 4: histogram matching). Coarse to fine over Gaussian
+pyramids (:func:`synth.pixel.solid.run_levels`); ``planes``: all three views, or two for laminae.
 
-1. the **search step**: ``e_{v,i}`` = the nearest exemplar neighbourhood of every ``s_{v,i}``;
-2. the **optimisation step**: every voxel becomes the weighted average of the values that the matched
-   neighbourhoods covering it propose (eq 2), with the IRLS weights ``w = ||s_{v,i} - e_{v,i}||^(r-2)``,
-   ``r = 0.8`` (eq 3), so that a robust ``L_r`` norm is minimised and averaging blurs less; the
-   weights are divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (eq 4, histogram matching: ``H_s`` the
-   volume's grey-level histogram, kept up to date during the step, ``H_e`` the exemplars', ``b`` the
-   bin of the proposed value), which pulls the volume's grey levels toward the exemplar's.
+References: J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid texture
+synthesis from 2D exemplars", ACM Trans. Graph. 26(3) (SIGGRAPH 2007), article 2; eqs 1-4. V. Kwatra et
+al., "Texture optimization for example-based synthesis", SIGGRAPH 2005 (the IRLS optimisation). X. Tong et
+al., SIGGRAPH 2002 (k-coherence search). R. D. Urs et al., BMVC 2012 (the settings and the scan orders).
 
-Coarse to fine over Gaussian pyramids: the coarsest volume starts as random exemplar values, each
-finer one as the previous level upsampled (trilinear, checked against a known ramp in the tests).
-``planes`` chooses the views: all three (isotropic material), or two, e.g. ``('xz', 'yz')`` for
-laminae (ALGORITHMS.md section 4: "use three and allow two"; a horizontal-laminae exemplar cannot
-describe the xy slices, which cut the sheets into contour mazes), leaving the xy slices free.
-``stats``: ``energy`` (the mean best-match distance of every iteration, per level; it falls at every
-iteration with the exact search, tested), ``contrast_before_remap`` (see below), the level plan.
-
-References
-----------
-J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid texture synthesis
-from 2D exemplars", ACM Trans. Graph. 26(3) (Proc. SIGGRAPH 2007), article 2; eqs 1-4.
-V. Kwatra, I. Essa, A. Bobick, N. Kwatra, "Texture optimization for example-based synthesis",
-ACM Trans. Graph. 24(3) (SIGGRAPH 2005): the IRLS optimisation Kopf extends to solids.
-X. Tong, J. Zhang, L. Liu, X. Wang, B. Guo, H.-Y. Shum, "Synthesis of bidirectional texture functions
-on arbitrary surfaces", SIGGRAPH 2002: k-coherence search.
-R. D. Urs, J.-P. Da Costa, J.-M. Leyssale, G. Vignoles, C. Germain, "Non-parametric synthesis of
-laminar volumetric textures from a 2D sample", BMVC 2012: the settings and the scan orders.
-
-Departures, and why (figures: soot = ``hrtem-soot-128.png``, seed 1, per-axis means of
-:func:`synth.evaluate.evaluate_volume`; "KL g/o" = grey / orientation KL)
--------------------
-- **Histogram gain 64** (:data:`HISTOGRAM_GAIN`). Eq 4 with normalised histograms (gain 1) hardly
-  changes the weights, and the averaging let the volume collapse toward a flat grey: 32^3 from a
-  64^2 soot crop kept 0.18 of the exemplar's standard deviation (0.13 on the 16^3 test) and its
-  orientation KL was 0.39/0.69/0.46. The first cut then rank-remapped the volume onto the exemplar's
-  grey levels **after every iteration**: that fought the optimisation (the energy jumped 2-3x after
-  each remap) and blew the low-contrast residue up into blotches and streaks (soot 64^3 from 128^2:
-  orientation KL 0.15/0.45/0.15). Gains measured on the 32^3 case without any remap: 1 / 16 / 64 /
-  256 / 1024 / 4096 kept 0.18 / 0.48 / 0.64 / 0.76 / 0.83 / 0.90 of the contrast, with orientation
-  KL (mean of the axes) 0.51 / 0.07 / 0.06 / 0.18 / 0.12 / 0.13: high gains force the grey levels at
-  the expense of the structure; 64 keeps both.
-- **Exemplar-usage re-weighting** (:data:`POSITION_GAIN`, :data:`POSITION_CELLS`; after Chen & Wang's
-  position histogram, which Kopf does not use): after each plane's search, the exemplar is cut into
-  16 x 16 cells and a match centred in a cell used more than the mean has its IRLS weight divided by
-  ``1 + gain * (u / mean(u) - 1)``. Why: without it the volume often fell into a laminar attractor
-  (planar sheets of one orientation satisfy all three planes with parallel stripes; the soot
-  exemplar's fringes run every way), and which seeds did so was luck: soot 64^3 from 128^2, seeds
-  1 / 2, orientation KL per axis: 0.08/0.03/0.02 and 0.13/0.10/0.03 without; 0.04/0.06/0.02 and
-  0.03/0.05/0.02 with gain 1 (the default). Gain 4 (measured with an earlier search setting) gave
-  0.09/0.07/0.06 and 0.06/0.05/0.05 against 0.05/0.06/0.02 and 0.05/0.07/0.04 for gain 1.
-- **One rank remap at the very end** (:func:`synth.pixel.solid.match_histogram`, when
-  ``histogram_matching``): the remaining contrast deficit (the optimisation keeps about 0.6-0.7 of
-  the exemplar's std at 64^3) is removed by a monotone remap of the finished volume, which keeps its
-  structure (orientation KL unchanged) and makes grey KL ~0. It does not feed back into the
-  iterations. ``stats['contrast_before_remap']`` reports what the optimisation achieved by itself.
-- **Search**: k-coherence on each slice (Tong et al.: candidates from the in-plane neighbours'
-  matches, shifted, their :data:`COHERENCE_USED` most similar exemplar positions and
-  :data:`RANDOM_CANDIDATES` random ones), seeded by the coarser level's matches upsampled; only the
-  very first iteration (coarsest level) uses the PCA + approximate k-d tree search (Kopf's search).
-  Final energy against the exact search's (16^3 test volume, seeds 5-8): 1.01 / 0.92 / 0.85 / 0.74x
-  (tested within 5%; the exact search's greedy matches lose coherence and end higher). Also running
-  the tree search at the start of every level and keeping the better match was tried: it broke the
-  coherence (soot orientation KL 0.07/0.11/0.05 against 0.04/0.06/0.02, seed 1) and cost 2-3x the
-  search time. With 4 set entries instead of 8 the search is 25% faster and soot was as good (seed 2:
-  0.02/0.02/0.01), but single seeds of the fast/exact test reached 1.14x.
-  ``search='exact'`` compares every exemplar neighbourhood (the definition).
-- **4 iterations per level** (the study: 10): the energy settles by the 3rd-4th iteration (soot 64^3:
-  finest-level energy 0.0043, 0.0038, 0.0034, 0.0034, then 0.0032 after 10), and the 4-iteration
-  volume was no worse (orientation KL 0.06/0.03/0.02 against 0.04/0.12/0.05 with 10; the spread
-  between seeds is of that order), at 40% of the time.
-- **Sparse grid**: as Kopf, neighbourhoods are centred on every ``stride``-th voxel only, here along
-  the two axes of each slice plane (every voxel is still covered by ~(n/stride)^2 neighbourhoods per
-  plane, tested); the grid's phase is drawn afresh every iteration so no voxel is always a centre.
-- **Histogram in blocks**: the optimisation step takes the voxels in scan order in blocks of
-  ``max(UPDATE_BLOCK, N / 16)`` voxels (:data:`synth.kernels.solid_search.UPDATE_BLOCK` = 4096,
-  :data:`UPDATE_BLOCKS_PER_SWEEP`; also cut at the progress steps), computes a block in parallel from
-  the histogram as it was at the block's start, then updates the histogram (Kopf: after every voxel).
-  A voxel's new value depends on no other voxel, so this is what makes the step parallel and, with
-  the block's voxels taken in memory order, cache-friendly: at 128^3 an update sweep took 5.6 s with
-  blocks of 4096 and 3.0 s with N / 16 (one thread). The histogram lags by at most 1/16 of a sweep.
-- **The schedule follows the structure** (``adapt_to_structure``, on; see
-  :func:`synth.pixel.solid.structure_schedule`): a weakly oriented exemplar (mean coherence < 0.75: soot,
-  grains, pores) is synthesized over at most 2 levels, laminae over ``levels`` with at least 10
-  iterations per level (the paper's 10; per-plane laminae, mean orientation KL on the xz/yz axes
-  0.16/0.13 with 4 -> 0.08/0.07 with 10). The coarse levels of a structure a few pixels across hold
-  only residual noise that the iterations amplify into blobs: on the known-answer field (correlation
-  lengths 2/3.5/6) the output's correlation length along z was 5 against 2 with 4 levels; S2 error
-  0.03-0.04 on every axis with 2. More iterations coarsen it further (10 at 2 levels: 0.11 along z).
-  Soot: orientation KL 0.04/0.05/0.04 with 2 levels against 0.04/0.06/0.02 with 5, S2 error 0.03-0.04
-  against 0.06-0.08, so soot loses nothing.
-- **Orientation-usage re-weighting** (``orientation_gain``, default :data:`ORIENTATION_GAIN` = 32; 0 = off,
-  the paper): eq 4 applied to each plane's orientation histogram (:mod:`synth.grid.orientation_histogram`:
-  12 bins, coherence-weighted exemplar shares). Why: eq 4 on grey levels and the usage re-weighting leave
-  the volume free to fall into an orientation attractor. Bent horizontal laminae given for the two views
-  that admit a volume (``planes=('xz', 'yz')``) came out as straight laminae tilted about 30 degrees on both
-  planes (orientation KL xz / yz 2.3 / 1.6, seeds 1-3): every window matched the slopes of the exemplar's
-  bends, a consistent but wrong solid. Measured in session 6 (64^3 from 128^2, mean over seeds, worst in
-  brackets), gain 0 / 1 / 4 / 16 / 32 / 64: two-view bent laminae (seeds 1-2) xz 2.3 / 0.46 / 0.29 / 0.14 /
-  0.14 / 0.15 and yz 1.6 / 0.44 / 0.20 / 0.17 / 0.11 / 0.12 (horizontal bent laminae, kinked where the bends
-  turn); per-plane laminae (seeds 1-3) worst axis xy / xz / yz 0.08 / 0.16 / 0.10 at 0, 0.02 / 0.10 / 0.09
-  at 16, **0.02 / 0.08 / 0.09** at 32, 0.02 / 0.08 / 0.11 at 64. It also helps the micro-structures: soot
-  orientation KL 0.015-0.025 per axis against 0.036-0.047 at 0, S2 error 0.028-0.037 against 0.033-0.044;
-  the known answer's S2 error stays 0.03-0.05 on every axis. Session 4 had measured gains 1 and 4 only, too
-  weak to matter.
-- **Histogram matching** on grey levels only (the exemplars are grey), 16 bins on [0, 1];
-  ``H_e`` pools the active planes' exemplars. Kopf also matches other histograms in some results.
-- **Neighbourhood size**: 7x7 (ALGORITHMS.md) rather than Kopf's 8x8 (an odd size has a centre); at
-  coarse levels it shrinks to a quarter of the exemplar's shorter side
-  (:func:`synth.pixel.solid.plan_levels`). 3 levels instead of 5 gave the same quality on soot
-  (orientation KL 0.03/0.08/0.10 against 0.04/0.12/0.05 at 10 iterations): the 3x3 coarse levels
-  cost little and are kept as the study's setting.
-- **Exemplar borders**: only neighbourhoods fully inside the exemplar are matched (ALGORITHMS.md);
-  the volume wraps (``periodic=True``, a tileable volume, the default) or is mirrored at its faces.
-- **Scan order** matters only in the optimisation step (the order in which blocks update the
-  histogram); the search step is order-free.
-
-Measured (defaults; docs/solid.md has the tables, docs/benchmarks.md the times)
---------------------------------------------------------------------------------
-Soot 64^3 from 128^2, seeds 1-3: grey KL 0.000 on every axis (final remap), orientation KL 0.015-0.025
-per axis; the slices show fine, isotropic fringes like the exemplar's, somewhat softer. Bent laminae
-(``undulating_laminae((128, 128), 7, 16, 128, noise=0.3)``) with ``planes=('xz', 'yz')``: horizontal
-bent laminae on both planes, orientation KL about 0.14 / 0.11 (the paper's settings: 2.3 / 1.6, a
-tilted planar stack); with one exemplar on all three planes no volume exists (docs/solid.md).
+Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
+- histogram gain 64, not eq 4's 1 (:data:`HISTOGRAM_GAIN`): gain 1 let the volume collapse to flat grey;
+- exemplar-usage re-weighting (:data:`POSITION_GAIN`, after Chen & Wang): against laminar attractors;
+- one rank remap of the finished volume (``histogram_matching``); ``stats['contrast_before_remap']``;
+- k-coherence search seeded by the coarser level, the k-d tree only at the very first iteration;
+- 4 iterations per level (the study: 10); a sparse grid of centres whose phase is drawn every iteration;
+- the histogram follows the update in blocks of ``max(4096, N / 16)`` voxels (parallel), not voxel by voxel;
+- the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10
+  iterations;
+- orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
+- grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
+- neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored.
 """
 
 from __future__ import annotations
@@ -156,18 +55,24 @@ from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
+    LevelStep,
     ProgressMeter,
+    SolidPlan,
+    SolidRun,
     dense_sources,
     exemplar_offsets,
     gather_plane,
+    initial_sources,
     initial_volume,
     match_histogram,
     plan_levels,
     plane_centres,
     plane_offsets,
+    run_levels,
+    search_plane,
     slice_geometry,
     structure_schedule,
-    upsample_sources,
+    upsample_plane_sources,
     upsample_volume,
 )
 
@@ -181,16 +86,16 @@ DISTANCE_FLOOR = 1e-3
 SEARCH_COST = 1.0
 UPDATE_COST = 0.3
 #: Histogram-matching gain: eq 4 with normalised histograms is gain 1, which let the volume collapse to a
-#: flat grey; 64 measured best (module docstring, Departures).
+#: flat grey; 64 measured best (docs/solid.md, Departures).
 HISTOGRAM_GAIN = 64.0
 #: k-coherence search: how many of each exemplar position's similar positions are proposed.
 COHERENCE_USED = 8
 #: The optimisation step updates at least 1/16 of the volume between two histogram updates (cache).
 UPDATE_BLOCKS_PER_SWEEP = 16
-#: Exemplar-usage re-weighting: gain, and cells per exemplar side (module docstring, Departures).
+#: Exemplar-usage re-weighting: gain, and cells per exemplar side (docs/solid.md, Departures).
 POSITION_GAIN = 1.0
 POSITION_CELLS = 16
-#: Default gain of the orientation-usage re-weighting (module docstring, Departures; 0 = the paper).
+#: Default gain of the orientation-usage re-weighting (docs/solid.md, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
 RANDOM_CANDIDATES = 2
@@ -259,14 +164,165 @@ def _orientation_factors(
     pixels the plane's matches are centred on (:func:`synth.grid.orientation_histogram.orientation_excess`),
     interpolated between a match's two bins: eq 4's histogram matching applied to orientations instead
     of grey levels, so the slices of each plane are pulled toward their exemplar's orientation
-    distribution (a departure; see the module notes).
+    distribution (a departure; docs/solid.md).
     """
     excess = orientation_excess(labels, match, weight)
     return (1.0 / usage_factors(labels, excess, match, gain)).astype(np.float32)
 
 
-def _active_planes(params: SolidKopfParams) -> list[int]:
-    return [PLANES.index(plane) for plane in params.planes]
+class _KopfLoop:
+    """Kopf's search and optimisation steps at each level (:func:`synth.pixel.solid.run_levels`)."""
+
+    def __init__(self, params: SolidKopfParams, plan: SolidPlan, run: SolidRun, iterations: int) -> None:
+        self.params, self.plan, self.run, self.iterations = params, plan, run, iterations
+        s = params.stride
+        total = sum(
+            iterations * np.prod(shape) * (len(run.active) * SEARCH_COST / s**2 + UPDATE_COST)
+            for shape in plan.shapes
+        )
+        self.meter = ProgressMeter(run.report, float(total))
+        self.timings = {"search": 0.0, "optimisation": 0.0}
+        self.energies: dict[str, list[float]] = {}
+        self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
+        self.src = np.zeros((3, 0), dtype=np.int64)
+        self.pooled = np.zeros(0, dtype=np.float32)
+
+    def start_level(self, step: LevelStep) -> None:
+        """Upsample the volume and the coherent sources (or draw them), and build the level's tables."""
+        params, plan, active = self.params, self.plan, self.run.active
+        n = step.size
+        self.nbhs = plan.neighbourhoods(step.level)
+        images = [plan.exemplars[p][step.level] for p in range(3)]
+        self.images = images
+        if step.coarsest:
+            self.src = initial_sources(self.nbhs, step.voxels, self.run.rng)
+        else:
+            self.vol = upsample_volume(self.vol, step.shape, params.periodic)
+            self.src = upsample_plane_sources(self.src, plan, step.level)
+        self.vol = np.ascontiguousarray(self.vol, dtype=np.float32)
+        self.field = MatchField(
+            match=np.full((3, self.vol.size), -1, dtype=np.int64),
+            weight=np.zeros((3, self.vol.size), dtype=np.float32),
+            offsets=np.ascontiguousarray(np.stack([plane_offsets(p, n) for p in PLANES]), dtype=np.int32),
+            ex_offsets=np.ascontiguousarray(np.stack([exemplar_offsets(n, im.shape[1]) for im in images])),
+            axes=np.array([PLANE_AXES[p] for p in PLANES], dtype=np.int64),
+            phase=np.zeros((3, 2), dtype=np.int64),
+            stride=params.stride,
+            active=np.array([p in active for p in range(3)], dtype=np.uint8),
+        )
+        self.packed = PackedExemplars.pack(images)
+        self.orient: dict[int, OrientationLabels] = {}
+        if params.orientation_gain > 0:
+            known: dict[int, OrientationLabels] = {}
+            for p in active:
+                if id(images[p]) not in known:
+                    known[id(images[p])] = orientation_labels(images[p])
+                self.orient[p] = known[id(images[p])]
+        self.pooled = np.concatenate([images[p].ravel() for p in active])
+        self.hist = HistogramState.start(
+            self.vol, self.pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN if params.histogram_matching else 0.0
+        )
+        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
+        self.scratch = (stamps, np.zeros(1, dtype=np.int64))
+
+    def iterate(self, step: LevelStep, it: int) -> bool:
+        """The search step on every active plane, then the optimisation step (eqs 2-4)."""
+        params, rng, meter = self.params, self.run.rng, self.meter
+        stage = f"solid-kopf: level {step.level + 1} of {step.levels}, iteration {it + 1}/{step.iterations}"
+        t0 = time.perf_counter()
+        self.field.match.fill(-1)
+        sum_d2, count = 0.0, 0
+        for p in self.run.active:
+            sum_d2, count = self._search_plane(step, it, p, stage, sum_d2, count)
+        t1 = time.perf_counter()
+        order = scan_order(step.shape, params.scan, rng)
+        block = max(UPDATE_BLOCK, self.vol.size // UPDATE_BLOCKS_PER_SWEEP)
+        # the chunks are fixed by the sizes: the same blocks on every run
+        for a, b in meter.chunks(len(order), UPDATE_COST, stage):
+            irls_update(
+                self.vol, order, a, b, self.field, self.packed, self.hist, params.periodic, block=block
+            )
+        self.timings["search"] += t1 - t0
+        self.timings["optimisation"] += time.perf_counter() - t1
+        self.energies.setdefault(f"level {step.level + 1}", []).append(sum_d2 / max(count, 1))
+        return True
+
+    def _search_plane(
+        self, step: LevelStep, it: int, p: int, stage: str, sum_d2: float, count: int
+    ) -> tuple[float, int]:
+        """Plane ``p``'s search step on a sparse grid of a fresh phase, and its weights (IRLS, usage);
+        adds its squared distances and searches to the running ``sum_d2`` and ``count``."""
+        params, rng, field, s = self.params, self.run.rng, self.field, self.params.stride
+        plane, shape, n = PLANES[p], step.shape, step.size
+        phase = (int(rng.integers(0, s)), int(rng.integers(0, s)))
+        field.phase[p] = phase
+        centres = plane_centres(shape, plane, s, phase)
+        flat = np.ravel_multi_index(tuple(centres.T), shape)
+        geometry = slice_geometry(shape, plane, params.periodic)
+        seed_key = int(rng.integers(0, 2**63))
+        for a, b in self.meter.chunks(len(centres), SEARCH_COST, stage):
+            queries = gather_plane(self.vol, centres[a:b], plane, n, params.periodic)
+            pos, d2 = search_plane(
+                self.nbhs[p],
+                queries,
+                centres[a:b],
+                exact=params.search == "exact",
+                tree=step.coarsest and it == 0,
+                geometry=geometry,
+                src=self.src[p],
+                n_random=RANDOM_CANDIDATES,
+                seed_key=seed_key,
+                index0=a,
+                scratch=self.scratch,
+                k=COHERENCE_USED,
+            )
+            rms = np.maximum(np.sqrt(d2 / queries.shape[1]), DISTANCE_FLOOR)
+            field.match[p, flat[a:b]] = pos
+            field.weight[p, flat[a:b]] = (rms ** (params.r - 2.0)).astype(np.float32)
+            sum_d2 += float(np.sum(d2 / queries.shape[1]))
+            count += b - a
+        self.src[p] = dense_sources(field.match[p], shape, plane, s, phase, self.images[p].shape)
+        if POSITION_GAIN > 0:
+            field.weight[p, flat] *= _position_factors(field.match[p, flat], self.images[p].shape)
+        if params.orientation_gain > 0:
+            field.weight[p, flat] *= _orientation_factors(
+                field.match[p, flat], self.orient[p], field.weight[p, flat], params.orientation_gain
+            )
+        return sum_d2, count
+
+    def end_level(self, step: LevelStep) -> None:
+        pass
+
+    def result(self, seed: int) -> Result:
+        """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""
+        params, vol = self.params, self.vol
+        # The optimisation's own contrast (std against the exemplars'), before the final remap: near 0 means
+        # the volume collapsed toward a flat grey, as it did with eq 4's gain 1.
+        contrast = float(vol.std() / max(float(self.pooled.std()), 1e-12))
+        if params.histogram_matching:  # final rank remap onto the exemplars' grey levels (see Departures)
+            vol = match_histogram(vol, self.pooled)
+        image = np.clip(vol, 0.0, 1.0).astype(np.float32)
+        self.run.report("done", 1.0)
+        self.timings["total"] = self.run.seconds()
+        energies = self.energies
+        return Result(
+            method="solid-kopf",
+            image=image,
+            params=params.model_dump(),
+            seed=seed,
+            timings=self.timings,
+            stats={
+                # Mean squared difference per neighbourhood entry of the search step, every iteration
+                # (the energy the iterations lower), per level (coarse first); and its last value per level.
+                "energy": energies,
+                "mean_best_distance": {k: v[-1] for k, v in energies.items()},
+                "levels": self.plan.levels,
+                "iterations": self.iterations,
+                "neighbourhood_sizes": list(self.plan.sizes),
+                "planes": list(params.planes),
+                "contrast_before_remap": contrast,
+            },
+        )
 
 
 def run_solid_kopf(
@@ -280,161 +336,14 @@ def run_solid_kopf(
     exemplars: dict[str, np.ndarray] | None = None,
 ) -> Result:
     """Synthesize a ``size = (D, H, W)`` volume whose slices in ``params.planes`` match their exemplars."""
-    start = time.perf_counter()
-    report = checked_progress(progress)
-    views = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
-    active = _active_planes(params)
+    run = SolidRun.start(exemplar, exemplars, params.planes, seed, checked_progress(progress))
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
-        levels, iterations = structure_schedule([views[PLANES[p]] for p in active], levels, iterations)
-    plan = plan_levels(views, size, levels, params.neighbourhood_size)
-    rng = np.random.default_rng(seed)
-    s = params.stride
-    total = sum(
-        iterations * np.prod(shape) * (len(active) * SEARCH_COST / s**2 + UPDATE_COST)
-        for shape in plan.shapes
-    )
-    meter = ProgressMeter(report, float(total))
-    timings = {"search": 0.0, "optimisation": 0.0}
-    energies: dict[str, list[float]] = {}
-    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in active], rng)
-    src = np.zeros((3, 0), dtype=np.int64)
-    pooled = np.zeros(0, dtype=np.float32)
-    for level in range(plan.levels - 1, -1, -1):
-        shape = plan.shapes[level]
-        n = plan.sizes[level]
-        nbhs = plan.neighbourhoods(level)
-        images = [plan.exemplars[p][level] for p in range(3)]
-        coarsest = level == plan.levels - 1
-        if coarsest:
-            src = np.stack(
-                [
-                    nbhs[p].centres[rng.integers(0, len(nbhs[p].centres), int(np.prod(shape)))]
-                    for p in range(3)
-                ]
-            )
-        else:
-            vol = upsample_volume(vol, shape, params.periodic)
-            src = np.stack(
-                [
-                    upsample_sources(
-                        src[p],
-                        plan.shapes[level + 1],
-                        shape,
-                        plane,
-                        images[p].shape,
-                        plan.exemplars[p][level + 1].shape,
-                    )
-                    for p, plane in enumerate(PLANES)
-                ]
-            )
-        vol = np.ascontiguousarray(vol, dtype=np.float32)
-        field = MatchField(
-            match=np.full((3, vol.size), -1, dtype=np.int64),
-            weight=np.zeros((3, vol.size), dtype=np.float32),
-            offsets=np.ascontiguousarray(np.stack([plane_offsets(p, n) for p in PLANES]), dtype=np.int32),
-            ex_offsets=np.ascontiguousarray(np.stack([exemplar_offsets(n, im.shape[1]) for im in images])),
-            axes=np.array([PLANE_AXES[p] for p in PLANES], dtype=np.int64),
-            phase=np.zeros((3, 2), dtype=np.int64),
-            stride=s,
-            active=np.array([p in active for p in range(3)], dtype=np.uint8),
-        )
-        packed = PackedExemplars.pack(images)
-        orient: dict[int, OrientationLabels] = {}
-        if params.orientation_gain > 0:
-            known: dict[int, OrientationLabels] = {}
-            for p in active:
-                if id(images[p]) not in known:
-                    known[id(images[p])] = orientation_labels(images[p])
-                orient[p] = known[id(images[p])]
-        pooled = np.concatenate([images[p].ravel() for p in active])
-        hist = HistogramState.start(
-            vol, pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN if params.histogram_matching else 0.0
-        )
-        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
-        scratch = (stamps, np.zeros(1, dtype=np.int64))
-        for it in range(iterations):
-            stage = f"solid-kopf: level {level + 1} of {plan.levels}, iteration {it + 1}/{iterations}"
-            t0 = time.perf_counter()
-            field.match.fill(-1)
-            sum_d2 = 0.0
-            count = 0
-            for p in active:
-                plane = PLANES[p]
-                phase = (int(rng.integers(0, s)), int(rng.integers(0, s)))
-                field.phase[p] = phase
-                centres = plane_centres(shape, plane, s, phase)
-                flat = np.ravel_multi_index(tuple(centres.T), shape)
-                geometry = slice_geometry(shape, plane, params.periodic)
-                seed_key = int(rng.integers(0, 2**63))
-                step = meter.chunk(SEARCH_COST)
-                for a in range(0, len(centres), step):
-                    b = min(len(centres), a + step)
-                    queries = gather_plane(vol, centres[a:b], plane, n, params.periodic)
-                    if params.search == "exact" or (coarsest and it == 0):
-                        pos, d2 = nbhs[p].search(queries, exact=params.search == "exact")
-                    else:
-                        pos, d2 = nbhs[p].search_coherent(
-                            queries,
-                            centres[a:b],
-                            geometry,
-                            src[p],
-                            n_random=RANDOM_CANDIDATES,
-                            seed_key=seed_key,
-                            index0=a,
-                            scratch=scratch,
-                            k=COHERENCE_USED,
-                        )
-                    rms = np.maximum(np.sqrt(d2 / queries.shape[1]), DISTANCE_FLOOR)
-                    field.match[p, flat[a:b]] = pos
-                    field.weight[p, flat[a:b]] = (rms ** (params.r - 2.0)).astype(np.float32)
-                    sum_d2 += float(np.sum(d2 / queries.shape[1]))
-                    count += b - a
-                    meter.advance((b - a) * SEARCH_COST, stage)
-                src[p] = dense_sources(field.match[p], shape, plane, s, phase, images[p].shape)
-                if POSITION_GAIN > 0:
-                    field.weight[p, flat] *= _position_factors(field.match[p, flat], images[p].shape)
-                if params.orientation_gain > 0:
-                    field.weight[p, flat] *= _orientation_factors(
-                        field.match[p, flat], orient[p], field.weight[p, flat], params.orientation_gain
-                    )
-            t1 = time.perf_counter()
-            order = scan_order(shape, params.scan, rng)
-            step = meter.chunk(UPDATE_COST)  # fixed by the sizes: the same blocks on every run
-            block = max(UPDATE_BLOCK, vol.size // UPDATE_BLOCKS_PER_SWEEP)
-            for a in range(0, len(order), step):
-                b = min(len(order), a + step)
-                irls_update(vol, order, a, b, field, packed, hist, params.periodic, block=block)
-                meter.advance((b - a) * UPDATE_COST, stage)
-            timings["search"] += t1 - t0
-            timings["optimisation"] += time.perf_counter() - t1
-            energies.setdefault(f"level {level + 1}", []).append(sum_d2 / max(count, 1))
-    # The optimisation's own contrast (std against the exemplars'), before the final remap: near 0 means
-    # the volume collapsed toward a flat grey, as it did with eq 4's gain 1.
-    contrast = float(vol.std() / max(float(pooled.std()), 1e-12))
-    if params.histogram_matching:  # final rank remap onto the exemplars' grey levels (see Departures)
-        vol = match_histogram(vol, pooled)
-    image = np.clip(vol, 0.0, 1.0).astype(np.float32)
-    report("done", 1.0)
-    timings["total"] = time.perf_counter() - start
-    return Result(
-        method="solid-kopf",
-        image=image,
-        params=params.model_dump(),
-        seed=seed,
-        timings=timings,
-        stats={
-            # Mean squared difference per neighbourhood entry of the search step, every iteration
-            # (the energy the iterations lower), per level (coarse first); and its last value per level.
-            "energy": energies,
-            "mean_best_distance": {k: v[-1] for k, v in energies.items()},
-            "levels": plan.levels,
-            "iterations": iterations,
-            "neighbourhood_sizes": list(plan.sizes),
-            "planes": list(params.planes),
-            "contrast_before_remap": contrast,
-        },
-    )
+        levels, iterations = structure_schedule(run.constrained(), levels, iterations)
+    plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
+    loop = _KopfLoop(params, plan, run, iterations)
+    run_levels(plan, [iterations] * plan.levels, loop)
+    return loop.result(seed)
 
 
 SPEC = register(

@@ -5,7 +5,8 @@ through it (``xy``, ``xz``, ``yz``; the study's "front and side views" plus the 
 in that plane's exemplar (SSD), and the voxel takes the **average of the matched centres**. Passes
 repeat until the matches stop changing (the fraction of voxels whose match changed in any plane falls
 below ``tolerance``, the study's "same neighbourhoods after 2 consecutive iterations") or
-``iterations`` passes. Multi-resolution over Gaussian pyramids, coarse to fine.
+``iterations`` passes. Multi-resolution over Gaussian pyramids, coarse to fine
+(:func:`synth.pixel.solid.run_levels`).
 
 References
 ----------
@@ -16,28 +17,16 @@ R. D. Urs, J.-P. Da Costa, J.-M. Leyssale, G. Vignoles, C. Germain, "Non-paramet
 laminar volumetric textures from a 2D sample", BMVC 2012, section 2.1: the 2D/3D variant and its
 settings (5 levels, 7x7 non-causal neighbourhoods, Hilbert scan).
 
-Departures, and why
--------------------
-- **Search**: k-coherence (Tong et al. 2002) on each slice (candidates from the in-plane neighbours'
-  matches, shifted, their 8 most similar exemplar positions, and 2 random positions), seeded at each
-  level by the coarser level's matches upsampled; the very first pass of the coarsest level uses a
-  PCA + k-d tree search. Wei's thesis uses TSVQ. ``search='exact'`` compares every exemplar
-  neighbourhood (the definition).
-- **Batches**: voxels are visited in scan order in batches (at most 4096 voxels, about 1% of the
-  run); the voxels of one batch are matched against the volume as it was before the batch
-  (Jacobi inside a batch, Gauss-Seidel between batches), so that the searches run in bulk.
-- **Multi-resolution** by initialisation: each level starts from the coarser volume upsampled and its
-  matches upsampled; the parent level's neighbourhood is not part of the comparison.
-- **Exemplar borders**: only neighbourhoods fully inside the exemplar are matched; the volume wraps
-  (``periodic``) or is mirrored at its faces.
-- **Views**: ``planes`` (default all three, ALGORITHMS.md: "use three and allow two"); with two, e.g.
-  ``('xz', 'yz')``, the study's front and side views, the voxel averages two matched centres and
-  the third plane's slices are free (laminar materials).
+Departures (why: docs/solid.md, "Departures from the papers"):
+- k-coherence search (Tong et al. 2002) seeded by the coarser level, not Wei's TSVQ (``search='exact'``);
+- batches of at most 4096 voxels matched together (Jacobi inside a batch, Gauss-Seidel between);
+- multi-resolution by initialisation only: the parent level is not part of the neighbourhood;
+- neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
+- ``planes``: all three by default, or two (the study's front and side views) for laminae.
 """
 
 from __future__ import annotations
 
-import time
 from typing import Literal
 
 import numpy as np
@@ -49,12 +38,18 @@ from synth.kernels.solid_search import KCOHERENCE_BLOCKS
 from synth.methods.common import SolidParams, checked_progress
 from synth.pixel.solid import (
     PLANES,
+    LevelStep,
     ProgressMeter,
+    SolidPlan,
+    SolidRun,
     gather_plane,
+    initial_sources,
     initial_volume,
     plan_levels,
+    run_levels,
+    search_plane,
     slice_geometry,
-    upsample_sources,
+    upsample_plane_sources,
     upsample_volume,
 )
 
@@ -83,6 +78,82 @@ class SolidWeiLevoyParams(SolidParams):
     )
 
 
+class _WeiLevoyLoop:
+    """Wei-Levoy passes at each level (:func:`synth.pixel.solid.run_levels`)."""
+
+    def __init__(self, params: SolidWeiLevoyParams, plan: SolidPlan, run: SolidRun) -> None:
+        self.params, self.plan, self.run = params, plan, run
+        self.meter = ProgressMeter(
+            run.report, float(sum(params.iterations * np.prod(sh) for sh in plan.shapes))
+        )
+        self.distances: dict[str, float] = {}
+        self.passes: dict[str, int] = {}
+        self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
+        self.src = np.zeros((3, 0), dtype=np.int64)
+
+    def start_level(self, step: LevelStep) -> None:
+        """Upsample the volume and the coherent sources (or draw them)."""
+        params, plan = self.params, self.plan
+        self.nbhs = plan.neighbourhoods(step.level, centre=False)
+        images = [plan.exemplars[p][step.level] for p in range(3)]
+        if step.coarsest:
+            self.src = initial_sources(self.nbhs, step.voxels, self.run.rng)
+        else:
+            self.vol = upsample_volume(self.vol, step.shape, params.periodic)
+            self.src = upsample_plane_sources(self.src, plan, step.level)
+        self.vol = np.ascontiguousarray(self.vol, dtype=np.float32)
+        self.geometries = [slice_geometry(step.shape, plane, params.periodic) for plane in PLANES]
+        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
+        self.scratch = (stamps, np.zeros(1, dtype=np.int64))
+
+    def iterate(self, step: LevelStep, it: int) -> bool:
+        """One pass in scan order, in batches; ``False`` once fewer than ``tolerance`` voxels changed."""
+        params, rng, meter, src, active = self.params, self.run.rng, self.meter, self.src, self.run.active
+        shape, n_vox, n = step.shape, step.voxels, step.size
+        flat_vol = self.vol.reshape(-1)
+        stage = f"solid-wei-levoy: level {step.level + 1} of {step.levels}, pass {it + 1}/{step.iterations}"
+        order = scan_order(shape, params.scan, rng)
+        keys = [int(rng.integers(0, 2**63)) for _ in PLANES]
+        changed = 0
+        sum_d2 = 0.0
+        for a, b in meter.chunks(n_vox, 1.0, stage, step=min(MAX_BATCH, meter.chunk())):
+            ids = order[a:b]
+            centres = np.stack(np.unravel_index(ids, shape), axis=1).astype(np.int64)
+            total = np.zeros(b - a, dtype=np.float64)
+            moved = np.zeros(b - a, dtype=bool)
+            for p in active:
+                plane = PLANES[p]
+                queries = gather_plane(self.vol, centres, plane, n, params.periodic, centre=False)
+                pos, d2 = search_plane(
+                    self.nbhs[p],
+                    queries,
+                    centres,
+                    exact=params.search == "exact",
+                    tree=step.coarsest and it == 0,
+                    geometry=self.geometries[p],
+                    src=src[p],
+                    n_random=RANDOM_CANDIDATES,
+                    seed_key=keys[p],
+                    index0=a,
+                    scratch=self.scratch,
+                )
+                moved |= src[p, ids] != pos
+                src[p, ids] = pos
+                total += self.nbhs[p].values(pos)
+                sum_d2 += float(np.sum(d2)) / queries.shape[1]
+            flat_vol[ids] = (total / len(active)).astype(np.float32)
+            changed += int(np.count_nonzero(moved))
+        self.distances[f"level {step.level + 1}"] = sum_d2 / (len(active) * n_vox)
+        self.passes[f"level {step.level + 1}"] = it + 1
+        if it > 0 and changed / n_vox < params.tolerance:
+            meter.advance((step.iterations - it - 1) * n_vox, stage)  # the passes not needed
+            return False
+        return True
+
+    def end_level(self, step: LevelStep) -> None:
+        pass
+
+
 def run_solid_wei_levoy(
     exemplar: np.ndarray,
     *,
@@ -94,98 +165,21 @@ def run_solid_wei_levoy(
     exemplars: dict[str, np.ndarray] | None = None,
 ) -> Result:
     """Synthesize a ``size = (D, H, W)`` volume whose slices look like the per-plane exemplars."""
-    start = time.perf_counter()
-    report = checked_progress(progress)
-    views = exemplars if exemplars is not None else dict.fromkeys(PLANES, exemplar)
-    plan = plan_levels(views, size, params.levels, params.neighbourhood_size)
-    active = [PLANES.index(plane) for plane in params.planes]
-    rng = np.random.default_rng(seed)
-    meter = ProgressMeter(report, float(sum(params.iterations * np.prod(sh) for sh in plan.shapes)))
-    distances: dict[str, float] = {}
-    passes: dict[str, int] = {}
-    vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in active], rng)
-    src = np.zeros((3, 0), dtype=np.int64)
-    for level in range(plan.levels - 1, -1, -1):
-        shape = plan.shapes[level]
-        n_vox = int(np.prod(shape))
-        n = plan.sizes[level]
-        nbhs = plan.neighbourhoods(level, centre=False)
-        images = [plan.exemplars[p][level] for p in range(3)]
-        coarsest = level == plan.levels - 1
-        if coarsest:
-            src = np.stack([nbhs[p].centres[rng.integers(0, len(nbhs[p].centres), n_vox)] for p in range(3)])
-        else:
-            vol = upsample_volume(vol, shape, params.periodic)
-            src = np.stack(
-                [
-                    upsample_sources(
-                        src[p],
-                        plan.shapes[level + 1],
-                        shape,
-                        plane,
-                        images[p].shape,
-                        plan.exemplars[p][level + 1].shape,
-                    )
-                    for p, plane in enumerate(PLANES)
-                ]
-            )
-        vol = np.ascontiguousarray(vol, dtype=np.float32)
-        flat_vol = vol.reshape(-1)
-        geometries = [slice_geometry(shape, plane, params.periodic) for plane in PLANES]
-        stamps = np.zeros((KCOHERENCE_BLOCKS, max(im.size for im in images)), dtype=np.int64)
-        scratch = (stamps, np.zeros(1, dtype=np.int64))
-        for it in range(params.iterations):
-            stage = f"solid-wei-levoy: level {level + 1} of {plan.levels}, pass {it + 1}/{params.iterations}"
-            order = scan_order(shape, params.scan, rng)
-            keys = [int(rng.integers(0, 2**63)) for _ in PLANES]
-            step = min(MAX_BATCH, meter.chunk())
-            changed = 0
-            sum_d2 = 0.0
-            for a in range(0, n_vox, step):
-                b = min(n_vox, a + step)
-                ids = order[a:b]
-                centres = np.stack(np.unravel_index(ids, shape), axis=1).astype(np.int64)
-                total = np.zeros(b - a, dtype=np.float64)
-                moved = np.zeros(b - a, dtype=bool)
-                for p in active:
-                    plane = PLANES[p]
-                    queries = gather_plane(vol, centres, plane, n, params.periodic, centre=False)
-                    if params.search == "exact" or (coarsest and it == 0):
-                        pos, d2 = nbhs[p].search(queries, exact=params.search == "exact")
-                    else:
-                        pos, d2 = nbhs[p].search_coherent(
-                            queries,
-                            centres,
-                            geometries[p],
-                            src[p],
-                            n_random=RANDOM_CANDIDATES,
-                            seed_key=keys[p],
-                            index0=a,
-                            scratch=scratch,
-                        )
-                    moved |= src[p, ids] != pos
-                    src[p, ids] = pos
-                    total += nbhs[p].values(pos)
-                    sum_d2 += float(np.sum(d2)) / queries.shape[1]
-                flat_vol[ids] = (total / len(active)).astype(np.float32)
-                changed += int(np.count_nonzero(moved))
-                meter.advance(b - a, stage)
-            distances[f"level {level + 1}"] = sum_d2 / (len(active) * n_vox)
-            passes[f"level {level + 1}"] = it + 1
-            if it > 0 and changed / n_vox < params.tolerance:
-                meter.advance((params.iterations - it - 1) * n_vox, stage)  # the passes not needed
-                break
-    report("done", 1.0)
+    run = SolidRun.start(exemplar, exemplars, params.planes, seed, checked_progress(progress))
+    plan = plan_levels(run.views, size, params.levels, params.neighbourhood_size)
+    loop = _WeiLevoyLoop(params, plan, run)
+    run_levels(plan, [params.iterations] * plan.levels, loop)
+    run.report("done", 1.0)
     return Result(
         method="solid-wei-levoy",
-        image=np.clip(vol, 0.0, 1.0).astype(np.float32),
+        image=np.clip(loop.vol, 0.0, 1.0).astype(np.float32),
         params=params.model_dump(),
         seed=seed,
-        timings={"total": time.perf_counter() - start},
+        timings={"total": run.seconds()},
         stats={
             # Mean squared difference per neighbourhood entry, last pass of each level (level 1 = finest).
-            "mean_best_distance": distances,
-            "passes": passes,
+            "mean_best_distance": loop.distances,
+            "passes": loop.passes,
             "levels": plan.levels,
             "neighbourhood_sizes": list(plan.sizes),
             "planes": list(params.planes),

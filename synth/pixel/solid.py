@@ -1,26 +1,24 @@
-"""Solid textures from 2D exemplars: the machinery the slice-based solid methods share.
+"""Solid textures from 2D exemplars: the machinery and the driver the slice-based solid methods share.
 
 A voxel of a volume ``(D, H, W) = (z, y, x)`` lies in three orthogonal slices: ``xy`` (rows ``y``,
 columns ``x``), ``xz`` (rows ``z``, columns ``x``) and ``yz`` (rows ``z``, columns ``y``)
 (:data:`synth.api.PLANES`). Its *slice neighbourhoods* are the ``n x n`` squares around it in those
-slices, and each is compared with the neighbourhoods of that plane's own exemplar (the same image
-three times for an isotropic material). This module holds what every such method needs:
+slices, each compared with the neighbourhoods of that plane's own exemplar. This module holds:
 
 - :func:`plane_offsets` / :func:`exemplar_offsets`: one plane's square as volume offsets and as flat
-  exemplar offsets, entry by entry in the same (raster) order, so that a gathered slice
-  neighbourhood and an exemplar neighbourhood are comparable vectors;
-- :class:`ExemplarNeighbourhoods`: every neighbourhood fully inside an exemplar, as vectors, their
-  principal axes, and a k-d tree on the projections: :meth:`ExemplarNeighbourhoods.search` answers
-  nearest-neighbour queries exactly (exhaustive) or fast (PCA + tree, re-ranked exactly);
+  exemplar offsets, in the same (raster) order, so that slice and exemplar neighbourhoods compare;
+- :class:`ExemplarNeighbourhoods`: every neighbourhood fully inside an exemplar, its principal axes
+  and a k-d tree: exact, fast (PCA + tree, re-ranked) or k-coherent search (:func:`search_plane`);
 - :class:`SolidPlan` (:func:`plan_levels`): exemplar pyramids per plane, the volume's level shapes
-  and the neighbourhood side at each level, validated once (:class:`~synth.errors.InvalidInput`
-  naming the exemplar that is too small);
+  and each level's neighbourhood side, validated once (:class:`~synth.errors.InvalidInput`);
 - :func:`checked_planes`: the views a method matches (all three, or two for laminar materials);
-- volumes between levels (:func:`initial_volume`, :func:`upsample_volume`, :func:`volume_pyramid`),
-  Kopf's sparse neighbourhood centres (:func:`plane_centres`), and :class:`ProgressMeter`, which
-  turns units of work into ``progress(stage, fraction)`` calls at least every 2% of the run.
-
-Randomness comes only from the ``numpy.random.Generator`` passed in (seeded by the method).
+- volumes and coherent sources between levels (:func:`initial_volume`, :func:`upsample_volume`,
+  :func:`initial_sources`, :func:`upsample_plane_sources`), Kopf's sparse centres (:func:`plane_centres`);
+- the driver: :class:`SolidRun` (views, constrained planes, the one random generator, progress),
+  :func:`run_levels` (coarse to fine, per-level iteration counts, a method's :class:`LevelLoop` at
+  each level) and :class:`ProgressMeter` (``progress(stage, fraction)`` at least every 2%; a report
+  may cancel). A method is a :class:`LevelLoop`; another stage (e.g. a structure field before the
+  texture levels) is another loop run over its own plan.
 
 References
 ----------
@@ -32,8 +30,10 @@ Stanford 2002, ch. 7): the per-slice neighbourhoods of Wei-Levoy solid synthesis
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -55,21 +55,28 @@ __all__ = [
     "PLANES",
     "PLANE_AXES",
     "ExemplarNeighbourhoods",
+    "LevelLoop",
+    "LevelStep",
     "ProgressMeter",
     "SolidPlan",
+    "SolidRun",
     "checked_planes",
     "dense_sources",
     "exemplar_neighbourhoods",
     "exemplar_offsets",
     "gather_plane",
+    "initial_sources",
     "initial_volume",
     "is_laminar",
     "match_histogram",
     "plan_levels",
     "plane_centres",
     "plane_offsets",
+    "run_levels",
+    "search_plane",
     "slice_geometry",
     "structure_schedule",
+    "upsample_plane_sources",
     "upsample_sources",
     "upsample_volume",
     "volume_pyramid",
@@ -566,3 +573,142 @@ class ProgressMeter:
     def advance(self, units: float, stage: str) -> None:
         self.done += units
         self.progress(stage, min(1.0, self.done / self.total))
+
+    def chunks(
+        self, n: int, unit_cost: float, stage: str, step: int | None = None
+    ) -> Iterator[tuple[int, int]]:
+        """Items ``[a, b)`` of ``n`` in chunks of :meth:`chunk` (or ``step``) items, advancing the meter
+        by ``(b - a) * unit_cost`` after the caller has done each chunk (whose report may cancel)."""
+        step = self.chunk(unit_cost) if step is None else step
+        for a in range(0, n, step):
+            b = min(n, a + step)
+            yield a, b
+            self.advance((b - a) * unit_cost, stage)
+
+
+# ---------------------------------------------------------------------------------------------
+# The driver: a run's setup and its per-level loop
+
+
+@dataclass
+class SolidRun:
+    """What every solid run starts from (:meth:`start`): the exemplar of each plane, the constrained
+    planes, the random generator (the only source of randomness), the progress callback and the clock."""
+
+    views: dict[str, np.ndarray]
+    active: list[int]
+    rng: np.random.Generator
+    report: Callable[[str, float], None]
+    started: float = field(default_factory=time.perf_counter)
+
+    @classmethod
+    def start(
+        cls,
+        exemplar: np.ndarray | None,
+        exemplars: Mapping[str, np.ndarray] | None,
+        planes: Sequence[str],
+        seed: int,
+        report: Callable[[str, float], None],
+    ) -> SolidRun:
+        """``exemplars`` per plane, or ``exemplar`` on all three; ``planes``: the constrained ones."""
+        started = time.perf_counter()
+        views = dict(exemplars) if exemplars is not None else dict.fromkeys(PLANES, exemplar)
+        active = [PLANES.index(plane) for plane in planes]
+        return cls(views, active, np.random.default_rng(seed), report, started)  # type: ignore[arg-type]
+
+    def constrained(self) -> list[np.ndarray]:
+        """The constrained planes' exemplars."""
+        return [self.views[PLANES[p]] for p in self.active]
+
+    def seconds(self) -> float:
+        return time.perf_counter() - self.started
+
+
+@dataclass(frozen=True)
+class LevelStep:
+    """One pyramid level of a run as the driver hands it to a :class:`LevelLoop`.
+
+    ``level``: pyramid index (0 the finest, ``levels - 1`` the coarsest, run first); ``shape``: the
+    volume's; ``size``: the neighbourhood side; ``iterations``: this level's count.
+    """
+
+    level: int
+    levels: int
+    shape: tuple[int, int, int]
+    size: int
+    iterations: int
+
+    @property
+    def coarsest(self) -> bool:
+        return self.level == self.levels - 1
+
+    @property
+    def voxels(self) -> int:
+        return int(np.prod(self.shape))
+
+
+class LevelLoop(Protocol):
+    """A method's work at each level: set the level up (initialise at the coarsest, else upsample the
+    coarser level's state), iterate (return ``False`` to end the level early), close it."""
+
+    def start_level(self, step: LevelStep) -> None: ...
+
+    def iterate(self, step: LevelStep, it: int) -> bool: ...
+
+    def end_level(self, step: LevelStep) -> None: ...
+
+
+def run_levels(plan: SolidPlan, iterations: Sequence[int], loop: LevelLoop) -> None:
+    """Coarse to fine over ``plan``'s levels: ``loop.start_level``, up to ``iterations[level]`` calls of
+    ``loop.iterate``, ``loop.end_level``. Stages run one after the other as loops of their own (e.g. a
+    structure stage before the texture levels); per-level neighbourhood sides come from ``plan.sizes``."""
+    for level in range(plan.levels - 1, -1, -1):
+        step = LevelStep(level, plan.levels, plan.shapes[level], plan.sizes[level], int(iterations[level]))
+        loop.start_level(step)
+        for it in range(step.iterations):
+            if not loop.iterate(step, it):
+                break
+        loop.end_level(step)
+
+
+def initial_sources(
+    nbhs: Sequence[ExemplarNeighbourhoods], n_voxels: int, rng: np.random.Generator
+) -> np.ndarray:
+    """Every voxel's exemplar position ``(3, N)`` int64 per plane, drawn at random (``rng``) among the
+    plane's neighbourhood centres: the coarsest level's k-coherence seeds."""
+    return np.stack([nbhs[p].centres[rng.integers(0, len(nbhs[p].centres), n_voxels)] for p in range(3)])
+
+
+def upsample_plane_sources(src: np.ndarray, plan: SolidPlan, level: int) -> np.ndarray:
+    """The three planes' per-voxel exemplar positions ``(3, N)`` of level ``level + 1`` at ``level``
+    (:func:`upsample_sources`)."""
+    return np.stack(
+        [
+            upsample_sources(
+                src[p],
+                plan.shapes[level + 1],
+                plan.shapes[level],
+                plane,
+                plan.exemplars[p][level].shape,
+                plan.exemplars[p][level + 1].shape,
+            )
+            for p, plane in enumerate(PLANES)
+        ]
+    )
+
+
+def search_plane(
+    nbh: ExemplarNeighbourhoods,
+    queries: np.ndarray,
+    centres: np.ndarray,
+    *,
+    exact: bool,
+    tree: bool,
+    **coherent: object,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest exemplar neighbourhoods of ``queries``: every neighbourhood (``exact``), the PCA + k-d
+    tree search (``tree``: a level's very first search has no coherent sources yet), else k-coherence
+    (:meth:`ExemplarNeighbourhoods.search_coherent` with the keyword arguments ``coherent``)."""
+    if exact or tree:
+        return nbh.search(queries, exact=exact)
+    return nbh.search_coherent(queries, centres, **coherent)  # type: ignore[arg-type]

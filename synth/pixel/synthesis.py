@@ -97,6 +97,7 @@ __all__ = [
     "SynthesisReport",
     "check_neighbourhoods_fit",
     "entry_weights",
+    "k_coherence_sets",
     "level_neighbourhood_size",
     "source_map_pyramid",
     "synthesize_source_map",
@@ -322,7 +323,7 @@ def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarr
     return np.concatenate(parts, axis=1)
 
 
-def _k_coherence_sets(
+def k_coherence_sets(
     embeds: Sequence[tuple[np.ndarray, float]],
     size: int,
     valid: np.ndarray,
@@ -632,7 +633,7 @@ def synthesize_source_map(
             embeds.append((_euclidean_embedding(gui_ex, guidance.metric), w_gui))
         k = 0 if exact else settings.k
         kset = (
-            _k_coherence_sets(embeds, size, valid, k, mask, settings.kset_size, settings.kset_dims)
+            k_coherence_sets(embeds, size, valid, k, mask, settings.kset_size, settings.kset_dims)
             if not exact
             else np.full((1, 1, 0, 2), -1, np.int64)
         )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.errors import InvalidInput
+from synth.errors import Cancelled, InvalidInput
 from synth.grid.scan import scan_order
 from synth.kernels.solid_search import (
     HistogramState,
@@ -24,6 +24,8 @@ from synth.kernels.solid_search import (
 from synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
+    LevelStep,
+    ProgressMeter,
     dense_sources,
     exemplar_neighbourhoods,
     exemplar_offsets,
@@ -32,6 +34,7 @@ from synth.pixel.solid import (
     plan_levels,
     plane_centres,
     plane_offsets,
+    run_levels,
     slice_geometry,
     upsample_sources,
     upsample_volume,
@@ -311,3 +314,68 @@ def test_kcoherence_search_with_fewer_set_entries_equals_reference() -> None:
     ref_pos, ref_d2 = kcoherence_search_reference(queries, centres, geometry, src, nb.sets, 1, 5, 0, k=3)
     np.testing.assert_array_equal(pos, ref_pos)
     np.testing.assert_array_equal(d2, ref_d2)
+
+
+# ---------------------------------------------------------------- the driver
+
+
+class _Recorder:
+    """A level loop that records the driver's calls and stops a level after ``stop_after`` iterations."""
+
+    def __init__(self, stop_after: int) -> None:
+        self.calls: list[tuple] = []
+        self.stop_after = stop_after
+
+    def start_level(self, step: LevelStep) -> None:
+        self.calls.append(("start", step.level, step.shape, step.size, step.iterations, step.coarsest))
+
+    def iterate(self, step: LevelStep, it: int) -> bool:
+        self.calls.append(("iterate", step.level, it))
+        return it + 1 < self.stop_after
+
+    def end_level(self, step: LevelStep) -> None:
+        self.calls.append(("end", step.level))
+
+
+def test_run_levels_goes_coarse_to_fine_with_per_level_iterations_and_early_stops() -> None:
+    ex = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    plan = plan_levels(dict.fromkeys(PLANES, ex), (16, 16, 16), 2, 7)
+    loop = _Recorder(stop_after=2)
+    run_levels(plan, [1, 3], loop)  # level 0 (finest) 1 iteration, level 1 (coarsest) 3, stopped at 2
+    assert loop.calls == [
+        ("start", 1, plan.shapes[1], plan.sizes[1], 3, True),
+        ("iterate", 1, 0),
+        ("iterate", 1, 1),
+        ("end", 1),
+        ("start", 0, plan.shapes[0], plan.sizes[0], 1, False),
+        ("iterate", 0, 0),
+        ("end", 0),
+    ]
+
+
+def test_progress_chunks_cover_the_items_and_report_after_each_chunk() -> None:
+    seen: list[tuple[str, float]] = []
+    meter = ProgressMeter(lambda stage, fraction: seen.append((stage, fraction)), total=200.0)
+    done = []
+    for a, b in meter.chunks(10, 20.0, "stage"):  # 1% of 200 units = 2 units: one item per chunk
+        assert len(seen) == len(done)  # reported after the caller's work on the chunk, not before
+        done.append((a, b))
+    assert done == [(i, i + 1) for i in range(10)]
+    assert seen[-1] == ("stage", 1.0)
+    assert [(a, b) for a, b in ProgressMeter(lambda s, f: None, 1.0).chunks(5, 1.0, "s", step=2)] == [
+        (0, 2),
+        (2, 4),
+        (4, 5),
+    ]
+
+
+def test_progress_chunks_stop_when_the_report_cancels() -> None:
+    def cancel(stage: str, fraction: float) -> None:
+        if fraction >= 0.3:
+            raise Cancelled("stop")
+
+    done = []
+    with pytest.raises(Cancelled):
+        for a, b in ProgressMeter(cancel, total=10.0).chunks(10, 1.0, "stage", step=1):
+            done.append((a, b))
+    assert done == [(0, 1), (1, 2), (2, 3)]

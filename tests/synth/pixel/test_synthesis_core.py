@@ -774,13 +774,13 @@ def test_kset_parameters_reach_the_k_coherence_sets(monkeypatch: pytest.MonkeyPa
     import synth.pixel.synthesis as core
 
     seen: list[tuple[int, int]] = []
-    real = core._k_coherence_sets
+    real = core.k_coherence_sets
 
     def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
         seen.append((args[5], args[6]))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(core, "_k_coherence_sets", spy)
+    monkeypatch.setattr(core, "k_coherence_sets", spy)
     params = {"kset_size": 5, "kset_dims": 3, "neighbourhood_size": 7, "levels": 1}
     synthesize("wei-levoy", _rng_image((24, 24)), size=(16, 16), params=params)
     assert seen == [(5, 3)]
