@@ -123,3 +123,59 @@ def test_quilting_defaults_use_the_whole_laminar_exemplar():
     ours = synthesize("quilting", ex, size=(192, 192), seed=1)
     assert ours.stats["coverage"]["share"] > paper.stats["coverage"]["share"] + 0.1
     assert ours.image.std() / ex.std() > 0.88 > paper.image.std() / ex.std()
+
+
+@pytest.mark.parametrize("method", ["gaussian-patch", "feature-guided"])
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ({"usage_weight": -0.5}, "usage_weight"),
+        ({"usage_weight": 101}, "usage_weight"),
+        ({"error": "l1"}, "error"),
+    ],
+)
+def test_search_options_bad_values_name_the_field(method, params, field):
+    ex = np.zeros((64, 64), dtype=np.float32)
+    with pytest.raises(InvalidParameter, match=field):
+        synthesize(method, ex, size=(64, 64), params=params)
+
+
+def test_gaussian_patch_reports_its_neighbours():
+    rng = np.random.default_rng(3)
+    ex = rng.random((40, 40)).astype(np.float32)
+    base = {"patch_size": 12, "neighbours": 4}
+    mean = synthesize("gaussian-patch", ex, size=(48, 48), seed=2, params={**base, "estimate": "mean"})
+    kept = synthesize("gaussian-patch", ex, size=(48, 48), seed=2, params=base)
+    # one position per patch in the stats; the coverage counts all N at 1/N for the mean
+    n_patches = len(kept.stats["patch_sources"])
+    assert len(mean.stats["patch_sources"]) == n_patches == 25  # 5 x 5 patches of step 9
+    assert mean.stats["coverage"]["patches"] == 1 + 4 * (n_patches - 1)
+    assert kept.stats["coverage"]["patches"] == n_patches
+    y, x = kept.stats["patch_sources"][0]
+    np.testing.assert_array_equal(kept.image[:4, :4], ex[y : y + 4, x : x + 4])
+    assert kept.stats["coverage"] == exemplar_coverage(kept.stats["patch_sources"], ex.shape, 12)
+
+
+def test_feature_guided_search_follows_the_exemplar_orientation():
+    from synth.methods.feature_guided import search_for
+
+    rng = np.random.default_rng(4)
+    noise = rng.random((64, 64))
+    stripes = 0.5 + 0.4 * np.sin(2 * np.pi * np.arange(64) / 7.0)[:, None] * np.ones((1, 64))
+    assert search_for(noise) == ("normalised", 1.0)
+    assert search_for(stripes) == ("ssd", 0.0)
+    r = synthesize(
+        "feature-guided", noise.astype(np.float32), size=(64, 64), seed=1, params={"patch_size": 16}
+    )
+    assert r.params["error"] == "normalised" and r.params["usage_weight"] == 1.0
+    assert r.stats["coverage"]["patches"] == len(r.stats["patch_sources"])
+
+
+@pytest.mark.skipif(not ONION_CORE.exists(), reason=f"{ONION_CORE} missing")
+def test_gaussian_patch_defaults_keep_the_laminar_contrast():
+    ex = load_image(ONION_CORE)
+    before = {"error": "ssd", "usage_weight": 0, "blending": "none"}
+    old = synthesize("gaussian-patch", ex, size=(160, 160), seed=1, params=before)
+    new = synthesize("gaussian-patch", ex, size=(160, 160), seed=1)
+    assert new.image.std() / ex.std() > 0.85 > old.image.std() / ex.std()
+    assert new.stats["coverage"]["share"] > old.stats["coverage"]["share"]
