@@ -52,7 +52,7 @@ Departures
   error and a usage penalty on over-used exemplar regions for weakly oriented exemplars, the paper's SSD
   on strongly oriented ones): the candidates come from the colour error of
   :meth:`synth.patch.search.PatchSearcher.normalised_ssd` times :class:`synth.patch.usage.UsagePenalty`'s
-  factors. Seeds 1-3, 128 -> 256, onion-core HRTEM crop: coherence ratio 0.86 -> 0.91, contrast 0.84 ->
+  factors. Seeds 1-3, 128 -> 256, onion-core HRTEM crop: coherence ratio 0.81 -> 0.87, contrast 0.84 ->
   0.94, grey KL 0.034 -> 0.005, orientation KL 0.15 -> 0.04; the onion crop (shells) orientation KL 1.22
   -> 0.03 (the paper's search fills the output with the crop's straightest fringes); docs/patch.md.
   ``stats['patch_sources']``: ``[row, column, copy]`` of every patch (copy 0 = the exemplar as it is);

@@ -97,7 +97,7 @@ Departures
   penalty on over-used exemplar regions (:class:`synth.patch.usage.UsagePenalty`; the neighbour a patch
   is built on is counted, or all ``N`` at ``1/N`` for the mean and the draws); with the boundary cut
   (the paper's Fig. 3) the contrast is higher still (onion-core 0.83 pasted, 0.88 cut). Seeds 1-3,
-  128 -> 256, mean: onion-core crop contrast 0.74 -> 0.88, coherence ratio 0.91 -> 0.94, grey KL 0.092
+  128 -> 256, mean: onion-core crop contrast 0.74 -> 0.88, coherence ratio 0.88 -> 0.90, grey KL 0.092
   -> 0.016, orientation KL 0.17 -> 0.04, share of the exemplar used 0.72 -> 0.90; brick, grass, gravel
   and soot: both KLs lower or equal, contrast higher; the seam ratio (:func:`synth.evaluate.seam_visibility`)
   rises toward 1 (grass 0.67 -> 1.01, brick 1.25 -> 1.29).
