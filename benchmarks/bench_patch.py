@@ -502,7 +502,7 @@ def laminar(others: bool = True) -> str:
         "ratio and contrast >= 0.85, grey KL < 0.05. The crops (benchmarks/data/README.md) are an "
         "onion-like soot particle: `hrtem-onion-core-128` has its disordered core in the middle, "
         "`hrtem-onion-128` more of the shells. The peer (Embark texture-synthesis) on the issue's crop of "
-        "the same kind: coherence ratio 0.65, contrast 0.75, grey KL 0.105 (docs FINDINGS).",
+        "the same kind: coherence ratio 0.65, contrast 0.75, grey KL 0.105 (issue 24).",
         "",
     ]
     verdicts = []
