@@ -2,7 +2,8 @@
 
 Run: ``python -m benchmarks.bench_quality`` (writes docs/quality.md and docs/img/quality-*.png; the sections
 other benchmarks own there, between ``<!-- begin:name -->`` and ``<!-- end:name -->``, are kept).
-``--seeds 1`` for a quick look.
+``--seeds 1`` for a quick look. ``--methods quilting,gaussian-patch`` re-measures only those methods and
+replaces only their rows in docs/quality.md (the pictures and the other rows stay as they are).
 
 Every 2D method with its defaults, 128 x 128 exemplars -> 256 x 256, seeds 1-3, on the public crops
 (``skimage.data`` grass, gravel, brick: ``[:128, :128]``, grey), HRTEM soot (``hrtem-soot-128.png``), a
@@ -29,6 +30,7 @@ Cells are the mean over seeds, with the worst seed in brackets.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import statistics
 import sys
@@ -145,10 +147,55 @@ def figure(exemplar: np.ndarray, outputs: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(tiles[:-1], axis=1)
 
 
+def replace_rows(methods: tuple[str, ...], n_seeds: int) -> int:
+    """Re-measure ``methods`` on every exemplar and replace their rows in docs/quality.md's tables."""
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise SystemExit(f"--methods: unknown {unknown}; choose among {', '.join(METHODS)}")
+    doc = DOCS / "quality.md"
+    text = doc.read_text()
+    seeds = tuple(range(1, n_seeds + 1))
+    for name, exemplar in exemplars().items():
+        polarity = STRAND_POLARITY.get(name, "dark")
+        start = text.find(f"## {name}\n")
+        end = text.find("\n## ", start + 1)
+        if start < 0:
+            print(f"{name}: no section in {doc.name}, skipped", flush=True)
+            continue
+        section = text[start:end]
+        for method in methods:
+            runs, times = [], []
+            for seed in seeds:
+                t0 = time.perf_counter()
+                result = synthesize(method, exemplar, size=SIZE, seed=seed)
+                times.append(time.perf_counter() - t0)
+                runs.append(measures(exemplar, result.image, result, polarity=polarity))
+            cells = " | ".join(cell(key, runs) for key, _ in MEASURES)
+            row = f"| `{method}` | {statistics.median(times):.1f} | {cells} |"
+            section = re.sub(rf"^\| `{re.escape(method)}` \|.*$", row, section, count=1, flags=re.M)
+            print(f"{name}: {row}", flush=True)
+        text = text[:start] + section + text[end:]
+    note = (
+        f"<!-- rows-note -->_Rows of {', '.join(f'`{m}`' for m in methods)} re-measured alone "
+        f"(`--methods`, {time.strftime('%Y-%m-%d')}, 1-minute load {os.getloadavg()[0]:.1f} after them on "
+        "the shared 2-core machine): their time column is wall time under that load; the pictures still "
+        "show the earlier outputs._\n\n"
+    )
+    text = re.sub(r"<!-- rows-note -->.*?\n\n", "", text, flags=re.S)
+    first = text.find("\n## ") + 1
+    doc.write_text(text[:first] + note + text[first:])
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="the 2D quality table (docs/quality.md)")
     parser.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
+    parser.add_argument(
+        "--methods", default="", help="comma-separated subset: replace only these methods' rows in the doc"
+    )
     args = parser.parse_args(argv)
+    if args.methods:
+        return replace_rows(tuple(m.strip() for m in args.methods.split(",") if m.strip()), args.seeds)
     seeds = tuple(range(1, args.seeds + 1))
     (DOCS / "img").mkdir(parents=True, exist_ok=True)
     head = "| method | time (s) | " + " | ".join(label for _, label in MEASURES) + " |"

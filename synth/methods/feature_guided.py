@@ -48,6 +48,15 @@ Departures
   (:class:`synth.patch.layout.PatchLayout`); the last patch of a row is matched (colour and features)
   on its left *and* right overlaps, the last row on its top *and* bottom ones, warped with only the
   borders that have no known strip held fixed, and cut by the graph cut through every strip.
+- ``error`` and ``usage_weight`` (not the paper; None = :func:`search_for`: the variance-normalised colour
+  error and a usage penalty on over-used exemplar regions for weakly oriented exemplars, the paper's SSD
+  on strongly oriented ones): the candidates come from the colour error of
+  :meth:`synth.patch.search.PatchSearcher.normalised_ssd` times :class:`synth.patch.usage.UsagePenalty`'s
+  factors. Seeds 1-3, 128 -> 256, onion-core HRTEM crop: coherence ratio 0.81 -> 0.87, contrast 0.84 ->
+  0.94, grey KL 0.034 -> 0.005, orientation KL 0.15 -> 0.04; the onion crop (shells) orientation KL 1.22
+  -> 0.03 (the paper's search fills the output with the crop's straightest fringes); docs/patch.md.
+  ``stats['patch_sources']``: ``[row, column, copy]`` of every patch (copy 0 = the exemplar as it is);
+  ``stats['coverage']``: :func:`synth.evaluate.coverage.exemplar_coverage` of the copy-0 patches.
 - See :mod:`synth.patch.feature_guided` for the normalisation of the two costs, the candidates, the
   dropped far correspondences and the rejected folding warps.
 """
@@ -65,6 +74,7 @@ from synth.analysis.features import feature_map, feature_overlay
 from synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
 from synth.api import MethodSpec, Progress, Result, register
 from synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
+from synth.evaluate.coverage import exemplar_coverage
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
 from synth.methods.quilting import precheck_patch_method
@@ -188,6 +198,21 @@ class FeatureGuidedParams(PatchParams):
     rotations: bool = Field(
         False, description="Also take patches from the 7 rotated/reflected copies of the exemplar."
     )
+    error: Literal["normalised", "ssd"] | None = Field(
+        None,
+        description="Colour error of the candidates on the overlap: 'ssd' = the paper; 'normalised' = SSD "
+        "over the overlap's plus the candidate's own variance (flat ones not preferred for being flat). "
+        "None: 'normalised' for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes, grass, "
+        "gravel), 'ssd' for strongly oriented ones (laminae, fibres, brick joints).",
+    )
+    usage_weight: float | None = Field(
+        None,
+        ge=0.0,
+        le=100.0,
+        description="Gain of the penalty on over-used exemplar regions in the candidate search (Chen & "
+        "Wang's position histogram; not the paper); 0 = the paper. None: 1 for weakly oriented exemplars, "
+        "0 for strongly oriented ones (as error).",
+    )
 
     def feature_options(self) -> dict[str, object]:
         """Keyword arguments of :func:`synth.analysis.features.feature_map`."""
@@ -215,6 +240,21 @@ def reverse_weight_for(exemplar: np.ndarray) -> float:
     return REVERSE_WEIGHT if mean_coherence(exemplar) < ORIENTED_COHERENCE else 0.0
 
 
+def search_for(exemplar: np.ndarray) -> tuple[str, float]:
+    """The candidate search ``error=None`` / ``usage_weight=None`` stand for, from the exemplar.
+
+    On weakly oriented exemplars (below :data:`~synth.analysis.tensor.ORIENTED_COHERENCE`) the paper's
+    colour SSD picks the flattest candidates where the overlap cannot be matched exactly, and on laminar
+    HRTEM crops that mix ordered shells and a disordered core the output converges to one region (the
+    core, or the straightest fringes: onion crop orientation KL 1.22, share of the exemplar used 0.54);
+    the variance-normalised error with the usage penalty (1) uses the whole exemplar (0.03, 0.92) and keeps
+    or improves grey KL, orientation KL and coherence on grass, gravel and soot (docs/patch.md). On brick
+    (strongly oriented) it raised the seam ratio (1.13 -> 1.24, seeds 1-3) for no gain the pictures show:
+    ``('ssd', 0)``, the paper, there.
+    """
+    return ("normalised", 1.0) if mean_coherence(exemplar) < ORIENTED_COHERENCE else ("ssd", 0.0)
+
+
 def run_feature_guided(
     exemplar: np.ndarray,
     *,
@@ -231,6 +271,14 @@ def run_feature_guided(
     start = time.perf_counter()
     if params.reverse_weight is None:
         params = params.model_copy(update={"reverse_weight": reverse_weight_for(exemplar)})
+    if params.error is None or params.usage_weight is None:
+        error, usage_weight = search_for(exemplar)
+        params = params.model_copy(
+            update={
+                "error": error if params.error is None else params.error,
+                "usage_weight": usage_weight if params.usage_weight is None else params.usage_weight,
+            }
+        )
     options = params.feature_options()
     report("features", 0.0)
     fmap = feature_map(exemplar, **options)  # type: ignore[arg-type]
@@ -250,6 +298,8 @@ def run_feature_guided(
         warp_band=params.warp_band,
         rotations=params.rotations,
         periodic=params.periodic,
+        error=str(params.error),
+        usage_weight=float(params.usage_weight or 0.0),
     )
     made = synthesize_feature_guided(exemplar, fmap, size, settings, np.random.default_rng(seed), report)
     image = np.clip(made.image, 0.0, 1.0).astype(np.float32)
@@ -280,6 +330,9 @@ def run_feature_guided(
             "synthesized_features": int(made.mask.sum()),
             "copy_share": copy_share(cmap),
             **made.stats,
+            "coverage": exemplar_coverage(
+                [p[:2] for p in made.stats["patch_sources"] if p[2] == 0], exemplar.shape, params.patch_size
+            ),
         },
     )
 

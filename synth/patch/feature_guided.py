@@ -118,6 +118,7 @@ from synth.evaluate.breaks import Seams
 from synth.patch.graphcut import graph_cut_mask
 from synth.patch.layout import PatchLayout, Strips
 from synth.patch.search import PatchSearcher, k_nearest
+from synth.patch.usage import UsagePenalty
 
 __all__ = [
     "FeatureGuidedOutput",
@@ -239,6 +240,12 @@ class FeatureGuidedSettings:
     #: warp the wrapped patches of a periodic layout too (known on both sides of an axis); False: paste
     #: them unwarped
     warp_two_sided: bool = True
+    #: colour error of the candidates: "ssd" (the paper) or "normalised" (SSD over the overlap's plus the
+    #: candidate's variance, :meth:`synth.patch.search.PatchSearcher.normalised_ssd`)
+    error: str = "ssd"
+    #: gain of the penalty on over-used exemplar regions (:class:`synth.patch.usage.UsagePenalty`, one per
+    #: copy of the exemplar); 0: off (the paper)
+    usage_weight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -370,6 +377,8 @@ def synthesize_feature_guided(
     feature_costs: list[float] = []
     colour_costs: list[float] = []
     reranked = 0
+    usages = [UsagePenalty(v.image.shape, w, s.usage_weight) for v in copies]
+    used_sources: list[list[int]] = []
     report_every = max(1, len(layout) // 50)
 
     for n, (i, j, y, x, kind) in enumerate(layout.patches()):
@@ -384,9 +393,21 @@ def synthesize_feature_guided(
             mask = strips.mask(w)
             if strips not in falloffs:
                 falloffs[strips] = None if s.warp_band is None else band_falloff(mask, s.warp_band)
-            ssd = np.concatenate([sr.ssd(region, mask).ravel() for sr in searchers])
-            pool = k_nearest(ssd, s.candidates)
-            colour = ssd[pool] / (mask.sum() * channels)
+            ssds = [sr.ssd(region, mask) for sr in searchers]
+            ssd = np.concatenate([d.ravel() for d in ssds])
+            if s.error == "normalised" or s.usage_weight > 0:
+                errs = [
+                    sr.normalised_ssd(region, mask, d) if s.error == "normalised" else d
+                    for sr, d in zip(searchers, ssds, strict=True)
+                ]
+                if s.usage_weight > 0:
+                    errs = [e * u.factors() for e, u in zip(errs, usages, strict=True)]
+                err = np.concatenate([e.ravel() for e in errs])
+                pool = k_nearest(err, s.candidates)
+                colour = err[pool]
+            else:
+                pool = k_nearest(ssd, s.candidates)
+                colour = ssd[pool] / (mask.sum() * channels)
             context = context_features(region_mask, region_tan, mask)
             feature = np.zeros(len(pool))
             which = np.searchsorted(starts, pool, side="right") - 1
@@ -409,7 +430,7 @@ def synthesize_feature_guided(
             flat = int(pool[pick])
             reranked += int(pick != int(np.argmin(colour)))
             feature_costs.append(float(feature[pick]))
-            colour_costs.append(float(colour[pick]))
+            colour_costs.append(float(ssd[flat]) / (mask.sum() * channels))
         v = int(np.searchsorted(starts, flat, side="right") - 1)
         py, px = (int(t) for t in np.unravel_index(flat - int(starts[v]), searchers[v].positions_shape))
         variant = copies[v]
@@ -459,6 +480,8 @@ def synthesize_feature_guided(
             else graph_cut_mask(region, patch, mask, layout.sealed(i, j))
         )
         region[new] = patch[new]
+        usages[v].add(py, px, new)
+        used_sources.append([py, px, v])
         region_mask[new] = p_mask[new]
         region_tan[new] = np.where(p_mask, p_tan, np.nan)[new]
         region_labels, region_sources = labels[at], sources[at]
@@ -481,6 +504,7 @@ def synthesize_feature_guided(
         "reranked_share": reranked / max(1, len(layout) - 1),
         "mean_feature_cost": float(np.mean(feature_costs)) if feature_costs else 0.0,
         "mean_overlap_error": float(np.mean(colour_costs)) if colour_costs else 0.0,
+        "patch_sources": used_sources,
     }
     if s.deform:
         stats["warps"] = warps

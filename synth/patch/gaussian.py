@@ -191,6 +191,7 @@ def rclg_neighbour(
     theta: float,
     rng: np.random.Generator,
     taper: np.ndarray | None = None,
+    member: int | None = None,
 ) -> np.ndarray:
     """A neighbour drawn uniformly, corrected toward the overlap by the RCLG gain (a departure).
 
@@ -200,11 +201,13 @@ def rclg_neighbour(
     part as in :func:`rclg_patch`. ``taper`` (shape ``(D,)``, 1 on the overlap; :func:`localisation_taper`)
     multiplies the correction ``A c`` pixel by pixel: the patch keeps the neighbour's own structure where
     the overlap says little about it. ``taper=None``: no taper (then the average over ``j`` is
-    :func:`rclg_patch`, since the correction is linear).
+    :func:`rclg_patch`, since the correction is linear). ``member``: the neighbour's index, already drawn
+    (then ``rng`` is not used).
     """
     known = np.asarray(known, dtype=bool)
     n = model.A.shape[1]
-    prior = model.mu + np.sqrt(n) * model.A[:, int(rng.integers(n))]
+    j = int(rng.integers(n)) if member is None else int(member)
+    prior = model.mu + np.sqrt(n) * model.A[:, j]
     if not known.any():
         return prior
     d = np.asarray(y0, dtype=np.float64) - prior[known]

@@ -9,6 +9,11 @@ three correlations of which the first depends on the mask only (computed once pe
 the second is one real FFT product per channel. A circular correlation on the exemplar's own grid is exact
 at every valid position (``q + u`` never wraps), so no padding is needed. Sums are in float64 and the result
 is clipped at 0 (the expansion can round to tiny negatives).
+
+:meth:`PatchSearcher.normalised_ssd` divides it by ``n (var_T + var_E(q))``, the template's and each
+candidate's own variance on the mask (two more cached correlations of the mask: ``sum M E`` beside
+``sum M E^2``), so that an uncorrelated candidate scores about 1 whatever its contrast (quilting's
+``error='normalised'``, docs/patch.md).
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ class PatchSearcher:
         self._spectra = sfft.rfft2(self.exemplar, axes=(0, 1))
         self._square_spectra = sfft.rfft2(self.exemplar**2, axes=(0, 1))
         self._energy: dict[bytes, np.ndarray] = {}
+        self._first: dict[bytes, np.ndarray] = {}
         self.windows = sliding_window_view(self.exemplar, (self.w, self.w), axis=(0, 1))
 
     @property
@@ -68,6 +74,50 @@ class PatchSearcher:
             m = np.repeat(m[..., None], self.channels, axis=2)
         return m
 
+    @staticmethod
+    def _key(m: np.ndarray) -> bytes:
+        if not np.all((m == 0) | (m == 1)):
+            return m.tobytes()
+        return np.packbits(m > 0).tobytes() + m.shape[2].to_bytes(2, "little")
+
+    def _mask_sums(self, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``sum_u M(u) E(q + u)^2`` and ``sum_u M(u) E(q + u)`` at every ``q`` (cached per mask)."""
+        key = self._key(m)
+        energy = self._energy.get(key)
+        if energy is None:
+            energy = self._correlate(self._square_spectra, m)
+            self._energy[key] = energy
+        first = self._first.get(key)
+        if first is None:
+            first = self._correlate(self._spectra, m)
+            self._first[key] = first
+        return energy, first
+
+    def normalised_ssd(
+        self, template: np.ndarray, mask: np.ndarray, ssd: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Masked SSD over the sum of the template's and each candidate's own variance on the mask.
+
+        ``SSD(q) / (n (var_T + var_E(q)) + eps)``, with ``n = sum M``, the variances taken over the masked
+        values (all channels pooled) and ``eps`` a thousandth of the exemplar's variance times ``n``. An
+        uncorrelated candidate scores about 1 whatever its own contrast, a matching one about 0: unlike
+        the plain SSD (about ``n (var_T + var_E)`` for an uncorrelated candidate), a flat candidate is not
+        preferred for being flat. Same shapes as :meth:`ssd`; ``ssd``: :meth:`ssd` of the same template
+        and mask when already computed.
+        """
+        m = self._weights(mask)
+        if ssd is None:
+            ssd = self.ssd(template, m)
+        energy, first = self._mask_sums(m)
+        n = float(m.sum())
+        var_e = np.maximum(energy / n - (first / n) ** 2, 0.0)
+        t = np.asarray(template, dtype=np.float64)
+        t = t[..., None] if t.ndim == 2 else t
+        mean_t = float(np.sum(m * t)) / n
+        var_t = max(float(np.sum(m * t * t)) / n - mean_t**2, 0.0)
+        eps = 1e-3 * float(self.exemplar.var()) + 1e-12
+        return ssd / (n * (var_t + var_e + eps))
+
     def ssd(self, template: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """Masked SSD of ``template`` against every exemplar patch.
 
@@ -86,9 +136,7 @@ class PatchSearcher:
         m = self._weights(mask)
         t = np.asarray(template, dtype=np.float64)
         t = t[..., None] if t.ndim == 2 else t
-        key = np.packbits(m > 0).tobytes() + m.shape[2].to_bytes(2, "little")
-        if not np.all((m == 0) | (m == 1)):
-            key = m.tobytes()
+        key = self._key(m)
         energy = self._energy.get(key)
         if energy is None:
             energy = self._correlate(self._square_spectra, m)
