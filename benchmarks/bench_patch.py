@@ -10,10 +10,11 @@ machine its threads spin against the other jobs and make small matrix products s
 
 from __future__ import annotations
 
+from synth.threads import single_threaded_blas
+
+single_threaded_blas()  # before NumPy loads OpenBLAS
+
 import os
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import time
 from pathlib import Path
 from typing import Any

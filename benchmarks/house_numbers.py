@@ -113,7 +113,8 @@ def limit_readers() -> tuple[list[str], list[str]]:
             if generic and isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
                 reads = reads or node.target.id in fields
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
-                args = [a.value for a in node.args if isinstance(a, ast.Constant)]
+                args = [a.value if isinstance(a, ast.Constant) else getattr(a, "id", None) for a in node.args]
+                args = ["OPENBLAS_NUM_THREADS" if a == "BLAS_THREADS" else a for a in args]
                 sets = sets or (node.func.attr in ("setdefault", "putenv") and "OPENBLAS_NUM_THREADS" in args)
             if isinstance(node, ast.Assign):
                 for target in node.targets:
