@@ -53,7 +53,6 @@ from synth.kernels.pixel_search import (
     candidate_capacity,
     position_distance,
     synthesize_chunk,
-    synthesize_chunk_reference,
 )
 
 __all__ = [
@@ -485,7 +484,6 @@ def synthesize_source_map(
     progress: ProgressFn | None = None,
     stage: str = "synthesis",
     span: tuple[float, float] = (0.0, 1.0),
-    reference: bool = False,
     ex_masks: Sequence[np.ndarray] | None = None,
     on_level_done: Callable[[int, dict], None] | None = None,
     histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
@@ -508,8 +506,6 @@ def synthesize_source_map(
     seed : int
     progress : callable (stage, fraction), optional
         Called about 64 times per pass with the overall fraction inside ``span``; may raise to cancel.
-    reference : bool
-        Run the plain NumPy reference instead of the numba kernel (tests only: slow).
     ex_masks : list of ndarray (h_l, w_l) bool, finest first, optional
         Exemplar positions that may be copied, per level (besides the neighbourhood-fits rectangle).
         Masked positions' neighbourhoods must lie inside the array; the caller guarantees they are
@@ -541,7 +537,6 @@ def synthesize_source_map(
         cand_offs = np.ascontiguousarray(
             cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))]
         )
-    chunk_fn = synthesize_chunk_reference if reference else synthesize_chunk
     work = [settings.iterations * h * w for h, w in out_shapes]
     total_work = float(sum(work))
     done_work = 0.0
@@ -687,7 +682,7 @@ def synthesize_source_map(
             label = f"{stage}: level {level + 1}/{levels}, pass {it + 1}/{settings.iterations}"
             for start in range(0, n, step):
                 stop = min(n, start + step)
-                chunk_fn(state, start, stop)
+                synthesize_chunk(state, start, stop)
                 if progress is not None:
                     frac = (done_work + (it * n + stop)) / total_work
                     progress(label, span[0] + (span[1] - span[0]) * frac)

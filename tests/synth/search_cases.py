@@ -6,9 +6,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import synth.pixel.synthesis as synthesis
+from synth.kernels.pixel_search import synthesize_chunk_reference
 from synth.pixel.synthesis import CandidateWindow, synthesize_source_map
 
-__all__ = ["_rng_image", "_run_both", "_striped_window", "_tiled_window"]
+__all__ = ["_rng_image", "_run_both", "_striped_window", "_tiled_window", "synthesize_with_reference"]
+
+
+def synthesize_with_reference(**kwargs: object) -> tuple:
+    """:func:`synthesize_source_map` with the plain NumPy search (``synthesize_chunk_reference``) in
+    place of the numba kernel: the driver calls whatever its module's ``synthesize_chunk`` is."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(synthesis, "synthesize_chunk", synthesize_chunk_reference)
+        return synthesize_source_map(**kwargs)  # type: ignore[arg-type]
 
 
 def _rng_image(shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
@@ -21,7 +31,7 @@ def _rng_image(shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
 
 def _run_both(**kwargs: object) -> None:
     fast, fast_report = synthesize_source_map(**kwargs)  # type: ignore[arg-type]
-    slow, slow_report = synthesize_source_map(reference=True, **kwargs)  # type: ignore[arg-type]
+    slow, slow_report = synthesize_with_reference(**kwargs)
     for a, b in zip(fast, slow, strict=True):
         np.testing.assert_array_equal(a, b)
     for key, value in fast_report.mean_best_distance.items():

@@ -5,8 +5,36 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.kernels.streamline_hits import first_hits, first_hits_reference
+from synth.analysis.streamlines import trace
+from synth.kernels.streamline_hits import first_hits
 from tests.synth.analysis.test_streamlines import ring_direction
+
+
+def first_hits_reference(
+    angle: np.ndarray, label: np.ndarray, max_steps: int, step: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Plain version (non-periodic) of :func:`first_hits`' steps and hit positions, with
+    :func:`synth.analysis.streamlines.trace` (which mirrors the field outside the image where the
+    kernel clamps it: the two agree wherever curves stay a pixel inside)."""
+    h, w = label.shape
+    starts = np.argwhere(np.ones((h, w), bool)).astype(np.float64)
+    best = np.where(label.ravel() >= 0, 0, max_steps + 1)
+    pos = starts.copy()
+    plus = trace(angle, starts, max_steps, step=step)
+    minus = trace(angle, starts, max_steps, step=step, forward=-(plus[1] - plus[0]))
+    for curve in (plus, minus):
+        iy = np.floor(curve[..., 0] + 0.5).astype(np.int64)
+        ix = np.floor(curve[..., 1] + 0.5).astype(np.int64)
+        inside = np.cumprod((iy >= 0) & (iy < h) & (ix >= 0) & (ix < w), axis=0).astype(bool)
+        on = inside & (label[np.clip(iy, 0, h - 1), np.clip(ix, 0, w - 1)] >= 0)
+        on[0] = False
+        k = np.where(on.any(axis=0), on.argmax(axis=0), max_steps + 1)
+        better = k < best
+        best = np.where(better, k, best)
+        pos[better] = curve[k[better], np.flatnonzero(better)]
+    steps = np.where(best > max_steps, -1, best)
+    pos[best == 0] = starts[best == 0]
+    return steps.reshape(h, w), pos.reshape(h, w, 2)
 
 
 def test_first_hits_kernel_matches_the_reference() -> None:

@@ -29,7 +29,13 @@ from synth.pixel.synthesis import (
     synthesize_source_map,
     tensor_features,
 )
-from tests.synth.search_cases import _rng_image, _run_both, _striped_window, _tiled_window
+from tests.synth.search_cases import (
+    _rng_image,
+    _run_both,
+    _striped_window,
+    _tiled_window,
+    synthesize_with_reference,
+)
 
 # ---------------------------------------------------------------- option semantics
 
@@ -89,7 +95,9 @@ def test_masked_exemplar_positions_are_never_copied(search: str) -> None:
     settings = SearchSettings(size=3, levels=1, iterations=2, search=search, k=3)
     srcs, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask])
     assert (srcs[0][..., 1] >= 12).all()
-    ref, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask], reference=True)
+    ref, _ = synthesize_with_reference(
+        ex_levels=[ex], out_shapes=[(16, 16)], settings=settings, seed=1, ex_masks=[mask]
+    )
     np.testing.assert_array_equal(srcs[0], ref[0])
 
 
@@ -658,10 +666,8 @@ def test_initial_source_map_starts_the_synthesis_and_every_pass_refines() -> Non
     settings = SearchSettings(size=5, shape="square", scan="random", iterations=1, k=2, refine_square=True)
     inner = (slice(4, 20), slice(4, 20))
     kept = []
-    for reference in (False, True):
-        srcs, _ = synthesize_source_map(
-            [ex], [(24, 24)], settings, seed=1, initial=[ident], reference=reference
-        )
+    for run in (synthesize_source_map, synthesize_with_reference):
+        srcs, _ = run(ex_levels=[ex], out_shapes=[(24, 24)], settings=settings, seed=1, initial=[ident])
         kept.append(srcs[0])
         assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() > 0.95
     np.testing.assert_array_equal(kept[0], kept[1])
