@@ -250,31 +250,11 @@ def _transfer_class(c, want, period, n_classes):
 
 
 @kernel
-def _gather_candidates(
-    cand,
-    oy,
-    ox,
-    src,
-    hint,
-    use_hint,
-    kset,
-    cand_offs,
-    valid,
-    mask,
-    n_random,
-    key,
-    stamp,
-    tag,
-    w,
-    cls,
-    want,
-    period,
-    span,
-    to_c,
-    from_c,
-):
+def _gather_candidates(cand, oy, ox, cands, win, want, key, stamp, tag, w):
     """The position's candidates into ``cand``, in proposal order, each once; return their number.
 
+    ``cands`` (:class:`Candidates`) and ``win`` (:class:`ClassWindow`) as in :class:`SearchState`;
+    ``want`` the position's wanted class, ``key`` its random key, ``w`` the exemplar's width.
     Proposals first (the sources of the neighbours in ``cand_offs`` shifted by ``p - q``, each with
     its ``k`` similar positions (Tong et al.), from ``src`` and then ``hint``; then ``n_random``
     seeded random positions), then one pass keeps those inside ``valid`` and ``mask``, not seen yet
@@ -282,6 +262,8 @@ def _gather_candidates(
     transfer (``to_c``, ``from_c`` not empty) a proposal of another class is first moved to the same
     point of the wanted class and then checked the same way.
     """
+    src, hint, use_hint, valid, mask, kset, cand_offs, _, n_random, _ = cands
+    cls, _, period, span, to_c, from_c = win
     H = src.shape[0]
     W = src.shape[1]
     k = kset.shape[2]
@@ -384,9 +366,9 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
     out, ex, offs, metric, w_cur, ew_cur = cur
     par_out, par_ex, par_offs, par_metric, w_par, ew_par = par
     gui_out, gui_ex, gui_offs, gui_metric, w_gui, ew_gui = gui
-    src, hint, use_hint, valid, mask, kset, cand_offs, exact, n_random, capacity = cands
+    src, _, _, valid, mask, _, _, exact, _, capacity = cands  # the rest: _gather_candidates
     labels, label_count, label_target, hist_weight = hist
-    cls, want_cls, cls_period, cls_span, to_common, from_common = win
+    cls, want_cls, cls_period, cls_span, _, _ = win
     order, first_pass, done, seed_key, stamp, counter, best_out = run
     W = out.shape[1]
     w = ex.shape[1]
@@ -474,29 +456,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
         else:
             counter[0] += 1
             key = _splitmix(seed_key ^ np.uint64(p))
-            n = _gather_candidates(
-                cand,
-                oy,
-                ox,
-                src,
-                hint,
-                use_hint,
-                kset,
-                cand_offs,
-                valid,
-                mask,
-                n_random,
-                key,
-                stamp,
-                counter[0],
-                w,
-                cls,
-                want,
-                cls_period,
-                cls_span,
-                to_common,
-                from_common,
-            )
+            n = _gather_candidates(cand, oy, ox, cands, win, want, key, stamp, counter[0], w)
             if n == 0:  # every proposal fell outside the class window: keep the current source
                 cand[0, 0] = src[oy, ox, 0]
                 cand[0, 1] = src[oy, ox, 1]
