@@ -106,7 +106,12 @@ def limit_readers() -> tuple[list[str], list[str]]:
     for path in _files():
         tree = ast.parse(path.read_text())
         reads = sets = False
-        generic = "from_env" in {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)}
+        # A settings class whose from_env reads TEXSYNTH_<FIELD> itself (not through limit_from_env).
+        generic = "from_env" in {
+            n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)
+        } and not any(
+            isinstance(n, ast.Call) and getattr(n.func, "id", "") == "limit_from_env" for n in ast.walk(tree)
+        )
         for node in ast.walk(tree):
             if isinstance(node, ast.Constant) and node.value in LIMIT_VARIABLES:
                 reads = True
