@@ -6,7 +6,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: serve test lint bench demo clean
+.PHONY: serve test test-suite test-nojit lint bench demo clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "texsynth needs Python 3.11 or newer")'
@@ -20,7 +20,19 @@ serve: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m ruff check synth app worker jobs tests benchmarks
+	$(MAKE) --no-print-directory -j2 --output-sync=target test-suite test-nojit
+
+test-suite: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# The kernel tests with numba's JIT off (as stumpy's CI does): the kernels' Python bodies run, so
+# coverage sees them and a typing-only bug shows. A fast subset (the k-coherence searches, one exact
+# search, the streamline hits, the grid), run beside the suite: it adds no wall time. numba's uint64
+# arithmetic wraps silently; NumPy's scalars say so with a warning, which is the hash working.
+test-nojit: $(STAMP)
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -p no:cacheprovider \
+		-W "ignore:overflow encountered in scalar:RuntimeWarning" \
+		-k "not exact or 1-causal-exact" tests/synth/kernels tests/synth/grid
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks.run_all

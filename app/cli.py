@@ -108,10 +108,10 @@ class ServeLock:
         return None
 
     def record(self, worker_group: int | None) -> None:
-        tmp = f"{self.path}.{os.getpid()}.tmp"
-        with open(tmp, "w") as fh:
-            json.dump({"pid": os.getpid(), "host": self.host, "worker_group": worker_group}, fh)
-        os.replace(tmp, self.path)
+        from synth.io.atomic import atomic_write_bytes  # not at import: building the parser stays light
+
+        record = {"pid": os.getpid(), "host": self.host, "worker_group": worker_group}
+        atomic_write_bytes(self.path, json.dumps(record).encode())
 
     def release(self) -> None:
         if self._read().get("pid") == os.getpid():

@@ -5,7 +5,7 @@ For lab scripts that run batches on the service instead of on their own machine:
     from app.client import Client
 
     client = Client("http://localhost:8000")     # token=... or $TEXSYNTH_TOKEN when the service has tokens
-    job = client.submit("carbon.png", method="wei-levoy", params={"width": 256, "height": 256}, seed=1)
+    job = client.submit("carbon.png", method="wei-levoy", size={"width": 256, "height": 256}, seed=1)
     job = client.wait(job["id"], progress=lambda j: print(j["stage"], j["fraction"]))
     paths = client.download(job, "out/")          # output.png, output.tiff, metrics.json, ...
 
@@ -151,17 +151,18 @@ class Client:
         seed: int | None = None,
         constraint: FileLike | None = None,
         exemplars: Mapping[str, FileLike] | None = None,
+        size: Mapping[str, int] | None = None,
     ) -> dict:
         """Queue a job; returns its record (``id``, ``state``, ...).
 
-        ``params`` holds the method's parameters and the output size as ``width``/``height`` (and
-        ``depth`` for volumes). A solid method takes ``exemplars={'xy': ..., 'xz': ..., 'yz': ...}``
-        instead of ``exemplar`` for an anisotropic material.
+        ``params`` holds the method's parameters, ``size`` the output's ``width``/``height`` (and
+        ``depth`` for volumes; the service also reads them from ``params``, as its first clients sent
+        them). A solid method takes ``exemplars={'xy': ..., 'xz': ..., 'yz': ...}`` instead of
+        ``exemplar`` for an anisotropic material.
         """
         files = self._files(exemplar, constraint, exemplars)
-        return self._post_form(
-            "/api/jobs", {"method": method, "params": json.dumps(params or {}), "seed": seed}, files
-        )
+        fields = {"method": method, "params": json.dumps(params or {}), "seed": seed, **(size or {})}
+        return self._post_form("/api/jobs", fields, files)
 
     def job(self, job_id: str) -> dict:
         return self._json("GET", f"/api/jobs/{urllib.parse.quote(job_id)}")
@@ -230,6 +231,7 @@ class Client:
         seed: int | None = None,
         constraint: FileLike | None = None,
         exemplars: Mapping[str, FileLike] | None = None,
+        size: Mapping[str, int] | None = None,
     ) -> dict:
         """Queue one job per point of ``grid``; ``get_sweep`` then gives all their metrics in one table."""
         files = self._files(exemplar, constraint, exemplars)
@@ -238,6 +240,7 @@ class Client:
             "grid": json.dumps(grid),
             "params": json.dumps(params or {}),
             "seed": seed,
+            **(size or {}),
         }
         return self._post_form("/api/sweeps", fields, files)
 
@@ -290,7 +293,6 @@ def _submit(args: argparse.Namespace) -> int:
     client = Client(args.url, token=args.token)
     params = parse_assignments(args.sets)
     size = {"width": args.width, "height": args.height, "depth": args.depth}
-    params.update({k: v for k, v in size.items() if v is not None})
     sources = input_sources(args)
     planes = {role[len("exemplar_") :]: p for role, p in sources.items() if role.startswith("exemplar_")}
     job = client.submit(
@@ -300,6 +302,7 @@ def _submit(args: argparse.Namespace) -> int:
         seed=args.seed,
         constraint=sources.get("constraint"),
         exemplars=planes or None,
+        size={k: v for k, v in size.items() if v is not None},
     )
     print(f"job {job['id']} queued: {client.base_url}{job['page']}", file=sys.stderr)
     if args.no_wait:

@@ -30,7 +30,8 @@ class JobPublic(BaseModel):
     page: str
     state: str = Field(description="queued, running, succeeded, failed or cancelled")
     method: str
-    params: dict[str, Any]
+    params: dict[str, Any] = Field(description="the method's parameters")
+    size: dict[str, int] = Field(description="the output's width, height (and depth)")
     seed: int
     stage: str
     fraction: float = Field(description="progress in [0, 1]")
@@ -91,6 +92,7 @@ class SweepPublic(BaseModel):
     method: str
     grid: dict[str, list[Any]]
     params: dict[str, Any]
+    size: dict[str, int] = Field(description="the output size of every run (unless swept in grid)")
     state: str = Field(description="running until every job ended, then done")
     counts: dict[str, int]
     columns: list[str]

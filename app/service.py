@@ -15,6 +15,7 @@ import random
 import threading
 import time
 import uuid
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +27,7 @@ from jobs.config import Settings
 from jobs.methods import methods
 from jobs.queue import QUEUE, TASK_NAME, create_celery
 from jobs.reaper import Reaper
-from jobs.store import TERMINAL, JobRecord, JobStore
+from jobs.store import SIZE_FIELDS, TERMINAL, JobRecord, JobStore
 from synth import __version__ as synth_version
 from synth.api import MethodSpec, check_inputs
 from synth.errors import InvalidParameter
@@ -36,8 +37,6 @@ from synth.params import validate_params
 from synth.pipeline import load_inputs
 
 __all__ = ["SIZE_FIELDS", "JobRequest", "Service", "Upload"]
-
-SIZE_FIELDS = ("width", "height", "depth")
 
 
 def _output_shape(size: dict[str, int]) -> tuple[int, ...]:
@@ -57,7 +56,8 @@ class JobRequest:
     """A validated submission: everything needed to create and queue a job."""
 
     method: str
-    params: dict[str, Any]  # the method's parameters (as validated, defaults filled) + width/height[/depth]
+    params: dict[str, Any]  # the method's parameters (as validated, defaults filled)
+    size: dict[str, int]  # the output's width, height (, depth)
     seed: int
     inputs: dict[str, tuple[str, bytes]]
     shapes: dict[str, tuple[int, ...]]  # the decoded inputs' array shapes, for admission control
@@ -130,15 +130,20 @@ class Service:
     # -- submission -----------------------------------------------------------------------------
 
     def validate(
-        self, method: str, params_json: str | dict, seed: int | None, uploads: list[Upload]
+        self,
+        method: str,
+        params_json: str | dict,
+        seed: int | None,
+        uploads: list[Upload],
+        size: Mapping[str, int | None] | None = None,
     ) -> JobRequest:
-        """Check a submission completely (method, parameters, size, images) or raise an engine error."""
+        """Check a submission completely (method, parameters, size, images) or raise an engine error.
+
+        ``size``: the ``width``/``height``/``depth`` form fields; the same names inside ``params``
+        (how the first clients sent them) are still accepted and moved out here."""
         spec = self.method(method)
         params = _parse_params(params_json)
-        size = {
-            k: params.pop(k) for k in SIZE_FIELDS if k in params and k not in spec.params_model.model_fields
-        }
-        size = self._validate_size(spec, size)
+        size = self._validate_size(spec, _take_size(spec, params, size))
         model = validate_params(spec.params_model, params)
         if seed is None:
             seed = random.randrange(2**31)
@@ -153,7 +158,7 @@ class Service:
         )
         shapes = {role: tuple(image.shape) for role, image in images.items()}
         del images
-        params_out = {**model.model_dump(mode="json"), **size}
+        params_out = model.model_dump(mode="json")
         self.admission.check_job(
             method, params_out, size, shapes, seconds_per_element=spec.seconds_per_element
         )
@@ -162,6 +167,7 @@ class Service:
         return JobRequest(
             method=method,
             params=params_out,
+            size=size,
             seed=int(seed),
             # stored under a name from the sniffed format, never the client's (no evil.html)
             inputs={
@@ -185,7 +191,13 @@ class Service:
         return dict(zip(needed, checked, strict=True))
 
     def manifest(self, req: JobRequest) -> dict[str, Any]:
-        return {"method": req.method, "params": req.params, "seed": req.seed, "texsynth": synth_version}
+        return {
+            "method": req.method,
+            "params": req.params,
+            "size": req.size,
+            "seed": req.seed,
+            "texsynth": synth_version,
+        }
 
     def submit(self, req: JobRequest, principal: Principal = ANONYMOUS) -> JobRecord:
         with self._admit_lock:
@@ -193,6 +205,7 @@ class Service:
             job = self.store.create_job(
                 method=req.method,
                 params=req.params,
+                size=req.size,
                 seed=req.seed,
                 inputs=req.inputs,
                 manifest={**self.manifest(req), "owner": principal.name},
@@ -230,17 +243,12 @@ class Service:
         for combo in itertools.product(*grid.values()):
             point = dict(zip(grid.keys(), combo, strict=True))
             params = {**req.params, **point}
-            size = {
-                k: params.pop(k)
-                for k in SIZE_FIELDS
-                if k in params and k not in spec.params_model.model_fields
-            }
-            size = self._validate_size(spec, size)
+            size = self._validate_size(spec, {**req.size, **_take_size(spec, params, None)})
             try:
                 model = validate_params(spec.params_model, params)
             except InvalidParameter as exc:
                 raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
-            point_params = {**model.model_dump(mode="json"), **size}
+            point_params = model.model_dump(mode="json")
             self.admission.check_job(
                 req.method,
                 point_params,
@@ -254,22 +262,24 @@ class Service:
                     spec.precheck(model, {**req.shapes, "output": _output_shape(size)})
                 except InvalidParameter as exc:
                     raise InvalidParameter(f"grid.{exc.name}", exc.value, exc.reason) from None
-            points.append(point_params)
-        self.admission.check_sweep(runs, sum(math.prod(p[k] for k in SIZE_FIELDS if k in p) for p in points))
+            points.append((point_params, size))
+        self.admission.check_sweep(runs, sum(math.prod(size.values()) for _, size in points))
         sweep_id = uuid.uuid4().hex
         job_ids: list[str] = []
         with self._admit_lock:
             self.admission.check_queue(principal.name, runs)
-            for params in points:
+            for params, size in points:
                 job = self.store.create_job(
                     method=req.method,
                     params=params,
+                    size=size,
                     seed=req.seed,
                     inputs=req.inputs,
                     sweep_id=sweep_id,
                     manifest={
                         **self.manifest(req),
                         "params": params,
+                        "size": size,
                         "sweep_id": sweep_id,
                         "owner": principal.name,
                     },
@@ -277,7 +287,9 @@ class Service:
                     share_inputs_of=job_ids[0] if job_ids else None,  # the upload stored once
                 )
                 job_ids.append(job.id)
-            self.store.create_sweep(sweep_id, req.method, grid, req.params, job_ids, owner=principal.name)
+            self.store.create_sweep(
+                sweep_id, req.method, grid, req.params, job_ids, owner=principal.name, size=req.size
+            )
         self._queue(job_ids, sweep_id)
         return sweep_id
 
@@ -333,6 +345,7 @@ class Service:
             "state": job.state,
             "method": job.method,
             "params": job.params,
+            "size": job.size,
             "seed": job.seed,
             "stage": job.stage,
             "fraction": job.fraction,
@@ -366,7 +379,7 @@ class Service:
                 {
                     "job": job.id,
                     "state": job.state,
-                    **{k: job.params.get(k) for k in sweep["grid"]},
+                    **{k: job.size[k] if k in job.size else job.params.get(k) for k in sweep["grid"]},
                     **flat,
                     "access": self.tokens.sign(job.id),  # not a column: for the page's thumbnails
                 }
@@ -378,6 +391,7 @@ class Service:
             "method": sweep["method"],
             "grid": sweep["grid"],
             "params": sweep["params"],
+            "size": sweep["size"],
             "state": "running" if active else "done",
             "counts": counts,
             "columns": ["job", "state", *sweep["grid"], *metric_names],
@@ -432,8 +446,22 @@ def _check_finite(value: Any, field: str) -> None:
 def _parse_params(value: str | dict) -> dict[str, Any]:
     params = _parse_json(value, "params")
     if not isinstance(params, dict):
-        raise InvalidParameter("params", params, 'must be a JSON object, e.g. {"width": 128, "height": 128}')
+        raise InvalidParameter("params", params, 'must be a JSON object, e.g. {"levels": 3}')
     return dict(params)
+
+
+def _take_size(spec: MethodSpec, params: dict[str, Any], given: Mapping[str, int | None] | None) -> dict:
+    """The output's sides from the ``width``/``height``/``depth`` form fields (``given``) and, as the
+    first clients sent them, from inside ``params``, where they are removed (a method parameter of one
+    of those names stays a parameter). The same side given both ways must agree."""
+    size = {k: params.pop(k) for k in SIZE_FIELDS if k in params and k not in spec.params_model.model_fields}
+    for name, value in (given or {}).items():
+        if value is None:
+            continue
+        if name in size and size[name] != value:
+            raise InvalidParameter(name, value, f"given twice, {size[name]} in params and {value} as a field")
+        size[name] = value
+    return size
 
 
 def _flatten(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]:

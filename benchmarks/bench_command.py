@@ -120,7 +120,7 @@ def _env(tree: Path) -> dict[str, str]:
     # What the tree's own command does before NumPy loads (the instrumented children do not go
     # through synth.cli.main): single-threaded OpenBLAS where it sets that.
     cli = tree / "synth" / "cli" / "__init__.py"
-    if "OPENBLAS_NUM_THREADS" in cli.read_text():
+    if (tree / "synth" / "threads.py").exists() or "OPENBLAS_NUM_THREADS" in cli.read_text():
         env.setdefault("OPENBLAS_NUM_THREADS", "1")
     return env
 
@@ -330,7 +330,8 @@ def report(results: dict) -> str:
         "128 -> 256 run, replayed from captured states on the grass crop: `wei-levoy` 2.71 -> 0.81 s, "
         "`tensor-constrained` 2.05 -> 0.91 s; (3) the command runs OpenBLAS single-threaded (unless "
         "`OPENBLAS_NUM_THREADS` is set): the k-coherence PCA's covariance and `eigh` took 0.45 s of CPU "
-        "with two threads spinning against other work, 0.005 s with one.",
+        "with two threads spinning against other work, 0.005 s with one (under load 4-5, `wei-levoy`'s "
+        "three levels' k-coherence sets 1.69 s of CPU with two threads, 1.23 s with one).",
         "",
         "Before the issue-13 defaults, half of `wei-levoy`'s synthesis was its k-coherence sets: one k-d "
         "tree query of its 13,456 finest-level neighbourhoods (9 x 9 pixels on 16 principal components, "

@@ -17,11 +17,12 @@ exemplars with the same feature detector settings for every method.
 
 from __future__ import annotations
 
-import os
+from synth.threads import single_threaded_blas
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+single_threaded_blas()  # before NumPy loads OpenBLAS
 
 import json
+import os
 import statistics
 import sys
 import time

@@ -15,11 +15,12 @@ machine its threads spin against the other jobs and make small matrix products s
 
 from __future__ import annotations
 
-import os
+from synth.threads import single_threaded_blas
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+single_threaded_blas()  # before NumPy loads OpenBLAS
 
 import argparse
+import os
 import re
 import statistics
 import time

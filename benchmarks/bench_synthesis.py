@@ -15,10 +15,11 @@ k-coherence PCA's small matrix products slower, never faster.
 
 from __future__ import annotations
 
+from synth.threads import single_threaded_blas
+
+single_threaded_blas()  # before NumPy loads OpenBLAS
+
 import os
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 import resource
 import statistics
 import time

@@ -76,7 +76,7 @@ NOTES = (
     "cannot fit joints on both sides of its last column / row with N = 5 neighbours (broken joints there), "
     "and the mending smears a joint that only one side has. `tensor-constrained` on brick tiles since its "
     "brick defaults (flat neighbourhoods for exemplars oriented in two directions, LE, pixel-only "
-    "refinement: periodic ratio 3.98 -> 0.72; its module docstring); a few joint stubs remain inside. "
+    "refinement: periodic ratio 3.98 -> 0.72; docs/tensor-constrained.md); a few joint stubs remain inside. "
     "`arbitrary-shape` on brick gets its strand hints (brick's fibre grey spread is above the threshold): "
     "the joints are laid along the wave grating as dashed lines, and one seed in three shows its "
     "horizontal tile border (rows ratio 2.16, seed 1; 0.73-1.07 otherwise); brick, oriented two ways, "

@@ -39,7 +39,7 @@ def _exemplar() -> np.ndarray:
         return load_image(path)[:64, :64].copy()
     from synth.io.patterns import undulating_laminae
 
-    return undulating_laminae(64, 64)
+    return undulating_laminae((64, 64))
 
 
 def _constraint() -> np.ndarray:

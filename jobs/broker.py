@@ -32,6 +32,9 @@ from kombu.transport import TRANSPORT_ALIASES, filesystem
 from kombu.utils.encoding import bytes_to_str, str_to_bytes
 from kombu.utils.json import dumps, loads
 
+from synth.errors import StorageError
+from synth.io.atomic import atomic_write_bytes
+
 __all__ = ["SCHEME", "SafeChannel", "SafeTransport", "quarantine_folder"]
 
 log = logging.getLogger(__name__)
@@ -51,16 +54,10 @@ class SafeChannel(filesystem.Channel):
     def _put(self, queue: str, payload: Any, **kwargs: Any) -> None:
         name = f"{round(monotonic() * 1000)}_{uuid.uuid4()}.{queue}.msg"
         final = os.path.join(self.data_folder_out, name)
-        temporary = os.path.join(self.data_folder_out, f".{name}.tmp")
-        try:
-            with open(temporary, "wb") as fh:
-                fh.write(str_to_bytes(dumps(payload)))
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(temporary, final)  # readers list *.msg only: complete or absent
-        except OSError as exc:
-            Path(temporary).unlink(missing_ok=True)
-            raise ChannelError(f"cannot add message {name} to the queue ({exc.strerror or exc})") from exc
+        try:  # readers skip dot-files (the writer's temporary): a message is complete or absent
+            atomic_write_bytes(final, str_to_bytes(dumps(payload)))
+        except StorageError as exc:
+            raise ChannelError(f"cannot add message {name} to the queue ({exc.reason})") from exc
 
     def _get(self, queue: str) -> Any:
         wanted = f"{queue}.msg"

@@ -14,6 +14,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from synth.io.limits import LIMITS, limit_from_env
+
 __all__ = ["Settings"]
 
 _ENV_PREFIX = "TEXSYNTH_"
@@ -27,10 +29,15 @@ class Settings(BaseModel):
 
     data_dir: Path = Field(Path("data"), description="job inputs, artifacts, job records, embedded broker")
     redis_url: str | None = Field(None, description="Redis for broker and results; unset = embedded default")
-    # Input limits: checked by the API before anything is stored or queued.
+    # Input limits: checked by the API before anything is stored or queued, and by the worker again.
+    # The image limits are synth.io.limits': their defaults and their variables are written there.
     max_body_bytes: int = Field(32 * 2**20, description="largest accepted request body (HTTP 413 above)")
-    max_input_pixels: int = Field(4096 * 4096, description="largest accepted exemplar/constraint (413 above)")
-    max_output_pixels: int = Field(4096 * 4096, description="largest output width*height(*depth)")
+    max_input_pixels: int = Field(
+        LIMITS["max_input_pixels"].default, description="largest accepted exemplar/constraint (413 above)"
+    )
+    max_output_pixels: int = Field(
+        LIMITS["max_output_pixels"].default, description="largest output width*height(*depth)"
+    )
     max_sweep_runs: int = Field(64, description="largest parameter grid of one sweep (runs)")
     # Admission control (app/admission.py): per owner (token name; everyone together without tokens).
     max_queued_per_token: int = Field(
@@ -79,10 +86,16 @@ class Settings(BaseModel):
 
     @classmethod
     def from_env(cls, environ: dict[str, str] | None = None, **overrides: Any) -> Settings:
-        """Build from ``TEXSYNTH_<NAME>`` variables (``TEXSYNTH_DATA_DIR``, ...) and ``REDIS_URL``."""
+        """Build from ``TEXSYNTH_<NAME>`` variables (``TEXSYNTH_DATA_DIR``, ...) and ``REDIS_URL``; the
+        size limits from their variables in :data:`synth.io.limits.LIMITS`."""
         env = os.environ if environ is None else environ
         values: dict[str, Any] = {}
         for name in cls.model_fields:
+            if name in LIMITS:
+                found = limit_from_env(name, env)
+                if found is not None:
+                    values[name] = found[1]
+                continue
             raw = env.get(_ENV_PREFIX + name.upper())
             if raw is not None and raw != "":
                 values[name] = (
@@ -106,7 +119,7 @@ class Settings(BaseModel):
                 continue
             if name in _LISTS:
                 value = ",".join(value)
-            env[_ENV_PREFIX + name.upper()] = str(value)
+            env[LIMITS[name].env if name in LIMITS else _ENV_PREFIX + name.upper()] = str(value)
         return env
 
     @property

@@ -73,7 +73,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     artifacts TEXT NOT NULL DEFAULT '[]',
     timings TEXT NOT NULL DEFAULT '{}',
     metrics TEXT NOT NULL DEFAULT '{}',
-    owner TEXT
+    owner TEXT,
+    size TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);
 CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created);
@@ -85,7 +86,8 @@ CREATE TABLE IF NOT EXISTS sweeps (
     grid TEXT NOT NULL,
     params TEXT NOT NULL,
     job_ids TEXT NOT NULL,
-    owner TEXT
+    owner TEXT,
+    size TEXT
 );
 CREATE TABLE IF NOT EXISTS workers (
     name TEXT PRIMARY KEY,
@@ -97,6 +99,15 @@ CREATE TABLE IF NOT EXISTS workers (
 """
 
 _JSON_COLUMNS = ("params", "inputs", "artifacts", "timings", "metrics")
+#: The output's sides, a record's ``size`` (never inside ``params``). Records made before ``size``
+#: had its own column kept them in ``params``: reading one moves them out.
+SIZE_FIELDS = ("width", "height", "depth")
+
+
+def _split_size(params: dict[str, Any], size: dict[str, int] | None) -> dict[str, int]:
+    if size is not None:
+        return size
+    return {k: params.pop(k) for k in SIZE_FIELDS if k in params}
 
 
 @dataclass(frozen=True)
@@ -130,12 +141,14 @@ class JobRecord:
     timings: dict[str, float] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
     owner: str | None = None  # the token name that submitted it (None: made without tokens)
+    size: dict[str, int] = field(default_factory=dict)  # the output's width, height (, depth)
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> JobRecord:
         values = dict(row)
         for name in _JSON_COLUMNS:
             values[name] = json.loads(values[name])
+        values["size"] = _split_size(values["params"], json.loads(values["size"] or "null"))
         return cls(**values)
 
 
@@ -167,11 +180,12 @@ class JobStore:
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
             db.executescript(_SCHEMA)
-            for table in ("jobs", "sweeps"):  # records made before owners existed
+            for table in ("jobs", "sweeps"):  # records made before owners and sizes had columns
                 columns = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
-                if "owner" not in columns:
-                    with contextlib.suppress(sqlite3.OperationalError):  # another process added it
-                        db.execute(f"ALTER TABLE {table} ADD COLUMN owner TEXT")
+                for column in ("owner", "size"):
+                    if column not in columns:
+                        with contextlib.suppress(sqlite3.OperationalError):  # another process added it
+                            db.execute(f"ALTER TABLE {table} ADD COLUMN {column} TEXT")
             db.execute("CREATE INDEX IF NOT EXISTS jobs_owner ON jobs(owner, state)")
 
     # -- plumbing -------------------------------------------------------------------------------
@@ -211,6 +225,7 @@ class JobStore:
         seed: int,
         inputs: dict[str, tuple[str, bytes]],
         manifest: dict[str, Any],
+        size: dict[str, int] | None = None,
         sweep_id: str | None = None,
         job_id: str | None = None,
         owner: str | None = None,
@@ -218,8 +233,10 @@ class JobStore:
     ) -> JobRecord:
         """Store the inputs and manifest in a new job folder, then insert the record as ``queued``.
 
-        ``inputs`` maps a role (``exemplar``, ``constraint``) to ``(file name, bytes)``. The folder is
-        complete before the record exists, so a worker never sees a job without its inputs.
+        ``size`` holds the output's ``width``, ``height`` (and ``depth``); ``params`` the method's
+        parameters only. ``inputs`` maps a role (``exemplar``, ``constraint``) to ``(file name,
+        bytes)``. The folder is complete before the record exists, so a worker never sees a job
+        without its inputs.
         ``share_inputs_of`` names a job (of the same sweep) whose stored inputs are the same bytes:
         they are hard-linked instead of written again, so a sweep stores its upload once. Nothing
         ever writes into an input file (a replacement would be a new file), and deleting one job
@@ -242,9 +259,20 @@ class JobStore:
         with self._connect() as db:
             db.execute(
                 "INSERT INTO jobs"
-                " (id, created, method, params, seed, inputs, sweep_id, state, updated, owner)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
-                (job_id, now, method, json.dumps(params), seed, json.dumps(names), sweep_id, now, owner),
+                " (id, created, method, params, size, seed, inputs, sweep_id, state, updated, owner)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
+                (
+                    job_id,
+                    now,
+                    method,
+                    json.dumps(params),
+                    json.dumps(size or {}),
+                    seed,
+                    json.dumps(names),
+                    sweep_id,
+                    now,
+                    owner,
+                ),
             )
         record = self.get(job_id)
         assert record is not None
@@ -517,17 +545,19 @@ class JobStore:
         params: dict,
         job_ids: list[str],
         owner: str | None = None,
+        size: dict[str, int] | None = None,
     ) -> None:
         with self._connect() as db:
             db.execute(
-                "INSERT INTO sweeps (id, created, method, grid, params, job_ids, owner)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?)",
+                "INSERT INTO sweeps (id, created, method, grid, params, size, job_ids, owner)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     sweep_id,
                     time.time(),
                     method,
                     json.dumps(grid),
                     json.dumps(params),
+                    json.dumps(size or {}),
                     json.dumps(job_ids),
                     owner,
                 ),
@@ -541,6 +571,7 @@ class JobStore:
         sweep = dict(row)
         for name in ("grid", "params", "job_ids"):
             sweep[name] = json.loads(sweep[name])
+        sweep["size"] = _split_size(sweep["params"], json.loads(sweep["size"] or "null"))
         return sweep
 
     # -- workers ------------------------------------------------------------------------------------

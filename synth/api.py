@@ -221,6 +221,7 @@ def synthesize(
     progress: Progress | None = None,
     constraint: np.ndarray | None = None,
     exemplars: Mapping[str, np.ndarray] | None = None,
+    max_output: int | None = None,
 ) -> Result:
     """Run ``method`` on ``exemplar`` and return a :class:`Result`.
 
@@ -244,6 +245,9 @@ def synthesize(
     exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray``, optional
         One grey exemplar per orthogonal plane (:data:`PLANES`), for the solid methods, instead of
         ``exemplar``: each plane's slices of the volume must look like its own exemplar.
+    max_output : int, optional
+        Largest ``size`` (pixels or voxels) accepted; default: :mod:`synth.io.limits`' ``max_output``
+        (the service passes its own, lower one).
     """
     spec = find_method(method)
     if spec is None:
@@ -258,7 +262,7 @@ def synthesize(
     planes = _plane_exemplars(exemplar, exemplars) if spec.plane_exemplars else None
     ex = planes["xy"] if planes is not None else _checked_image("exemplar", exemplar)
     con = None if constraint is None else np.ascontiguousarray(constraint, dtype=np.float32)
-    out_size = _output_size(size, ex, con, spec.output_ndim, planes)
+    out_size = _output_size(size, ex, con, spec.output_ndim, planes, max_output)
     extra: dict[str, Any] = {"exemplars": planes} if planes is not None else {}
     start = time.perf_counter()
     result = spec.run(
@@ -306,6 +310,7 @@ def _output_size(
     constraint: np.ndarray | None,
     ndim: int,
     planes: dict[str, np.ndarray] | None = None,
+    max_output: int | None = None,
 ) -> tuple[int, ...]:
     if size is None:
         if constraint is not None:
@@ -315,4 +320,4 @@ def _output_size(
             depth = planes["xz"].shape[0] if planes is not None else exemplar.shape[0]
             return (int(depth), *(int(s) for s in exemplar.shape[:2]))
         return tuple(2 * s for s in exemplar.shape[:2])
-    return check_output_size(size, ndim)
+    return check_output_size(size, ndim, max_elements=max_output)

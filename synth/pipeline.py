@@ -77,10 +77,11 @@ def synthesize_to_folder(
     bit_depth: int = 8,
     plots: bool = True,
     voxel_size: float | None = None,
+    max_output: int | None = None,
 ) -> Outcome:
     """Run ``method`` on decoded ``images`` (by role) and write all artifacts into ``folder``.
 
-    See :func:`synth.api.synthesize` for the arguments and
+    See :func:`synth.api.synthesize` for the arguments (``max_output`` too) and
     :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
     the synthesis started and finished (Unix time). A volume is evaluated plane by plane against its
     per-plane exemplars when given; ``voxel_size`` (nm) calibrates its TIFF stack and its fringe lengths.
@@ -98,6 +99,7 @@ def synthesize_to_folder(
         progress=progress,
         constraint=images.get("constraint"),
         exemplars=planes or None,
+        max_output=max_output,
     )
     manifest = {**(manifest or {}), "started": started, "finished": time.time()}
     if progress is not None:

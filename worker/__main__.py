@@ -1,9 +1,9 @@
-import os
 import sys
 
-# OpenBLAS single-threaded, as in every ``texsynth`` command (see :mod:`synth.cli`): set before NumPy loads.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from synth.threads import single_threaded_blas
 
-from worker.cli import main
+single_threaded_blas()  # as in every ``texsynth`` command: before NumPy loads OpenBLAS
+
+from worker.cli import main  # noqa: E402
 
 sys.exit(main())

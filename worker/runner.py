@@ -105,22 +105,23 @@ def run_job(
     try:
         progress("loading inputs", 0.0)
         manifest = json.loads((folder / "manifest.json").read_text())
-        images = load_inputs(
-            {role: (folder / "inputs" / name).read_bytes() for role, name in job.inputs.items()}
+        images = load_inputs(  # under the service's limits, as the API checked them
+            {role: (folder / "inputs" / name).read_bytes() for role, name in job.inputs.items()},
+            max_pixels=settings.max_input_pixels,
         )
         methods(settings)  # registers TEXSYNTH_EXTRA_METHODS in this process
-        params = dict(job.params)
-        size = tuple(params.pop(k) for k in ("depth", "height", "width") if k in params) or None
+        size = tuple(job.size[k] for k in ("depth", "height", "width") if k in job.size) or None
         manifest["attempt"] = job.attempts
         outcome = synthesize_to_folder(
             job.method,
             images,
             staging,
             size=size,
-            params=params,
+            params=job.params,
             seed=job.seed,
             progress=progress,
             manifest=manifest,
+            max_output=settings.max_output_pixels,
         )
         timings = {k: float(v) for k, v in outcome.result.timings.items()}
         if store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics):

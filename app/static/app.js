@@ -114,7 +114,11 @@ function stopTimer() {
 
 const radioValue = (name) => document.querySelector(`input[name="${name}"]:checked`)?.value;
 const short = (id) => id.slice(0, 8);
-const sizeOf = (params) => `${params.width ?? "?"}×${params.height ?? "?"}${params.depth ? "×" + params.depth : ""}`;
+// A job's output size (its own field, never inside its params).
+const sizeOf = (job) => {
+  const s = job.size || {};
+  return `${s.width ?? "?"}×${s.height ?? "?"}${s.depth ? "×" + s.depth : ""}`;
+};
 
 // -- the parameter form, generated from the method's JSON schema (defaults = the papers' settings) --
 
@@ -243,8 +247,9 @@ function showError(err, target) {
   }
 }
 
-// The multipart body shared by a job and a sweep: the chosen inputs, the method and its parameters.
-function formBody(params) {
+// The multipart body shared by a job and a sweep: the chosen inputs, the method, its parameters and
+// the output size (form fields width, height, depth).
+function formBody(params, size) {
   const form = new FormData();
   for (const role of ["exemplar", "constraint", ...PLANE_ROLES]) {
     const input = $(`#${role}`);
@@ -253,17 +258,19 @@ function formBody(params) {
   }
   form.append("method", $("#method").value);
   form.append("params", JSON.stringify(params));
+  for (const [name, value] of Object.entries(size)) form.append(name, String(value));
   return form;
 }
 
-const formParams = () => ({ ...readFields($("#size-fields")), ...readFields($("#param-fields")) });
+const formParams = () => readFields($("#param-fields"));
+const formSize = () => readFields($("#size-fields"));
 
 async function submitJob(event) {
   event.preventDefault();
   $("#form-error").hidden = true;
   const button = $("#submit");
   button.disabled = true;
-  const form = formBody(formParams());
+  const form = formBody(formParams(), formSize());
   if ($("#seed").value !== "") form.append("seed", $("#seed").value);
   try {
     const job = await api("/api/jobs", { method: "POST", body: form });
@@ -293,7 +300,7 @@ async function fillFromJob(id) {
   }
   $("#method").value = job.method;
   showMethod();
-  for (const [name, value] of Object.entries(job.params)) {
+  for (const [name, value] of Object.entries({ ...job.size, ...job.params })) {
     const input = document.getElementById(`param-${name}`);
     if (!input) continue;
     if (input.dataset.kind === "boolean") input.checked = !!value;
@@ -432,11 +439,13 @@ async function submitSweep() {
   const button = $("#sweep-submit");
   button.disabled = true;
   const params = formParams();
+  const size = formSize();
   delete params[plan.name];
+  delete size[plan.name];
   const ids = [];
   try {
     for (const seed of plan.seeds) {
-      const form = formBody(params);
+      const form = formBody(params, size);
       form.append("grid", JSON.stringify({ [plan.name]: plan.values }));
       form.append("seed", String(seed));
       ids.push((await api("/api/sweeps", { method: "POST", body: form })).id);
@@ -460,7 +469,7 @@ async function refreshJobs(gen = generation) {
       el("td", {}, el("a", { href: `#/jobs/${j.id}`, text: short(j.id) }),
         j.sweep_id ? el("a", { href: `#/sweeps/${j.sweep_id}`, class: "hint sweep-tag", text: " sweep" }) : ""),
       el("td", { text: j.method }),
-      el("td", { text: sizeOf(j.params) }),
+      el("td", { text: sizeOf(j) }),
       el("td", {}, el("span", { class: `state ${j.state}`, text: j.state })),
       j.state === "failed"
         ? el("td", { class: "reason", title: j.message, text: j.message })
@@ -496,7 +505,7 @@ async function renderJob(id) {
     if (gen !== generation) return;
     $("#job-state").textContent = job.state + (job.cancel_requested && job.state === "running" ? " (cancelling)" : "");
     $("#job-state").className = `state ${job.state}`;
-    $("#job-summary").textContent = `${job.method}, ${sizeOf(job.params)}, seed ${job.seed} — submitted ${fmtTime(job.created)}` +
+    $("#job-summary").textContent = `${job.method}, ${sizeOf(job)}, seed ${job.seed} — submitted ${fmtTime(job.created)}` +
       (job.elapsed ? `, ${job.elapsed.toFixed(1)} s` : "") + (job.attempts > 1 ? `, run ${job.attempts}` : "");
     $("#progress").value = job.state === "succeeded" ? 1 : job.fraction;
     $("#progress").classList.toggle("failed", job.state === "failed");
@@ -567,8 +576,8 @@ function setSize(node, width, height) {
 
 function showViewer(job) {
   const a = job.artifacts;
-  const W = job.params.width;
-  const H = job.params.height;
+  const W = job.size.width;
+  const H = job.size.height;
   const exemplar = $("#view-exemplar");
   exemplar.src = job.inputs.exemplar || job.inputs.exemplar_xy;
   $("#result").src = a["output.png"];
@@ -629,7 +638,7 @@ async function compareChoices(job) {
   });
 }
 
-const jobLabel = (j) => `${short(j.id)} · ${j.method} ${sizeOf(j.params)} seed ${j.seed}`;
+const jobLabel = (j) => `${short(j.id)} · ${j.method} ${sizeOf(j)} seed ${j.seed}`;
 
 function figure(src, caption, id) {
   return el("figure", {}, el("a", { href: src, target: "_blank" }, el("img", { src, alt: caption, id })),
@@ -646,10 +655,10 @@ function flatten(obj, prefix = "", out = {}) {
 
 // A volume's slices, one at a time: the plane (xy = fixed z, xz = fixed y, yz = fixed x) and a slider.
 function showVolumeViewer(job) {
-  const depth = job.params.depth;
+  const depth = job.size.depth;
   $("#volume-viewer").hidden = !depth;
   if (!depth) return;
-  const count = { xy: depth, xz: job.params.height, yz: job.params.width };
+  const count = { xy: depth, xz: job.size.height, yz: job.size.width };
   const axis = { xy: "z", xz: "y", yz: "x" };
   const slider = $("#slice-index");
   const show = () => {
@@ -750,7 +759,7 @@ function showFringes(fringes) {
 
 function showResults(job) {
   const a = job.artifacts;
-  const volume = !!job.params.depth;
+  const volume = !!job.size.depth;
   $("#results").hidden = false;
   showVolumeViewer(job);
   // A 2-D output, its exemplar and its tensor images go to the viewer; a volume keeps its pictures.
@@ -907,7 +916,7 @@ async function compareMetrics(A, B) {
 }
 
 function compareSettings(A, B) {
-  const rows = [["method", A.method, B.method], ["size", sizeOf(A.params), sizeOf(B.params)], ["seed", A.seed, B.seed]];
+  const rows = [["method", A.method, B.method], ["size", sizeOf(A), sizeOf(B)], ["seed", A.seed, B.seed]];
   const names = [...new Set([...Object.keys(A.params), ...Object.keys(B.params)])]
     .filter((n) => !["width", "height", "depth"].includes(n));
   for (const n of names) rows.push([n, A.params[n], B.params[n]]);
@@ -969,7 +978,7 @@ function drawSweep(sweeps, seeds, g) {
   $("#sweep-name").textContent = params.join(", ");
   $("#sweep-state").textContent = running ? "running" : "done";
   $("#sweep-state").className = `state ${running ? "running" : "succeeded"}`;
-  $("#sweep-summary").textContent = `${first.method}, ${sizeOf(first.params)}; ${param} = ${first.grid[param].join(", ")}; ` +
+  $("#sweep-summary").textContent = `${first.method}, ${sizeOf(first)}; ${param} = ${first.grid[param].join(", ")}; ` +
     `seed${sweeps.length > 1 ? "s" : ""} ${sweeps.map((s) => seeds[s.id] ?? "?").join(", ")}; ` +
     Object.entries(counts).map(([k, v]) => `${v} ${k}`).join(", ");
   $("#sweep-progress").value = rows.length ? ended / rows.length : 0;

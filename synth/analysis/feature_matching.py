@@ -3,72 +3,28 @@
 Feature-guided patch synthesis compares the feature pixels of the output's L-shaped context region
 (``f_out``, ``m`` of them) with those of the input feature map under the same region translated to a
 candidate position (``f_in``, ``n`` of them), and later aligns them by deformation
-(:mod:`synth.analysis.warp`). This module holds the matching cost and the correspondences.
+(:mod:`synth.analysis.warp`). This module holds the matching cost and the correspondences:
 
-The symbols of the paper
-------------------------
-- ``f_i^out``, ``i = 1..m``: positions of the feature pixels in the context region (output);
-  ``f_j^in``, ``j = 1..n``: positions of the input feature pixels in the overlapping region, i.e.
-  the context region translated by ``T = (dx, dy)`` into the input feature map.
-- ``v_i^out``, ``v_j^in``: the unit tangent vectors at those pixels. Tangents are orientations
-  (``v`` and ``-v`` are the same tangent), so ``|v_out - v_in|`` is taken between the two unit
-  vectors pointing into the same half-plane: ``min(|v1 - v2|, |v1 + v2|) = 2 sin(d / 2)`` where
-  ``d`` in ``[0, pi/2]`` is the angle between the two orientations (modulo pi). It is 0 for parallel
-  tangents and ``sqrt(2)`` for perpendicular ones (:func:`tangent_difference`).
-- **eq 1**: ``gdist(f_i^out, f_j^in) = |f_i^out - f_j^in|_2 + tau |v_i^out - v_j^in|_2``, distances
-  in pixels; ``tau = 0.1`` for matching, ``tau = 10`` for the correspondences of the deformation.
-- **buckets** ``C_l``, ``l = 0..3``: tangent orientations quantised uniformly into four intervals
-  of 45 degrees, centred on 0 (horizontal), 45, 90 (vertical) and -45 degrees (y up):
-  ``l = floor((theta + pi/8) / (pi/4)) mod 4`` (:func:`orientation_bucket`). Adjacent buckets have
-  adjacent intervals, and ``C_0`` and ``C_3`` are adjacent.
-- ``W_f(f_i^out)``: the corresponding input feature. Of the nearest (Euclidean) input features
-  ``f_{i_0}``, ``f_{i_-1}``, ``f_{i_1}`` in the buckets ``l_i``, ``l_i - 1`` and ``l_i + 1`` (the
-  perpendicular bucket ``l_i + 2`` is never a candidate), the one of least ``gdist``: the paper's
-  approximation of the exact argmin over all ``n`` features, found in constant time per feature from
-  one distance transform per bucket with a pointer to the nearest feature pixel.
-- ``B_f(f_j^in)``: the number of context features ``f_i^out`` that ``W_f`` maps onto ``f_j^in``
-  (0, 1 or more); ``|B_f - 1|`` measures how far ``W_f`` is from one-to-one.
-- **eq 2**: the matching cost ``(1/m) sum_i gdist(f_i^out, W_f(f_i^out)) + beta (1/n) sum_j
-  |B_f(f_j^in) - 1|``, with ``beta = 0.3`` (distances in pixels).
+- **eq 1**: ``gdist(f_out, f_in) = |f_out - f_in|_2 + tau |v_out - v_in|_2`` with unit tangents taken
+  as orientations (:func:`tangent_difference`: ``2 sin(d / 2)``); ``tau = 0.1`` for matching, ``10``
+  for the deformation's correspondences;
+- **buckets** ``C_l``, ``l = 0..3``: tangents quantised into four 45-degree intervals centred on 0,
+  45, 90 and -45 degrees (:func:`orientation_bucket`); ``W_f(f_out)`` is the nearest input feature of
+  least ``gdist`` in the buckets ``l``, ``l - 1``, ``l + 1``, from one distance transform per bucket;
+- **eq 2**: ``(1/m) sum_i gdist(f_i, W_f(f_i)) + beta (1/n) sum_j |B_f(f_j) - 1|``, ``beta = 0.3``,
+  ``B_f(f_j)`` the number of context features mapped onto ``f_j``.
 
-Departure (optional): the reverse term
---------------------------------------
-Eq 2 is a one-sided (directed) chamfer distance: it asks how near every *context* feature lies to
-some candidate feature, never how near the *candidate's* features lie to the context's. A candidate
-whose overlap is cluttered with short, broken features offers any context feature a near partner and
-scores well, although most of its features continue nothing; on HRTEM soot the chosen patches then
-carry shorter fringes than the exemplar (docs/feature-guided.md). ``reverse_weight`` (``lambda``)
-adds the other direction, as the symmetric chamfer distance does (Barrow et al. 1977; Borgefors
-1988 match one way, symmetric variants sum both):
-
-``eq 2 + lambda (1/n) sum_j gdist(f_j^in, W_b(f_j^in))``
-
-where ``W_b`` maps each candidate feature inside the overlapping region to the nearest context
-feature in its own and the two adjacent buckets, found exactly as ``W_f`` is but with the four
-distance transforms built on the context's features (the overlap of the output window), and a
-candidate feature with no context feature in its three buckets gets :func:`unmatched_penalty` of the
-window. ``lambda = 0`` is the paper's eq 2 (the same bytes); ``lambda = 1`` weighs both directions
-alike. Brute-force spelling: :func:`reverse_cost_reference`.
-
-Choices where the paper is silent
----------------------------------
-- The distance transforms cover the **whole** input feature map, as the paper precomputes them: a
-  context feature may match an input feature just outside the overlapping region. Such a match
-  counts in the first term and in no ``B_f`` of the region (``sum_j`` runs over the region's
-  features only). :func:`feature_correspondences`, by contrast, matches within the chosen patch.
-- A context feature with no input feature in its three buckets gets ``gdist`` =
-  :func:`unmatched_penalty` (the diagonal of the input map plus ``tau sqrt(2)``: worse than any real
-  match, finite so that costs stay comparable).
-- An empty sum contributes 0: ``m = 0`` makes the first term 0, ``n = 0`` the second.
-- Ties: among the three buckets, the first of least ``gdist`` in the order ``l, l - 1, l + 1``; among
-  equally near features of one bucket, the one :func:`scipy.ndimage.distance_transform_edt` points at.
+Departure: ``reverse_weight`` (``lambda``) adds the reverse chamfer term
+``lambda (1/n) sum_j gdist(f_j, W_b(f_j))`` (the symmetric chamfer distance; ``lambda = 0`` is eq 2,
+the same bytes; :func:`reverse_cost_reference` spells it out). Choices where the paper is silent (the
+whole input map is searched, :func:`unmatched_penalty`, empty sums, ties) and why: docs/design.md
+("chamfer matching").
 
 References
 ----------
-Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on
-Graphics 23(3) (Proc. SIGGRAPH 2004), pp. 364-367, section 2.1 (eqs 1-2) and 2.2.
-G. Borgefors, "Hierarchical chamfer matching: a parametric edge matching algorithm", IEEE TPAMI
-10(6), 1988, pp. 849-865.
+Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM TOG 23(3), 2004, pp. 364-367,
+sections 2.1 (eqs 1-2) and 2.2. G. Borgefors, "Hierarchical chamfer matching: a parametric edge
+matching algorithm", IEEE TPAMI 10(6), 1988, pp. 849-865.
 """
 
 from __future__ import annotations

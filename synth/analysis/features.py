@@ -4,66 +4,29 @@ A feature map is the binary image of a texture's thin curvilinear features, one 
 feature-guided patch synthesis matches and aligns (:mod:`synth.analysis.feature_matching`,
 :mod:`synth.analysis.warp`). :func:`feature_map` follows the paper's section 2.3 step by step:
 
-1. **bilateral filter** (Tomasi & Manduchi 1998) to sharpen edges: scikit-image's
-   :func:`~skimage.restoration.denoise_bilateral` with ``sigma_spatial = sigma_d`` (the paper's
-   closeness scale, 2.0 px) and ``sigma_color = sigma_r`` (the similarity scale, 10 of 256 grey
-   levels = ``10/256`` on the project's [0, 1] images); Gaussian closeness and similarity functions,
-   a ``2 ceil(3 sigma_d) + 1`` window, reflected borders;
-2. **response**: ``features='edges'``: the gradient magnitude ``sqrt(D_x^2 + D_y^2)`` of central
-   finite differences along the two image axes (:func:`numpy.gradient`; "finite differences along
-   the two image axes as a simple gradient estimator"); ``features='ridges'``: the 5-point Laplacian
-   ``L`` (:func:`scipy.ndimage.laplace`), made positive on the chosen ``polarity``: ``-L`` for
-   **bright** lines (the centre of a bright line is a maximum, ``L < 0``), ``+L`` for **dark** lines
-   (HRTEM lattice fringes), clipped at 0 so the other polarity never responds;
-3. **two-pass classification**: pass 1, the **strong** pixels, with a response of at least the
-   global high threshold ``T``, taken as the ``high_percentile``-th percentile of the response over
-   the image (or given as ``high_threshold``: the paper lets the user adjust it); pass 2, a **weak**
-   pixel ``p`` is kept when, for some strong pixel ``q`` with response ``R(q)`` within ``radius``
-   pixels (a disc), ``response(p) >= alpha R(q)``: the local low threshold ``alpha R`` of the paper,
-   i.e. ``response(p) >= alpha * min R(q)`` over the strong pixels of the disc (a minimum filter).
-   Strong and weak pixels are then kept only in 8-connected components that hold a strong pixel
-   (hysteresis in Canny's sense, but with the paper's spatially varying low threshold instead of
-   Canny's global one; :func:`skimage.filters.apply_hysteresis_threshold` takes one global low
-   threshold and is therefore **not** what the paper describes);
-4. **thinning** to one pixel with :func:`skimage.morphology.thin` (Lam, Lee & Suen 1992), after a
-   non-maximum suppression across the feature (``suppress=True``, see the departures);
-5. **tangent** at every feature pixel: the structure direction
-   (:func:`~synth.analysis.tensor.structure_direction`, the eigenvector of the smaller eigenvalue of
-   the structure tensor) of the bilateral-filtered image, with derivative scale ``tangent_sigma[0]``
-   and window ``tangent_sigma[1]``: the paper's "smoothed tangent". Radians counter-clockwise from
-   +x with ``y`` up, wrapped to ``(-pi/2, pi/2]`` (ALGORITHMS.md, "Conventions").
+1. **bilateral filter** (Tomasi & Manduchi 1998), ``sigma_d = 2`` px, ``sigma_r = 10/256``;
+2. **response**: the gradient magnitude of central differences (``features='edges'``), or the 5-point
+   Laplacian made positive on the chosen ``polarity`` (``'ridges'``: bright or dark lines, e.g. HRTEM
+   fringes);
+3. **two-pass classification**: strong pixels at or above the ``high_percentile``-th percentile ``T``;
+   a weak pixel kept when ``response >= alpha R(q)`` for a strong ``q`` within ``radius`` (the paper's
+   local low threshold, not Canny's global one), then only components that hold a strong pixel;
+4. **thinning** to one pixel (:func:`skimage.morphology.thin`, Lam, Lee & Suen 1992);
+5. **tangent**: the structure direction of the filtered image (the paper's "smoothed tangent"),
+   radians counter-clockwise from +x, ``y`` up, wrapped to ``(-pi/2, pi/2]``.
 
-Departures, and why
--------------------
-- The paper gives no value for the percentile of the high threshold, nor the size of the
-  neighbourhood of pass 2. The defaults here (``high_percentile=90``, ``radius=3``) were chosen on
-  the shared HRTEM soot image and on bent laminae (features along the fringes, few specks); the
-  phrase "a fixed percentile of the highest filter response" can also be read as a fraction of the
-  maximum response: pass ``high_threshold=q * response.max()`` for that reading.
-- The paper's "revised thinning algorithm removes pixels with weak filter responses first while
-  preserving the connectivity". :func:`~skimage.morphology.thin` removes border pixels
-  symmetrically instead, whatever their response. Alone, it turns the broad responses of smooth
-  laminae (the gradient of a sinusoid is high over half of each period) into meshes and ladders;
-  so, by default (``suppress=True``), only the crests of the response are classified: pixels whose
-  response is not below either neighbour across the feature (the gradient orientation of the
-  structure tensor, rounded to one of 8 neighbours: Canny's non-maximum suppression). This removes
-  the weak pixels of a band first, as the paper's thinning does, but it does not preserve
-  connectivity: a crest may break where it bends sharply or at junctions. ``suppress=False`` gives
-  the paper's steps literally.
-- ``presmooth`` (default 0, the paper) adds a Gaussian before the bilateral filter. The bilateral
-  filter with ``sigma_r = 10/256`` keeps noise larger than 4% of the grey range, which shot-noisy
-  micrographs and noisy synthetic laminae have: ``presmooth=1`` gives clean features on them.
-- A response below 1% of the image's largest response never counts: where features are sparse
-  (a drawn line on a flat background) the percentile threshold is ~0 and would otherwise pass the
-  rounding noise of the bilateral filter.
+Departures, each explained in docs/design.md ("feature maps"):
+- ``high_percentile=90``, ``radius=3`` (no values in the paper), chosen on HRTEM soot and bent laminae;
+- ``suppress=True``: non-maximum suppression across the feature before thinning (the paper's thinning
+  removes weak pixels first; skimage's does not); ``suppress=False`` is the paper literally;
+- ``presmooth`` (default 0, the paper): a Gaussian before the bilateral filter for noisy images;
+- a response below 1% of the largest never counts.
 
 References
 ----------
-Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on
-Graphics 23(3) (Proc. SIGGRAPH 2004), pp. 364-367, section 2.3.
+Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM TOG 23(3), 2004, section 2.3.
 C. Tomasi, R. Manduchi, "Bilateral filtering for gray and color images", Proc. ICCV 1998, pp. 839-846.
-L. Lam, S.-W. Lee, C. Y. Suen, "Thinning methodologies - a comprehensive survey", IEEE TPAMI 14(9),
-1992, pp. 869-885.
+L. Lam, S.-W. Lee, C. Y. Suen, "Thinning methodologies - a comprehensive survey", IEEE TPAMI 14(9), 1992.
 """
 
 from __future__ import annotations

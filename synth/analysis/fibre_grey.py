@@ -23,12 +23,8 @@ How (:func:`fibre_grey_spread`):
    (wood grain 0.68). The measure needs no fibre spacing (no scale to estimate: the crests are found
    wherever they are). It is not bounded by 1: the crests of an image whose averaged grey is bimodal
    across (brick rows and mortar) can spread more than its pixels.
-
-Values (sigma_d = 1, sigma_w = 3, length 16) on the project's exemplars, 128 x 128 (`skimage.data`
-crops ``[:128, :128]``): wood grain 0.683, straight fringes 0.007, bent laminae 0.012, HRTEM soot 0.159,
-brick 1.709, grass 0.273, gravel 0.279 (docs/arbitrary-shape.md).
-
-Reference: this project's measure (issue 13's wood grain).
+The values on the project's exemplars are in docs/arbitrary-shape.md. Reference: this project's
+measure (issue 13's wood grain).
 """
 
 from __future__ import annotations

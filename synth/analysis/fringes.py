@@ -4,62 +4,30 @@ The fringe analysis materials scientists run on HRTEM images of soot and dense c
 (Yehliu et al. 2011; Botero et al. 2016, 2019), and the morphological part of the benchmark of the
 volumetric-synthesis study (Urs et al. 2012, section 3.2, Fig. 10):
 
-1. **band-pass** the grey image: a Gaussian low-pass (``sigma``) removes shot noise, then either a
-   morphological **bottom-hat** with a disk of radius ``background`` (Botero's choice: keeps dark
-   features narrower than the disk, removes uneven illumination) or a **difference of Gaussians**
-   ``G(sigma) - G(background)``. Lattice fringes are dark lines in these HRTEM images
-   (``polarity='dark'``, as Botero's bottom-hat); the bright polarity traces the gaps between them
-   (on ``hrtem-soot-256.png``, whose contrast is nearly symmetric, with similar statistics:
-   docs/evaluation.md);
-2. **threshold** the filter response with Otsu's method times ``threshold_factor`` (Botero's
-   ``bw_fac``), or at a fixed value;
-3. **skeletonise** (:func:`skimage.morphology.skeletonize`);
-4. **prune branches**: a branch (a run of skeleton pixels from a free end to a junction) shorter
-   than ``min_length`` is removed, and junctions that are left with two arms join them again;
-5. **break junctions**: skeleton pixels with more than two neighbours are removed, so that every
-   remaining piece is a simple path (a *fringe*) or a closed loop;
-6. **measure** each fringe: length = path length along the skeleton between its two end pixels
-   (axial steps 1, diagonal steps sqrt(2)); end-to-end distance = Euclidean distance of the end
-   pixels' centres; tortuosity = length / end-to-end distance (1 for a straight fringe);
-7. **drop specks**: fringes shorter than ``min_length`` are discarded.
+1. **band-pass**: a Gaussian low-pass (``sigma``), then a morphological bottom-hat with a disk of
+   radius ``background`` (Botero's choice) or a difference of Gaussians; fringes are dark lines
+   (``polarity='dark'``);
+2. **threshold** at Otsu's level times ``threshold_factor`` (Botero's ``bw_fac``), or a fixed value;
+3. **skeletonise**; 4. **prune** branches shorter than ``min_length``; 5. **break junctions**, so every
+   piece is a simple path (a *fringe*) or a closed loop;
+6. **measure**: length along the skeleton (axial steps 1, diagonal sqrt(2)), tortuosity = length /
+   end-to-end distance; 7. **drop** fringes shorter than ``min_length``.
 
-Neighbourhoods on the skeleton
-------------------------------
-The skeleton is read as a graph whose vertices are its pixels. Two pixels are linked when they are
-4-neighbours, or diagonal neighbours with neither of the two pixels that would bridge them (the
-other two pixels of their 2x2 square) on the skeleton. Without that rule a 4-connected staircase
-(``(0,0) (0,1) (1,1) (1,2)``) would count as three junction pixels and a T-junction would not
-come apart when its centre is removed; with it, "more than two neighbours" means a real junction.
-The length of a fringe is its shortest path on the skeleton's full 8-neighbourhood graph (within
-the fringe), so a staircase counts its diagonal steps as sqrt(2), like a thin 8-connected line (a
-corner pixel that 8-connectivity makes redundant is cut by one diagonal step), and a drawn straight
-line (horizontal, vertical or diagonal) has exactly its drawn length, centre to centre of its end
-pixels: ``N - 1`` for ``N`` pixels in a row, ``(N - 1) sqrt(2)`` on a diagonal.
+The skeleton is read as a graph whose diagonal links count only where no pixel bridges them, so "more
+than two neighbours" means a real junction and a drawn straight line has exactly its drawn length
+(docs/design.md, "fringes": the rule and its reasons).
 
-Departures, and why
--------------------
-- Botero's program equalises the histogram before filtering and repairs T/Y/H branchings by
-  keeping the longest arm; here the branch pruning of step 4 plays that role, without equalisation
-  (the filter response is thresholded by Otsu, which is already contrast-invariant).
-- Closed loops (no end pixel) have no end-to-end distance; they are counted (``n_loops``) and left
-  out of the distributions.
-- Fringes cut by the image border are kept, with the length they have inside the image.
-- Straight lines at angles other than 0, 45 and 90 degrees are digitised as staircases and measure a
-  tortuosity slightly above 1; :func:`~skimage.morphology.skeletonize` may also end the skeleton of
-  a straight band with a one-pixel diagonal kink (tortuosity ~1.02 for a 20 px fringe).
-  (:func:`~skimage.morphology.thin` leaves no kink but gives the same statistics on
-  ``hrtem-soot-256.png`` within 0.015 in median tortuosity, at 5x the cost.)
+Departures: no histogram equalisation and branch pruning instead of Botero's T/Y/H repair; closed
+loops counted (``n_loops``) and left out of the distributions; fringes cut by the border kept;
+digitised oblique lines measure a tortuosity slightly above 1 (docs/design.md, docs/evaluation.md).
 
 References
 ----------
-R. D. Urs, J.-P. Da Costa, J.-M. Leyssale, G. Vignoles, C. Germain, "Non-parametric synthesis of
-laminar volumetric textures from a 2D sample", Proc. BMVC 2012, pp. 54.1-54.11 (section 3.2).
-M. L. Botero, D. Chen, S. Gonzalez-Calera, D. Jefferson, M. Kraft, "HRTEM evaluation of soot
-particles produced by the non-premixed combustion of liquid fuels", Carbon 96 (2016) 459-473.
-M. L. Botero, Y. Sheng, J. Akroyd, J. Martin, J. A. H. Dreyer, W. Yang, M. Kraft, "Internal
-structure of soot particles in a diffusion flame", Carbon 141 (2019) 635-642.
-K. Yehliu, R. L. Vander Wal, A. L. Boehman, "Development of an HRTEM image analysis method to
-quantify carbon nanostructure", Combustion and Flame 158(9) (2011) 1837-1851.
+R. D. Urs et al., "Non-parametric synthesis of laminar volumetric textures from a 2D sample", BMVC 2012.
+M. L. Botero et al., "HRTEM evaluation of soot particles produced by the non-premixed combustion of
+liquid fuels", Carbon 96 (2016) 459-473; "Internal structure of soot particles in a diffusion flame",
+Carbon 141 (2019) 635-642. K. Yehliu, R. L. Vander Wal, A. L. Boehman, "Development of an HRTEM image
+analysis method to quantify carbon nanostructure", Combust. Flame 158(9) (2011) 1837-1851.
 """
 
 from __future__ import annotations

@@ -3,54 +3,27 @@
 Given one-to-one feature correspondences ``(x_i, x'_i)`` (context feature ``x_i``, patch feature
 ``x'_i``; :func:`synth.analysis.feature_matching.feature_correspondences`), the chosen patch is
 deformed by a smooth warp that moves each ``x'_i`` onto ``x_i`` while the pixels of its bottom and
-right borders stay where they are ("to prevent the accumulation of deformations"; those pixels are
-constraints too).
+right borders stay where they are ("to prevent the accumulation of deformations").
 
-How
----
-- The warp is fitted **backwards**, as resampling needs it: ``g`` maps a pixel of the warped patch
-  to the patch position it takes its value from, with ``g(x_i) = x'_i`` at the targets and
-  ``g(p) = p`` at every pixel centre ``p`` of the fixed borders (a pair whose target is a fixed
-  pixel is dropped: the borders win). The warped patch is
-  ``patch(g(y))``, so the patch's feature at ``x'_i`` appears at ``x_i`` exactly. Interpolated is
-  the displacement ``g(y) - y`` (two scalar fields).
-- **Thin-plate spline** first (Meinguet 1979): :class:`scipy.interpolate.RBFInterpolator` with
-  ``kernel='thin_plate_spline'``, ``smoothing=0`` and a degree-1 polynomial, i.e. the interpolant
-  of least bending energy.
-- **Shepard's method** (inverse-distance weighting, power 2: ``d(y) = sum_i w_i d_i / sum_i w_i``,
-  ``w_i = |y - y_i|^-2``; exact at the data points, the mean of the values where several coincide)
-  when the spline fails. The spline **fails** when (a) its linear system cannot be solved
-  (:class:`numpy.linalg.LinAlgError`: duplicated targets, or targets all on one line when nothing is
-  fixed), (b) it misses a constraint by more than ``1e-6`` px (ill-conditioning: "if the resulting
-  warping function cannot satisfy the warp constraints, we switch to Shepard's method"), or (c) it
-  **folds**: the Jacobian determinant of ``g``, by central differences on the pixel grid, is
-  ``<= 0`` somewhere (the paper does not name this check; a folded warp would mirror texture).
-- **Smoothing** (``smoothing > 0``, a departure): the spline is regularised at the feature
-  constraints (scipy's per-point ``smoothing``; the fixed borders keep 0 and stay exact), so that
-  it approximates noisy, close correspondences instead of rippling through them. With smoothing the
-  feature constraints are met approximately; the residual check (b) applies to the exact ones only.
-- **Falloff** (``falloff``, a departure): a weight map in ``[0, 1]`` multiplies the displacement,
-  so the warp can be confined to a band along the overlap and decay smoothly to zero beyond it
-  (:func:`band_falloff`): the paper's spline with two fixed borders spreads the displacement over
-  the whole patch, bending features far from the seam that meet nothing. Where the weight is 1
-  (the overlap) the spline is untouched.
-- **Resampling**: :func:`scipy.ndimage.map_coordinates` with ``order=1`` (bilinear: no overshoot,
-  values stay in the patch's range, and a pixel whose source is a pixel centre is copied exactly),
-  or ``order=3`` (cubic B-spline: sharper, as bilinear interpolation at half-pixel offsets is a
-  ``[1/2, 1/2]`` blur), clipped to the range of the four pixels around each source so it does not
-  ring. Sources outside the patch take the nearest border pixel (``mode='nearest'``).
+How: the warp is fitted backwards, as resampling needs it: ``g`` maps a pixel of the warped patch to
+the patch position it takes its value from, ``g(x_i) = x'_i`` and ``g(p) = p`` on the fixed borders;
+the displacement ``g(y) - y`` is interpolated by a thin-plate spline (Meinguet 1979; scipy's
+``RBFInterpolator``, least bending energy), and by Shepard's method (inverse-distance weighting,
+power 2) when the spline fails: an unsolvable system, a constraint missed by more than 1e-6 px, or a
+fold (a Jacobian determinant ``<= 0``, a check the paper does not name). The patch is resampled with
+:func:`scipy.ndimage.map_coordinates` (``order=1``, or ``3`` clipped to the four pixels around each
+source). Coordinates are ``(row, col)`` in the patch's pixel frame.
 
-Coordinates are ``(row, col)`` in the patch's pixel frame (not the project's ``x``/``y``), since the
-warp acts on arrays.
+Departures (why: docs/design.md, "the warp"; measured in docs/feature-guided.md):
+- ``smoothing > 0``: the spline regularised at the feature constraints (the borders stay exact);
+- ``falloff``: a weight map confining the displacement to a band along the overlap (:func:`band_falloff`).
 
 References
 ----------
-Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on
-Graphics 23(3) (Proc. SIGGRAPH 2004), pp. 364-367, section 2.2.
-J. Meinguet, "Multivariate interpolation at arbitrary points made simple", Journal of Applied
-Mathematics and Physics (ZAMP) 30, 1979, pp. 292-304.
-D. Shepard, "A two-dimensional interpolation function for irregularly-spaced data", Proc. ACM
-National Conference, 1968, pp. 517-524.
+Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM TOG 23(3), 2004, section 2.2.
+J. Meinguet, "Multivariate interpolation at arbitrary points made simple", ZAMP 30, 1979, pp. 292-304.
+D. Shepard, "A two-dimensional interpolation function for irregularly-spaced data", Proc. ACM National
+Conference, 1968, pp. 517-524.
 """
 
 from __future__ import annotations

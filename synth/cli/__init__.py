@@ -9,26 +9,20 @@ Start-up is kept short: building the parser imports no numpy, numba, scipy or ma
 command imports what it needs when it runs), and when the command line names an engine command only
 that command's parser is built (the entry points are not scanned).
 
-OpenBLAS runs single-threaded in every ``texsynth`` command, and in the processes they start (the
-workers of ``texsynth serve``), unless ``OPENBLAS_NUM_THREADS`` says otherwise (set before NumPy
-loads it): the engine's matrix work is small (the k-coherence PCA of a few thousand neighbourhoods
-of at most a few hundred values), where its threads cost more than they give, and on a shared
-2-core machine they spin against the other work (wei-levoy 128 -> 256 under load 4-5: its three
-levels' k-coherence sets took 1.69 s of CPU with two threads, 1.23 s with one, the covariance and
-``eigh`` 0.45 s against 0.005 s). The bytes are the same whatever the count
-(``tests/synth/cli/test_cli_synthesize.py``).
+OpenBLAS runs single-threaded in every ``texsynth`` command and the processes it starts
+(:mod:`synth.threads`, the one place that sets it; docs/benchmarks.md measures why).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 from collections.abc import Sequence
 
 from synth import __version__
 from synth.errors import StorageError, SynthError
+from synth.threads import single_threaded_blas
 
 __all__ = ["build_parser", "main"]
 
@@ -65,7 +59,7 @@ def _command(argv: Sequence[str]) -> str | None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before NumPy loads OpenBLAS (module docstring)
+    single_threaded_blas()  # before NumPy loads OpenBLAS
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(_command(argv))
     args = parser.parse_args(argv)

@@ -1,60 +1,24 @@
 """Broken curvilinear features at patch boundaries (the claim of Wu & Yu 2004, measured).
 
-Patch methods break curvilinear structures (lattice fringes, cell walls, fibre boundaries, cracks) where
-two patches meet: a feature that runs into a seam and does not continue on the other side ends there. A
-feature that ends is visible as an **endpoint** of the one-pixel-wide feature map. This module counts
-the endpoints near the seams and compares their density with the exemplar's, where every endpoint is a
-natural one.
+Patch methods break curvilinear structures (lattice fringes, cell walls, fibre boundaries, cracks)
+where two patches meet: a feature that runs into a seam either ends there (an **endpoint** of the
+one-pixel-wide feature map, :func:`feature_endpoints`) or continues with a tangent jump (a **kink**: a
+seam crossing, :func:`seam_crossings`, whose two sides' directions differ by more than ``KINK_ANGLE``
+= 30 degrees over ``KINK_REACH`` = 3 px). Both are counted near the seams and compared with what the
+texture itself does:
 
-Definitions
------------
-- **Features**: the one-pixel-wide feature mask of :func:`synth.analysis.features.feature_map`
-  (edges or ridges; the same detector and options for the output and the exemplar).
-- **Endpoint**: a feature pixel with at most one 8-neighbour on the mask (a free end, or an isolated
-  pixel) (:func:`feature_endpoints`).
-- **Seams**: the 4-neighbour pixel pairs that came from different patches (:class:`Seams`), from a
-  patch-label map (:func:`seams_from_labels`) or from a source-position map, where two neighbours
-  whose exemplar positions are not neighbours in the same way lie on a seam (:func:`seams_from_sources`).
-  The **seam length** is the number of such pairs (each a unit edge between two pixels).
-- **Seam band**: the pixels whose centre lies within ``radius`` pixels of a seam edge: the pixels on
-  either side of a seam edge are 0.5 px from it, so the band is the pixels within ``radius - 0.5`` of
-  a seam pixel (Euclidean distance transform); ``radius = 2`` gives a band of two pixels on each side
-  of a straight seam.
-- A **margin** of ``radius + 1`` pixels along the image border is left out of every count, in the
-  output and in the exemplar: the frame cuts features and makes endpoints that no seam made.
-
-- **Crossing**: a place where a feature passes from one side of a seam to the other: a group of
-  8-neighbouring feature pixels on different sides (the sides are the pieces the seams cut the
-  image into: 4-connected pixels not separated by a seam edge), grouped by 8-connectivity
-  (:func:`seam_crossings`).
-- **Kink**: a crossing where the feature continues (at least ``KINK_REACH`` = 3 px of it on each
-  side, followed along the feature within its side) but turns: the principal directions of the two
-  sides' pixels differ by more than ``KINK_ANGLE`` = 30 degrees. A feature that continues with a
-  tangent jump is broken as surely as one that ends, and the endpoint count does not see it (two
-  misaligned fringes joined into one bent curve have no end).
-
-The measure
------------
-Two kinds of **breaks** near seams, each against what the texture itself does:
-
-- ends: ``end_ratio = (endpoints in the band / feature pixels in the band) / (exemplar endpoints /
-  exemplar feature pixels)``: how often features end per unit of feature length near the seams,
-  relative to the exemplar. Per feature pixel, not per pixel of area: a seam cut through an empty
-  region has few endpoints because it has few features, not because it breaks none.
-- kinks: ``kink_ratio = (kinks / crossings at the seams) / (kinks / crossings at the exemplar's
-  virtual seams)``, the virtual seams the boundaries of ``VIRTUAL_BLOCK`` px blocks laid on the
-  exemplar at four offsets (0, 4, 8, 12 px; its own curvature, junctions and noise make kinks there
-  too).
+- **Seams**: 4-neighbour pixel pairs from different patches (:class:`Seams`, from a label map,
+  :func:`seams_from_labels`, or a source map, :func:`seams_from_sources`); the **band** is the pixels
+  within ``radius`` of a seam edge; a margin of ``radius + 1`` px along the border is left out.
+- ``end_ratio``: endpoints per feature pixel in the band over the exemplar's endpoints per feature pixel;
+- ``kink_ratio``: kinks per crossing at the seams over the same at the exemplar's virtual seams
+  (``VIRTUAL_BLOCK`` px blocks at four offsets);
 - ``ratio = (band endpoints + kinks) / (band feature pixels * exemplar end rate + crossings *
-  exemplar kink rate)``: all breaks over the breaks the exemplar's rates predict for that band.
-  1 = the seams break features no more often than the texture does; above 1 = broken features at
-  patch boundaries.
+  exemplar kink rate)``: 1 = the seams break features no more often than the texture does.
 
-Also reported: ``density_ratio`` (the earlier measure: endpoint density per pixel of band area over
-the exemplar's, blind to how many features the band holds), ``per_length`` (endpoints in the band
-per pixel of seam length), ``expected_per_length`` (``rho_ex * band area / seam length``), and
-``interior_ratio`` (the output's endpoint density per pixel away from the band over the exemplar's:
-how much the method breaks features where there is no seam, a control).
+Also reported: ``density_ratio``, ``per_length``, ``expected_per_length`` and ``interior_ratio`` (a
+control away from the seams); their definitions and the reasons for each choice: docs/design.md
+("broken features").
 
 References
 ----------

@@ -1,45 +1,26 @@
 """Two-point correlation ``S2(r)`` of two-phase images and volumes, along each axis.
 
 ``S2(r)`` is the probability that two points a distance ``r`` apart, along a given axis, both lie in
-phase 1 (Torquato 2002, chapter 2): the descriptor materials scientists compare microstructures
-with. Its known values frame every test of this module:
+phase 1 (Torquato 2002, chapter 2): the descriptor materials scientists compare microstructures with.
+Its known values frame every test of this module: ``S2(0) = phi`` (the volume fraction); ``S2(r) ->
+phi^2`` without long-range order; periodic for a periodic medium; a closed form for a level cut of a
+Gaussian random field (:func:`level_cut_s2`; Berk 1987, Teubner 1991, Torquato 2002 section 2.5.4).
 
-- ``S2(0) = phi``, the volume fraction of phase 1;
-- ``S2(r) -> phi^2`` as ``r`` grows in a medium without long-range order;
-- for a periodic medium ``S2`` is periodic (a checkerboard: ``phi`` at even, 0 at odd lags);
-- for a level cut of a Gaussian random field of correlation ``rho(r)``, ``S2`` is given in closed form
-  (:func:`level_cut_s2`; Berk 1987, Teubner 1991, Torquato 2002 section 2.5.4).
-
-How it is computed
-------------------
-Phase 1 is ``grey >= threshold``: the bright phase. A grey image is thresholded at the given value,
-by default its Otsu threshold (:func:`otsu_threshold`); the evaluation of a synthesis uses the
-**exemplar's** Otsu threshold for the exemplar and the output alike, so that both are cut at the same
-grey level. ``S2`` along one axis is averaged over every line of the array parallel to that axis, with
-the Wiener-Khinchin theorem: the sum over lines of ``|FFT(f)|^2``, transformed back, is the sum over
-lines of the autocorrelation ``sum_i f_i f_{i+r}``. Two boundary treatments:
-
-- **periodic** (``periodic=True``): ``S2(r) = 1/(L N) sum_lines sum_i f_i f_{(i + r) mod N}``, the right
-  estimate for a periodic (toroidal) synthesis;
-- **non-periodic** (default): each line is zero-padded to at least ``N + max_lag`` before the FFT, so that
-  no pair wraps round, and lag ``r`` is normalised by its own number of pairs:
-  ``S2(r) = 1/(L (N - r)) sum_lines sum_{i < N - r} f_i f_{i + r}`` (unbiased for a finite sample).
-
-The sums are counts of pairs, so they are rounded to integers before the division: results are exact,
-not merely close. Lines are processed in chunks (at most a few million samples at a time), so that a
-512^3 volume needs no more than a small multiple of its own size in memory.
+How: phase 1 is ``grey >= threshold`` (by default Otsu's, :func:`otsu_threshold`; an evaluation cuts
+the exemplar and the output at the exemplar's). ``S2`` along an axis is averaged over every line
+parallel to it by the Wiener-Khinchin theorem (the FFT of each line, ``|.|^2``, transformed back):
+``periodic=True`` wraps lags round (a toroidal synthesis); by default each line is zero-padded so no
+pair wraps and lag ``r`` is divided by its own number of pairs, ``L (N - r)``. The sums are counts of
+pairs, rounded to integers before the division (exact results); lines go in chunks, so a 512^3 volume
+needs a small multiple of its own size in memory (docs/design.md, "two-point correlation").
 
 References
 ----------
 S. Torquato, *Random Heterogeneous Materials: Microstructure and Macroscopic Properties*, Springer,
-New York, 2002, chapter 2 (two-point probability function ``S2``), section 2.5.4 (level-cut Gaussian
-random fields).
-M. Teubner, "Level surfaces of Gaussian random fields and microemulsions", Europhysics Letters 14(5),
-1991, 403-408.
-N. F. Berk, "Scattering properties of a model bicontinuous structure with a well defined length
-scale", Physical Review Letters 58(25), 1987, 2718-2721.
-N. Otsu, "A threshold selection method from gray-level histograms", IEEE Transactions on Systems, Man,
-and Cybernetics 9(1), 1979, 62-66.
+New York, 2002, chapter 2, section 2.5.4. M. Teubner, "Level surfaces of Gaussian random fields and
+microemulsions", Europhys. Lett. 14(5), 1991, 403-408. N. F. Berk, "Scattering properties of a model
+bicontinuous structure with a well defined length scale", Phys. Rev. Lett. 58(25), 1987, 2718-2721.
+N. Otsu, "A threshold selection method from gray-level histograms", IEEE Trans. SMC 9(1), 1979, 62-66.
 """
 
 from __future__ import annotations

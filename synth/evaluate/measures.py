@@ -9,75 +9,23 @@ compared with the exemplar (:func:`evaluate_volume`):
 - **structure** (Figs 8-9): energy-weighted histograms of the structure-tensor orientation and their
   KL divergence; the coherence distribution; the Log-Euclidean distance of the mean tensors;
 - **fringe morphology** (Fig. 10): fringe length and tortuosity distributions
-  (:mod:`synth.analysis.fringes`), compared by two-sample Kolmogorov-Smirnov tests and by the KL divergence
-  of their histograms.
+  (:mod:`synth.analysis.fringes`), compared by Kolmogorov-Smirnov tests and KL divergences;
+- for volumes, beyond the study: the two-point correlation ``S2(r)`` along each axis
+  (:mod:`synth.evaluate.correlation`).
 
-Choices the paper leaves open (all recorded in the ``settings`` of every result)
------------------------------------------------------------------------------------
-- **Grey histograms**: 64 bins of width 1/64 on [0, 1] (an 8-bit image puts 4 grey levels in a bin).
-- **KL divergence**: ``D(exemplar || output) = sum_i p_i log(p_i / q_i)`` in nats, with ``p`` the
-  exemplar's histogram: how badly the output accounts for the exemplar's values (an output that
-  lost part of the exemplar's dynamics, as Wei-Levoy's averaging does, is penalised most). Both
-  histograms are normalised, then smoothed additively, ``p <- (p + eps) / (1 + n_bins eps)`` with
-  ``eps = 1e-5`` (about Laplace's add-one rule on a 100 000-pixel image, but independent of the image
-  size, so that a volume and an image are smoothed alike). Identical histograms give exactly 0.
-- **Structure tensor on a 7x7 window**: the study estimates orientations on a 7x7 neighbourhood
-  (Bigun et al.); here the window is the Gaussian of :func:`synth.analysis.tensor.structure_tensor` with the
-  same second moment as a 7x7 box, ``sigma_w = sqrt((7^2 - 1) / 12) = 2`` px, and derivatives of
-  scale ``sigma_d = 1`` px. Orientation histograms: 36 bins of 5 degrees over ``(-90, 90]`` degrees
-  of the *gradient* orientation (perpendicular to the fringes), each pixel weighted by its tensor
-  trace (gradient energy) so that flat regions do not vote.
-- **Coherence**: unweighted histogram, 20 bins on [0, 1], its mean, and the KL divergence as above.
-- **Mean tensors**: the pixel average of each tensor field, compared with the Log-Euclidean metric
-  (Arsigny et al. 2006; :func:`synth.analysis.tensor.log_tensors`).
-- **Fringes**: :func:`synth.analysis.fringes.extract_fringes` with its defaults (HRTEM fringes, ~18 px/nm);
-  Kolmogorov-Smirnov statistic and p-value of the length and tortuosity samples
-  (:func:`scipy.stats.ks_2samp`), and the KL divergence of their histograms (lengths: 24 bins from
-  the minimum fringe length to the longest fringe of either image; tortuosity: 20 bins on [1, 3],
-  values above 3 counted in the last bin). Density = fringes per 10 000 px.
-- **RGB images** are converted to grey before any measure, with the BT.601 luma weights
-  ``0.299 R + 0.587 G + 0.114 B`` of :func:`synth.io.load_image` (``mode='grey'``,
-  :data:`synth.colour.LUMA_WEIGHTS`), so that evaluating an RGB array and its grey-loaded file agree: the
-  study's measures are defined on grey levels, and fringes on grey images.
-- **Moments**: skewness and excess kurtosis as :func:`scipy.stats.skew` and :func:`scipy.stats.kurtosis`
-  compute them (Fisher's, excess: 0 for a Gaussian; biased estimators), standard deviation with
-  ``ddof = 0``.
-- **Speed**: ``scipy.stats`` takes longer to import (0.4-0.7 s here) than a whole 256 x 256 evaluation,
-  so the moments and the exact two-sample Kolmogorov-Smirnov test are computed here with the very
-  operations of scipy 1.17 (same bits; the tests compare them with scipy), and ``scipy.stats`` is
-  imported only for the cases the exact test does not cover (more than 10 000 fringes, or too long a
-  computation), as ``scipy.stats.ks_2samp`` itself would then switch method.
-
-Multi-2D analysis of volumes
-----------------------------
-For each axis ``k`` of a ``(D, H, W)`` volume, every slice along ``k`` is an image. Histograms,
-tensor sums and fringe samples of all slices of an axis are **pooled** (summed/concatenated) and
-compared with the exemplar's, exactly like one large output image; the moments of the pooled values
-are those of the volume. Because pooling the grey levels of all slices along any axis gives the
-volume's histogram, the pooled grey KL is the same for the three axes; the per-slice spread tells
-them apart, so each axis also reports the mean, standard deviation, minimum and maximum over its
-slices of the per-slice grey and orientation KL, standard deviation and skewness (the study's
-Fig. 7 curves). ``overall`` pools the three axes.
-
-An anisotropic material has one exemplar per plane (``{'xy', 'xz', 'yz'}``, :data:`PLANES`): the
-slices along axis 0 (``xy``) are compared with the ``xy`` exemplar, and so on. Beyond the study, the
-volume's two-point correlation ``S2(r)`` along each physical axis is compared with that of every
-exemplar whose plane contains the axis (:mod:`synth.evaluate.correlation`; Torquato 2002): a
-volume can match every slice's histograms and orientations and still have its grains or laminae
-at the wrong scale along one axis.
+The choices the paper leaves open (64 grey bins, ``D(exemplar || output)`` smoothed by ``eps = 1e-5``,
+the 7x7 window as ``sigma_w = 2``, energy-weighted orientation bins, BT.601 luma for RGB, pooled
+slices per axis, per-plane exemplars) are recorded in every result's ``settings`` and explained in
+docs/evaluation.md ("What is measured, and the choices the paper leaves open"). The moments and the
+exact KS test repeat scipy 1.17's operations (same bits) so that ``scipy.stats`` is rarely imported.
 
 References
 ----------
 R. D. Urs, J.-P. Da Costa, J.-M. Leyssale, G. Vignoles, C. Germain, "Non-parametric synthesis of
-laminar volumetric textures from a 2D sample", Proc. BMVC 2012, pp. 54.1-54.11.
-J. Bigun, G. H. Granlund, J. Wiklund, "Multidimensional orientation estimation with applications to
-texture analysis and optical flow", IEEE TPAMI 13(8), 1991.
-V. Arsigny, P. Fillard, X. Pennec, N. Ayache, "Log-Euclidean metrics for fast and simple calculus on
-diffusion tensors", Magnetic Resonance in Medicine 56(2), 2006.
-M. L. Botero, D. Chen, S. Gonzalez-Calera, D. Jefferson, M. Kraft, "HRTEM evaluation of soot
-particles produced by the non-premixed combustion of liquid fuels", Carbon 96 (2016) 459-473.
-S. Torquato, *Random Heterogeneous Materials: Microstructure and Macroscopic Properties*, Springer,
-New York, 2002, chapter 2.
+laminar volumetric textures from a 2D sample", Proc. BMVC 2012, pp. 54.1-54.11. J. Bigun et al.,
+"Multidimensional orientation estimation ...", IEEE TPAMI 13(8), 1991. V. Arsigny et al., "Log-Euclidean
+metrics ...", Magn. Reson. Med. 56(2), 2006. M. L. Botero et al., "HRTEM evaluation of soot particles
+...", Carbon 96 (2016) 459-473. S. Torquato, *Random Heterogeneous Materials*, Springer, 2002, ch. 2.
 """
 
 from __future__ import annotations

@@ -36,12 +36,7 @@ from PIL import Image, UnidentifiedImageError
 from synth.colour import to_grey
 from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
 from synth.io.atomic import atomic_write_bytes
-from synth.io.limits import (
-    DEFAULT_MAX_PIXELS,
-    DEFAULT_MAX_VOXELS,
-    check_image_shape,
-    resolve_limit,
-)
+from synth.io.limits import LIMITS, check_image_shape, resolve_limit
 
 __all__ = [
     "FORMAT_FILES",
@@ -118,7 +113,8 @@ def load_image(
         What error messages call the input. Defaults to the path as given, or ``"image"`` for bytes.
     max_pixels : int, optional
         Largest accepted ``width * height``, checked from the header before decoding. Defaults to
-        the environment variable ``TEXSYNTH_MAX_PIXELS`` if set, else :data:`DEFAULT_MAX_PIXELS`.
+        ``TEXSYNTH_MAX_INPUT_PIXELS`` if set (``TEXSYNTH_MAX_PIXELS``, deprecated), else
+        :data:`synth.io.limits.DEFAULT_MAX_PIXELS`.
     mode : {'auto', 'grey', 'rgb'}
         ``'auto'`` keeps grey as grey and RGB as RGB, except that an RGB image whose three channels
         are identical becomes grey; ``'grey'`` converts colour to luma; ``'rgb'`` repeats a grey
@@ -167,7 +163,7 @@ def load_image(
     """
     if mode not in ("auto", "grey", "rgb"):
         raise InvalidParameter("mode", mode, "must be one of 'auto', 'grey', 'rgb'")
-    limit = resolve_limit("max_pixels", max_pixels, "TEXSYNTH_MAX_PIXELS", DEFAULT_MAX_PIXELS)
+    limit = resolve_limit("max_pixels", max_pixels, "max_input_pixels")
     data, label = _read_source(source, name, default_name="image")
     if sniff_format(data) == "PNG" and len(data) >= 24 and data[12:16] == b"IHDR":
         # Pillow cannot open a PNG that declares zero width or height ("not an image", 415): it is
@@ -195,7 +191,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
     max_voxels : int, optional
         Largest accepted ``depth * height * width``, checked from the header before decoding.
         Defaults to the environment variable ``TEXSYNTH_MAX_VOXELS`` if set, else
-        :data:`DEFAULT_MAX_VOXELS`.
+        :data:`synth.io.limits.DEFAULT_MAX_VOXELS`.
 
     Returns
     -------
@@ -218,7 +214,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
     Values are converted to [0, 1] as in :func:`load_image` (integers by their full scale, float
     data rescaled from the whole volume's minimum and maximum only if outside [0, 1]).
     """
-    limit = resolve_limit("max_voxels", max_voxels, "TEXSYNTH_MAX_VOXELS", DEFAULT_MAX_VOXELS)
+    limit = resolve_limit("max_voxels", max_voxels, "max_input_voxels")
     data, label = _read_source(source, name, default_name="volume")
     fmt = sniff_format(data)
     if fmt != "TIFF":
@@ -250,7 +246,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
                 raise InputTooLarge(
                     label,
                     f"{width}x{height}x{depth} = {depth * height * width} voxels is more than the limit "
-                    f"of {limit} (set TEXSYNTH_MAX_VOXELS or max_voxels to change it)",
+                    f"of {limit} (set {LIMITS['max_input_voxels'].env} or max_voxels to change it)",
                 )
             check_image_shape(label, height, width, None)
             photometric = page.photometric

@@ -1,58 +1,29 @@
 """Per-pixel neighbourhood search and copy: the hot loop of every pixel-based method.
 
 For each position in a chunk of a scan order, compare the output's neighbourhood with exemplar
-neighbourhoods and copy the best match's features (and remember its source position). A
-neighbourhood distance is the weighted sum of up to three blocks:
+neighbourhoods and copy the best match's features (and remember its source position). A distance is
+the weighted sum of up to three blocks: ``cur`` (the image being synthesized, same level), ``par``
+(the parent level at ``(y // 2, x // 2)``, full square) and ``gui`` (a fixed guidance field: the
+tensor field of Akl 2014, eq 13), each with its metric: ``SSD`` (also ED on tensors stored as
+``(S_xx, sqrt(2) S_xy, S_yy)``), ``NORM`` (its square root: FN, and LE on log-tensors) or ``SO``
+(channels ``(sin O, cos O, C, 1 / C)``, eqs 7-9). Output positions wrap; candidates lie in the
+rectangle ``valid`` (every neighbourhood inside the exemplar) and where ``mask`` is non-zero (one
+canvas may hold several images, e.g. rotated copies of the exemplar).
 
-- ``cur``: the image being synthesized, same pyramid level (offsets usually causal or square);
-- ``par``: the already synthesized parent level, at ``(y // 2, x // 2)`` (full square);
-- ``gui``: a fixed guidance field at the same level (the tensor field of Akl 2014, eq 13).
+Search: ``exact`` visits every valid position (partial distances stop once above the best, which
+keeps the argmin); otherwise candidates are k-coherent (Tong et al. 2002): each neighbour ``q``'s
+source and its ``k`` most similar exemplar positions shifted by ``p - q``, the same from an optional
+``hint`` map, and ``n_random`` seeded random positions. In the first pass unsynthesized pixels
+(``done == 0``) are left out of ``cur``. Options: histogram matching (a candidate's distance times
+``1 + weight * max(0, count / target - 1)`` for its label, Kopf et al. 2007 eq 4); a class window (a
+candidate counts only when its class, e.g. its rotated copy, is within ``span`` of the wanted one,
+cyclically; with a *transfer* a proposal of another class moves to the same point of the wanted class).
 
-Candidates lie in the rectangle ``valid`` and where ``mask`` (uint8, exemplar-sized) is non-zero:
-the mask lets one exemplar canvas hold several images (e.g. rotated copies of the exemplar, each
-valid only where its neighbourhoods are fully inside the rotated image).
-
-Each block has a per-position metric: ``SSD`` (sum of squared channel differences; also ED on
-tensors stored as ``(S_xx, sqrt(2) S_xy, S_yy)``), ``NORM`` (square root of that sum: FN, and LE
-on log-tensors) or ``SO`` (channels ``(sin O, cos O, C, 1 / C)``, Akl 2014 eqs 7-9). Output positions wrap
-(toroidal output); exemplar positions never do: candidates lie in ``valid`` so that every
-neighbourhood is fully inside the exemplar.
-
-Search: ``exact`` visits every valid exemplar position (the definition; partial distances stop
-early once they exceed the best so far, which leaves the argmin unchanged). Otherwise candidates
-are k-coherent (Tong et al. 2002): for every neighbour ``q`` in ``cand_offsets``, the source of
-``q`` and its ``k`` precomputed most similar exemplar positions, each shifted by ``p - q``; the same
-from an optional ``hint`` source map, and ``n_random`` seeded random positions. In the first pass
-unsynthesized output pixels (``done == 0``) are left out of the ``cur`` block.
-
-Histogram matching (optional, ``hist.weight > 0``): every exemplar position carries a label (its
-position, or e.g. its orientation bin); the output's count per label is kept up to date while the
-weight is positive, and a candidate's distance is multiplied by
-``1 + weight * max(0, count / target - 1)`` for its label.
-
-Class window (optional, ``win.span >= 0``): every exemplar position has a class (e.g. the rotated
-copy of the exemplar it lies in) and every output position a wanted class; a candidate counts only
-when its class is within ``span`` of the wanted one, cyclically modulo ``period``. When no
-proposal qualifies, the position keeps its current source. With a *transfer* (``to_common``,
-``from_common``: one affine map per class, from its exemplar positions to a frame all classes share
-and back), a proposal of another class is not dropped but moved to the same point of the wanted class
-(of the class among ``want + j period`` nearest its own): a coherent continuation from a neighbour
-copying another rotated copy continues in the wanted copy (arbitrary-shape: strands cross the copies'
-angle steps unbroken). Without a transfer (empty arrays), such proposals are dropped.
-
-The kernel's inputs come in named groups (:class:`SearchState`: three :class:`Part` blocks,
-:class:`Candidates`, :class:`Histogram`, :class:`ClassWindow` and the current :class:`Pass`), numba
-named tuples that the driver builds once per level. ``synthesize_chunk_reference`` is the plain
-NumPy version the tests compare the kernel with; it takes the same state.
-
-Speed without changing a bit: the candidate loop calls no helper that takes an array. numba updates
-two atomic reference counts per array argument and call, and the former per-candidate helpers
-(a distance of nine arrays, a candidate check of five) spent more time in those updates than in the
-distances (wei-levoy 128 -> 256, finest level: 1.06 s -> 0.45 s of CPU per pass). The three parts'
-exemplar features are read from one flat buffer and their gathered queries from one array; each
-part's sum keeps its order, its float32 terms and its early stop, so the distances are the same.
-The sums index with unsigned integers, which spares numba's negative-index wrap-around per load
-(0.45 s -> 0.33 s per pass).
+The inputs come in named groups (:class:`SearchState`: three :class:`Part` blocks,
+:class:`Candidates`, :class:`Histogram`, :class:`ClassWindow`, :class:`Pass`), numba named tuples built
+once per level. :func:`synthesize_chunk_reference` is the plain NumPy version the tests compare the
+kernel with; it takes the same state. The kernel's speed-ups that keep every bit (no array-taking
+helper in the candidate loop, unsigned indexing) are measured in docs/pixel.md.
 """
 
 from __future__ import annotations
@@ -267,31 +238,11 @@ def _transfer_class(c, want, period, n_classes):
 
 
 @kernel
-def _gather_candidates(
-    cand,
-    oy,
-    ox,
-    src,
-    hint,
-    use_hint,
-    kset,
-    cand_offs,
-    valid,
-    mask,
-    n_random,
-    key,
-    stamp,
-    tag,
-    w,
-    cls,
-    want,
-    period,
-    span,
-    to_c,
-    from_c,
-):
+def _gather_candidates(cand, oy, ox, cands, win, want, key, stamp, tag, w):
     """The position's candidates into ``cand``, in proposal order, each once; return their number.
 
+    ``cands`` (:class:`Candidates`) and ``win`` (:class:`ClassWindow`) as in :class:`SearchState`;
+    ``want`` the position's wanted class, ``key`` its random key, ``w`` the exemplar's width.
     Proposals first (the sources of the neighbours in ``cand_offs`` shifted by ``p - q``, each with
     its ``k`` similar positions (Tong et al.), from ``src`` and then ``hint``; then ``n_random``
     seeded random positions), then one pass keeps those inside ``valid`` and ``mask``, not seen yet
@@ -299,6 +250,8 @@ def _gather_candidates(
     transfer (``to_c``, ``from_c`` not empty) a proposal of another class is first moved to the same
     point of the wanted class and then checked the same way.
     """
+    src, hint, use_hint, valid, mask, kset, cand_offs, _, n_random, _ = cands
+    cls, _, period, span, to_c, from_c = win
     H = src.shape[0]
     W = src.shape[1]
     k = kset.shape[2]
@@ -390,9 +343,9 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
     out, ex, offs, metric, w_cur, ew_cur = cur
     par_out, par_ex, par_offs, par_metric, w_par, ew_par = par
     gui_out, gui_ex, gui_offs, gui_metric, w_gui, ew_gui = gui
-    src, hint, use_hint, valid, mask, kset, cand_offs, exact, n_random, capacity = cands
+    src, _, _, valid, mask, _, _, exact, _, capacity = cands  # the rest: _gather_candidates
     labels, label_count, label_target, hist_weight = hist
-    cls, want_cls, cls_period, cls_span, to_common, from_common = win
+    cls, want_cls, cls_period, cls_span, _, _ = win
     order, first_pass, done, seed_key, stamp, counter, best_out = run
     W = out.shape[1]
     w = ex.shape[1]
@@ -480,29 +433,7 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
         else:
             counter[0] += 1
             key = splitmix(seed_key ^ np.uint64(p))
-            n = _gather_candidates(
-                cand,
-                oy,
-                ox,
-                src,
-                hint,
-                use_hint,
-                kset,
-                cand_offs,
-                valid,
-                mask,
-                n_random,
-                key,
-                stamp,
-                counter[0],
-                w,
-                cls,
-                want,
-                cls_period,
-                cls_span,
-                to_common,
-                from_common,
-            )
+            n = _gather_candidates(cand, oy, ox, cands, win, want, key, stamp, counter[0], w)
             if n == 0:  # every proposal fell outside the class window: keep the current source
                 cand[0, 0] = src[oy, ox, 0]
                 cand[0, 1] = src[oy, ox, 1]

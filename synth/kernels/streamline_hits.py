@@ -7,7 +7,8 @@ curve enters a pixel of a *cut* (``label >= 0``); the nearer hit wins. The traci
 keeping the sign of the previous one; the first step of the "plus" curve goes rightwards, or down when
 vertical, the "minus" curve the other way), with the hit tested at the rounded position after every
 step (and at the pixel itself before the first). Outside the image a curve stops (``periodic``: wraps).
-:func:`first_hits_reference` is the plain version the tests compare it with.
+Its plain reference, built on :func:`synth.analysis.streamlines.trace`, lives in the tests
+(``tests/synth/kernels/test_streamline_hits.py``): it ties the kernel to the analysis floor above.
 """
 
 from __future__ import annotations
@@ -16,10 +17,9 @@ import math
 
 import numpy as np
 
-from synth.analysis.streamlines import trace
 from synth.kernels.options import kernel
 
-__all__ = ["first_hits", "first_hits_reference"]
+__all__ = ["first_hits"]
 
 
 @kernel(inline="always")
@@ -108,30 +108,3 @@ def first_hits(c2, s2, label, max_steps, step, periodic):
                         first[y, x, 0], first[y, x, 1] = sign * pr, sign * pc
                         break
     return steps, hit, end, first
-
-
-def first_hits_reference(
-    angle: np.ndarray, label: np.ndarray, max_steps: int, step: float = 1.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """Plain version (non-periodic) of :func:`first_hits`' steps and hit positions, with
-    :func:`synth.analysis.streamlines.trace` (which mirrors the field outside the image where the
-    kernel clamps it: the two agree wherever curves stay a pixel inside)."""
-    h, w = label.shape
-    starts = np.argwhere(np.ones((h, w), bool)).astype(np.float64)
-    best = np.where(label.ravel() >= 0, 0, max_steps + 1)
-    pos = starts.copy()
-    plus = trace(angle, starts, max_steps, step=step)
-    minus = trace(angle, starts, max_steps, step=step, forward=-(plus[1] - plus[0]))
-    for curve in (plus, minus):
-        iy = np.floor(curve[..., 0] + 0.5).astype(np.int64)
-        ix = np.floor(curve[..., 1] + 0.5).astype(np.int64)
-        inside = np.cumprod((iy >= 0) & (iy < h) & (ix >= 0) & (ix < w), axis=0).astype(bool)
-        on = inside & (label[np.clip(iy, 0, h - 1), np.clip(ix, 0, w - 1)] >= 0)
-        on[0] = False
-        k = np.where(on.any(axis=0), on.argmax(axis=0), max_steps + 1)
-        better = k < best
-        best = np.where(better, k, best)
-        pos[better] = curve[k[better], np.flatnonzero(better)]
-    steps = np.where(best > max_steps, -1, best)
-    pos[best == 0] = starts[best == 0]
-    return steps.reshape(h, w), pos.reshape(h, w, 2)

@@ -3,114 +3,30 @@
 Akl, Yaacoub, Donias, Da Costa, Germain (GRETSI), in three steps:
 
 1. **Constraint field** (section 2.1, eqs 1-3): the orientation field ``O_con`` of the constraint
-   image ``I_con`` (eq 1) turns every tensor of the exemplar's field ``S_en`` by the angle at the
-   same position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`synth.analysis.tensor.rotate_tensors`).
-2. **Rotated dictionary** ``D_M`` (section 2.2, eq 4): intensity + tensor neighbourhoods of the
-   exemplar turned by ``2 pi m / M`` (the paper's step: 5 degrees, ``M = 72``), each copy with its
-   own tensor field, only neighbourhoods fully inside a copy (:mod:`synth.analysis.rotation`).
-3. **Synthesis** (section 3, eqs 5-6): for every output position the neighbourhood made of the
-   output's intensities and ``S_con``'s tensors is matched in ``D_M`` with
-   ``W SSD + (1 - W) STD`` (ED metric in the paper) and the best match's pixel is copied; causal
-   neighbourhood with a lexicographic scan (or square with a random walk), optional Gaussian
-   pyramids whose neighbourhoods include the parent level. This is the shared engine of
-   :mod:`synth.pixel.synthesis` run on the canvas of ``D_M``, guided by ``S_con``.
+   ``I_con`` (eq 1) turns every tensor of the exemplar's field ``S_en`` by the angle at the same
+   position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`synth.analysis.tensor.rotate_tensors`).
+2. **Rotated dictionary** ``D_M`` (section 2.2, eq 4): the exemplar turned by ``2 pi m / M`` (5 deg).
+3. **Synthesis** (section 3, eqs 5-6): each output neighbourhood (intensities and ``S_con``'s tensors)
+   is matched in ``D_M`` with ``W SSD + (1 - W) STD`` and the best match's pixel copied: the shared
+   engine (:mod:`synth.pixel.synthesis`) on ``D_M``'s canvas, guided by ``S_con``.
 
-Choices the paper leaves open, and departures (why)
----------------------------------------------------
-- ``rotation_reference='dominant'`` (default) turns ``S_en`` by ``O_con - O_dom``, ``O_dom`` the
-  exemplar's dominant orientation, so that the output's structures run along the constraint's;
-  ``'absolute'`` turns by ``O_con`` (the paper, literally: right only when ``O_dom = 0``).
-- Sizes: the paper assumes ``I_en`` and ``I_con`` of the same size and proposes, otherwise, to
-  synthesize an exemplar-like texture of the constraint's size first. That is done with
-  tensor-constrained synthesis (:func:`synth.methods.tensor_constrained.run_tensor_constrained`);
-  its texture's tensor field is ``S_en`` and its source map says which exemplar position each
-  output position stands for.
-- ``restrict_rotations`` (the paper's own perspective, section 4): the search looks only at the
-  copies turned by the local angle, within ``rotation_window`` (at least the nearest copy; a copy and
-  its half-turn twin alike). With ``window_search='strict'`` (default) the kernel's per-position
-  candidate window (:class:`synth.pixel.synthesis.CandidateWindow`) drops every candidate from
-  another copy, in the exact and the k-coherence search alike; every position is also offered a
-  *hint*, the exemplar position ``S_con`` was built from in an in-window copy (moved to the nearest
-  copyable position of that copy near its border), and no random candidates are drawn. With
-  ``'hints'`` only the hints steer, and neighbours' sources from other copies compete (better for the
-  ``local`` reference, whose wanted copy jumps from pixel to pixel with the exemplar's orientation
-  noise; measured in docs/arbitrary-shape.md). ``stats['in_window_fraction']`` reports the share of
-  output pixels copied from inside the window. Without the restriction there are no hints and
-  ``random_candidates`` random positions of the whole ``D_M`` are tried per pixel (the paper's
-  global search, approximated by k-coherence; ``search='exact'`` is the paper's, slow).
-- ``transfer_candidates`` (default on; with the strict window): the window used to drop a neighbour's
-  coherent proposal from a copy outside it, so a strand broke wherever the constraint's angle crossed
-  a 5-degree step. Such a proposal is now moved to the same exemplar point of the copy at the local
-  angle (:meth:`synth.analysis.rotation.RotatedDictionary.affine_maps`, the kernel's class transfer in
-  :mod:`synth.kernels.pixel_search`) and competes there. Wood grain, paper settings, 256 x 256, seed 1,
-  waves / rings / spiral: strand ratio 0.52 / 0.65 / 0.58 -> 0.67 / 0.69 / 0.73 at an unchanged
-  agreement (0.14-0.15).
-- ``histogram_weight`` (grey-level histogram matching, 16 bins; Kopf et al. 2007, eq 4's re-weighting,
-  the engine's :func:`synth.kernels.pixel_search._histogram_factor`): over-used grey levels lose
-  against equally good under-used ones; 0 (off) is the paper.
-- ``hint_layout='strands'`` (a departure; the paper's route is ``'texture'``): the hints and
-  ``S_en`` come from the exemplar's fibres laid along the constraint's strands
-  (:mod:`synth.methods.strand_hints`: each strand is given one exemplar fibre along its length, cut
-  regions ``strand_hint_spacing`` apart linked so that a strand keeps its fibre across them) instead of
-  an exemplar-like texture synthesized in the exemplar's frame, whose hints jump from fibre to fibre
-  along a strand that crosses the exemplar's fibres (a patchwork of grey levels along the strands of a
-  wood grain). No exemplar-like texture is synthesized then. ``initial_sources='hints'`` starts the
-  output from the hints (an initialisation by the exemplar laid along the constraint) and makes every
-  pass a square refinement pass (:func:`synth.pixel.synthesis.synthesize_source_map`'s ``initial``).
-  Wood grain, 256 x 256, seeds 1-3: grey variance along the strands over across them
-  (:mod:`synth.evaluate.strands`) 0.51-0.70 -> 0.14-0.25, agreement 0.076-0.091 -> 0.023-0.041.
-- Both fields default to an automatic choice (None) made from a measured exemplar property, the
-  *fibre grey spread* (:func:`synth.analysis.fibre_grey.fibre_grey_spread`: the variance of the grey
-  levels of the fibres' crests, the exemplar averaged along its fibres, over the exemplar's grey
-  variance). With the ``'fibres'`` recipe and ``restrict_rotations``, a spread of at least
-  :data:`~synth.analysis.fibre_grey.OWN_GREY_FIBRES` (0.35: fibres with their own grey levels, wood
-  grain 0.68, brick 1.71) takes the strand hints (:data:`STRAND_HINTS`), a lower one (uniform
-  periodic stripes: fringes 0.007, bent laminae 0.012) the paper's route (:data:`PAPER_HINTS`), as
-  does every other recipe. Why not always: on fringes and laminae over rings the strand hints close
-  the rings into loops that the strand measure leaves out (strand ratio 0.67-0.74 < 0.8), and they
-  streak the soot (KL 8-10x). ``stats['fibre_grey_spread']`` and ``stats['own_grey_fibres']``
-  (spread >= threshold) record what the choice read, ``params`` what ran; a value given for either
-  field is kept (docs/arbitrary-shape.md).
-- ``recipe`` (default ``'auto'``): the settings are chosen from the exemplar's mean coherence
-  (:data:`ORIENTED_COHERENCE`): strongly oriented exemplars get :data:`RECIPES` ``'fibres'``, weakly
-  oriented ones (soot) ``'weak'``; a recipe sets only the fields left at their defaults, and
-  ``recipe='paper'`` keeps every field as given (their defaults: the paper's settings).
-- The ``'fibres'`` recipe adds square refinement passes (``iterations=4, refinement='square'``; the
-  paper allows a causal or a square neighbourhood, section 3, and uses 2 causal passes): the causal
-  lexicographic first pass lays the strands down, and three passes that compare the whole 13 x 13
-  square in a random order, every neighbour proposing its continuation, mend the kinks it leaves where
-  strands turn against the scan (the waves' crests and troughs, whose kinks repeated down the rows).
-  Wood grain on waves, seeds 1-3: strand ratio 0.72, 0.66, 0.72 -> 0.89, 0.83, 0.82 at agreement
-  0.08-0.09 (docs/arbitrary-shape.md). The previous recipe (a recipe sets only fields whose value
-  is the default, so ``iterations=2`` alone would be replaced): ``recipe='paper',
-  rotation_reference='local', window_search='strict', w=0.5, histogram_weight=5``.
-- k-coherence sets over ``D_M`` cost memory in proportion to ``M`` times the exemplar's area times
-  the neighbourhood: ``k`` defaults to 0 here and is refused when the sets would not fit
-  (:data:`K_SET_MEMORY_LIMIT`).
-- The naive variant (the paper's ``I_sor/O``) guides by ``I_con``'s own tensors:
-  ``constraint_tensors='constraint'``.
-- A featureless constraint (no gradient anywhere) has no orientation to follow: :class:`InvalidInput`.
-  Where only part of it is flat, ``O_con`` there is 0, so the exemplar keeps its own orientation.
-- ``W`` is applied to normalised parts, as in :mod:`synth.pixel.synthesis` (each part divided by its
-  typical value), so ``W = 0.5`` weighs intensities and tensors equally; the paper gives no value,
-  the default 0.1 is the measured best (docs/arbitrary-shape.md).
-
-- ``periodic=True`` (a tileable output): the synthesis wraps (:mod:`synth.pixel.synthesis`), the
-  constraint's structure tensors and any resampling of it wrap around its borders, the exemplar-like
-  texture behind ``S_en`` is synthesized tileable (also when the exemplar already has the output's
-  size: the exemplar itself does not tile) and the guidance pyramid wraps. The constraint is the
-  user's and is used as given: the output tiles seamlessly only if the constraint does (e.g.
-  :func:`synth.io.patterns.grating` or a wave with whole periods across the image); a constraint that
-  jumps at its borders makes the texture follow the jump.
-
-The measure of "following the constraint" is :func:`orientation_agreement`.
+Choices the paper leaves open and departures, each measured in docs/arbitrary-shape.md ("How it works"):
+- ``rotation_reference='dominant'``: ``S_en`` turned by ``O_con - O_dom`` (``'absolute'``: the paper);
+- a size unlike the constraint's: an exemplar-like texture synthesized first by ``tensor-constrained``;
+- ``restrict_rotations`` (the paper's perspective): only the copies at the local angle are searched;
+- ``transfer_candidates``: a proposal from another copy moves to the copy at the local angle;
+- ``histogram_weight``: grey-level histogram matching (Kopf et al. 2007, eq 4); 0 is the paper;
+- ``hint_layout='strands'``, ``initial_sources='hints'``: the exemplar's fibres laid along the
+  constraint's strands (:mod:`synth.methods.strand_hints`), chosen by the fibre grey spread;
+- ``recipe='auto'``: settings by the exemplar's coherence (``'fibres'`` adds square refinement passes);
+- ``W`` weighs normalised parts; default 0.1, the measured best; ``k = 0`` (k-sets over ``D_M`` are large);
+- ``periodic=True``: the output tiles if the constraint does. Following it: :func:`orientation_agreement`.
 
 References
 ----------
 A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Synthèse de texture contrainte par champ
 de structure arbitraire", GRETSI (eqs 1-6, figures 1-4).
-A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis of
-directional textures for virtual material design", IEEE ICIP 2014.
+A. Akl et al., "Structure tensor based synthesis of directional textures ...", IEEE ICIP 2014.
 """
 
 from __future__ import annotations

@@ -1,64 +1,27 @@
 """Feature-guided patch synthesis (Wu & Yu 2004): match curvilinear features as well as colour, bend, cut.
 
 Patches in raster order with overlap, as in image quilting; each new patch is chosen on a mix of the
-colour SSD over the overlap and the chamfer matching cost of the features (eq 2 with eq 1's ``gdist``:
-the output's context features against the candidate's, tangents in 4 orientation buckets), then, with
-``deform``, warped by a thin-plate spline (Shepard's method when it fails) so that its features meet
-the context's, and merged along a graph-cut seam (Kwatra et al. 2003). The steps and the choices where
-the paper is silent are in :mod:`synth.patch.feature_guided`; the feature maps in
-:mod:`synth.analysis.features`, the matching in :mod:`synth.analysis.feature_matching`, the warp in
-:mod:`synth.analysis.warp`.
+colour SSD over the overlap and the chamfer matching cost of the features (eq 2 with eq 1's ``gdist``),
+then, with ``deform``, warped by a thin-plate spline so that its features meet the context's, and
+merged along a graph-cut seam (Kwatra et al. 2003). The steps: :mod:`synth.patch.feature_guided`; the
+feature maps: :mod:`synth.analysis.features`; the matching: :mod:`synth.analysis.feature_matching`;
+the warp: :mod:`synth.analysis.warp`. ``Result.extras``: ``features_exemplar``, ``features_output``,
+``seams`` and ``copy_map``; ``stats['broken_features']`` (:func:`synth.evaluate.broken_features`).
 
-Artifacts (``Result.extras``, written by the one artifact writer): ``features_exemplar`` and
-``features_output`` (feature pixels coloured by tangent over the image in grey,
-:func:`synth.analysis.features.feature_overlay`; the output's are detected on the output with the
-exemplar's settings) and ``seams`` (patch boundaries in red over the output), plus ``copy_map`` as for
-the other patch methods. ``stats['broken_features']`` is :func:`synth.evaluate.broken_features` of the
-output: endpoints of features within 2 px of a seam, relative to the exemplar's endpoint density.
+Departures, each measured in docs/feature-guided.md (full text: docs/design.md, "feature-guided"):
+- patch size 32 (the paper: 32-64), overlap a quarter of the patch;
+- detector defaults where the paper gives none (``high_percentile = 90``, ``radius = 3``);
+- ``deform`` on (the paper) with a changed warp (tangent gate, normal displacements, spaced controls,
+  a 4 px band, cubic resampling): the paper's warp broke and doubled features;
+- ``reverse_weight`` (not the paper): the reverse chamfer term, 4 on weakly oriented exemplars;
+- ``periodic=True``: a torus layout matched, warped and cut on every known strip;
+- ``error``, ``usage_weight`` (not the paper; None: variance-normalised colour error and a usage penalty on
+  weakly oriented exemplars, the paper's SSD on strongly oriented ones): docs/patch.md, "Laminar HRTEM".
 
 References
 ----------
 Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on Graphics
 23(3) (Proc. SIGGRAPH 2004), pp. 364-367.
-
-Departures
-----------
-- Patch size default 32 (the paper: "between 32x32 and 64x64" for 128 -> 256); the overlap, not
-  given, defaults to a quarter of the patch (the context must hold enough of the features to match).
-- The feature detector's defaults are the paper's (edges, sigma_d = 2, sigma_r = 10/256, alpha = 0.3)
-  and those :func:`~synth.analysis.features.feature_map` chose where the paper gives none
-  (``high_percentile = 90``, ``radius = 3``); ``presmooth = 1`` and ``features='ridges'`` with
-  ``polarity='dark'`` suit HRTEM fringes (docs/feature-guided.md).
-- ``deform`` is **on by default** (the paper), with a changed warp. The paper's warp, as first built,
-  raised broken features at seams and bent brick joints into wobbly, doubled lines; the warp was then
-  changed (tangent gate, normal displacements, spaced controls, a 4 px band beyond the overlap, cubic
-  resampling: :mod:`synth.patch.feature_guided`). Measured again (5 seeds, ends and kinks at seams over
-  the exemplar's rates, docs/feature-guided.md), deformation breaks fewer features than no deformation
-  on soot (1.04 vs 1.10) and cells (1.11 vs 1.21) and as many on bent laminae (0.97 vs 0.97) and brick
-  (1.04 vs 1.10, within the spread). Neither beats ``quilting`` on brick (0.90): the paper's claim
-  holds on soot only.
-- ``reverse_weight`` (not the paper; 0 = the paper's eq 2; default None: 4 on weakly oriented exemplars,
-  0 on strongly oriented ones, :func:`reverse_weight_for`): adds the reverse chamfer term
-  (the candidate's overlap features matched against the context's,
-  :func:`synth.analysis.feature_matching.reverse_costs`). It restores the mean fringe length on soot
-  that eq 2 loses (19.9 vs 19.1 px, exemplar 20.0, quilting 19.8; seeds 0-29) at equal tortuosity
-  (1.422 vs 1.415, quilting 1.447), for slightly more broken features at seams (soot 1.07 vs 1.04,
-  seeds 0-9; within the spread everywhere); measured in docs/feature-guided.md.
-- ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
-  (:class:`synth.patch.layout.PatchLayout`); the last patch of a row is matched (colour and features)
-  on its left *and* right overlaps, the last row on its top *and* bottom ones, warped with only the
-  borders that have no known strip held fixed, and cut by the graph cut through every strip.
-- ``error`` and ``usage_weight`` (not the paper; None = :func:`search_for`: the variance-normalised colour
-  error and a usage penalty on over-used exemplar regions for weakly oriented exemplars, the paper's SSD
-  on strongly oriented ones): the candidates come from the colour error of
-  :meth:`synth.patch.search.PatchSearcher.normalised_ssd` times :class:`synth.patch.usage.UsagePenalty`'s
-  factors. Seeds 1-3, 128 -> 256, onion-core HRTEM crop: coherence ratio 0.81 -> 0.87, contrast 0.84 ->
-  0.94, grey KL 0.034 -> 0.005, orientation KL 0.15 -> 0.04; the onion crop (shells) orientation KL 1.22
-  -> 0.03 (the paper's search fills the output with the crop's straightest fringes); docs/patch.md.
-  ``stats['patch_sources']``: ``[row, column, copy]`` of every patch (copy 0 = the exemplar as it is);
-  ``stats['coverage']``: :func:`synth.evaluate.coverage.exemplar_coverage` of the copy-0 patches.
-- See :mod:`synth.patch.feature_guided` for the normalisation of the two costs, the candidates, the
-  dropped far correspondences and the rejected folding warps.
 """
 
 from __future__ import annotations

@@ -2,114 +2,33 @@
 
 Patches of side ``w`` are synthesized in raster order with overlap (sec. 2, Fig. 1;
 :class:`synth.patch.layout.PatchLayout`). For each new patch, the ``N`` exemplar patches nearest to the
-output on the overlap (L2, eq. 1 and the text below eq. 2; FFT correlation,
-:class:`synth.patch.search.PatchSearcher`) give ``mu`` and ``Sigma`` (eq. 1); the patch is then
+output on the overlap (L2, eq. 1; FFT correlation, :class:`synth.patch.search.PatchSearcher`) give
+``mu`` and ``Sigma`` (eq. 1); the patch is then a draw from ``N(mu, Sigma)`` (``model='lg'``), the
+conditional mean given the overlap ``y0`` (``'clg'``, eq. 4), or the minimiser of eq. 5 (``'rclg'``,
+closed form eq. 7 with ``G = Sigma + sigma^2 I``), solved in the ``N``-dimensional span of the
+neighbours (:mod:`synth.patch.gaussian`). ``blending='boundary-cut'`` stitches it along the
+Efros-Freeman minimum-error cut (Fig. 3); ``'none'`` pastes it (Fig. 2).
 
-- ``model='lg'``: a draw from ``N(mu, Sigma)``, ignoring the overlap (the LG model of Raad et al. 2014);
-- ``model='clg'``: the conditional mean given the overlap ``y0`` (eq. 4), with ``Sigma + sigma^2 I``;
-- ``model='rclg'``: the minimiser of eq. 5, closed form eq. 7 with ``G = Sigma + sigma^2 I``,
-
-solved in the ``N``-dimensional span of the neighbours (:mod:`synth.patch.gaussian`: one ``N x N``
-Cholesky per patch, no explicit inverse). Colour patches stack the three channels in one vector. With
-``blending='boundary-cut'`` the patch is stitched along the Efros-Freeman minimum-error cut of the overlap
-(the paper's Fig. 3); with ``'none'`` it is pasted over the overlap (Fig. 2).
+Departures, each measured in docs/patch.md and docs/design.md ("gaussian-patch"):
+- ``sigma``, ``theta`` (no values in the paper): 0.05 and 0.05; the overlap: a quarter of the patch;
+- the first patch is an exemplar patch drawn uniformly;
+- ``estimate='neighbour'`` (the paper: ``'mean'``): one neighbour corrected toward the overlap (Matheron's
+  rule, tapered by ``localisation``); ``'draw'``: a draw from the conditional law (sec. 3.1);
+- ``contrast='restore'``: each patch keeps the neighbours' standard deviation (the mean decays);
+- ``neighbours`` N = 5 (the paper: 20); ``scales > 1``: the paper's sec. 4 outlook, simplified;
+- ``periodic=True``: a torus layout, two-sided patches mended at their inner edges;
+- the output is clipped to [0, 1] (``stats['clipped_share']``);
+- ``error='normalised'``, ``usage_weight=1``, ``blending='boundary-cut'`` (since issue 24): the neighbours
+  on the variance-normalised overlap error times a penalty on over-used regions, so the output does not
+  settle in the exemplar's flattest part (docs/patch.md, "Laminar HRTEM").
+The paper literally: ``estimate='mean'``, ``contrast='none'``, ``neighbours=20``, ``error='ssd'``,
+``usage_weight=0``.
 
 References
 ----------
 L. Raad, A. Desolneux, J.-M. Morel, "Conditional Gaussian models for texture synthesis", SSVM 2015,
-LNCS 9087, pp. 474-485, doi:10.1007/978-3-319-18461-6_38. L. Raad, A. Desolneux, J.-M. Morel, "Locally
-Gaussian exemplar-based texture synthesis", ICIP 2014 (the LG model). A. A. Efros, W. T. Freeman, "Image
-quilting for texture synthesis and transfer", SIGGRAPH 2001 (the boundary cut).
-
-Departures
-----------
-- ``sigma`` and ``theta`` have no values in the paper ("a low value" for sigma); the defaults (0.05 and
-  0.05, grey levels in [0, 1]) are ours, measured in docs/patch.md: with sigma = 0.01 CLG extrapolates
-  (``A1 c`` with large ``c``) into saturated garbage on the brick exemplar; theta above 0.1 pulls the
-  overlap toward the model mean and moves the seam to the overlap's outer edge.
-- The overlap is not stated in the paper (Fig. 1 shows it); the default is a quarter of the patch.
-- The first patch has no overlap to condition on: it is an exemplar patch drawn uniformly (for every model).
-- ``estimate='draw'`` (not the paper; its sec. 3.1 proposes it): CLG/RCLG patches drawn from the conditional
-  law (:func:`synth.patch.gaussian.rclg_draw`) instead of its mode. Measured in docs/patch.md: it barely
-  differs from the mode, since ``k >> N`` overlap values pin the ``N`` coefficients of the model.
-- ``estimate='neighbour'`` (the default; the paper's estimate is ``'mean'``): one of the ``N`` neighbours,
-  drawn uniformly, corrected toward the overlap by the RCLG gain, the correction tapered by
-  ``exp(-d^2/(2L^2))`` with ``d`` the distance from the overlap and ``L = localisation`` (default the
-  overlap): Matheron's rule on a draw from the neighbours' empirical law, with an ensemble Kalman filter's
-  covariance localisation (:func:`synth.patch.gaussian.rclg_neighbour`). The mean and the draws of the
-  rank-``N`` model average the neighbours beyond the overlap: on brick the horizontal joints, at different
-  heights in the ``N`` neighbours, fade to dashes (gradient energy of the joints, ``|theta| >= 80`` deg,
-  0.93e-4 per pixel against the exemplar's 2.33e-4; orientation-histogram bins at -90..-80, 80..90 and
-  -15..-10 deg hold 0.07 and 0.05 of the energy against 0.15 and 0.11, the excess lies in the near-vertical
-  bricks' sides). The corrected neighbour keeps one neighbour's joints where the overlap does not pin them.
-  RCLG + boundary cut, 128 -> 256, orientation KL mean (worst), ``'mean'`` -> ``'neighbour'``: brick seeds 0-5
-  0.111 (0.137) -> 0.044 (0.072), seeds 6-11 0.129 (0.162) -> 0.030 (0.049); grass seeds 0-11 0.039 (0.049) ->
-  0.044 (0.067), gravel 0.019 (0.027) -> 0.016 (0.027), hrtem-soot-128 0.018 (0.037) -> 0.024 (0.045); grey KL
-  brick 0.020 -> 0.017, grass 0.009 -> 0.007, gravel 0.022 -> 0.026, soot 0.012 -> 0.012 (all below 0.037).
-  The verbatim-copy share rises (brick 0.66 -> 0.75, quilting's 0.94; the others 0.04-0.05 -> 0.05-0.08).
-  Brick orientation KL, seeds 0-11, against ``L``: no taper 0.090 (worst 0.146), 16 px 0.062, 12 px 0.066, 10
-  px 0.045, 8 px 0.045, 7 px (the overlap) 0.037, 6 px 0.039, 4 px 0.047; at ``w = 20`` and ``40`` (``L`` =
-  overlap 5 and 10), seeds 0-2: 0.120 -> 0.036 and 0.100 -> 0.032, gravel and soot unchanged within the seeds'
-  spread. Tried and worse on brick (seeds 0-11): the nearest neighbour on the overlap instead of a uniform
-  draw (0.075, worst 0.144); ``N`` = 3 and 8 with the taper (0.051, 0.053); a stronger ridge (``16 lam``)
-  instead of the taper (0.053); ``contrast='none'`` (0.052, grey KL 0.05-0.08 on the others); ``N = 20``
-  without the taper (0.066, gravel comes out blocky); seeds 0-5, the mean with the tapered correction (0.128).
-  Made the default although soot's orientation KL rises (0.018 -> 0.024 over seeds 0-11, 0.015 -> 0.023 over
-  seeds 12-23; as with quilting, real exemplar patches keep less of the crop's dominant orientation than the
-  averaged mean): without it brick misses its orientation target with the defaults.
-- Gaussian patches can leave [0, 1]; the output is clipped at the end (``stats['clipped_share']``).
-- ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
-  (:class:`synth.patch.layout.PatchLayout`), the last patch of a row is conditioned on its left *and*
-  right overlaps and the last row on its top *and* bottom ones (the model takes any known mask; the
-  neighbours are searched on the whole known region); the boundary cut cuts each strip
-  (:func:`synth.patch.cut.strips_cut_mask`). A CLG/RCLG patch known on two opposite sides fits twice the
-  overlap with the same ``N`` neighbours and met its strips with a jump at their inner edges (1.2-2.9 times
-  the mean gradient energy on soot, 128^2, against 1.1-2.0 for the one-sided patches); its new part is
-  re-solved to meet them smoothly (:func:`synth.patch.gaussian.mend_inner_edges`, a Poisson equation).
-  The other patches are those of the non-periodic layout. With ``scales > 1`` a coarser scale is periodic
-  too when its size holds two patch steps (else it is laid out as usual: it only guides the search).
-- ``contrast='restore'`` (the default; not the paper): each CLG/RCLG patch's new part keeps the
-  neighbours' mean standard deviation (:func:`synth.patch.gaussian.restore_contrast`). The paper's
-  conditional mean averages the neighbours' continuations, and the next patch conditioned on that
-  average finds flatter neighbours, so contrast decays patch after patch. Measured on hrtem-soot-128
-  -> 256, seed 0: RCLG grey-level KL 0.88 -> 0.04, std 0.067 -> 0.134 (exemplar 0.162), orientation KL
-  0.010 -> 0.015; CLG 0.70 -> 0.009. ``contrast='none'`` is the paper literally.
-- ``scales > 1`` (the paper's sec. 4 outlook, after Raad et al., JMIV 2016, in a simpler form): the
-  exemplar is reduced ``scales - 1`` times by 2 (anti-aliased), the coarsest output synthesized as above,
-  and each finer scale's neighbours chosen on the overlap *and* on the whole patch of the coarser output
-  upsampled (against the coarser exemplar upsampled alike; the two parts weighted equally per pixel
-  count); the Gaussian model and the conditioning are those of a single scale. Measured in docs/patch.md:
-  in this form it does not help (it smooths further).
-- ``neighbours`` N = 5 by default (the paper: 20). The model lives in the span of the N nearest
-  patches; with 20, structures the overlap does not pin (a brick's horizontal joints) are averaged
-  over 20 positions, fade and leave negative dashes. RCLG + boundary cut, 128 -> 256, seeds 0-2, grey /
-  orientation KL, N = 20 -> 5: brick 0.025-0.034 / 0.22-0.39 -> 0.021-0.027 / 0.107-0.108, grass
-  0.013-0.021 / 0.031-0.052 -> 0.009-0.012 / 0.034-0.049, gravel 0.029-0.038 / 0.018-0.027 ->
-  0.024-0.031 / 0.011-0.027, hrtem-soot-128 0.019-0.025 / 0.013-0.015 -> 0.012-0.013 / 0.006-0.037;
-  the verbatim-copy share rises a little (gravel 0.009-0.012 -> 0.010-0.032, quilting's 0.63) and the
-  gravel stones come out crisper. N = 4 and 7 were no better (brick 0.095-0.18 and 0.27).
-- ``error='normalised'``, ``usage_weight=1`` and ``blending='boundary-cut'`` (the defaults since issue 24;
-  before: ``'ssd'``, 0 and ``'none'``). The paper's L2 on the overlap is about ``n (var_T + var_E)`` for an
-  uncorrelated candidate, so the ``N`` nearest are the flattest wherever the overlap cannot be matched
-  exactly; on a laminar HRTEM crop that mixes ordered shells with a disordered core the output settles in
-  the core (contrast 0.74, grey KL 0.09). The neighbour search divides the SSD by the overlap's plus the
-  candidate's variance (:meth:`synth.patch.search.PatchSearcher.normalised_ssd`) and multiplies it by a
-  penalty on over-used exemplar regions (:class:`synth.patch.usage.UsagePenalty`; the neighbour a patch
-  is built on is counted, or all ``N`` at ``1/N`` for the mean and the draws); with the boundary cut
-  (the paper's Fig. 3) the contrast is higher still (onion-core 0.83 pasted, 0.88 cut). Seeds 1-3,
-  128 -> 256, mean: onion-core crop contrast 0.74 -> 0.88, coherence ratio 0.88 -> 0.90, grey KL 0.092
-  -> 0.016, orientation KL 0.17 -> 0.04, share of the exemplar used 0.72 -> 0.90; brick, grass, gravel
-  and soot: both KLs lower or equal, contrast higher; the seam ratio (:func:`synth.evaluate.seam_visibility`)
-  rises toward 1 (grass 0.67 -> 1.01, brick 1.25 -> 1.29).
-- ``stats['patch_sources']``: one exemplar position per patch (its neighbour; the nearest of the ``N`` for
-  the mean and the draws, so that the manifest stays one pair per patch); ``stats['coverage']``:
-  :func:`synth.evaluate.coverage.exemplar_coverage` of every position counted (all ``N`` at ``1/N``).
-- The paper literally: ``estimate='mean'``, ``contrast='none'``, ``neighbours=20``, ``error='ssd'``,
-  ``usage_weight=0`` (and ``blending`` as in its Fig. 2 or 3).
-- Measured limits (docs/patch.md, with ``estimate='mean'``): on textures whose overlap says little about the
-  rest of a patch (gravel, grass, HRTEM soot at w = 30, N = 20) CLG and RCLG fall toward the neighbours' mean
-  patch after patch and lose about half the grey-level spread; the paper reports the smoothing ("at the cost
-  of losing finer details").
+LNCS 9087, pp. 474-485. L. Raad et al., "Locally Gaussian exemplar-based texture synthesis", ICIP 2014
+(LG). A. A. Efros, W. T. Freeman, "Image quilting for texture synthesis and transfer", SIGGRAPH 2001.
 """
 
 from __future__ import annotations

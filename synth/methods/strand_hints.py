@@ -6,8 +6,8 @@ exemplar-like texture synthesized in the exemplar's own frame (section 2.1: "syn
 the constraint's size first"), so along a constraint strand that runs across the exemplar's fibres
 the hints jump from fibre to fibre; a fibrous exemplar whose fibres each have their own grey level
 (wood grain) then comes out as a patchwork of grey along each strand (docs/arbitrary-shape.md,
-"Continuous strands"). This module lays the hints out along the constraint's flow instead, a
-departure from the paper (``hint_layout='strands'``).
+"Continuous strands"). This module lays the hints along the constraint's flow instead (a departure,
+``hint_layout='strands'``).
 
 How (a piecewise parametrisation of the output by the constraint's strands):
 
@@ -27,11 +27,8 @@ How (a piecewise parametrisation of the output by the constraint's strands):
    until the strand is nearer the next cut (runs of about ``spacing`` pixels), and neighbouring strands
    get neighbouring fibres, so the hints show an undistorted strip of exemplar along the strand.
 4. **Copy**: the copy whose turn carries the fibre's direction at the hint (signed) onto the strand's
-   (signed) direction at the pixel, so that the strip keeps its handedness (of a copy and its
-   half-turn twin, the one that does).
-
-Pixels whose strand meets no cut within ``2 spacing`` steps (rare: near a spiral's centre) take a
-random fibre. Same inputs and seed, same hints.
+   (signed) direction at the pixel, so that the strip keeps its handedness. A pixel whose strand
+   meets no cut within ``2 spacing`` steps (near a spiral's centre) takes a random fibre.
 """
 
 from __future__ import annotations

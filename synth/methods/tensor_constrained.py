@@ -1,117 +1,24 @@
 """Structure-tensor-constrained synthesis (Akl et al., ICIP 2014): tensor field first, then texture.
 
 Stage 1 (structure layer): the exemplar's structure tensor field ``S_in`` (eqs 1-3) is synthesized
-into an output field ``S_out`` by the Wei-Levoy scheme adapted to tensors: neighbourhoods are
-vectors of tensors compared by the sum of tensor dissimilarities (STD, eq 12) under ED, SO, FN or
-LE (eqs 6-11), over Gaussian pyramids of the tensor fields, the best match's tensor being copied.
+into an output field ``S_out`` by the Wei-Levoy scheme adapted to tensors: neighbourhoods of tensors
+compared by the sum of tensor dissimilarities (STD, eq 12) under ED, SO, FN or LE (eqs 6-11), over
+Gaussian pyramids of the tensor fields, the best match's tensor being copied. Stage 2 (texture layer):
+Wei-Levoy on pixels where every neighbourhood has a pixel part (SSD) and a tensor part (``S_out``
+around the output position against ``S_in`` around the candidate, STD): ``D = p SSD + (1 - p) STD``
+(eq 13). The paper leaves eq 13's normalisation open: each part is divided by its typical value
+(:mod:`synth.pixel.synthesis`), so ``p = 0.5`` weighs both equally. ``periodic=True`` closes the tile
+borders in both stages (``S_out``'s pyramid always wraps).
 
-Stage 2 (texture layer): Wei-Levoy on pixels where every neighbourhood has a pixel part (output
-vs exemplar, SSD) and a tensor part (``S_out`` around the output position vs ``S_in`` around the
-candidate, STD): ``D = p SSD + (1 - p) STD`` (eq 13).
-
-Departure, measured: the structure stage matches histograms (the solid-texture papers' tool, Kopf
-et al. 2007, Chen & Wang 2010): by default the synthesized field's orientation histogram is pulled
-toward the exemplar's (a candidate whose orientation bin is over-represented pays a penalty,
-:func:`synth.kernels.pixel_search._histogram_factor`). ``structure_histogram='none'`` is the paper
-literally; docs/tensor-constrained.md compares both.
-
-Normalisation of eq 13 (the paper leaves it open): each part is divided by its typical value,
-the mean distance between random exemplar positions under its metric times the number of
-positions it compares, so that ``p = 0.5`` weighs both parts equally (:mod:`synth.pixel.synthesis`).
-
-The tensor part of a texture neighbourhood has the pixel part's shape (plus its centre, which
-``S_out`` already holds). Departure, and why: the stage-1 source map proposes candidates to the stage-2 search
-(it names, for every output position, an exemplar position whose tensor neighbourhood matches
-``S_out`` there), which lets the fast search find what the constraint asks for.
-
-Default departures of issue 13 (docs/quality.md, 128 -> 256, seeds 1-3, mean (worst)); the earlier
-settings ``k=3, p=0.5, falloff=0, refinement='same', refinement_size=None, texture_histogram_weight=0``
-give the earlier bytes. The texture stage copied the structure stage's coherent regions whole (its
-tensor part is exactly 0 where it follows the stage-1 source map) and joined them with hard seams:
-``seam_contrast`` of the source map 1.3-2.4 on five of six exemplars; brick and wood lost grey levels
-(KL 0.056 (0.071), 0.062 (0.088)). Now, in both stages, the Gaussian falloff (``falloff=0.156``) and a
-square refinement pass (``refinement='square'``; ``refinement_size=None`` picks 7 x 7 for weakly
-oriented exemplars and the whole neighbourhood for strongly oriented ones, :func:`refinement_size_for`);
-in the texture stage Chen & Wang's position histogram (``texture_histogram_weight=10``), ``p = 0.8``
-(the pixel part may leave a stage-1 region where the texture does not continue) and ``k = 2``.
-Seams grass 1.32 -> 0.67,
-gravel 2.43 -> 0.97, soot 2.32 -> 1.01, wood 1.25 -> 0.90; grey KL brick 0.015 (0.019), wood 0.003;
-laminae orientation KL 0.039 -> 0.051 (0.066), still within issue 13's 0.10. With a 7 x 7 refinement
-everywhere brick's seam went 1.45 (1.58) -> 1.77 (1.99) and the laminae's strand ratio 0.944 (0.755) ->
-0.874 (0.774); the whole neighbourhood for strongly oriented exemplars gives 1.35 (1.52) and 0.913
-(0.843) (brick's seam still above 1.2: mortar joints end in stubs). CPU per run, soot and wood
-128 -> 256, the earlier settings then the defaults: 1.38 -> 1.17 s.
-
-Default departures of the brick-seam work (128 -> 256, seeds 1-3, mean (worst), measured like
-docs/quality.md; ``metric='SO', refinement_p=None, texture_histogram_weight=10`` give the earlier
-bytes). Brick's mortar joints ended in stubs (seam 1.35 (1.52)): horizontal joints floating mid-brick.
-Two causes, seen in the synthesized field and the source maps:
-
-- **SO cannot see the joints' layout.** Its dissimilarity ``M_or^alpha M_coh^(1-alpha)`` is 0 whenever
-  two orientations agree, whatever their coherence (eqs 7-9), and brick's vertical joints differ from
-  the brick faces in coherence, not in orientation. So the structure stage kept only the horizontal
-  joints' low-coherence diamonds, placed without the vertical joints they span, and the texture stage
-  drew a horizontal joint in each diamond wherever the vertical joints happened to be. With LE (eq 11,
-  ``metric='LE'``, the default now) the field carries the vertical joints too: the exemplar pixels
-  through the structure stage's source map already show a brick bond, and the output follows the
-  field more closely (coherence-weighted ``cos 2(O_image - O_field)``: brick 0.80 -> 0.85, laminae
-  0.935 -> 0.947).
-- **Refinement passes cannot undo a stub** while the tensor part still asks for it: its pixels agree
-  with one another, so no single pixel's change lowers eq 13. The square refinement passes now match
-  pixels only (``refinement_p=1``; the guidance part weighs 0 there and is skipped): the first pass
-  lays the texture out under the field, the refinement makes it a texture. Alone (with SO) it lowers
-  every seam (brick 1.35 -> 0.81, grass 0.67 -> 0.61, soot 1.01 -> 0.91) but leaves the stubs in the
-  picture; with LE most joints meet (a few short stubs remain, seed 2 the most; wei-levoy's are cleaner).
-- The texture stage's position histogram weighs 3 (``texture_histogram_weight``, 10 before): at 10 it
-  pushes every exemplar joint pixel into use and splices joint pieces (brick seam with LE and pixel-only
-  refinement 1.01 (1.18) -> 0.83 (0.90)); brick's grey KL stays 0.009 (0.011) (0.019 (0.033) before).
-
-Figures, before -> after, grey KL / orientation KL / seam (strand ratio where it is a target): brick
-0.019 / 0.054 / 1.35 (1.52) -> 0.009 / 0.026 / 0.83 (0.90); grass 0.001 / 0.009 / 0.67 -> 0.003 /
-0.012 / 0.63; gravel 0.004 / 0.011 / 0.97 -> 0.004 / 0.011 / 0.78; soot 0.002 / 0.006 / 1.01 -> 0.002 /
-0.010 / 0.96 (1.00); bent laminae 0.001 / 0.058 / 0.94, strand 0.913 (0.843) -> 0.001 / 0.045 / 0.95,
-strand 1.168 (1.052); wood grain 0.005 / 0.040 / 0.98 -> 0.011 / 0.046 / 0.93. Not kept (measured,
-seeds 1-3, brick seam): higher p (0.9: 1.32; 0.95: 0.94 (1.22) with stubs), k = 10 (1.53), 3 texture
-passes (1.27), 2 texture levels (1.24, stubs), the tensor part over the full square in the first pass
-(1.13 (1.42), stubs), ED (0.61 but grey KL 0.05 (0.10) and stubs), FN (0.88, stubs), pixel-only
-refinement with SO (0.81, stubs), no position histogram (LE: 0.47 but doubled joints, grey KL 0.022).
-CPU per run (128 -> 256, seeds 1-3, earlier settings then defaults, alternating in one process): soot
-1.45 -> 1.60 s, wood 1.74 -> 1.59 s, brick 1.75 -> 1.45 s (the guidance part is skipped in refinement).
-Tileable brick (``periodic=True``, :func:`synth.evaluate.tile_seam` ratio, seeds 1-3): 3.98 (6.09) ->
-1.65 (2.06); soot 0.96 (1.13), gravel 1.08 (1.23): brick's tile borders still show.
-
-Default departure of the brick-stubs work (128 -> 256, seeds 1-3, mean (worst), measured like
-docs/quality.md; ``falloff=0.156`` gives the earlier bytes). Brick's outputs still showed short horizontal
-joint pieces ending mid-brick (stubs), and the structure stage's own source map showed them too. The
-falloff (sigma = 0.156 x 13 = 2 pixels) left a 13 x 13 neighbourhood about 5 x 5 effective pixels, too
-few to see whether a joint meets a vertical one 10 pixels away. ``falloff=None`` (the default now) is
-flat (0, the paper) for strongly oriented exemplars with structures in two directions, 0.156 otherwise
-(:func:`falloff_for`: mean coherence >= :data:`ORIENTED_COHERENCE` and a coherence-weighted fraction
->= 0.05 oriented more than 45 degrees off the dominant orientation,
-:func:`synth.analysis.tensor.cross_orientation_fraction`:
-brick 0.14, bent laminae 0.001, wood grain 0.000; grass, gravel and soot are weakly oriented). Only
-brick moves (the five others give the same bytes as before). Brick: grey KL 0.009 (0.011) -> 0.006
-(0.007), orientation KL 0.026 (0.033) -> 0.036 (0.047), seam 0.83 (0.90) -> 0.91 (0.95), strand ratio
-1.37 (1.42) -> 1.25 (1.30); by eye most stubs are gone (a few short ones remain, 1-3 per output, where
-wei-levoy has none); periodic ``tile_seam`` 1.65 (2.06) -> 0.72 (1.02), no joints lined up along the
-tile border. CPU per brick run 1.62 -> 1.70 s (median of 6, alternating). Flat everywhere would cost
-the one-directional oriented exemplars: laminae seam 0.95 -> 1.00, orientation KL 0.045 -> 0.062
-(0.090); wood seam 0.93 -> 1.07. Not kept (brick, seeds 1-3): flat in the structure stage only (seam
-0.89 (0.95), stubs) or in the texture stage only (0.90 (1.10), stubs); falloff 0.3 in both (0.84
-(1.01), stubs); with the falloff, 3 or 4 texture passes (0.75, 0.70: the same stubs, pixel-only
-passes keep them), 4 structure passes (0.87, stubs), structure_k 2 (0.76, smeared joint regions in the
-field and more stubs on seed 2), 16 structure candidates (0.80, stubs), p 0.9 (0.72, stubs), 2 texture
-levels (0.63 (0.66): fewer stubs but some, CPU 1.81 s). On top of the flat neighbourhoods: 2 texture
-levels (0.68 (0.84), the cleanest joints seen, but CPU 2.43 s, +50 %), texture histogram weight 1
-(0.72, more stubs), 3 structure passes (0.97 (1.20)), 5 structure levels (0.90 (1.03), stubs), 16
-structure candidates (0.91, stubs on seed 3), p 0.9 (0.80; periodic tile_seam 1.29 (1.72)), 3 texture
-passes (0.78 (0.80), about the same stubs, CPU 2.00 s), k 3 (0.90, more stubs), texture histogram
-weight 5 (1.06 (1.10)).
-
-Tileable outputs: ``periodic=True`` makes both stages' searches close the tile borders (see
-:mod:`synth.pixel.synthesis`; a causal neighbourhood then needs two or more passes in each stage).
-The structure field needs nothing else to wrap: ``S_out`` is copied from ``S_in`` and its pyramid
-for the texture stage always wraps (``mode='wrap'``).
+Departures, each measured in docs/tensor-constrained.md ("Departures from the paper, measured"):
+- the structure stage matches the orientation histogram (``structure_histogram``; 'none' is the paper);
+- the stage-1 source map proposes candidates to the stage-2 search (fast search finds what ``S_out`` asks);
+- the LE metric by default: SO is blind to coherence where orientations agree (brick's vertical joints);
+- a Gaussian falloff of the neighbourhood weights, flat (the paper) for strongly oriented exemplars with
+  structures in two directions (:func:`falloff_for`);
+- a square refinement pass in both stages (:func:`refinement_size_for`), matching pixels only in the
+  texture stage (``refinement_p=1``);
+- the texture stage: Chen & Wang's position histogram (weight 3), ``p = 0.8``, ``k = 2``.
 
 References
 ----------

@@ -3,57 +3,22 @@
 For every output pixel in scan order, its neighbourhood (causal L-shape or square, plus the parent
 level's square neighbourhood) is compared by SSD with exemplar neighbourhoods and the best match's
 centre is copied; multi-resolution over Gaussian pyramids, several passes per level, toroidal
-output, exemplar neighbourhoods fully inside the exemplar.
+output, exemplar neighbourhoods fully inside the exemplar (:mod:`synth.pixel.synthesis`).
+
+Departures, each measured in docs/pixel.md ("wei-levoy's defaults"), each undone by a parameter:
+- unsynthesized pixels are ignored in the first pass rather than compared as noise;
+- the search is k-coherence (Tong et al. 2002), not TSVQ; k-sets of 7 x 7 neighbourhoods on 8 components;
+- position-histogram matching on (``histogram_weight=10``, Chen & Wang 2010): the plain search locks
+  onto a few exemplar regions;
+- a Gaussian falloff of the neighbourhood (``falloff=0.156``, Efros & Leung 1999);
+- square refinement passes (``refinement='square'``);
+- two pyramid levels (a coarse level loses the exemplar's border band);
+- ``periodic=True``: tileable outputs, with 3 passes unless told.
 
 References
 ----------
 L.-Y. Wei, M. Levoy, "Fast texture synthesis using tree-structured vector quantization",
-SIGGRAPH 2000. Departures (see :mod:`synth.pixel.synthesis`): unsynthesized pixels are ignored in
-the first pass rather than compared as noise; the default search is k-coherence, not TSVQ.
-
-Default departure: **position-histogram matching on** (``histogram_weight=10``; Chen & Wang 2010, the
-same re-weighting the structure stage of tensor-constrained synthesis uses). The paper's plain search
-(``histogram_weight=0``) locks onto a few exemplar regions and grows garbage: 128 -> 256, seed 1,
-grey / orientation KL against the exemplar, plain -> matched: grass 0.36 / 0.11 -> 0.001 / 0.008
-(smeared blades and streaks -> grass), gravel 0.13 / 0.07 -> 0.004 / 0.008 (diagonal streaks ->
-stones), hrtem-soot-128 0.07 / 0.10 -> 0.002 / 0.007 (issue 13).
-
-Default departures of issue 13 (docs/quality.md, 128 -> 256, seeds 1-3, mean (worst)), each reachable
-back by a parameter (``levels=3, falloff=0, refinement='same', kset_size=9, kset_dims=16`` give the
-earlier bytes):
-
-- **Gaussian falloff** of the neighbourhood (``falloff=0.156``: Efros & Leung 1999's sigma = side / 6.4).
-  Flat weights let the 84 entries of a 13 x 13 L-shape outvote the 4 that touch the pixel: its value
-  is left nearly free, so two thirds of soot's 4-neighbour pairs came from unrelated sources (median
-  coherent piece: 1 pixel) with twice the texture's gradient energy across them (``seam_contrast``
-  1.92). With the falloff the nearest entries decide; they are summed first, which the partial
-  distance's early stop rewards.
-- **Square refinement passes** (``refinement='square'``): pass 2 compares the full 13 x 13 square in a
-  random order, every neighbour proposing candidates, so a pixel meets the pixels after it too.
-- **Two pyramid levels** (3 before): at a coarse level no neighbourhood fits within about 12 px of the
-  exemplar's border, and on bent laminae that band holds one slope (22 % of the exemplar's orientations,
-  5 % of the copyable positions): the output lost it (orientation KL 0.104 (0.143)).
-- **k-sets of 7 x 7 neighbourhoods on 8 components** (9 x 9 on 16 before, measured with flat weights):
-  as good on the table with the falloff, and their k-d tree query, a third of the run before, is cheaper.
-
-Seams before -> after: gravel 1.54 -> 0.71, soot 1.92 -> 0.98; laminae orientation KL 0.104 (0.143) ->
-0.066 (0.088); wood strand ratio 0.75 (0.70) -> 0.92 (0.88); every cell of the table meets issue 13's
-targets but brick's strand ratio, which measures 3 strands of the exemplar (docs/quality.md). CPU
-per run, soot and wood 128 -> 256, the earlier settings then the defaults: 2.07 -> 1.70 s. Not helping
-(measured, seed 1): a coherence bias (Hertzmann et al. 2001's kappa; fewer, harder seams: soot 1.92 ->
-2.26 at kappa 0.5), position-histogram targets that restore the border band's orientations (laminae
-worst 0.130 -> 0.116 only).
-
-Tileable outputs: ``periodic=True`` (see :mod:`synth.pixel.synthesis`). The toroidal output of the
-paper wraps every neighbourhood, yet its causal scan ends at the bottom and right borders, which a
-2 x 2 tiling shows (soot 128 -> 128, seed 1, :func:`synth.evaluate.tile_seam` ratio 1.42, ranks
-0.99 / 0.97); with ``periodic`` the first pass also compares the synthesized first rows and columns
-across those borders and the refinement passes compare the full square in random order (seed 1:
-ratio 0.91, ranks 0.31 / 0.35; seeds 1-3: mean ratio 1.56 -> 0.93); a causal neighbourhood then
-needs ``iterations >= 2``; with the defaults above a periodic run gets 3 passes unless told (96 x 96
-smooth noise, seeds 1-8: ``tile_seam`` ratio 1.21 -> 0.97, ranks 0.73 -> 0.43). Those figures are
-for the paper's passes (``refinement='same', falloff=0``); the default square refinement already looks
-across the borders (non-periodic, the same noise: ratio 1.18, ranks 0.72).
+SIGGRAPH 2000.
 """
 
 from __future__ import annotations

@@ -30,6 +30,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from synth.analysis.tensor import coherence, structure_direction, structure_tensor
+from synth.colour import LUMA_WEIGHTS
 from synth.errors import InvalidInput, InvalidParameter
 from synth.io import image_to_png_bytes
 from synth.io.atomic import atomic_write_bytes
@@ -129,7 +130,7 @@ def _plane_exemplars(
 def _grey(image: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(image, dtype=np.float64)
     if arr.ndim == 3 and arr.shape[2] == 3:
-        arr = arr @ np.array([0.299, 0.587, 0.114])  # BT.601 luma, as synth.io.load_image
+        arr = arr @ np.asarray(LUMA_WEIGHTS, dtype=np.float64)  # as synth.io.load_image
     if arr.ndim != 2 or min(arr.shape) < 1:
         raise InvalidInput(name, f"expected a grey (H, W) image, got shape {np.shape(image)}")
     if not np.isfinite(arr).all():

@@ -1,92 +1,31 @@
 """Feature-guided patch synthesis (Wu & Yu 2004, section 3): match on features and colour, bend, cut.
 
-The engine behind the ``feature-guided`` method (:mod:`synth.methods.feature_guided`). It composes the
-pieces the project already has; nothing here re-implements them:
+The engine behind the ``feature-guided`` method (:mod:`synth.methods.feature_guided`), composed of the
+project's pieces: (1) the exemplar's feature map (section 2.3, :func:`synth.analysis.features.feature_map`)
+and, with ``rotations``, its seven rotated/reflected copies (:func:`variants`); (2) per patch of the raster
+layout (:class:`synth.patch.layout.PatchLayout`), the colour SSD of the overlap against every exemplar
+patch by FFT (:class:`synth.patch.search.PatchSearcher`), the ``candidates`` best kept; (3) the feature
+matching cost (eq 2, eq 1's ``gdist``, ``tau = 0.1``, ``beta = 0.3``;
+:func:`synth.analysis.feature_matching.matching_costs`), plus ``reverse_weight`` times the reverse term;
+(4) total cost ``w_f F / mean(F) + (1 - w_f) S / mean(S)`` (``w_f = 0.5``, section 3), drawn among
+those within ``1 + tolerance`` of the least; (5) with ``deform``, the warp (section 2.2): gated
+correspondences (eq 1, ``tau = 10``), thinned to spaced controls, a thin-plate spline confined to the
+overlap and a band (:mod:`synth.analysis.warp`); (6) the graph-cut seam (Kwatra et al. 2003).
 
-1. **feature map of the exemplar** (section 2.3; :func:`synth.analysis.features.feature_map`), and,
-   with ``rotations``, the seven other rotated/reflected copies of the exemplar with their feature maps
-   (section 3: "their rotated or reflected versions are also presented as input"; :func:`variants`:
-   the masks are moved with the pixels and the tangents turned, not detected again);
-2. for every patch of the raster layout (:class:`synth.patch.layout.PatchLayout`), the colour SSD of the
-   output's overlap (L-shaped, top or left) against every exemplar patch, by FFT
-   (:class:`synth.patch.search.PatchSearcher`); the ``candidates`` patches of least SSD (over all copies)
-   are the candidates;
-3. the **feature matching cost** (eq 2, with eq 1's ``gdist``, ``tau = 0.1``, ``beta = 0.3``) of each
-   candidate: the output's context features (the synthesized feature map inside the overlap) matched
-   by the bucketed chamfer matching against the candidate's features
-   (:func:`synth.analysis.feature_matching.matching_costs`); with ``reverse_weight > 0`` (not the
-   paper; default 4) plus that weight times the reverse chamfer term, the candidate's overlap
-   features matched against the context's (:func:`~synth.analysis.feature_matching.reverse_costs`);
-4. **total cost** ``= w_f F / mean(F) + (1 - w_f) S / mean(S)`` over the candidates (``w_f = 0.5``,
-   section 3: "the relative weight between feature and SSD color matching costs is always set to
-   0.5"); the patch is drawn uniformly among those within ``(1 + tolerance)`` of the least total
-   (the paper takes the least; the tolerance keeps outputs of different seeds different, as in
-   quilting);
-5. with ``deform``, the **warp** (section 2.2): one-to-one correspondences context feature ->
-   patch feature in the overlap (``W'_f``, eq 1 with ``tau = 10``;
-   :func:`synth.analysis.feature_matching.feature_correspondences`), kept only where the tangents
-   agree within ``max_angle`` and reduced to their displacement across the feature
-   (``normal_only``), thinned to control points ``warp_spacing`` px apart carrying the median
-   displacement around them (:func:`~synth.analysis.feature_matching.thin_correspondences`); a
-   thin-plate spline through them with the bottom and right borders fixed, Shepard's method when
-   the spline fails, its displacement confined to the overlap and a ``warp_band`` px band beyond
-   it (:func:`synth.analysis.warp.band_falloff`, :func:`synth.analysis.warp.warp_coordinates`);
-   the patch is resampled from the exemplar copy around it (cubic, clipped to the four pixels
-   around each source; pixels the warp leaves in place are copied), its features with it
-   (nearest);
-6. **merge** along the graph-cut seam over the overlap (Kwatra et al. 2003;
-   :func:`synth.patch.graphcut.graph_cut_mask`); the output's colour, feature map and patch labels
-   take the patch where the cut says so.
-
-Choices where the paper is silent, and departures
--------------------------------------------------
-- **Normalisation of the two costs.** The paper mixes the feature cost (pixels) and the colour SSD
-  with equal weights without saying how they are made comparable. Here each is divided by its mean
-  over the candidates, so that ``w_f = 0.5`` means "equal relative importance". A term that is the
-  same for every candidate (e.g. no features anywhere) then weighs nothing; a term whose mean is 0
-  is 0.
-- **Candidates** come from the colour SSD (the ``candidates`` best), and the feature cost re-ranks
-  them; the paper evaluates both costs at every translation. Measured in docs/feature-guided.md.
-- **Output feature map**: the synthesized one (section 3: "generates a new texture and its feature
-  map simultaneously"): each patch's features (warped with it) are pasted where its pixels are.
-- **The reverse chamfer term** (``reverse_weight``, 4 here; 0 is the paper's eq 2; the method picks
-  4 or 0 from the exemplar's coherence, :func:`synth.methods.feature_guided.reverse_weight_for`). Eq 2 only
-  asks how near each context feature lies to a candidate feature. Adding the other direction (the
-  symmetric chamfer distance) brings the fringes of soot outputs back to the exemplar's mean length
-  (weight 4: 19.9 px against 19.1 with eq 2 alone and 20.0 in the exemplar, seeds 0-29) with the
-  same tortuosity, but soot breaks slightly more features at the seams (1.07 vs 1.04, seeds 0-9;
-  the other exemplars level); over 30 seeds the fringes are then closer to the exemplar's than
-  quilting's on both measures, which eq 2 alone is not (docs/feature-guided.md).
-- **Correspondences farther apart than ``max_shift`` px are dropped** (the paper keeps all): a context
-  feature with no patch feature nearby has nothing to meet, and pulling a far one across the overlap
-  bends the patch more than the paper's "small amount of deformation".
-- A warp whose backward map folds (non-positive Jacobian determinant, Shepard's method under large
-  displacements) is not applied; the unwarped patch is used (``stats['warps']['folded']``).
-- **The warp, as the paper gives it, damaged the patches here** (docs/feature-guided.md, "the
-  paper's warp"): every context feature pixel was a control point, so the spline interpolated the
-  one-pixel jitter of two independently thinned feature maps (neighbouring pairs displaced by 0
-  and 1 px) and rippled; pairs from the adjacent tangent buckets bent features onto crossing ones;
-  the nearest pixel slid pairs along their features; the displacement, held only at the far
-  borders, spread over the whole patch and bent straight features far from any seam; bilinear
-  resampling at sub-pixel offsets blurred fine fringes. Hence, each measured there: the tangent
-  gate (``max_angle``, 30 degrees), the normal component (``normal_only``), the spaced controls
-  with median displacements (``warp_spacing``, 3 px: the largest single gain), the band
-  (``warp_band``, 4 px; 8, 16 and the whole patch were worse on brick), warps that move nothing
-  by ``min_shift`` (0.5 px) skipped (``stats['warps']['small']``), and cubic resampling.
-  Tried and not kept: spline smoothing (no gain over spaced controls), a ramp from the fixed
-  borders, local chamfer registration of the displacements (worse alignment than the gated pairs).
-- Warped patches are resampled from the exemplar copy around the patch (not only the patch), so that
-  pixels the warp pulls in from outside the patch are real texture; at the exemplar's border the
-  nearest border pixel is used.
+Choices where the paper is silent, and departures (reasons and figures: docs/feature-guided.md and
+docs/design.md, "the feature-guided engine"):
+- each cost divided by its mean over the candidates, so ``w_f = 0.5`` means equal importance;
+- candidates from the colour SSD, re-ranked by the feature cost (the paper: both at every translation);
+- the output's feature map is the synthesized one; the reverse chamfer term (``reverse_weight``);
+- correspondences beyond ``max_shift`` dropped; folding warps not applied;
+- the warp: tangent gate, normal component, spaced median controls, a band, cubic resampling from the
+  exemplar copy around the patch.
 
 References
 ----------
-Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM Transactions on Graphics
-23(3) (Proc. SIGGRAPH 2004), pp. 364-367 (sections 2.1-2.3 and 3; eqs 1-2).
-V. Kwatra, A. Schödl, I. Essa, G. Turk, A. Bobick, "Graphcut textures: image and video synthesis using
-graph cuts", ACM TOG 22(3), 2003, pp. 277-286 (the seam).
-A. A. Efros, W. T. Freeman, "Image quilting for texture synthesis and transfer", SIGGRAPH 2001 (the
-raster layout, the overlap SSD and the tolerance).
+Q. Wu, Y. Yu, "Feature matching and deformation for texture synthesis", ACM TOG 23(3), 2004, pp. 364-367.
+V. Kwatra et al., "Graphcut textures: image and video synthesis using graph cuts", ACM TOG 22(3), 2003.
+A. A. Efros, W. T. Freeman, "Image quilting for texture synthesis and transfer", SIGGRAPH 2001.
 """
 
 from __future__ import annotations

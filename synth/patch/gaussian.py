@@ -1,46 +1,29 @@
 """Locally Gaussian patch models (Raad, Desolneux & Morel 2015, sec. 2): LG, CLG and RCLG.
 
-A patch ``p`` (all pixels and channels stacked in one vector of length ``D = w^2 C``) splits into its
-overlap part ``Mp`` (``k`` values, known: ``y0``) and the rest ``Sp`` (eq. 2). Its model is learnt from the
-``N`` exemplar patches nearest on the overlap (eq. 1): ``mu = mean(p_i)``, ``Sigma = A A^T`` with
-``A = (P - mu) / sqrt(N)`` the ``D x N`` centred patch matrix, and ``G = Sigma + sigma^2 I``.
+A patch ``p`` (all pixels and channels stacked, length ``D = w^2 C``) splits into its overlap part
+``Mp`` (``k`` values, known: ``y0``) and the rest ``Sp`` (eq. 2). Its model is learnt from the ``N``
+exemplar patches nearest on the overlap (eq. 1): ``mu = mean(p_i)``, ``Sigma = A A^T`` with
+``A = (P - mu) / sqrt(N)``, and ``G = Sigma + sigma^2 I``.
 
-- **LG** (Raad et al. 2014): a draw ``mu + A z``, ``z ~ N(0, I_N)``, exactly ``N(mu, Sigma)``; the overlap is
-  ignored (the method stitches it afterwards).
+- **LG** (Raad et al. 2014): a draw ``mu + A z``, ``z ~ N(0, I_N)``; the overlap is ignored.
 - **CLG** (eq. 4): ``x1 = mu1 + G12 G22^-1 (y0 - mu2)``, ``x2 = y0``.
 - **RCLG** (eq. 7): ``p = (theta^2 G^-1 + M^T M)^-1 (M^T y0 + theta^2 G^-1 mu)``, the minimiser of eq. 5.
 
-Everything is solved in the ``N``-dimensional span of the neighbours. Eq. 7 is the posterior mean of ``p``
-observed through ``y0 = Mp + n``, ``n ~ N(0, theta^2 I_k)``, so by the matrix inversion lemma
-``p = mu + G M^T (M G M^T + theta^2 I)^-1 (y0 - mu2)``; with ``G22 = A2 A2^T + sigma^2 I`` and Woodbury /
-the push-through identity ``A2^T (A2 A2^T + lam I)^-1 = (A2^T A2 + lam I_N)^-1 A2^T``,
-``lam = sigma^2 + theta^2``, ``c = (A2^T A2 + lam I_N)^-1 A2^T (y0 - mu2)`` (one ``N x N`` Cholesky):
+Everything is solved in the ``N``-dimensional span of the neighbours: by the matrix inversion lemma and
+the push-through identity, with ``lam = sigma^2 + theta^2`` and ``c = (A2^T A2 + lam I_N)^-1 A2^T (y0 - mu2)``
+(one ``N x N`` Cholesky),
 
-    x1 = mu1 + A1 c,       x2 = y0 - (theta^2 / lam) (y0 - mu2 - A2 c).
+    x1 = mu1 + A1 c,       x2 = y0 - (theta^2 / lam) (y0 - mu2 - A2 c);
 
-``theta = 0`` gives CLG exactly (``x2 = y0``; eq. 4 with ``lam = sigma^2``); ``theta -> inf`` gives
-``p -> mu``. A patch costs ``O(N^2 k + N D)``, never ``O(D^3)``, and no matrix is inverted explicitly.
+``theta = 0`` gives CLG exactly, ``theta -> inf`` gives ``mu``. A patch costs ``O(N^2 k + N D)``.
 
-Beyond the paper (its sec. 3.1 suggests it: "sample a patch from [the RCLG law] instead of taking the
-most probable one"), :func:`rclg_draw` draws from the conditional law by Matheron's rule: a prior draw
-``p' = mu + A z`` and observation noise ``theta n`` are corrected by the same linear map as the mean,
-``p = p' + G M^T (M G M^T + theta^2 I)^-1 (y0 - M p' - theta n)``. The ``sigma^2 I`` part of the prior is not
-drawn (it would only add white pixel noise of standard deviation ``sigma``), so the draw lies in the
-neighbours' span; it is exact for the model ``N(mu, Sigma)`` observed with the regularised gain.
-
-Also beyond the paper, :func:`rclg_neighbour` is Matheron's rule applied to a draw from the *empirical*
-law of the neighbours instead of their Gaussian: one neighbour ``p_j``, drawn uniformly, corrected by the
-same gain, ``p = p_j + G M^T (M G M^T + theta^2 I)^-1 (y0 - M p_j)`` (the analysis of one member of an
-ensemble Kalman filter, Evensen 1994, without perturbed observations). With ``k >> N`` overlap values the
-correction pins the member to the overlap and, like the mean, averages the neighbours' structure beyond it;
-so the correction is tapered with the distance from the overlap (:func:`localisation_taper`), the ensemble
-Kalman filter's covariance localisation (Houtekamer & Mitchell 2001): from ``N`` samples the covariance
-between an overlap pixel and a far pixel is poorly estimated, and it carries the other neighbours'
-structure there. Near the overlap the patch is the corrected member, far from it the neighbour itself.
-
-Also beyond the paper, for the wrapped patches of a periodic layout (known along two opposite borders):
-:func:`mend_inner_edges` re-solves a conditional patch's new part so that it meets its known part without
-a jump (a discrete Poisson equation, as in Pérez, Gangnet & Blake, "Poisson image editing", SIGGRAPH 2003).
+Beyond the paper (derivations and reasons: docs/design.md, "locally Gaussian patch models"):
+- :func:`rclg_draw`: a draw from the conditional law by Matheron's rule (its sec. 3.1 suggests it);
+- :func:`rclg_neighbour`: Matheron's rule on one neighbour drawn uniformly (an ensemble Kalman filter's
+  analysis, Evensen 1994), tapered away from the overlap (:func:`localisation_taper`, Houtekamer &
+  Mitchell 2001);
+- :func:`mend_inner_edges`: a two-sided patch's new part re-solved to meet its known part (a discrete
+  Poisson equation, Pérez, Gangnet & Blake 2003).
 """
 
 from __future__ import annotations

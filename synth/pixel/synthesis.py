@@ -1,64 +1,30 @@
 """Multi-resolution, pixel-by-pixel synthesis of a *source map* (Wei & Levoy 2000, generalised).
 
-Every pixel-based method here is this one loop with different features: the synthesized output
-is represented by its source map (for each output position, the exemplar position it copies), so
-that grey, colour and tensor-valued images, and images guided by a fixed field, share one engine.
+Every pixel-based method here is this one loop with different features: the output is represented by
+its source map (for each output position, the exemplar position it copies), so that grey, colour and
+tensor-valued images, and images guided by a fixed field, share one engine. For each pyramid level,
+coarsest first: initialise the source map (random exemplar positions at the top, the parent's sources
+upsampled below), then run ``iterations`` passes over a scan order, each position taking the exemplar
+position whose neighbourhood is closest (:mod:`synth.kernels.pixel_search`: the distance and the
+search). The output's borders wrap (toroidal); exemplar neighbourhoods lie fully inside the exemplar.
 
-For each pyramid level, coarsest first: initialise the source map (random exemplar positions at
-the top, the parent's sources upsampled below), then run ``iterations`` passes over a scan order,
-each position taking the exemplar position whose neighbourhood is closest (see
-:mod:`synth.kernels.pixel_search` for the distance and the search). The output's borders wrap
-(toroidal output); exemplar neighbourhoods lie fully inside the exemplar.
+Weights (Akl 2014, eq 13): the pixel part (same and parent level) and the guidance part of a
+neighbourhood are each divided by their *typical* size (the mean distance between random exemplar
+positions under their metric, times the number of positions compared) before ``p`` and ``1 - p``
+weigh them, so that ``p = 0.5`` counts both parts equally whatever the units.
 
-Weights: the pixel part (same level and parent level) and the guidance part of a neighbourhood
-are each divided by their *typical* size (the mean distance between random exemplar positions under
-their metric, times the number of positions compared) before ``p`` and ``1 - p`` weight them, so
-that ``p = 0.5`` means "both parts count equally" whatever the units (Akl 2014, eq 13).
+Departures from Wei & Levoy, each with its figures in docs/pixel.md:
+- the first pass leaves a level's not-yet-synthesized positions out of the comparison (not noise);
+- the fast search is k-coherence (Tong et al. 2002), measured against the exact search;
+- ``SearchSettings.falloff``: the same-level neighbourhood weighed by a Gaussian (Efros & Leung 1999);
+- ``refine_square``: refinement passes compare the full square in a random order;
+- ``SearchSettings.periodic``: tileable outputs (the first pass compares every synthesized neighbour,
+  refinement passes the whole square, every neighbour proposes candidates).
 
-Departures from Wei & Levoy: in the first pass the not-yet-synthesized positions of the same
-level are left out of the comparison instead of being compared as initial noise (so a causal
-neighbourhood never reads an unsynthesized pixel); the fast search is k-coherence (Tong et al.
-2002), measured against the exact search in ``benchmarks/bench_synthesis.py``.
-
-Options of issue 13 (the defaults of ``wei-levoy`` and ``tensor-constrained``, measured there):
-``SearchSettings.falloff`` weighs the same-level neighbourhood by a Gaussian (Efros & Leung 1999,
-sigma = falloff x side, mean weight 1 so that eq 13's normalisation holds) and sums it nearest first;
-``refine_square`` makes the refinement passes compare the full square (of ``refine_size``) in a random
-order with every neighbour proposing candidates, what ``periodic`` already did.
-
-Tileable outputs (``SearchSettings.periodic``). Wrapped neighbourhoods alone do not make an output
-tile: a causal scan ends at the bottom and right borders, and its last rows and columns, matched only
-against what lies above and to the left, never meet the first ones they touch across the border.
-Wei & Levoy's toroidal output left that closure to chance: on the HRTEM soot crop (128 -> 128, seed
-1) the border of a 2 x 2 tiling stands out of every line of pixel pairs inside
-(:func:`synth.evaluate.tile_seam`: ratio 1.42, ranks 0.99 / 0.97). With ``periodic=True``:
-
-- the first pass compares every *already synthesized* position of the square neighbourhood: with
-  a lexicographic scan that is the causal L-shape (the same entries, in the same order, so the same
-  distances), plus, near the bottom and right borders, the first rows and columns across them, which
-  the causal neighbourhood of a torus holds;
-- the refinement passes (2, 3, ...) compare the whole square in a random order: in a
-  lexicographic refinement pass the last rows are again matched last, and with histogram matching
-  (whose free labels run out as a pass advances) the texture grows busier toward the pass's end,
-  which leaves a step at the border; one pass cannot close the borders, so a causal neighbourhood
-  needs two or more (the methods' parameters refuse fewer);
-- in every pass, every neighbour within the candidate radius proposes its source (k-coherence), not
-  only the causal ones: across the borders the first rows and columns propose their continuations
-  (and elsewhere, in the first pass, the not yet synthesized neighbours their initial sources);
-- the weights of eq 13 count the positions a pass compares (the same normalisation).
-
-Measured (``tile_seam`` of 96 x 96 outputs of the soot crop, defaults, seeds 0-9, mean ratio and
-rows / cols ranks; non-periodic -> periodic): wei-levoy 1.66, 0.98 / 0.90 -> 0.99, 0.44 / 0.53 (its
-square neighbourhood, which already tiles: 1.05, 0.57 / 0.57); tensor-constrained 1.21, 0.66 / 0.63
--> 0.98, 0.60 / 0.40; arbitrary-shape on a tileable wave constraint 1.36, 0.53 / 0.87 -> 1.00,
-0.42 / 0.59. A square neighbourhood with its default random scan keeps its search unchanged.
-
-What remains of a causal first pass: histogram matching makes its texture busier from the top rows
-to the bottom ones (line energy about 0.8 to 1.1 of the mean), a gradual change, not a step at the
-border; and on a strongly periodic exemplar (straight fringes) whose period does not divide the
-output, the phase mismatch that a torus must hold somewhere gathers where the scan closes, at the
-borders (fringes 64 -> 96, arbitrary-shape with 7 x 7 neighbourhoods: mean ratio 1.33 over seeds
-1-3, 1.23 with 4 passes, 0.90 with a square neighbourhood; with its default 13 x 13: 1.04).
+References
+----------
+L.-Y. Wei, M. Levoy, "Fast texture synthesis using tree-structured vector quantization", SIGGRAPH 2000.
+X. Tong et al., "Synthesis of bidirectional texture functions on arbitrary surfaces", SIGGRAPH 2002.
 """
 
 from __future__ import annotations
@@ -87,7 +53,6 @@ from synth.kernels.pixel_search import (
     candidate_capacity,
     position_distance,
     synthesize_chunk,
-    synthesize_chunk_reference,
 )
 
 __all__ = [
@@ -520,7 +485,6 @@ def synthesize_source_map(
     progress: ProgressFn | None = None,
     stage: str = "synthesis",
     span: tuple[float, float] = (0.0, 1.0),
-    reference: bool = False,
     ex_masks: Sequence[np.ndarray] | None = None,
     on_level_done: Callable[[int, dict], None] | None = None,
     histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
@@ -543,8 +507,6 @@ def synthesize_source_map(
     seed : int
     progress : callable (stage, fraction), optional
         Called about 64 times per pass with the overall fraction inside ``span``; may raise to cancel.
-    reference : bool
-        Run the plain NumPy reference instead of the numba kernel (tests only: slow).
     ex_masks : list of ndarray (h_l, w_l) bool, finest first, optional
         Exemplar positions that may be copied, per level (besides the neighbourhood-fits rectangle).
         Masked positions' neighbourhoods must lie inside the array; the caller guarantees they are
@@ -576,7 +538,6 @@ def synthesize_source_map(
         cand_offs = np.ascontiguousarray(
             cand_offs[(cand_offs[:, 0] < 0) | ((cand_offs[:, 0] == 0) & (cand_offs[:, 1] <= 0))]
         )
-    chunk_fn = synthesize_chunk_reference if reference else synthesize_chunk
     work = [settings.iterations * h * w for h, w in out_shapes]
     total_work = float(sum(work))
     done_work = 0.0
@@ -722,7 +683,7 @@ def synthesize_source_map(
             label = f"{stage}: level {level + 1}/{levels}, pass {it + 1}/{settings.iterations}"
             for start in range(0, n, step):
                 stop = min(n, start + step)
-                chunk_fn(state, start, stop)
+                synthesize_chunk(state, start, stop)
                 if progress is not None:
                     frac = (done_work + (it * n + stop)) / total_work
                     progress(label, span[0] + (span[1] - span[0]) * frac)

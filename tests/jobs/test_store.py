@@ -167,3 +167,22 @@ def test_a_failed_job_keeps_the_stage_it_failed_in_and_a_cancelled_one_says_canc
         assert store.finish(job_id, token, "failed" if job_id == failed else "cancelled", "why")
     assert store.get(failed).stage == "level 2 of 3" and store.get(failed).state == "failed"
     assert store.get(cancelled).stage == "cancelled"
+
+
+def test_size_is_a_field_of_its_own_and_older_records_move_it_out_of_params(store):
+    job = store.create_job(
+        method="m",
+        params={"levels": 2},
+        size={"width": 16, "height": 8},
+        seed=1,
+        inputs={"exemplar": ("e.png", b"x")},
+        manifest={},
+    )
+    assert job.size == {"width": 16, "height": 8} and job.params == {"levels": 2}
+    with store._connect() as db:  # a record written before the size had its own column
+        db.execute(
+            "UPDATE jobs SET params = ?, size = NULL WHERE id = ?",
+            ('{"levels": 2, "width": 16, "height": 8}', job.id),
+        )
+    older = store.get(job.id)
+    assert older.size == {"width": 16, "height": 8} and older.params == {"levels": 2}

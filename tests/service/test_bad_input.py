@@ -105,6 +105,19 @@ class TestRejected:
         assert r.status_code == 422, r.text
         assert r.json()["field"] == field and words in r.json()["detail"]
 
+    @pytest.mark.parametrize(
+        ("params", "fields", "field", "words"),
+        [
+            ({"width": 64}, {"width": 48}, "width", "given twice"),
+            ({}, {"width": 100000}, "width", "each side must lie in"),
+            ({}, {"height": "tall"}, "height", ""),
+        ],
+    )
+    def test_size_form_fields_are_checked_422(self, embedded, exemplar_png, params, fields, field, words):
+        r = _post(embedded, exemplar_png, method="test-blur", params=params, **fields)
+        assert r.status_code == 422, r.text
+        assert r.json()["field"] == field and words in r.json()["detail"]
+
     def test_params_not_json_422(self, embedded, exemplar_png):
         r = _post(embedded, exemplar_png, method="test-blur", params="{width: 3")
         assert r.status_code == 422 and r.json()["field"] == "params"

@@ -211,3 +211,32 @@ def test_health_and_methods(embedded):
     assert props["steps"]["default"] == 10 and "width" in methods["test-blur"]["size_schema"]["properties"]
     page = httpx.get(embedded.url + "/")
     assert page.status_code == 200 and "texsynth" in page.text
+
+
+def test_size_is_a_field_of_the_job_sent_as_form_fields_or_inside_params(embedded, exemplar_png):
+    """The output size travels in its own fields (``width``/``height``), never inside the job's params;
+    a client of the first API that puts them in ``params`` gets the same job. A sweep may sweep a side."""
+    client = embedded.client()
+    new = client.submit(
+        exemplar_png, method="test-blur", params={"steps": 1, "delay": 0}, size={"width": 40, "height": 32}
+    )
+    old = client.submit(
+        exemplar_png, method="test-blur", params={"steps": 1, "delay": 0, "width": 40, "height": 32}
+    )
+    for job in (new, old):
+        assert job["size"] == {"width": 40, "height": 32} and "width" not in job["params"]
+        done = client.wait(job["id"], timeout=120)
+        assert done["state"] == "succeeded", done["message"]
+        manifest = json.loads(client.artifact(done, "manifest.json"))
+        assert manifest["size"] == {"width": 40, "height": 32} and "width" not in manifest["params"]
+        with Image.open(io.BytesIO(client.artifact(done, "output.png"))) as im:
+            assert im.size == (40, 32)
+    sweep = client.sweep(
+        exemplar_png,
+        {"width": [24, 32]},
+        method="test-blur",
+        params={"steps": 1, "delay": 0},
+        size={"height": 16},
+    )
+    assert sorted(r["width"] for r in sweep["rows"]) == [24, 32] and sweep["size"]["height"] == 16
+    assert {client.job(r["job"])["size"]["height"] for r in sweep["rows"]} == {16}

@@ -111,7 +111,7 @@ def test_run_again_fills_the_form_and_reuses_the_inputs(browser, embedded, two_j
     new_id = page.url.rsplit("/", 1)[1]
     assert new_id != job["id"]
     again = embedded.client().wait(new_id, timeout=60)
-    assert again["params"] == job["params"] and again["seed"] == job["seed"]
+    assert again["params"] == job["params"] and again["size"] == job["size"] and again["seed"] == job["seed"]
     same_input = [httpx.get(embedded.url + j["inputs"]["exemplar"]).content for j in (job, again)]
     assert same_input[0] == same_input[1]
     assert not errors, errors

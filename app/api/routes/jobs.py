@@ -68,20 +68,32 @@ def read_uploads(
 UploadsDep = Annotated[list[Upload], Depends(read_uploads)]
 
 
+def read_size(
+    width: Annotated[int | None, Form(description="output width (pixels); default 128")] = None,
+    height: Annotated[int | None, Form(description="output height (pixels); default 128")] = None,
+    depth: Annotated[int | None, Form(description="output depth (slices), solid methods; default 64")] = None,
+) -> dict[str, int | None]:
+    """The output size's form fields (a FastAPI dependency of the routes that submit jobs). Clients of
+    the first API send the same names inside ``params``; both are accepted."""
+    return {"width": width, "height": height, "depth": depth}
+
+
+SizeDep = Annotated[dict[str, int | None], Depends(read_size)]
+
+
 @router.post("", status_code=202, response_model=JobPublic, responses=_ERRORS)
 def submit_job(
     service: ServiceDep,
     principal: PrincipalDep,
     response: Response,
     uploads: UploadsDep,
+    size: SizeDep,
     method: Annotated[str, Form(min_length=1, description="a method name from GET /api/methods")],
-    params: Annotated[
-        str, Form(description='JSON object: the method\'s parameters and "width"/"height" (and "depth")')
-    ] = "{}",
+    params: Annotated[str, Form(description="JSON object: the method's parameters")] = "{}",
     seed: Annotated[int | None, Form(description="random seed; same inputs + seed = same output")] = None,
 ) -> dict:
     """Validate and queue a synthesis job; ``202`` with the job's URL in ``Location``."""
-    request = service.validate(method, params, seed, uploads)
+    request = service.validate(method, params, seed, uploads, size)
     job = service.submit(request, principal)
     response.headers["Location"] = f"/api/jobs/{job.id}"
     return service.job_public(job)
@@ -172,7 +184,7 @@ def get_slice(service: ServiceDep, principal: PrincipalDep, job_id: str, plane: 
     job = _job(service, job_id, principal)
     if plane not in _PLANE_AXIS:
         raise HTTPException(422, f"plane must be one of {', '.join(_PLANE_AXIS)}, not {plane!r}")
-    if "output.tiff" not in job.artifacts or job.params.get("depth") is None:
+    if "output.tiff" not in job.artifacts or job.size.get("depth") is None:
         raise HTTPException(404, f"job {job_id} has no volume (it is {job.state}; 2-D jobs have no slices)")
     path = service.store.job_dir(job_id) / "out" / "output.tiff"
     volume = _stack(str(path), path.stat().st_mtime_ns)

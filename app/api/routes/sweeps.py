@@ -9,7 +9,7 @@ from typing import Annotated
 from fastapi import APIRouter, Form, HTTPException, Query, Response
 
 from app.api.deps import PrincipalDep, ServiceDep
-from app.api.routes.jobs import _ERRORS, UploadsDep
+from app.api.routes.jobs import _ERRORS, SizeDep, UploadsDep
 from app.schemas import ErrorPublic, SweepPublic
 
 router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
@@ -21,15 +21,17 @@ def submit_sweep(
     principal: PrincipalDep,
     response: Response,
     uploads: UploadsDep,
+    size: SizeDep,
     method: Annotated[str, Form(min_length=1, description="a method name from GET /api/methods")],
     grid: Annotated[
         str, Form(description='JSON: parameter -> list of values, e.g. {"neighbourhood": [5, 9]}')
     ] = "{}",
-    params: Annotated[str, Form(description="JSON: fixed parameters (and width/height) of every run")] = "{}",
+    params: Annotated[str, Form(description="JSON: fixed parameters of every run")] = "{}",
     seed: Annotated[int | None, Form()] = None,
 ) -> dict:
-    """One job per point of ``grid`` (the product of its lists), sharing the inputs and the seed."""
-    request = service.validate(method, params, seed, uploads)
+    """One job per point of ``grid`` (the product of its lists; ``width``/``height``/``depth`` may be
+    swept too), sharing the inputs and the seed."""
+    request = service.validate(method, params, seed, uploads, size)
     sweep_id = service.submit_sweep(request, grid, principal)
     response.headers["Location"] = f"/api/sweeps/{sweep_id}"
     sweep = service.store.get_sweep(sweep_id)

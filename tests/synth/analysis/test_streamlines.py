@@ -1,15 +1,13 @@
-"""Streamlines of an orientation field (synth.analysis.streamlines) and the kernel that follows them to
-the first marked pixel (synth.kernels.streamline_hits), against its plain reference."""
+"""Streamlines of an orientation field (synth.analysis.streamlines)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from synth.analysis.streamlines import trace
-from synth.kernels.streamline_hits import first_hits, first_hits_reference
 
 
-def _ring_direction(shape: tuple[int, int], centre: tuple[float, float]) -> np.ndarray:
+def ring_direction(shape: tuple[int, int], centre: tuple[float, float]) -> np.ndarray:
     """Strand direction of concentric rings (tangent to circles about ``centre``), y up."""
     r, c = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
     gradient = np.arctan2(-(r - centre[0]), c - centre[1])  # radial: the rings' gradient
@@ -29,25 +27,7 @@ def test_trace_follows_a_straight_field_and_keeps_its_sign() -> None:
 def test_trace_turns_with_the_field_around_rings() -> None:
     """A curve along rings stays on its circle (midpoint Runge-Kutta, 1 px steps, a quarter turn)."""
     shape, centre = (64, 64), (31.5, 31.5)
-    pts = trace(_ring_direction(shape, centre), np.array([[31.5, 51.5]]), 30)
+    pts = trace(ring_direction(shape, centre), np.array([[31.5, 51.5]]), 30)
     radius = np.hypot(pts[:, 0, 0] - centre[0], pts[:, 0, 1] - centre[1])
     assert np.abs(radius - 20.0).max() < 0.3
     assert np.hypot(*(pts[-1, 0] - pts[0, 0])) > 25  # it went round, not back and forth
-
-
-def test_first_hits_kernel_matches_the_reference() -> None:
-    shape, centre = (48, 48), (23.5, 23.5)
-    angle = _ring_direction(shape, centre)
-    label = np.full(shape, -1, np.int64)
-    label[2:22, 23:25] = 0  # a cut across the rings (upwards from the centre)
-    label[26:46, 10:12] = 1
-    c2, s2 = np.cos(2 * angle), np.sin(2 * angle)
-    steps, hit, _, _ = first_hits(c2, s2, label, 40, 1.0, False)
-    ref_steps, ref_hit = first_hits_reference(angle, label, 40)
-    assert (steps >= 0).mean() > 0.5
-    same = steps == ref_steps
-    assert same.mean() > 0.99, same.mean()
-    both = same & (steps >= 0)
-    err = np.abs(hit[both] - ref_hit[both]).max(axis=-1)
-    assert (err < 1e-6).mean() > 0.95  # equal, but for curves passing next to the image's border, where
-    assert err.max() < 0.01  # the kernel clamps the field and the reference mirrors it

@@ -11,11 +11,8 @@ from synth import Cancelled, InvalidParameter
 from synth.analysis.tensor import structure_tensor
 from synth.api import synthesize
 from synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.grid.scan import SCAN_ORDERS, hilbert_points, morton_points, scan_order
+from synth.grid.scan import scan_order
 from synth.kernels.pixel_search import (
-    METRIC_NORM,
-    METRIC_SO,
     METRIC_SSD,
     Candidates,
     ClassWindow,
@@ -26,177 +23,19 @@ from synth.kernels.pixel_search import (
     synthesize_chunk,
 )
 from synth.pixel.synthesis import (
-    CandidateWindow,
     Guidance,
     SearchSettings,
     entry_weights,
     synthesize_source_map,
     tensor_features,
 )
-
-
-def _rng_image(shape: tuple[int, ...], seed: int = 0) -> np.ndarray:
-    from scipy.ndimage import gaussian_filter
-
-    noise = np.random.default_rng(seed).random(shape).astype(np.float32)
-    smooth = gaussian_filter(noise, (1.0, 1.0) + (0,) * (len(shape) - 2))
-    return ((smooth - smooth.min()) / (smooth.max() - smooth.min())).astype(np.float32)
-
-
-# ---------------------------------------------------------------- neighbourhoods and scan orders
-
-
-def test_causal_neighbourhood_is_the_raster_past() -> None:
-    offs = neighbourhood_offsets(5, "causal")
-    assert len(offs) == 12
-    assert all(dy < 0 or (dy == 0 and dx < 0) for dy, dx in offs)
-    assert len(neighbourhood_offsets(5, "square")) == 24
-    assert [0, 0] not in neighbourhood_offsets(5, "square").tolist()
-    assert [0, 0] in parent_offsets(3).tolist() and len(parent_offsets(3)) == 9
-
-
-@pytest.mark.parametrize("size", [4, 1, 0])
-def test_neighbourhood_size_must_be_odd_and_at_least_3(size: int) -> None:
-    with pytest.raises(InvalidParameter, match="neighbourhood_size"):
-        neighbourhood_offsets(size)
-
-
-@pytest.mark.parametrize("kind", SCAN_ORDERS)
-@pytest.mark.parametrize("shape", [(7, 5), (8, 8), (3, 4, 5)])
-def test_every_scan_order_visits_every_position_once(kind: str, shape: tuple[int, ...]) -> None:
-    order = scan_order(shape, kind, np.random.default_rng(0))
-    assert sorted(order.tolist()) == list(range(int(np.prod(shape))))
-
-
-@pytest.mark.parametrize("ndim", [2, 3])
-def test_hilbert_curve_moves_one_step_at_a_time(ndim: int) -> None:
-    pts = hilbert_points(ndim, 3)
-    assert np.abs(np.diff(pts, axis=0)).sum(axis=1).tolist() == [1] * (len(pts) - 1)
-
-
-def test_morton_order_known_answer() -> None:
-    assert morton_points(2, 1).tolist() == [[0, 0], [0, 1], [1, 0], [1, 1]]
-    assert scan_order((4, 4), "morton")[:8].tolist() == [0, 1, 4, 5, 2, 3, 6, 7]
-
-
-def test_random_scan_needs_a_generator() -> None:
-    with pytest.raises(InvalidParameter, match="seeded"):
-        scan_order((4, 4), "random")
-
-
-# ---------------------------------------------------------------- kernel against reference
-
-
-def _run_both(**kwargs: object) -> None:
-    fast, fast_report = synthesize_source_map(**kwargs)  # type: ignore[arg-type]
-    slow, slow_report = synthesize_source_map(reference=True, **kwargs)  # type: ignore[arg-type]
-    for a, b in zip(fast, slow, strict=True):
-        np.testing.assert_array_equal(a, b)
-    for key, value in fast_report.mean_best_distance.items():
-        assert value == pytest.approx(slow_report.mean_best_distance[key], rel=1e-4, abs=1e-7)
-
-
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-@pytest.mark.parametrize("shape", ["causal", "square"])
-@pytest.mark.parametrize("channels", [1, 3])
-def test_kernel_matches_reference_on_pixels(search: str, shape: str, channels: int) -> None:
-    ex = _rng_image((22, 20, channels), seed=channels)
-    levels = 2
-    settings = SearchSettings(
-        size=5,
-        shape=shape,
-        scan="lexicographic" if shape == "causal" else "random",
-        levels=levels,
-        parent_size=3,
-        iterations=2,
-        search=search,
-        k=3,
-        random_candidates=2,
-    )
-    _run_both(
-        ex_levels=gaussian_pyramid(ex, levels),
-        out_shapes=level_shapes((14, 12), levels),
-        settings=settings,
-        seed=3,
-    )
-
-
-@pytest.mark.parametrize(
-    ("metric", "code"), [("ED", METRIC_SSD), ("FN", METRIC_NORM), ("LE", METRIC_NORM), ("SO", METRIC_SO)]
+from tests.synth.search_cases import (
+    _rng_image,
+    _run_both,
+    _striped_window,
+    _tiled_window,
+    synthesize_with_reference,
 )
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-def test_kernel_matches_reference_with_tensor_guidance(metric: str, code: int, search: str) -> None:
-    ex = _rng_image((24, 24), seed=5)
-    feats, got = tensor_features(structure_tensor(ex), metric)  # type: ignore[arg-type]
-    assert got == code
-    out_tensors = structure_tensor(_rng_image((12, 12), seed=6), mode="wrap")
-    guidance = Guidance(
-        out_levels=[tensor_features(out_tensors, metric)[0]],
-        ex_levels=[feats],
-        metric=code,
-        weight=0.4,
-        size=3,
-        hint_levels=[np.random.default_rng(1).integers(2, 20, (12, 12, 2))],
-    )
-    settings = SearchSettings(
-        size=5, levels=1, iterations=2, search=search, k=2, random_candidates=1, alpha=0.3
-    )
-    _run_both(
-        ex_levels=[ex[..., None]], out_shapes=[(12, 12)], settings=settings, p=0.6, guidance=guidance, seed=2
-    )
-
-
-@pytest.mark.parametrize("metric", ["SO", "LE"])
-def test_kernel_matches_reference_when_synthesizing_tensors(metric: str) -> None:
-    feats, code = tensor_features(structure_tensor(_rng_image((20, 20), seed=8)), metric)  # type: ignore[arg-type]
-    settings = SearchSettings(size=3, levels=2, parent_size=3, iterations=1, search="exact")
-    _run_both(
-        ex_levels=gaussian_pyramid(feats, 2),
-        out_shapes=level_shapes((10, 10), 2),
-        settings=settings,
-        metric=code,
-        seed=4,
-    )
-
-
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-def test_how_a_pass_is_chunked_changes_no_byte(monkeypatch: pytest.MonkeyPatch, search: str) -> None:
-    """The kernel keeps nothing between calls but the state (its scratch buffers and the flat copy of
-    the exemplar features are rebuilt per call): one call per pass and one call per position give the
-    same bytes, with all three parts of a distance (pixels, parent level, SO tensor guidance) and
-    histogram matching on."""
-    import synth.pixel.synthesis as synthesis
-
-    ex = _rng_image((24, 24), seed=5)
-    ex_tensors = gaussian_pyramid(structure_tensor(ex), 2)
-    out_field = structure_tensor(_rng_image((14, 12), seed=6), mode="wrap")
-    out_tensors = gaussian_pyramid(out_field, 2, mode="wrap")
-    guidance = Guidance(
-        out_levels=[tensor_features(t, "SO")[0] for t in out_tensors],
-        ex_levels=[tensor_features(t, "SO")[0] for t in ex_tensors],
-        metric=METRIC_SO,
-        weight=0.4,
-        size=5,
-    )
-    settings = SearchSettings(
-        size=5, levels=2, parent_size=3, iterations=2, search=search, k=2, histogram_weight=2.0
-    )
-    runs = []
-    for chunks in (1, 10**9):  # one chunk per pass; one position per chunk
-        monkeypatch.setattr(synthesis, "_CHUNKS_PER_PASS", chunks)
-        srcs, report = synthesize_source_map(
-            ex_levels=gaussian_pyramid(ex[..., None], 2),
-            out_shapes=level_shapes((14, 12), 2),
-            settings=settings,
-            p=0.6,
-            guidance=guidance,
-            seed=4,
-        )
-        runs.append((srcs, report.mean_best_distance))
-    for a, b in zip(runs[0][0], runs[1][0], strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert runs[0][1] == runs[1][1]
-
 
 # ---------------------------------------------------------------- option semantics
 
@@ -256,7 +95,9 @@ def test_masked_exemplar_positions_are_never_copied(search: str) -> None:
     settings = SearchSettings(size=3, levels=1, iterations=2, search=search, k=3)
     srcs, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask])
     assert (srcs[0][..., 1] >= 12).all()
-    ref, _ = synthesize_source_map([ex], [(16, 16)], settings, seed=1, ex_masks=[mask], reference=True)
+    ref, _ = synthesize_with_reference(
+        ex_levels=[ex], out_shapes=[(16, 16)], settings=settings, seed=1, ex_masks=[mask]
+    )
     np.testing.assert_array_equal(srcs[0], ref[0])
 
 
@@ -414,29 +255,6 @@ def test_structure_neighbourhood_changes_only_the_structure_stage() -> None:
 # ---------------------------------------------------------------- histogram matching
 
 
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-@pytest.mark.parametrize("labelled", [False, True])
-def test_kernel_matches_reference_with_histogram_matching(search: str, labelled: bool) -> None:
-    ex = _rng_image((22, 20, 1), seed=12)
-    levels = 2
-    settings = SearchSettings(
-        size=5, levels=levels, parent_size=3, iterations=2, search=search, k=2, histogram_weight=3.0
-    )
-    histogram = None
-    if labelled:  # four grey-level bins as labels, wanting equal shares
-        histogram = [
-            (np.minimum((lvl[..., 0] * 4).astype(np.int64), 3), np.full(4, 0.25))
-            for lvl in gaussian_pyramid(ex, levels)
-        ]
-    _run_both(
-        ex_levels=gaussian_pyramid(ex, levels),
-        out_shapes=level_shapes((14, 12), levels),
-        settings=settings,
-        seed=5,
-        histogram=histogram,
-    )
-
-
 def _usage(src: np.ndarray, shape: tuple[int, int], border: int) -> np.ndarray:
     """How often each copyable exemplar position is copied."""
     counts = np.bincount((src[..., 0] * shape[1] + src[..., 1]).ravel(), minlength=shape[0] * shape[1])
@@ -508,28 +326,6 @@ def test_orientation_labels_bin_the_field_and_sum_to_one() -> None:
 # ---------------------------------------------------------------- per-position candidate window
 
 
-def _striped_window(ex_shape: tuple[int, int], out_shape: tuple[int, int], span: int) -> CandidateWindow:
-    """Exemplar columns in 4 classes (stripes of 5), output rows wanting class ``row % 4``."""
-    cls = np.broadcast_to(np.arange(ex_shape[1]) // 5 % 4, ex_shape).copy()
-    cls[:, :5] = -1  # never searched
-    want = np.broadcast_to((np.arange(out_shape[0]) % 4)[:, None], out_shape).copy()
-    return CandidateWindow([cls], [want], period=4, span=span)
-
-
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-@pytest.mark.parametrize("span", [0, 1])
-def test_kernel_matches_reference_with_a_candidate_window(search: str, span: int) -> None:
-    ex = _rng_image((22, 22, 1), seed=14)
-    settings = SearchSettings(size=5, levels=1, iterations=2, search=search, k=2, random_candidates=3)
-    _run_both(
-        ex_levels=[ex],
-        out_shapes=[(12, 10)],
-        settings=settings,
-        seed=6,
-        window=_striped_window((22, 22), (12, 10), span),
-    )
-
-
 def test_candidate_window_restricts_every_copied_position() -> None:
     ex = _rng_image((22, 22, 1), seed=15)
     window = _striped_window((22, 22), (12, 10), 0)
@@ -563,33 +359,6 @@ def test_the_neighbourhood_precheck_fails_exactly_when_the_run_would(side: int) 
 # ---------------------------------------------------------------- transfer between classes
 
 
-def _tiled_window(
-    tile: np.ndarray, n_tiles: int, out_shape: tuple[int, int], period: int
-) -> tuple[np.ndarray, CandidateWindow]:
-    """``n_tiles`` copies of ``tile`` side by side, class = copy; output row ``r`` wants class
-    ``r % n_tiles``; the transfer maps a copy's positions to the tile's own and back."""
-    h, w = tile.shape[:2]
-    ex = np.ascontiguousarray(np.concatenate([tile] * n_tiles, axis=1))
-    cls = np.broadcast_to(np.arange(n_tiles * w) // w, (h, n_tiles * w)).copy()
-    want = np.broadcast_to((np.arange(out_shape[0]) % n_tiles)[:, None], out_shape).copy()
-    to_common = np.zeros((n_tiles, 2, 3))
-    to_common[:, 0, 0] = to_common[:, 1, 1] = 1.0
-    from_common = to_common.copy()
-    to_common[:, 1, 2] = -w * np.arange(n_tiles)
-    from_common[:, 1, 2] = w * np.arange(n_tiles)
-    return ex, CandidateWindow(
-        [cls], [want], period=period, span=0, transfer_levels=[(to_common, from_common)]
-    )
-
-
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-@pytest.mark.parametrize("period", [2, 4])
-def test_kernel_matches_reference_with_a_class_transfer(search: str, period: int) -> None:
-    ex, window = _tiled_window(_rng_image((14, 11, 1), seed=16), 4, (12, 10), period)
-    settings = SearchSettings(size=5, levels=1, iterations=2, search=search, k=2, random_candidates=3)
-    _run_both(ex_levels=[ex], out_shapes=[(12, 10)], settings=settings, seed=7, window=window)
-
-
 def test_class_transfer_continues_coherent_copying_across_classes() -> None:
     """Every output row wants another copy of the same tile: without the transfer the neighbours'
     coherent proposals (from the row above, another copy) are dropped; with it they are moved into the
@@ -613,29 +382,6 @@ def test_class_transfer_continues_coherent_copying_across_classes() -> None:
 
 
 # ---------------------------------------------------------------- falloff and square refinement
-
-
-@pytest.mark.parametrize("search", ["exact", "kcoherence"])
-@pytest.mark.parametrize(
-    "extra",
-    [
-        {"falloff": 0.156},
-        {"refine_square": True, "refine_size": 3},
-        {"falloff": 0.2, "refine_square": True},
-    ],
-)
-def test_kernel_matches_reference_with_falloff_and_square_refinement(search: str, extra: dict) -> None:
-    ex = _rng_image((22, 20, 1), seed=21)
-    levels = 2
-    settings = SearchSettings(
-        size=5, levels=levels, parent_size=3, iterations=2, search=search, k=3, histogram_weight=2.0, **extra
-    )
-    _run_both(
-        ex_levels=gaussian_pyramid(ex, levels),
-        out_shapes=level_shapes((14, 12), levels),
-        settings=settings,
-        seed=7,
-    )
 
 
 def test_entry_weights_are_a_gaussian_of_the_side_with_mean_one() -> None:
@@ -920,10 +666,8 @@ def test_initial_source_map_starts_the_synthesis_and_every_pass_refines() -> Non
     settings = SearchSettings(size=5, shape="square", scan="random", iterations=1, k=2, refine_square=True)
     inner = (slice(4, 20), slice(4, 20))
     kept = []
-    for reference in (False, True):
-        srcs, _ = synthesize_source_map(
-            [ex], [(24, 24)], settings, seed=1, initial=[ident], reference=reference
-        )
+    for run in (synthesize_source_map, synthesize_with_reference):
+        srcs, _ = run(ex_levels=[ex], out_shapes=[(24, 24)], settings=settings, seed=1, initial=[ident])
         kept.append(srcs[0])
         assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() > 0.95
     np.testing.assert_array_equal(kept[0], kept[1])
