@@ -97,7 +97,9 @@ def onion_volume(
     period : float
         Distance between shells, voxels (> 2.5: a fringe needs more than two samples); HRTEM 5-8.
     centres : int, optional
-        Number of onions, their centres uniform in the volume; by default 10 per 128^3 (at least 1).
+        Number of onions, their centres uniform in the volume; by default 80 per 128^3 (at least 1): about
+        ten per 64^3, so that a 64^3 sample's slice statistics are those of the material (an independent
+        64^3 sample scores orientation KL <= 0.06 and fringe KS <= 0.13 against a 128^3 one's slices).
     blur : float
         Standard deviation of the Gaussian blur, voxels (0: none).
     noise : float
@@ -121,7 +123,7 @@ def onion_volume(
     blur = _check_number("blur", blur, 0.0, strict=False, high=16.0)
     noise = _check_number("noise", noise, 0.0, strict=False, high=10.0)
     if centres is None:
-        centres = max(1, round(10 * math.prod(dims) / 128**3))
+        centres = max(1, round(80 * math.prod(dims) / 128**3))
     if isinstance(centres, bool) or not isinstance(centres, int | np.integer) or not 1 <= centres <= 1000:
         raise InvalidParameter("centres", centres, "must be an integer in [1, 1000]")
     rng = np.random.default_rng(seed)
@@ -143,7 +145,7 @@ def turbostratic_volume(
     normal: Sequence[float] = (1.0, 1.0, 1.0),
     *,
     crumple: float = 0.2,
-    correlation: float = 12.0,
+    correlation: float = 8.0,
     blur: float = 0.8,
     noise: float = 0.3,
     seed: int = 0,
@@ -164,7 +166,8 @@ def turbostratic_volume(
         and spacing wander (``|grad phi|`` stays within about ``1 +- crumple``); 0 gives flat sheets.
     correlation : float
         Standard deviation, voxels, of the Gaussian that smooths the displacement's white noise (the
-        size of the crumples), in [1, 64].
+        size of the crumples), in [1, 64]. With 12 a 64^3 sample held too few crumples for its fringe
+        tortuosity to be the material's (KS up to 0.17 against a 128^3 sample's slices; 8: 0.13).
     blur, noise, seed
         As :func:`onion_volume`.
 
