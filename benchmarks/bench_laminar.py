@@ -2,7 +2,8 @@
 
 Run: ``python -m benchmarks.bench_laminar`` (writes docs/laminar.md, docs/laminar-benchmark.json and
 docs/img/laminar-*.png). ``--only NAME`` (repeatable) runs the rows whose key contains NAME and keeps the
-other rows of docs/laminar-benchmark.json; ``--seeds 1`` for a quick look.
+other rows of docs/laminar-benchmark.json; ``--seeds 1`` for a quick look; ``--report`` rewrites
+docs/laminar.md from docs/laminar-benchmark.json without running anything.
 
 1. **The truths** (:mod:`synth.io.laminar`, 128^3, seed 11, defaults: period 6 px, blur 0.8, noise 0.3):
    their mid-slices are the exemplars, the xy one for all planes ("one exemplar") or the three
@@ -170,7 +171,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid synthesis against known laminar answers")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
     parser.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
+    parser.add_argument("--report", action="store_true", help="only rewrite docs/laminar.md from the results")
     args = parser.parse_args(argv)
+    if args.report:
+        (DOCS / "laminar.md").write_text(report(json.loads(RESULTS.read_text())))
+        return 0
     (DOCS / "img").mkdir(parents=True, exist_ok=True)
     seeds = tuple(range(1, args.seeds + 1))
     saved: dict[str, Any] = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
