@@ -272,7 +272,7 @@ measure, the volume's slices against the truth's slices of the same size
 < 0.10, fringe length and tortuosity KS < 0.15, grey KL < 0.05. CPU s is the process CPU time of
 `synth.api.synthesize` (both cores), wall s its wall time, median over the seeds (the first seed of a
 method can include numba's compilation: `solid-chen-wang` 25.6 s CPU for seed 1 against 8.8-9.1 s for
-seeds 2-3 on onions). The machine was shared with four other sessions (load 6-9 on 2 cores): wall
+seeds 2-3 on onions). The machine was shared with four other sessions (load 6-14 on 2 cores): wall
 times are 2-4x the CPU times and say little; CPU times are comparable between rows.
 """
 
@@ -383,6 +383,19 @@ the same flat stack turns away from the exemplar's orientation (orientation KL 0
 32) comes closest of all here: sheets with a gentle wave, coherence 1.03, orientation KL 0.10-0.12,
 tortuosity KS 0.27-0.31 (still too straight), but in 43 s of CPU at 64^3 (target < 20 s). The same method
 that returns noise on the onions makes sheets on the stack: its schedule, not its solver, decides.
+Per plane the picture is the same (`solid-kopf` orientation KL 0.37-0.43, tortuosity KS 0.45-0.56;
+`solid-chen-wang` 0.12-0.14 and 0.26-0.32). At 128^3 `solid-kopf` keeps the orientation better (KL
+0.14-0.18) with the same straight sheets (tortuosity KS 0.44-0.54) and dislocations between them.
+
+**Time** (process CPU, median of seeds): `solid-kopf` 64^3 5.4-6.4 s on onions (2 levels) and 10-13 s on
+the stack (5 levels x 10), 128^3 40 s (onions) and 87-94 s (stack: over the 60 s target);
+`solid-chen-wang` 64^3 9-11 s on onions (3 iterations a level) and 26-43 s on the stack (over the 20 s
+target). CPU time also grows with contention: the per-plane stack rows ran on a quiet machine (wall
+below CPU), the others at load 6-14.
+
+**Targets met by nobody yet**: on onions the only runs above coherence 0.85 (the paper's settings) have
+orientation KL 0.25-1.46 on some axis (stripes), and no run reaches fringe length KS 0.15 on every axis
+(worms too short: 0.22-0.38); on the stack every run makes sheets too straight (tortuosity KS 0.26-0.56).
 """
 
 
