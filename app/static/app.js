@@ -757,10 +757,21 @@ function showFringes(fringes) {
       el("td", { text: fmtNum(fringes.output[k]) }))));
 }
 
+// The exemplar's diagnostics (metrics.exemplar): a plain warning when an exemplar mixes textures.
+function showExemplarWarning(metrics) {
+  const warnings = (metrics && metrics.exemplar && metrics.exemplar.warnings) || [];
+  const box = $("#exemplar-warning");
+  if (!box) return;
+  box.hidden = warnings.length === 0;
+  // "exemplar: The exemplar is not ..." reads as one sentence without its role; per-plane roles stay
+  box.replaceChildren(...warnings.map((w) => el("span", { text: w.replace(/^exemplar: /, "") })));
+}
+
 function showResults(job) {
   const a = job.artifacts;
   const volume = !!job.size.depth;
   $("#results").hidden = false;
+  showExemplarWarning(job.metrics);
   showVolumeViewer(job);
   // A 2-D output, its exemplar and its tensor images go to the viewer; a volume keeps its pictures.
   $("#viewer").hidden = volume || !a["output.png"];

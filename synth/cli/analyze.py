@@ -7,7 +7,8 @@ Writes into ``DIR``:
 - ``composite.png``: HSV, hue = fringe direction, saturation = coherence, value = the image;
 - ``tensor.json``: mean coherence, the dominant orientation in degrees (gradient and fringe
   direction), energy-weighted orientation histograms of both with their bin edges in degrees, the
-  image's shape and the two scales.
+  image's shape and the two scales, and the image's stationarity as an exemplar
+  (:func:`synth.analysis.stationarity.stationarity`; a warning is printed when it is not stationary).
 
 Angles follow ALGORITHMS.md: degrees counter-clockwise from +x with ``y`` up on screen, wrapped to
 ``(-90, 90]``. The gradient direction is across the fringes; the fringe direction, 90 degrees away,
@@ -37,7 +38,8 @@ Structure-tensor analysis of one image (Akl et al. 2014, eqs 1-5). Writes into D
   coherence.png    coherence, grey: 0 black (no orientation), 1 white (perfect fringes)
   orientation.png  fringe direction, cyclic hue palette (legend: strip and half-disc)
   composite.png    hue = fringe direction, saturation = coherence, brightness = image
-  tensor.json      mean coherence, dominant orientation (gradient and fringe), histograms
+  tensor.json      mean coherence, dominant orientation (gradient and fringe), histograms,
+                   stationarity (score <= 1: one texture throughout; else a warning: crop it)
 
 Angles: degrees counter-clockwise from +x, y up on screen, wrapped to (-90, 90].
 The gradient direction runs across fringes; the fringe direction is 90 degrees away.
@@ -146,6 +148,9 @@ def analyze_image(
             "fringe": [float(h) for h in fringe_hist],
         },
     }
+    from synth.analysis.stationarity import exemplar_diagnostics
+
+    summary["stationarity"] = exemplar_diagnostics({"image": image})["stationarity"]["image"]
     return TensorAnalysis(S, coh, tensor.structure_direction(S), summary)
 
 
@@ -188,11 +193,15 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise InvalidParameter("out", str(out), f"cannot write there ({exc.strerror or exc})") from None
     dominant = summary["dominant_orientation_deg"]
+    found = summary["stationarity"]
+    stationary = "" if found.get("score") is None else f", stationarity {found['score']:.2f}"
     print(
         f"{out}: coherence.png, orientation.png, composite.png, tensor.json "
         f"(mean coherence {summary['mean_coherence']:.3f}, fringe direction {dominant['fringe']:.1f} deg, "
-        f"gradient {dominant['gradient']:.1f} deg)"
+        f"gradient {dominant['gradient']:.1f} deg{stationary})"
     )
+    if found.get("warning"):
+        print(f"  warning: {found['warning']}")
     return 0
 
 

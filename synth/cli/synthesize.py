@@ -35,9 +35,10 @@ def parse_size(text: str) -> tuple[int, ...]:
 class _ProgressBar:
     """A one-line progress bar on a terminal; silent otherwise (logs and pipes stay clean)."""
 
-    def __init__(self, stream: Any = sys.stderr) -> None:
-        self.stream = stream
-        self.enabled = hasattr(stream, "isatty") and stream.isatty()
+    def __init__(self, stream: Any = None) -> None:
+        # sys.stderr as it is now, not as it was at import (pytest's capture replaces it per test)
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.start = time.perf_counter()
 
     def __call__(self, stage: str, fraction: float) -> None:
@@ -103,6 +104,12 @@ def _run(args: argparse.Namespace) -> int:
     )
     if summary:
         print("  " + ", ".join(f"{k} {v:.4g}" for k, v in summary.items() if isinstance(v, int | float)))
+    stationarity = outcome.metrics.get("exemplar", {}).get("stationarity", {})
+    scores = [f"{role} {r['score']:.2f}" for role, r in stationarity.items() if r.get("score") is not None]
+    if scores:
+        print("  exemplar stationarity (<= 1: one texture throughout): " + ", ".join(scores))
+    for warning in outcome.metrics.get("exemplar", {}).get("warnings", []):
+        print(f"  warning: {warning.removeprefix('exemplar: ')}")
     return 0
 
 

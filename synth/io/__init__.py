@@ -1,7 +1,8 @@
 """Inputs and outputs: load and validate images and volumes, save PNG and TIFF stacks, write files atomically.
 
 :mod:`synth.io.images` decodes and encodes; :mod:`synth.io.patterns` generates inputs with known orientation
-fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints.
+fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints; :mod:`synth.io.laminar`
+known-answer volumes of HRTEM-like fringes (carbon onions, turbostratic stacks).
 """
 
 from synth.io.atomic import atomic_write_bytes, atomic_write_json

@@ -11,7 +11,9 @@ orthogonal mid-slices beside their exemplars), ``cube.png`` (the block and its c
 mid-slices' ``coherence_{xy,xz,yz}.png`` and ``orientation_{xy,xz,yz}.png``
 (:mod:`synth.output.volume`); its metrics are the multi-2D ones with per-plane exemplars and
 two-point correlations (:func:`synth.evaluate.evaluate_volume`), its plots per plane plus
-``plots/s2.png``. Every file is written atomically.
+``plots/s2.png``. The metrics also carry the exemplars' diagnostics under ``exemplar`` (their
+stationarity and any warning, :func:`synth.analysis.stationarity.exemplar_diagnostics`), which the
+manifest repeats in short (``exemplar_stationarity``). Every file is written atomically.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from synth import __version__
+from synth.analysis.stationarity import exemplar_diagnostics
 from synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from synth.api import Result
 from synth.evaluate.measures import evaluate_pair_fringes, evaluate_volume, to_json_types
@@ -172,6 +175,12 @@ def write_artifacts(
         metrics = to_json_types(evaluate_volume(targets, image, pixel_size=pixel_size))
     else:
         metrics, fringes = evaluate_pair_fringes(exemplar, image)
+    roles = (
+        {f"exemplar_{p}": e for p, e in exemplars.items()}
+        if volume and exemplars is not None
+        else {"exemplar": exemplar}
+    )
+    metrics["exemplar"] = exemplar_diagnostics(roles)
     doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
     atomic_write_json(folder / "metrics.json", doc)
     names.append("metrics.json")
@@ -202,6 +211,10 @@ def write_artifacts(
             else {}
         ),
         "output_shape": list(image.shape),
+        "exemplar_stationarity": {
+            role: {k: v for k, v in report.items() if k in ("score", "stationary", "warning", "note")}
+            for role, report in metrics["exemplar"]["stationarity"].items()
+        },
         "timings": to_json_types(result.timings),
         "versions": versions(),
     }
