@@ -58,11 +58,16 @@ __all__ = [
     "PLANES",
     "PLANE_AXES",
     "WINDOW",
+    "ImageStats",
+    "MeasureSettings",
     "as_grey",
+    "check_values",
+    "compare_stats",
     "evaluate_pair",
     "evaluate_pair_fringes",
     "evaluate_volume",
     "grey_histogram",
+    "image_stats",
     "kl_divergence",
     "moments",
     "to_json_types",
@@ -103,13 +108,13 @@ def as_grey(image: np.ndarray, name: str = "image") -> np.ndarray:
     elif arr.ndim != 2:
         raise InvalidInput(name, f"expected a grey (H, W) or RGB (H, W, 3) image, got shape {arr.shape}")
     arr = arr.astype(np.float64, copy=False)
-    _check_values(arr, name)
+    check_values(arr, name)
     if min(arr.shape) < MIN_SIDE:
         raise InvalidInput(name, f"image of shape {arr.shape} is too small to evaluate (< {MIN_SIDE} px)")
     return arr
 
 
-def _check_values(arr: np.ndarray, name: str) -> None:
+def check_values(arr: np.ndarray, name: str) -> None:
     if arr.size == 0 or not np.isfinite(arr).all():
         raise InvalidInput(name, "is empty or holds NaN/inf values")
     lo, hi = float(arr.min()), float(arr.max())
@@ -190,7 +195,7 @@ def _skew_kurtosis(flat: np.ndarray) -> tuple[float, float]:
 
 
 @dataclass
-class _Settings:
+class MeasureSettings:
     grey_bins: int = GREY_BINS
     orientation_bins: int = ORIENTATION_BINS
     coherence_bins: int = COHERENCE_BINS
@@ -247,7 +252,7 @@ class _Settings:
 
 
 @dataclass
-class _Stats:
+class ImageStats:
     """Poolable statistics of one or more images (sums, counts and samples)."""
 
     grey: np.ndarray
@@ -265,9 +270,9 @@ class _Stats:
     extracted: Fringes | None = None
 
     @staticmethod
-    def pool(items: Iterable[_Stats]) -> _Stats:
+    def pool(items: Iterable[ImageStats]) -> ImageStats:
         items = list(items)
-        return _Stats(
+        return ImageStats(
             grey=np.sum([s.grey for s in items], axis=0),
             orientation=np.sum([s.orientation for s in items], axis=0),
             coherence=np.sum([s.coherence for s in items], axis=0),
@@ -286,7 +291,7 @@ class _Stats:
         return self.tensor_sum / max(self.n_pixels, 1)
 
 
-def _image_stats(grey: np.ndarray, settings: _Settings) -> _Stats:
+def image_stats(grey: np.ndarray, settings: MeasureSettings) -> ImageStats:
     tensors = structure_tensor(grey, settings.sigma_d, settings.sigma_w)
     energy = float((tensors[..., 0] + tensors[..., 2]).sum(dtype=np.float64))
     hist, _ = orientation_histogram(tensors, bins=settings.orientation_bins, weight="energy")
@@ -297,7 +302,7 @@ def _image_stats(grey: np.ndarray, settings: _Settings) -> _Stats:
         lengths, tortuosity, loops = fr.lengths, fr.tortuosity, fr.n_loops
     else:
         fr, lengths, tortuosity, loops = None, np.zeros(0), np.zeros(0), 0
-    return _Stats(
+    return ImageStats(
         grey=grey_histogram(grey, settings.grey_bins),
         orientation=hist * energy,
         coherence=coh_counts.astype(np.float64),
@@ -422,7 +427,7 @@ def _ks_outer_prob_inside(m: int, n: int, g: int, h: int) -> float:
     return a[maxj - minj - 1]
 
 
-def _fringe_block(ref: _Stats, out: _Stats, settings: _Settings) -> dict[str, Any]:
+def _fringe_block(ref: ImageStats, out: ImageStats, settings: MeasureSettings) -> dict[str, Any]:
     min_length = float(settings.fringe_options.get("min_length", MIN_LENGTH))
     longest = max([min_length + 1.0, *(float(s.lengths.max()) for s in (ref, out) if len(s.lengths))])
     length_edges = np.linspace(min_length, longest, LENGTH_BINS + 1)
@@ -432,7 +437,7 @@ def _fringe_block(ref: _Stats, out: _Stats, settings: _Settings) -> dict[str, An
         clipped = np.clip(values, edges[0], edges[-1])
         return np.histogram(clipped, bins=edges)[0].astype(np.float64)
 
-    def side(s: _Stats) -> dict[str, Any]:
+    def side(s: ImageStats) -> dict[str, Any]:
         summary: dict[str, Any] = fringe_summary(s.lengths, s.tortuosity, settings.pixel_size)
         summary["density_per_10k_px"] = _DENSITY_AREA * len(s.lengths) / max(s.fringe_area, 1)
         summary["loops"] = s.n_loops
@@ -461,8 +466,12 @@ def _fringe_block(ref: _Stats, out: _Stats, settings: _Settings) -> dict[str, An
     }
 
 
-def _compare(
-    ref: _Stats, out: _Stats, ref_moments: dict[str, Any], out_moments: dict[str, Any], settings: _Settings
+def compare_stats(
+    ref: ImageStats,
+    out: ImageStats,
+    ref_moments: dict[str, Any],
+    out_moments: dict[str, Any],
+    settings: MeasureSettings,
 ) -> dict[str, Any]:
     eps = settings.epsilon
     ref_mean, out_mean = ref.mean_tensor, out.mean_tensor
@@ -616,7 +625,7 @@ def evaluate_pair(
     >>> m["grey"]["kl"], m["structure"]["orientation_kl"]
     (0.0, 0.0)
     """
-    settings = _Settings(
+    settings = MeasureSettings(
         grey_bins=grey_bins,
         orientation_bins=orientation_bins,
         coherence_bins=coherence_bins,
@@ -639,17 +648,17 @@ def evaluate_pair_fringes(
     ``fringes=False``), so that the fringe overlays (:func:`synth.output.plots.write_plots`) reuse
     them instead of extracting them a second time.
     """
-    settings = _Settings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
+    settings = MeasureSettings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
     return _evaluate_pair(exemplar, output, settings)
 
 
 def _evaluate_pair(
-    exemplar: np.ndarray, output: np.ndarray, settings: _Settings
+    exemplar: np.ndarray, output: np.ndarray, settings: MeasureSettings
 ) -> tuple[dict[str, Any], dict[str, Fringes]]:
     ex = as_grey(exemplar, "exemplar")
     out = as_grey(output, "output")
-    ex_stats, out_stats = _image_stats(ex, settings), _image_stats(out, settings)
-    block = _compare(ex_stats, out_stats, moments(ex), moments(out), settings)
+    ex_stats, out_stats = image_stats(ex, settings), image_stats(out, settings)
+    block = compare_stats(ex_stats, out_stats, moments(ex), moments(out), settings)
     result = {
         "kind": "pair",
         "settings": settings.record(),
@@ -840,7 +849,7 @@ def evaluate_volume(
     exemplars took 3.2 s with fringes and about 1 s without on an idle core of the project's machine
     (6.3 s and 2.2 s with the two cores shared five ways); ``S2`` itself takes under 0.1 s.
     """
-    settings = _Settings(
+    settings = MeasureSettings(
         grey_bins=grey_bins,
         orientation_bins=orientation_bins,
         coherence_bins=coherence_bins,
@@ -865,32 +874,32 @@ def evaluate_volume(
     if vol.ndim != 3:
         raise InvalidInput("volume", f"expected a grey (D, H, W) volume, got shape {vol.shape}")
     vol = vol.astype(np.float64, copy=False)
-    _check_values(vol, "volume")
+    check_values(vol, "volume")
     if min(vol.shape) < MIN_SIDE:
         raise InvalidInput(
             "volume", f"volume of shape {vol.shape} is too small to evaluate (< {MIN_SIDE} voxels)"
         )
 
     # one exemplar's statistics are computed once, however many planes it serves
-    ref_stats: dict[int, _Stats] = {}
+    ref_stats: dict[int, ImageStats] = {}
     ref_moments: dict[int, dict[str, Any]] = {}
     for ex in planes.values():
         if id(ex) not in ref_stats:
-            ref_stats[id(ex)], ref_moments[id(ex)] = _image_stats(ex, settings), moments(ex)
+            ref_stats[id(ex)], ref_moments[id(ex)] = image_stats(ex, settings), moments(ex)
     # with every slice taken, each axis pools every voxel once: the moments are the volume's
     volume_moments = moments(vol) if slice_step == 1 else None
     per_axis: dict[str, Any] = {}
-    pooled_axes: list[_Stats] = []
+    pooled_axes: list[ImageStats] = []
     values_axes: list[np.ndarray] = []
     for axis in axes:
         ex = planes[PLANES[axis]]
         ref = ref_stats[id(ex)]
         slices = np.moveaxis(vol, axis, 0)[::slice_step]
-        slice_stats = [_image_stats(s, settings) for s in slices]
-        pooled = _Stats.pool(slice_stats)
+        slice_stats = [image_stats(s, settings) for s in slices]
+        pooled = ImageStats.pool(slice_stats)
         slice_moments = [moments(s) for s in slices]
         pooled_moments = volume_moments if volume_moments is not None else moments(slices)
-        block = _compare(ref, pooled, ref_moments[id(ex)], pooled_moments, settings)
+        block = compare_stats(ref, pooled, ref_moments[id(ex)], pooled_moments, settings)
         block["plane"] = PLANES[axis]
         block["slices"] = {
             "count": len(slice_stats),
@@ -911,9 +920,11 @@ def evaluate_volume(
         overall_ref, overall_ref_moments = ref_stats[id(one)], ref_moments[id(one)]
     else:
         used = [planes[PLANES[a]] for a in axes]
-        overall_ref = _Stats.pool(ref_stats[id(ex)] for ex in used)
+        overall_ref = ImageStats.pool(ref_stats[id(ex)] for ex in used)
         overall_ref_moments = moments(np.concatenate([ex.ravel() for ex in used]))
-    overall = _compare(overall_ref, _Stats.pool(pooled_axes), overall_ref_moments, overall_moments, settings)
+    overall = compare_stats(
+        overall_ref, ImageStats.pool(pooled_axes), overall_ref_moments, overall_moments, settings
+    )
     summary = dict(overall["summary"])
     record = {**settings.record(), "axes": list(axes), "slice_step": int(slice_step), "s2": None}
     result: dict[str, Any] = {"kind": "volume", "settings": record, "isotropic": isotropic}

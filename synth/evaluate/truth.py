@@ -28,11 +28,11 @@ import numpy as np
 from synth.errors import InvalidInput, InvalidParameter
 from synth.evaluate.measures import (
     PLANES,
-    _check_values,
-    _compare,
-    _image_stats,
-    _Settings,
-    _Stats,
+    ImageStats,
+    MeasureSettings,
+    check_values,
+    compare_stats,
+    image_stats,
     moments,
     to_json_types,
 )
@@ -46,8 +46,8 @@ class TruthSlices:
 
     block: tuple[int, int, int]
     axes: tuple[int, ...]
-    settings: _Settings
-    stats: dict[int, _Stats]
+    settings: MeasureSettings
+    stats: dict[int, ImageStats]
     moments: dict[str, Any]
     blocks: int
 
@@ -59,7 +59,7 @@ def _volume(array: np.ndarray, name: str) -> np.ndarray:
             name, f"expected a grey (D, H, W) volume with every side >= 8, got shape {vol.shape}"
         )
     vol = vol.astype(np.float64, copy=False)
-    _check_values(vol, name)
+    check_values(vol, name)
     return vol
 
 
@@ -102,7 +102,7 @@ def truth_slices(
     if not (isinstance(slice_step, int | np.integer) and slice_step >= 1):
         raise InvalidParameter("slice_step", slice_step, "must be a positive integer")
     axes = _axes(axes)
-    settings = _Settings(fringes=fringes, fringe_options=dict(fringe_options or {}))
+    settings = MeasureSettings(fringes=fringes, fringe_options=dict(fringe_options or {}))
     counts = [n // b for n, b in zip(vol.shape, shape, strict=True)]
     cubes = [
         vol[
@@ -113,8 +113,8 @@ def truth_slices(
         for i, j, k in np.ndindex(*counts)
     ]
     stats = {
-        axis: _Stats.pool(
-            _image_stats(s, settings) for cube in cubes for s in np.moveaxis(cube, axis, 0)[::slice_step]
+        axis: ImageStats.pool(
+            image_stats(s, settings) for cube in cubes for s in np.moveaxis(cube, axis, 0)[::slice_step]
         )
         for axis in axes
     }
@@ -146,8 +146,8 @@ def evaluate_against_truth(reference: TruthSlices | np.ndarray, volume: np.ndarr
     out_moments = moments(vol)
     per_axis: dict[str, Any] = {}
     for axis in ref.axes:
-        pooled = _Stats.pool(_image_stats(s, ref.settings) for s in np.moveaxis(vol, axis, 0))
-        block = _compare(ref.stats[axis], pooled, ref.moments, out_moments, ref.settings)
+        pooled = ImageStats.pool(image_stats(s, ref.settings) for s in np.moveaxis(vol, axis, 0))
+        block = compare_stats(ref.stats[axis], pooled, ref.moments, out_moments, ref.settings)
         coh = block["structure"]["coherence_mean"]
         block["summary"]["coherence_ratio"] = coh["output"] / coh["exemplar"] if coh["exemplar"] else None
         std = block["moments"]
