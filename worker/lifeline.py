@@ -35,6 +35,8 @@ __all__ = ["STOP_SIGNALS", "ShutdownGuard", "children"]
 STOP_SIGNALS = frozenset({signal.SIGTERM, signal.SIGINT, signal.SIGQUIT})
 #: Exit status of a worker ended by the guard (Celery's hard shutdown uses the same).
 EXIT_STATUS = 1
+#: Seconds the hard exit waits for its SIGKILLed pool children to be gone.
+REAP_SECONDS = 2.0
 
 
 def children(pid: int) -> list[int]:
@@ -134,10 +136,28 @@ class ShutdownGuard:
             words = threading.Thread(target=self.last_words, name="texsynth-last-words", daemon=True)
             words.start()
             words.join(1.0)  # a busy database must not hold the exit up
-        for child in children(os.getpid()):
+        killed = children(os.getpid())
+        for child in killed:
             with contextlib.suppress(OSError):
                 os.kill(child, signal.SIGKILL)
+        _reap(killed, REAP_SECONDS)  # so nothing of the worker is left when its exit is seen
         os._exit(EXIT_STATUS)
+
+
+def _reap(pids: list[int], seconds: float) -> None:
+    """Wait (at most ``seconds``) until the SIGKILLed children ``pids`` are gone, reaping them."""
+    deadline = time.monotonic() + seconds
+    pending = set(pids)
+    while pending and time.monotonic() < deadline:
+        for pid in list(pending):
+            try:
+                done, _ = os.waitpid(pid, os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere (Celery's pool) or never ours
+                done = pid
+            if done:
+                pending.discard(pid)
+        if pending:
+            time.sleep(0.01)
 
 
 def _say(message: str) -> None:
