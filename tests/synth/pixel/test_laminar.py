@@ -80,19 +80,20 @@ def test_auto_starts_laminar_only_for_one_laminar_exemplar_on_three_planes() -> 
 @pytest.mark.parametrize("method", ["solid-kopf", "solid-chen-wang"])
 def test_laminar_start_makes_slices_as_coherent_as_the_exemplar(method: str) -> None:
     """32^3 from nested shells: the random start gives a labyrinth (coherence well below the exemplar's),
-    the laminar start sheets (the issue's 0.85-1.15 band); both seeded, the same bytes twice."""
+    the laminar start sheets (the issue's 0.85-1.15 band); seeded: the same bytes twice."""
     ex = _shells()
     params = {"iterations": 1, "coarse_iterations": 2} if method == "solid-chen-wang" else {"iterations": 2}
     coh = {}
     for structure in ("none", "laminar"):
-        runs = [
-            synthesize(method, ex, size=(32, 32, 32), seed=1, params={**params, "structure": structure})
-            for _ in range(2)
-        ]
-        assert runs[0].image.tobytes() == runs[1].image.tobytes()
-        assert runs[0].stats["laminar_start"] == (structure == "laminar")
-        vol = runs[0].image
+        run = synthesize(method, ex, size=(32, 32, 32), seed=1, params={**params, "structure": structure})
+        assert run.stats["laminar_start"] == (structure == "laminar")
+        if structure == "laminar":
+            again = synthesize(
+                method, ex, size=(32, 32, 32), seed=1, params={**params, "structure": structure}
+            )
+            assert run.image.tobytes() == again.image.tobytes()
+        vol = run.image
         coh[structure] = np.mean([mean_coherence(np.take(vol, k, axis=a)) for a in range(3) for k in (8, 24)])
     ratio = {k: v / mean_coherence(ex) for k, v in coh.items()}
-    assert ratio["laminar"] > 0.85
-    assert ratio["laminar"] > ratio["none"] + 0.05
+    assert ratio["laminar"] > 0.85, ratio
+    assert ratio["laminar"] > ratio["none"] + 0.05, ratio
