@@ -362,6 +362,7 @@ those two targets sit at the sampling noise at 64^3.
 | onion truth | sheets alone (no texture stage) | | 1 | 1.07-1.09 | 0.10-0.21 | 0.19-0.33 | 0.09-0.34 | 0.00 | |
 | onion truth | `solid-chen-wang` | paper (random) | 1 | 0.74-0.79 | 0.04-0.06 | 0.40-0.45 | 0.09-0.13 | 0.01 | 61.4 |
 | onion truth | `solid-chen-wang` | laminar (auto) | 1-3 | 0.89-0.98 | 0.03-0.14 | 0.19-0.36 | 0.09-0.19 | 0.01 | 40.5-42.5 |
+| onion truth | `solid-chen-wang` | laminar, 10 coarse iterations (not 60) | 1 | 0.91-0.94 | 0.14-0.19 | 0.17-0.29 | 0.07-0.09 | 0.01 | 28.4 |
 | onion truth, 128^3 | `solid-kopf` | laminar (auto) | 1 | 1.04-1.06 | 0.01-0.03 | 0.05-0.11 | 0.12-0.31 | 0.00 | 87.8 |
 | real onion crop | `solid-kopf` | paper (auto: not laminar) | 1 | 0.75-0.76 | 0.08-0.10 | 0.14-0.19 | 0.46-0.49 | 0.00 | 5.6 |
 | real onion crop | `solid-kopf` | laminar (forced) | 1 | 1.02-1.03 | 0.09-0.16 | 0.11-0.13 | 0.14-0.22 | 0.00 | 5.3 |
@@ -370,6 +371,9 @@ those two targets sit at the sampling noise at 64^3.
 | real onion crop | `solid-chen-wang` | laminar (forced) | 1 | 0.94-0.95 | 0.07-0.09 | 0.12-0.15 | 0.25-0.29 | 0.07-0.08 | 10.5 |
 | soot 128 | `solid-kopf` | laminar (forced; auto does not) | 1 | 1.38-1.39 | 0.10-0.16 | 0.25-0.28 | 0.22-0.24 | 0.00 | 5.5 |
 
+Means over axes and seeds 1-3 (worst): `solid-kopf` paper start coherence ratio 0.81 (0.78), orientation KL
+0.01 (0.02), length KS 0.43 (0.47), tortuosity KS 0.12 (0.14); laminar start 1.02 (0.98), 0.06 (0.14), 0.20
+(0.28), 0.17 (0.27); `solid-chen-wang` laminar start 0.93 (0.89), 0.06 (0.14), 0.28 (0.36), 0.14 (0.19).
 (*) an earlier draw of the sheets (generated at the coarse level instead of subsampled from the finest), seed 1.
 The 128^3 volume is compared with the truth's whole slices; its process took 510 s wall for 87.8 s CPU at load
 13 (the paper start's 128^3 measured 52 s wall, 82 s CPU in docs/benchmarks.md' conditions): the 60 s target
@@ -394,6 +398,10 @@ The real onion crop (`benchmarks/data/hrtem-onion-128.png` of the patch-laminar 
   not fitted).
 - Larger windows (9, 11: 1.5-2 periods), one level only, and a pull toward the sheets after each step measured
   no better; fewer iterations keep longer fringes but lose the orientation mix.
+- Time: `solid-chen-wang` 64^3 takes 40-43 s CPU with the laminar start (61 s from noise), over the 20 s
+  target: its laminae schedule (60 coarse iterations, 10 at the finest level) was made to anneal laminae out of
+  noise; 10 coarse iterations from the sheets save a third (28 s) but lose the orientation mix (KL 0.14-0.19),
+  so the schedule is kept. `solid-kopf` 64^3: 11-13 s CPU per whole process, compilation included.
 - The real crop (coherence 0.52) is not laminar by the 0.75 threshold, and neither coherence at any window
   (0.48-0.55 against soot's 0.31-0.51) nor fringe lengths (median 16 px against soot's 14-16) tell it from
   soot, so `'auto'` does not start it laminar; `structure='laminar'` does. Forced on soot, the sheets are far
