@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage as ndi
 
 from synth.analysis.tensor import mean_coherence
 from synth.api import synthesize
@@ -32,6 +33,18 @@ def test_dominant_period_of_noisy_gratings(period: float) -> None:
     r, c = np.mgrid[0:128, 0:128].astype(np.float64)
     img = np.cos(2 * np.pi * (0.6 * r + 0.8 * c) / period) + rng.normal(0, 0.5, r.shape)
     assert dominant_period(img) == pytest.approx(period, rel=0.06)
+
+
+def test_dominant_period_is_not_fooled_by_low_frequency_blotches() -> None:
+    """Rings of 6 px under smooth dark and bright blotches whose mean power per frequency is the higher (the
+    mean power alone answers 32 px here)."""
+    r, c = np.mgrid[0:128, 0:128].astype(np.float64)
+    for seed in (2, 3, 4):
+        rng = np.random.default_rng(seed)
+        blotches = ndi.gaussian_filter(rng.normal(size=r.shape), 4.0, mode="wrap")
+        rings = 0.4 * np.cos(2 * np.pi * np.hypot(r - 64, c - 64) / 6.0)
+        img = rings + 0.3 * blotches / blotches.std() + rng.normal(0, 0.3, r.shape)
+        assert dominant_period(img) == pytest.approx(6.0, rel=0.05)
 
 
 def test_structure_levels_keep_a_period_of_three_pixels() -> None:
