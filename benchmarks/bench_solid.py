@@ -437,6 +437,12 @@ schedule, so 2 levels and 4 iterations) keeps the sheets but smooths the noise a
 ![kopf random](img/solid-laminar-start-truth-onions-kopf-none.png)
 ![kopf laminar](img/solid-laminar-start-truth-onions-kopf.png)
 ![chen-wang laminar](img/solid-laminar-start-truth-onions-chen-wang.png)
+
+Whole processes (`texsynth synthesize ... --no-plots`, the laminar-truth onion exemplar, seed 1, load 3-4 from
+other work on the 2 cores): `solid-kopf` 64^3 7.0 s wall (6.4 s CPU), 128^3 78 s wall (42 s CPU: the wall
+time was waiting for a core; 28-42 s per synthesis in the benchmark), `solid-chen-wang` 64^3 18.3 s wall
+(9.2 s CPU). On our own onion exemplar (coherence 0.82, so the laminae schedules: 10 iterations, Chen-Wang 60
+coarse iterations) the same runs cost 11-13 s and 40-43 s CPU: over the 10 s and 20 s targets.
 """  # noqa: E501 (markdown tables)
 
 
