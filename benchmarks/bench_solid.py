@@ -366,6 +366,7 @@ those two targets sit at the sampling noise at 64^3.
 | onion truth | `solid-chen-wang` | laminar (auto) | 1-3 | 0.89-0.98 | 0.03-0.14 | 0.19-0.36 | 0.09-0.19 | 0.01 | 40.5-42.5 |
 | onion truth | `solid-chen-wang` | laminar, 10 coarse iterations (not 60) | 1 | 0.91-0.94 | 0.14-0.19 | 0.17-0.29 | 0.07-0.09 | 0.01 | 28.4 |
 | onion truth, 128^3 | `solid-kopf` | laminar (auto) | 1 | 1.04-1.06 | 0.01-0.03 | 0.05-0.11 | 0.12-0.31 | 0.00 | 87.8 |
+| turbostratic truth (scratch: signed distance to a level set, period 6, noise 0.15) | `solid-kopf` | paper (random) / laminar (auto) | 1 | 0.83-0.84 / 1.04-1.08 | 0.03-0.16 / 0.04-0.27 | 0.28-0.36 / 0.11-0.14 | 0.05-0.10 / 0.17-0.25 | 0.00 | 11.6 / 10.0 |
 | real onion crop | `solid-kopf` | paper (auto: not laminar) | 1 | 0.75-0.76 | 0.08-0.10 | 0.14-0.19 | 0.46-0.49 | 0.00 | 5.6 |
 | real onion crop | `solid-kopf` | laminar (forced) | 1 | 1.02-1.03 | 0.09-0.16 | 0.11-0.13 | 0.14-0.22 | 0.00 | 5.3 |
 | real onion crop | `solid-kopf` | laminar, 10 iterations | 1 | 0.94-0.95 | 0.06-0.14 | 0.13-0.17 | 0.22-0.24 | 0.00 | 13.1 |
