@@ -25,7 +25,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - parallel passes: the search is Jacobi with the index histogram frozen per call, the solve in blocks;
 - every voxel is searched (Kopf's sparse grid was tried here: worse, no faster);
 - laminae only: orientation re-weighting (``orientation_gain`` 32) and an annealing schedule
-  (60 ``coarse_iterations``, ``solve_radius`` 1).
+  (60 ``coarse_iterations``, ``solve_radius`` 1);
+- the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
+  curved sheets at its period, matched by the tree search, on the levels that keep the period.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -56,6 +59,7 @@ from synth.kernels.solid_kcoherence import (
     solve_pass,
 )
 from synth.methods.common import SolidParams, checked_progress
+from synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
 from synth.pixel.solid import (
     PLANE_AXES,
     LevelStep,
@@ -63,6 +67,7 @@ from synth.pixel.solid import (
     SolidPlan,
     SolidRun,
     exemplar_offsets,
+    gather_plane,
     is_laminar,
     plan_levels,
     plane_offsets,
@@ -110,6 +115,16 @@ class SolidChenWangParams(SolidParams):
         description="Iterations at every level but the finest. None: "
         f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as the "
         "finest level's.",
+    )
+    structure: Literal["auto", "none", "laminar"] = Field(
+        "auto",
+        description="'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+        "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
+        "start; 'auto': laminar when one laminar, isotropic exemplar serves the three planes and "
+        "adapt_to_structure is on.",
+    )
+    structure_length: float = Field(
+        4.0, gt=0.0, le=64.0, description="Curvature length of the laminar start, in periods."
     )
     k: int = Field(15, ge=0, le=32, description="k-coherence: similar exemplar positions per pixel.")
     # Not given by the paper; measured (docs/solid.md, "Departures from the papers").
@@ -273,6 +288,25 @@ def _random_matches(bank: ExemplarBank, shape: tuple[int, int, int], rng: np.ran
     return match
 
 
+def _tree_matches(
+    plan: SolidPlan, level: int, bank: ExemplarBank, volume: np.ndarray, periodic: bool
+) -> np.ndarray:
+    """Each plane's best exemplar match of every voxel's slice neighbourhood in ``volume`` (PCA + k-d
+    tree, :meth:`synth.pixel.solid.ExemplarNeighbourhoods.search`), as global bank indices."""
+    shape = volume.shape
+    vol = np.ascontiguousarray(volume, dtype=np.float32)
+    centres = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), axis=-1).reshape(-1, 3)
+    match = np.empty((3, *shape), dtype=np.int32)
+    chunk = 1 << 16
+    for p, (name, nb) in enumerate(zip(PLANES, plan.neighbourhoods(level), strict=True)):
+        flat = match[p].reshape(-1)
+        for a in range(0, len(centres), chunk):
+            queries = gather_plane(vol, centres[a : a + chunk], name, plan.sizes[level], periodic)
+            pos, _ = nb.search(queries)
+            flat[a : a + chunk] = bank.layout[p, 0] + pos
+    return match
+
+
 def _upsampled_matches(
     coarse: np.ndarray, coarse_bank: ExemplarBank, bank: ExemplarBank, shape: tuple[int, int, int]
 ) -> np.ndarray:
@@ -346,6 +380,8 @@ class _Schedule:
     coarse_iterations: int
     orientation_gain: float
     solve_radius: int
+    laminar_start: bool = False
+    period: float = 0.0
 
     @classmethod
     def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
@@ -368,7 +404,17 @@ class _Schedule:
                 coarse_iterations = LAMINAR_COARSE_ITERATIONS
         if coarse_iterations is None:
             coarse_iterations = iterations
-        return cls(iterations, coarse_iterations, orientation_gain, solve_radius)
+        start = starts_laminar(params.structure, exemplars, params.planes, params.adapt_to_structure)
+        period = (
+            float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
+            if start
+            else 0.0
+        )
+        return cls(iterations, coarse_iterations, orientation_gain, solve_radius, start, period)
+
+    def levels(self, levels: int) -> int:
+        """At most ``levels``; with the laminar start, those that keep a 3 px period."""
+        return structure_levels(self.period, levels) if self.laminar_start else levels
 
     def per_level(self, levels: int) -> list[int]:
         """Iterations of each pyramid level (0 the finest)."""
@@ -404,6 +450,8 @@ class _ChenWangLoop:
             "orientation_gain": schedule.orientation_gain,
             "solve_radius": schedule.solve_radius,
             "sizes": list(plan.sizes),
+            "laminar_start": schedule.laminar_start,
+            "period": schedule.period if schedule.laminar_start else None,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -421,7 +469,19 @@ class _ChenWangLoop:
         geometry = self.geometry = _geometry(
             step.size, bank.layout, params.periodic, params.planes, params.sigma
         )
-        if self.match is None or self.prev_bank is None:
+        start_volume = None
+        if (self.match is None or self.prev_bank is None) and self.schedule.laminar_start:
+            scale = 2.0**step.level
+            start_volume = laminar_volume(
+                shape,
+                self.schedule.period / scale,
+                params.structure_length * self.schedule.period / scale,
+                np.concatenate([plan.exemplars[PLANES.index(p)][step.level].ravel() for p in params.planes]),
+                rng,
+                periodic=params.periodic,
+            )
+            match = _tree_matches(plan, step.level, bank, start_volume, params.periodic)
+        elif self.match is None or self.prev_bank is None:
             match = _random_matches(bank, shape, rng)
         else:
             match = _upsampled_matches(self.match, self.prev_bank, bank, shape)
@@ -431,7 +491,7 @@ class _ChenWangLoop:
         # A copy: a view would alias the plane's matches, and every solve would overwrite them.
         origin = np.array(match[int(np.flatnonzero(geometry.active)[0])], dtype=np.int32)
         self.state = SolidState(
-            volume=np.ascontiguousarray(bank.values[origin]),
+            volume=np.ascontiguousarray(bank.values[origin] if start_volume is None else start_volume),
             match=np.ascontiguousarray(match),
             weight=np.ones((3, *shape), dtype=np.float32),
             origin=origin,
@@ -522,7 +582,8 @@ def synthesize_solid_chen_wang(
         if not np.all(np.isfinite(np.asarray(exemplars[plane]))):
             raise InvalidInput(f"exemplar_{plane}", "contains NaN or infinite values")
     schedule = _Schedule.resolve(params, exemplars)
-    plan = plan_levels(exemplars, tuple(int(s) for s in size), params.levels, params.neighbourhood_size)
+    levels = schedule.levels(params.levels)
+    plan = plan_levels(exemplars, tuple(int(s) for s in size), levels, params.neighbourhood_size)
     run = SolidRun.start(None, exemplars, params.planes, seed, progress or (lambda stage, fraction: None))
     loop = _ChenWangLoop(params, plan, run, schedule)
     run_levels(plan, schedule.per_level(plan.levels), loop)

@@ -24,7 +24,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
   iterations;
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
-- neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored.
+- neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
+- the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
+  curved sheets at its period (the structure first, Akl 2014 in 3D), on the levels that keep the period.
 """
 
 from __future__ import annotations
@@ -52,6 +54,14 @@ from synth.kernels.solid_search import (
     irls_update,
 )
 from synth.methods.common import SolidParams, checked_progress
+from synth.pixel.laminar import (
+    dominant_period,
+    laminar_phase,
+    level_phase,
+    sheets,
+    starts_laminar,
+    structure_levels,
+)
 from synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
@@ -117,6 +127,16 @@ class SolidKopfParams(SolidParams):
         description="Pull each plane's slices toward its exemplar's orientation histogram (eq 4 on "
         "orientations; 0 = off, the paper).",
     )
+    structure: Literal["auto", "none", "laminar"] = Field(
+        "auto",
+        description="'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+        "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
+        "start; 'auto': laminar when one laminar, isotropic exemplar serves the three planes and "
+        "adapt_to_structure is on.",
+    )
+    structure_length: float = Field(
+        4.0, gt=0.0, le=64.0, description="Curvature length of the laminar start, in periods."
+    )
     iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
     scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
     r: float = Field(0.8, gt=0.0, le=2.0, description="Robust norm exponent (IRLS weights ||s-e||^(r-2)).")
@@ -173,8 +193,11 @@ def _orientation_factors(
 class _KopfLoop:
     """Kopf's search and optimisation steps at each level (:func:`synth.pixel.solid.run_levels`)."""
 
-    def __init__(self, params: SolidKopfParams, plan: SolidPlan, run: SolidRun, iterations: int) -> None:
+    def __init__(
+        self, params: SolidKopfParams, plan: SolidPlan, run: SolidRun, iterations: int, period: float = 0.0
+    ) -> None:
         self.params, self.plan, self.run, self.iterations = params, plan, run, iterations
+        self.period = period  # > 0: the laminar start at this period (px of the finest level)
         s = params.stride
         total = sum(
             iterations * np.prod(shape) * (len(run.active) * SEARCH_COST / s**2 + UPDATE_COST)
@@ -183,7 +206,14 @@ class _KopfLoop:
         self.meter = ProgressMeter(run.report, float(total))
         self.timings = {"search": 0.0, "optimisation": 0.0}
         self.energies: dict[str, list[float]] = {}
-        self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
+        if period > 0:
+            length = params.structure_length * period
+            phi = laminar_phase(plan.shapes[0], length, run.rng, periodic=params.periodic)
+            coarsest = plan.levels - 1
+            values = np.concatenate([plan.exemplars[p][-1].ravel() for p in run.active])
+            self.vol = sheets(level_phase(phi, coarsest), period / 2.0**coarsest, values)
+        else:
+            self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
         self.src = np.zeros((3, 0), dtype=np.int64)
         self.pooled = np.zeros(0, dtype=np.float32)
 
@@ -321,6 +351,8 @@ class _KopfLoop:
                 "neighbourhood_sizes": list(self.plan.sizes),
                 "planes": list(params.planes),
                 "contrast_before_remap": contrast,
+                "laminar_start": self.period > 0,
+                "period": self.period if self.period > 0 else None,
             },
         )
 
@@ -340,8 +372,12 @@ def run_solid_kopf(
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
+    period = 0.0
+    if starts_laminar(params.structure, run.views, params.planes, params.adapt_to_structure):
+        period = float(np.mean([dominant_period(image) for image in run.constrained()]))
+        levels = structure_levels(period, levels)
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
-    loop = _KopfLoop(params, plan, run, iterations)
+    loop = _KopfLoop(params, plan, run, iterations, period)
     run_levels(plan, [iterations] * plan.levels, loop)
     return loop.result(seed)
 
