@@ -521,7 +521,7 @@ the modules' docstrings, which keep one line per departure). Unless said otherwi
   levels: 0.11 along z). Soot: orientation KL 0.04/0.05/0.04 with 2 levels against 0.04/0.06/0.02 with
   5, S2 error 0.03-0.04 against 0.06-0.08, so soot loses nothing.
 - **Orientation-usage re-weighting** (`orientation_gain`, default `ORIENTATION_GAIN` = 32; 0 = off, the
-  paper): eq 4 applied to each plane's orientation histogram (`synth.grid.orientation_histogram`: 12
+  paper): eq 4 applied to each plane's orientation histogram (`synth.analysis.orientation_histogram`: 12
   bins, coherence-weighted exemplar shares). Eq 4 on grey levels and the usage re-weighting leave the
   volume free to fall into an orientation attractor. Bent horizontal laminae given for the two views that
   admit a volume (`planes=('xz', 'yz')`) came out as straight laminae tilted about 30 degrees on both
@@ -641,7 +641,7 @@ Measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL,
 - **Orientation re-weighting for laminae** (session 6; `orientation_gain`, `LAMINAR_ORIENTATION_GAIN` when
   the constrained exemplars are laminar and `adapt_to_structure` is on, else off): each search pass
   multiplies a candidate's distance by `1 + gain * excess` of its orientation bin in the plane's current
-  matches (`synth.grid.orientation_histogram`, as `solid-kopf`'s default). Bent laminae on the two views
+  matches (`synth.analysis.orientation_histogram`, as `solid-kopf`'s default). Bent laminae on the two views
   that admit a volume (`planes=('xz', 'yz')`, 64^3 from 128^2, seeds 1-3, orientation KL xz / yz): 0.52 /
   0.43 without, 0.20 / 0.17 with gain 32, 0.21 / 0.18 with 64 (the tilted planar stack is gone; more
   dislocations than Kopf's remain). Per-plane laminae barely move (0.04 / 0.17 / 0.16 against 0.04 / 0.17

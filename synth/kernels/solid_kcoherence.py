@@ -144,7 +144,7 @@ class SolidState(NamedTuple):
     orientation_factor : ndarray (3, N) float64
         Per plane, the factor multiplying the search distance of each exemplar neighbourhood: eq 4's
         re-weighting on the plane's orientation histogram
-        (:func:`synth.grid.orientation_histogram.usage_factors`), frozen during a search pass; ones
+        (:func:`synth.analysis.orientation_histogram.usage_factors`), frozen during a search pass; ones
         switch it off.
     """
 

@@ -15,34 +15,18 @@ A. A. Efros, W. T. Freeman, "Image quilting for texture synthesis and transfer",
 pp. 341-346. V. Kwatra, A. Schödl, I. Essa, G. Turk, A. Bobick, "Graphcut textures: image and video
 synthesis using graph cuts", ACM TOG 22(3), 2003, pp. 277-286 (eq. 1, for ``blending='graph-cut'``).
 
-Departures
-----------
-- The first patch is drawn uniformly among all exemplar patches (the paper: "randomly picked").
-- The output is grown to a whole number of patches and cropped to ``size`` (the paper does not say).
-- ``periodic=True`` (not the paper; a tileable output): the layout is a torus of the output's size
-  (:class:`synth.patch.layout.PatchLayout`, module docstring: the steps are spread evenly when the size
-  is not a multiple of the step, never longer than it), the last patch of a row is searched and cut
-  against its left *and* right overlaps, the last row against its top *and* bottom ones (one cut per
-  strip, :func:`synth.patch.cut.strips_cut_mask`; the graph cut ties every known border to the old side).
-- The overlap error is the SSD summed over colour channels; exemplar patches wrap nowhere (only patches
-  fully inside the exemplar are candidates).
-- ``error='normalised'`` and ``usage_weight=1`` (the defaults; the paper: ``'ssd'`` and 0). The plain
-  overlap SSD of an uncorrelated candidate is about ``n (var_T + var_E)``: the flattest candidates win
-  whenever the overlap cannot be matched exactly (curved 6 px fringes), and on a crop that mixes ordered
-  shells with a disordered core the output settles in the core after the first patch (docs/patch.md).
-  ``'normalised'`` divides the SSD by the template's plus the candidate's own variance on the overlap
-  (:meth:`synth.patch.search.PatchSearcher.normalised_ssd`); alone it swings to the opposite attractor
-  (the exemplar's straightest fringes, whose patches match each other best), so the search error is also
-  multiplied by a usage penalty on over-used exemplar regions (Chen & Wang's position histogram,
-  :class:`synth.patch.usage.UsagePenalty`). Measured in docs/patch.md (seeds 1-3, 128 -> 256, mean): on
-  the onion-core HRTEM crop coherence ratio (``mean_coherence``) 0.78 -> 0.88, contrast 0.82 -> 0.93, grey
-  KL 0.048 -> 0.006, orientation KL 0.16 -> 0.04, exemplar share used 0.67 -> 0.92; brick, grass, gravel
-  and soot: both KLs lower or equal, share used higher; the seam contrast (docs/quality.md) rises on grass
-  (1.16 -> 1.27), falls on brick (1.03 -> 1.01) and soot (1.55 -> 1.49).
-- ``stats['patch_sources']``: the top-left exemplar position of every patch, in layout order;
-  ``stats['coverage']``: :func:`synth.evaluate.coverage.exemplar_coverage` of them.
-- ``copy_map`` (extras) is the verbatim-copy map of :func:`synth.evaluate.copy_map`; ``source_map`` the
-  exemplar position each output pixel was copied from (row, column).
+Departures (docs/patch.md has the measurements)
+-----------------------------------------------
+- The first patch is drawn uniformly among all exemplar patches; the output is grown to whole patches
+  and cropped; the overlap error sums colour channels; only patches inside the exemplar are candidates.
+- ``periodic=True`` (not the paper): a torus layout, the last patch of a row (column) searched and cut
+  against both of its known strips (:func:`synth.patch.cut.strips_cut_mask`).
+- ``error='normalised'``, ``usage_weight=1`` (the paper: ``'ssd'``, 0): the SSD divided by the overlap's
+  plus the candidate's variance (:meth:`synth.patch.search.PatchSearcher.normalised_ssd`) times a penalty
+  on over-used exemplar regions (:class:`synth.patch.usage.UsagePenalty`), so the output does not settle
+  in the exemplar's flattest region (docs/patch.md, section "Laminar HRTEM").
+- ``stats['patch_sources']`` and ``stats['coverage']`` (:func:`synth.evaluate.coverage.exemplar_coverage`);
+  extras ``copy_map`` (:func:`synth.evaluate.copy_map`) and ``source_map`` (row, column per pixel).
 """
 
 from __future__ import annotations

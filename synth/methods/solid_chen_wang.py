@@ -40,14 +40,14 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.api import PLANES, MethodSpec, Progress, Result, register
-from synth.errors import InvalidInput
-from synth.grid.orientation_histogram import (
+from synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
     orientation_labels,
     usage_factors,
 )
+from synth.api import PLANES, MethodSpec, Progress, Result, register
+from synth.errors import InvalidInput
 from synth.grid.scan import ScanOrder, scan_order
 from synth.kernels.solid_kcoherence import (
     ExemplarBank,
@@ -250,7 +250,7 @@ def _geometry(
 
 def _bank_orientations(plan: SolidPlan, level: int, bank: ExemplarBank) -> list[OrientationLabels]:
     """Per plane, the orientation labels of its exemplar at ``level`` indexed by the bank's global
-    positions (:func:`synth.grid.orientation_histogram.orientation_labels`)."""
+    positions (:func:`synth.analysis.orientation_histogram.orientation_labels`)."""
     n = len(bank.values)
     lower = np.zeros(n, dtype=np.int64)
     fraction = np.zeros(n, dtype=np.float64)

@@ -37,13 +37,13 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.grid.orientation_histogram import (
+from synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
     orientation_labels,
     usage_factors,
 )
+from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.scan import ScanOrder, scan_order
 from synth.kernels.solid_search import (
     KCOHERENCE_BLOCKS,
@@ -181,10 +181,10 @@ def _orientation_factors(
     """Weight factors ``1 / (1 + gain * excess)`` of a plane's matched neighbourhoods.
 
     The excess of each bin is the (current, IRLS-weighted) over-use of the orientations of the exemplar
-    pixels the plane's matches are centred on (:func:`synth.grid.orientation_histogram.orientation_excess`),
-    interpolated between a match's two bins: eq 4's histogram matching applied to orientations instead
-    of grey levels, so the slices of each plane are pulled toward their exemplar's orientation
-    distribution (a departure; docs/solid.md).
+    pixels the plane's matches are centred on
+    (:func:`synth.analysis.orientation_histogram.orientation_excess`), interpolated between a match's
+    two bins: eq 4's histogram matching applied to orientations instead of grey levels, so the slices
+    of each plane are pulled toward their exemplar's orientation distribution (a departure; docs/solid.md).
     """
     excess = orientation_excess(labels, match, weight)
     return (1.0 / usage_factors(labels, excess, match, gain)).astype(np.float32)

@@ -283,7 +283,7 @@ def test_position_factors_penalise_only_over_used_exemplar_cells() -> None:
 
 
 def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
-    from synth.grid.orientation_histogram import ORIENTATION_BINS, orientation_labels
+    from synth.analysis.orientation_histogram import ORIENTATION_BINS, orientation_labels
     from synth.io.patterns import grating
 
     horizontal = grating((48, 48), np.pi / 2, 8.0)  # gradient along the rows: orientation pi/2 = -pi/2
@@ -298,7 +298,7 @@ def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
 
 
 def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_centres() -> None:
-    from synth.grid.orientation_histogram import orientation_labels
+    from synth.analysis.orientation_histogram import orientation_labels
     from synth.io.patterns import grating
 
     bins = 12  # centres at -82.5, -67.5, ..., 82.5 degrees
@@ -315,7 +315,7 @@ def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_cen
 
 
 def test_orientation_factors_penalise_only_over_used_orientations() -> None:
-    from synth.grid.orientation_histogram import OrientationLabels
+    from synth.analysis.orientation_histogram import OrientationLabels
     from synth.methods.solid_kopf import _orientation_factors
 
     # exemplar pixels 0, 1 wholly in bin 0; 2, 3 wholly in bin 1 (fraction 0)
@@ -328,7 +328,7 @@ def test_orientation_factors_penalise_only_over_used_orientations() -> None:
 
 
 def test_orientation_factors_interpolate_between_the_two_bins() -> None:
-    from synth.grid.orientation_histogram import OrientationLabels
+    from synth.analysis.orientation_histogram import OrientationLabels
     from synth.methods.solid_kopf import _orientation_factors
 
     # pixel 0 half in bin 0, half in bin 1; pixel 1 wholly in bin 1; pixel 2 wholly in bin 2
