@@ -446,6 +446,47 @@ other work on the 2 cores): `solid-kopf` 64^3 7.0 s wall (6.4 s CPU), 128^3 78 s
 time was waiting for a core; 28-42 s per synthesis in the benchmark), `solid-chen-wang` 64^3 18.3 s wall
 (9.2 s CPU). On our own onion exemplar (coherence 0.82, so the laminae schedules: 10 iterations, Chen-Wang 60
 coarse iterations) the same runs cost 11-13 s and 40-43 s CPU: over the 10 s and 20 s targets.
+
+### The laminar start, chosen by a pilot (real onion crops)
+
+The real onion-particle crops of `benchmarks/data` (mean coherence 0.52 and 0.47) sit below the 0.6 of
+`START_COHERENCE`, beside soot crops (0.39-0.50), and no single measure of the exemplar told them apart
+(coherence at several windows, fringe lengths, the orientation correlation length: soot-256 crops 13-16 px,
+onion crops 16-20 px). So between `PILOT_COHERENCE` (0.45) and 0.6, `structure='auto'` asks a pilot
+(`synth.methods.solid_kopf.laminar_pilot`, both solids): two 32^3 `solid-kopf` volumes, one from each
+start, seed 0, and the start whose slices keep the exemplar's mean coherence better (log ratio) wins. On
+32^3 the pilot points the same way as 64^3 on every crop tried (onion 0.64 / 0.83 at 32^3 against 0.63 /
+1.01 at 64^3, random / laminar; onion-core 0.74 / 0.88 against 0.71 / 1.23; soot-128 0.95 / 1.54 against
+0.96 / 1.51). It costs 1.5-2.8 s of CPU and runs only in that band: soot-128 (0.39) and every exemplar of
+the output fingerprints keep their bytes; soot-256's crops are not isotropic (mean tensor coherence 0.30-0.37
+on two of four) or below 0.45.
+
+64^3 from the real crops, defaults, seed 1, against the exemplar (`synth.evaluate.evaluate_volume`, every
+second slice of each axis, mean of the axes); the 2D reference line is `tensor-constrained` 256^2 of the
+same crop, seed 1:
+
+| crop | method | start | coherence ratio | orientation KL | length KS | tortuosity KS | grey KL | CPU s |
+|---|---|---|---|---|---|---|---|---|
+| onion | `solid-kopf` | random (before) | 0.63 | 0.089 | 0.157 | 0.526 | 0.000 | 4.8 |
+| onion | `solid-kopf` | auto: pilot -> laminar | **1.01** | 0.082 | 0.124 | **0.245** | 0.000 | 7.5 |
+| onion | `solid-chen-wang` | random (before) | 0.57 | 0.169 | 0.154 | 0.548 | 0.140 | 8.8 |
+| onion | `solid-chen-wang` | auto: pilot -> laminar | **0.90** | **0.079** | 0.116 | 0.353 | 0.081 | 10.8 |
+| onion | `tensor-constrained` 2D | | 0.97 | 0.018 | 0.248 | 0.164 | 0.001 | |
+| onion-core | `solid-kopf` | random (before) | 0.71 | 0.045 | 0.079 | 0.413 | 0.000 | 4.7 |
+| onion-core | `solid-kopf` | auto: pilot -> laminar | 1.23 | 0.041 | 0.229 | **0.115** | 0.000 | 8.0 |
+| onion-core | `solid-chen-wang` | random (before) | 0.62 | 0.070 | 0.108 | 0.419 | 0.079 | 8.1 |
+| onion-core | `solid-chen-wang` | auto: pilot -> laminar | **0.99** | **0.033** | 0.117 | **0.214** | **0.044** | 7.7 |
+| onion-core | `tensor-constrained` 2D | | 0.89 | 0.023 | 0.094 | 0.206 | 0.005 | |
+
+CPU times are of `synth.api.synthesize` at load 2-5 and include the pilot. The pictures (xy, xz, yz
+mid-slices; top row the random start, bottom row the default now): the blobs (Kopf) and grainy noise
+(Chen-Wang) become continuous fringes that curve and nest. Left as they are: Kopf on the onion-core crop
+over-orders the fringes (coherence 1.23, longer fringes than the crop: length KS 0.23); Chen-Wang's shells
+carry grain between them and its grey KL on the onion crop (0.08) misses 0.05.
+
+![kopf onion](img/solid-laminar-pilot-kopf-onion.png) ![kopf onion-core](img/solid-laminar-pilot-kopf-onion-core.png)
+
+![chen-wang onion](img/solid-laminar-pilot-chen-wang-onion.png) ![chen-wang onion-core](img/solid-laminar-pilot-chen-wang-onion-core.png)
 """  # noqa: E501 (markdown tables)
 
 

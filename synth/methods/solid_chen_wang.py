@@ -27,7 +27,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - laminae only: orientation re-weighting (``orientation_gain`` 32) and an annealing schedule
   (60 ``coarse_iterations``, ``solve_radius`` 1);
 - the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
-  curved sheets at its period, matched by the tree search, on the levels that keep the period.
+  curved sheets at its period, matched by the tree search, on the levels that keep the period; for
+  short-fringed exemplars solid-kopf's pilot decides (docs/solid.md, "chosen by a pilot").
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ from synth.kernels.solid_kcoherence import (
     solve_pass,
 )
 from synth.methods.common import SolidParams, checked_progress
+from synth.methods.solid_kopf import laminar_pilot
 from synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
 from synth.pixel.solid import (
     PLANE_AXES,
@@ -404,7 +406,9 @@ class _Schedule:
                 coarse_iterations = LAMINAR_COARSE_ITERATIONS
         if coarse_iterations is None:
             coarse_iterations = iterations
-        start = starts_laminar(params.structure, exemplars, params.planes, params.adapt_to_structure)
+        start = starts_laminar(
+            params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
+        )
         period = (
             float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
             if start

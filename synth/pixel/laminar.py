@@ -23,7 +23,7 @@ directional textures for virtual material design", ICIP 2014: the structure laye
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -34,6 +34,7 @@ from synth.colour import to_grey
 __all__ = [
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
+    "PILOT_COHERENCE",
     "START_COHERENCE",
     "dominant_period",
     "laminar_phase",
@@ -54,6 +55,10 @@ ISOTROPIC_MAX = 0.3
 #: ... and laminar enough when its mean coherence reaches this (onion truths 0.68-0.82; the real onion crop
 #: 0.52 and soot 0.39-0.46 stay below: their fringes are short, the sheets would be too long).
 START_COHERENCE = 0.6
+#: Between this and :data:`START_COHERENCE` the exemplar is ambiguous (short fringes: soot crops 0.43-0.50,
+#: real onion crops 0.47-0.52) and a pilot decides (:func:`starts_laminar`); below it (soot-128 0.39, and
+#: no pilot cost) the paper's random start.
+PILOT_COHERENCE = 0.45
 
 
 def mean_tensor_coherence(image: np.ndarray) -> float:
@@ -99,16 +104,22 @@ def dominant_period(image: np.ndarray) -> float:
 
 
 def starts_laminar(
-    structure: str, exemplars: Mapping[str, np.ndarray], planes: Sequence[str], adapt: bool
+    structure: str,
+    exemplars: Mapping[str, np.ndarray],
+    planes: Sequence[str],
+    adapt: bool,
+    pilot: Callable[[np.ndarray], bool] | None = None,
 ) -> bool:
     """Whether a solid synthesis starts from :func:`laminar_volume`.
 
     ``'laminar'``: always; ``'none'``: never; ``'auto'``: when ``adapt`` (the methods'
-    ``adapt_to_structure``) is on and one fringed (:data:`START_COHERENCE`), isotropic
-    (:data:`ISOTROPIC_MAX`) exemplar serves the three planes: the isotropic sheets fit it. Per-plane
-    exemplars, two views and one-orientation laminae describe anisotropic materials that isotropic sheets
-    do not (docs/solid.md), and a weakly oriented exemplar (soot) is not laminar: all keep the paper's
-    random start.
+    ``adapt_to_structure``) is on and one isotropic (:data:`ISOTROPIC_MAX`) exemplar serves the three
+    planes: the isotropic sheets fit it when it is fringed (mean coherence >= :data:`START_COHERENCE`);
+    between :data:`PILOT_COHERENCE` and that, ``pilot(exemplar)`` decides (the methods pass
+    :func:`synth.methods.solid_kopf.laminar_pilot`: a small volume from each start, the one whose slices
+    keep the exemplar's coherence). Per-plane exemplars, two views and one-orientation laminae describe
+    anisotropic materials that isotropic sheets do not (docs/solid.md), and a weakly oriented exemplar
+    (soot-128) is not laminar: all keep the paper's random start.
     """
     if structure in ("laminar", "none"):
         return structure == "laminar"
@@ -116,7 +127,10 @@ def starts_laminar(
     one = len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
     if not (adapt and one) or mean_tensor_coherence(images[0]) >= ISOTROPIC_MAX:
         return False
-    return mean_coherence(images[0]) >= START_COHERENCE
+    fringed = mean_coherence(images[0])
+    if fringed >= START_COHERENCE:
+        return True
+    return fringed >= PILOT_COHERENCE and pilot is not None and pilot(images[0])
 
 
 def structure_levels(period: float, levels: int) -> int:

@@ -110,3 +110,50 @@ def test_laminar_start_makes_slices_as_coherent_as_the_exemplar(method: str) -> 
     ratio = {k: v / mean_coherence(ex) for k, v in coh.items()}
     assert ratio["laminar"] > 0.85, ratio
     assert ratio["laminar"] > ratio["none"] + 0.05, ratio
+
+
+def test_pilot_decides_only_between_the_two_coherence_thresholds() -> None:
+    """Fringed exemplars start laminar without a pilot, weak ones never ask it; in between it decides."""
+    from synth.pixel.laminar import PILOT_COHERENCE, START_COHERENCE
+
+    calls: list[float] = []
+
+    def pilot(answer: bool):
+        def ask(image: np.ndarray) -> bool:
+            calls.append(mean_coherence(image))
+            return answer
+
+        return ask
+
+    planes = ("xy", "xz", "yz")
+    strong = _shells()
+    assert mean_coherence(strong) >= START_COHERENCE
+    assert starts_laminar("auto", dict.fromkeys(planes, strong), planes, True, pilot(False))
+    assert calls == []  # no pilot for a clearly fringed exemplar
+    # shells with more noise: fringed, isotropic, but below the start threshold
+    rng = np.random.default_rng(3)
+    weak = np.clip(strong + rng.normal(0, 0.5, strong.shape), 0, 1).astype(np.float32)
+    weak = ndi.gaussian_filter(weak, 0.7).astype(np.float32)  # coherence about 0.53
+    coherence = mean_coherence(weak)
+    assert PILOT_COHERENCE <= coherence < START_COHERENCE, coherence
+    assert starts_laminar("auto", dict.fromkeys(planes, weak), planes, True, pilot(True))
+    assert not starts_laminar("auto", dict.fromkeys(planes, weak), planes, True, pilot(False))
+    assert len(calls) == 2
+    assert not starts_laminar("auto", dict.fromkeys(planes, weak), planes, True)  # no pilot given: random
+    noise = np.random.default_rng(0).uniform(0, 1, (64, 64)).astype(np.float32)
+    assert not starts_laminar("auto", dict.fromkeys(planes, noise), planes, True, pilot(True))
+    assert len(calls) == 2  # below PILOT_COHERENCE: not asked
+
+
+def test_pilot_picks_the_start_that_keeps_the_exemplar_coherence() -> None:
+    """The real onion crop (short shells, coherence 0.52): the random start gives blobs (0.6x), the
+    pilot picks the sheets; the pilot is seeded (same answer twice)."""
+    from pathlib import Path
+
+    from synth.io import load_image
+    from synth.methods.solid_kopf import laminar_pilot
+
+    crop = Path(__file__).resolve().parents[3] / "benchmarks" / "data" / "hrtem-onion-128.png"
+    exemplar = load_image(crop)
+    assert laminar_pilot(exemplar)
+    assert laminar_pilot(exemplar)
