@@ -5,6 +5,7 @@ fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints.
 """
 
 from synth.io.atomic import atomic_write_bytes, atomic_write_json
+from synth.io.depth import InputBits, array_to_unit, used_bits
 from synth.io.images import (
     FORMAT_FILES,
     SUPPORTED_FORMATS,
@@ -12,6 +13,7 @@ from synth.io.images import (
     LoadMode,
     image_to_png_bytes,
     load_image,
+    load_image_bits,
     load_volume,
     sample_bits,
     save_image,
@@ -38,15 +40,19 @@ __all__ = [
     "MIN_SIDE",
     "SUPPORTED_FORMATS",
     "ImageSource",
+    "InputBits",
     "LoadMode",
+    "array_to_unit",
     "atomic_write_bytes",
     "atomic_write_json",
     "image_to_png_bytes",
     "load_image",
+    "load_image_bits",
     "load_volume",
     "sample_bits",
     "save_image",
     "save_volume",
     "sniff_format",
     "to_uint",
+    "used_bits",
 ]
