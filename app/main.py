@@ -18,13 +18,13 @@ from pathlib import Path
 
 from fastapi import FastAPI
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.openapi.utils import get_openapi
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 from app.api.routes import health, jobs, methods, metrics, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
+from app.openapi import install_openapi
 from app.schemas import ErrorPublic
 from app.security import AuthMiddleware, SameOriginMiddleware, SecurityHeadersMiddleware
 from app.service import Service
@@ -84,8 +84,7 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     install_error_handlers(app)
     for module in (jobs, methods, metrics, sweeps, health):
         app.include_router(module.router)
-    if service.tokens.enabled:
-        _declare_bearer(app)
+    install_openapi(app, service.methods, tokens=service.tokens.enabled)
 
     if SWAGGER_UI is not None:
         app.mount("/docs/assets", StaticFiles(directory=SWAGGER_UI), name="swagger-ui")
@@ -112,29 +111,3 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     return app
-
-
-def _declare_bearer(app: FastAPI) -> None:
-    """With tokens, the schema says so: a bearer scheme on every route but health (Swagger UI's
-    "Authorize" button then sends the token)."""
-
-    def openapi() -> dict:
-        if app.openapi_schema is None:
-            schema = get_openapi(
-                title=app.title, version=app.version, description=app.description, routes=app.routes
-            )
-            schema.setdefault("components", {})["securitySchemes"] = {
-                "bearer": {
-                    "type": "http",
-                    "scheme": "bearer",
-                    "description": "a token of TEXSYNTH_API_TOKENS",
-                }
-            }
-            for path, operations in schema.get("paths", {}).items():
-                if path != "/api/health":
-                    for operation in operations.values():
-                        operation["security"] = [{"bearer": []}]
-            app.openapi_schema = schema
-        return app.openapi_schema
-
-    app.openapi = openapi

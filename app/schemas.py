@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Any
 
 from pydantic import BaseModel, Field
+
+from jobs.store import STATES
 
 __all__ = [
     "DeletedPublic",
     "ErrorPublic",
     "HealthPublic",
     "JobPublic",
+    "JobState",
     "JobsPublic",
     "MethodPublic",
     "MethodsPublic",
@@ -24,11 +28,24 @@ class ErrorPublic(BaseModel):
     error: str = Field(description="machine-readable kind: input_too_large, unsupported_format, ...")
 
 
+class JobState(StrEnum):
+    """A job's state (jobs.store.STATES): queued -> running -> succeeded, failed or cancelled."""
+
+    queued = "queued"
+    running = "running"
+    succeeded = "succeeded"
+    failed = "failed"
+    cancelled = "cancelled"
+
+
+assert tuple(state.value for state in JobState) == STATES, "JobState must list jobs.store.STATES"
+
+
 class JobPublic(BaseModel):
     id: str
     url: str
     page: str
-    state: str = Field(description="queued, running, succeeded, failed or cancelled")
+    state: JobState = Field(description="queued, running, succeeded, failed or cancelled")
     method: str
     params: dict[str, Any] = Field(description="the method's parameters")
     size: dict[str, int] = Field(description="the output's width, height (and depth)")

@@ -6,6 +6,7 @@ worker and the CLI all go through :func:`synthesize`, so they share parameters a
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -15,6 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from synth.errors import InvalidInput, InvalidParameter
+from synth.io.depth import InputBits, array_to_unit
 from synth.io.limits import check_output_size
 from synth.params import MethodParams, validate_params
 
@@ -51,6 +53,7 @@ class Result:
     ``tensor_field`` is the synthesized (or constraint) structure tensor field ``(H, W, 3)`` when the
     method has one. ``extras`` holds further named float images (e.g. ``constraint_orientation``),
     ``stats`` numbers measured during the run (e.g. mean best-match distance per level).
+    ``input_bits`` is the exemplar's bit depth (:class:`synth.io.InputBits`), which writers keep.
     """
 
     method: str
@@ -61,6 +64,7 @@ class Result:
     tensor_field: np.ndarray | None = None
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    input_bits: InputBits | None = None
 
 
 Runner = Callable[..., Result]
@@ -230,7 +234,8 @@ def synthesize(
     method : str
         A name in :func:`available_methods` (``'wei-levoy'``, ``'tensor-constrained'``, ...).
     exemplar : ndarray
-        float32 image in [0, 1], ``(h, w)`` or ``(h, w, 3)`` (see :mod:`synth.io`).
+        ``(h, w)`` or ``(h, w, 3)``: uint8, uint16 (scaled by the bit depth they use: 12-bit data in
+        16 bits by 4095), bool, or float in [0, 1] (:mod:`synth.io.depth`; other floats are an error).
     size : tuple of int, optional
         Output array shape ``(H, W)`` (or ``(D, H, W)`` for volumes). Defaults to the constraint's
         shape when there is one, else twice the exemplar's.
@@ -259,9 +264,12 @@ def synthesize(
     given = {"exemplar"} if exemplar is not None else set()
     given |= {f"exemplar_{plane}" for plane in exemplars or {}}
     check_inputs(spec, given | ({"constraint"} if constraint is not None else set()))
-    planes = _plane_exemplars(exemplar, exemplars) if spec.plane_exemplars else None
-    ex = planes["xy"] if planes is not None else _checked_image("exemplar", exemplar)
-    con = None if constraint is None else np.ascontiguousarray(constraint, dtype=np.float32)
+    planes, depth = _plane_exemplars(exemplar, exemplars) if spec.plane_exemplars else (None, None)
+    if planes is not None:
+        ex = planes["xy"]
+    else:
+        ex, depth = _checked_image("exemplar", exemplar)
+    con = None if constraint is None else array_to_unit(constraint, "constraint")[0]
     out_size = _output_size(size, ex, con, spec.output_ndim, planes, max_output)
     extra: dict[str, Any] = {"exemplars": planes} if planes is not None else {}
     start = time.perf_counter()
@@ -275,33 +283,37 @@ def synthesize(
         **extra,
     )
     result.timings.setdefault("total", time.perf_counter() - start)
-    return result
+    return dataclasses.replace(result, input_bits=depth)
 
 
-def _checked_image(role: str, image: np.ndarray | None) -> np.ndarray:
+def _checked_image(role: str, image: np.ndarray | None) -> tuple[np.ndarray, InputBits]:
+    """``image`` as float32 in [0, 1] by the one dtype policy (:mod:`synth.io.depth`), and its depth."""
     if image is None:
         raise InvalidInput(role, "missing")
     arr = np.asarray(image)
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
         raise InvalidInput(role, f"shape {arr.shape} is neither (H, W) grey nor (H, W, 3) RGB")
-    return np.ascontiguousarray(arr, dtype=np.float32)
+    return array_to_unit(arr, role)
 
 
 def _plane_exemplars(
     exemplar: np.ndarray | None, exemplars: Mapping[str, np.ndarray] | None
-) -> dict[str, np.ndarray]:
-    """The three per-plane exemplars of a solid method (the one exemplar thrice when isotropic)."""
+) -> tuple[dict[str, np.ndarray], InputBits]:
+    """The three per-plane exemplars of a solid method (the one exemplar thrice when isotropic), and
+    the ``xy`` one's depth."""
     if exemplar is not None:
-        return dict.fromkeys(PLANES, _checked_grey("exemplar", exemplar))
+        grey, depth = _checked_grey("exemplar", exemplar)
+        return dict.fromkeys(PLANES, grey), depth
     assert exemplars is not None  # check_inputs saw all three
-    return {plane: _checked_grey(f"exemplar_{plane}", exemplars[plane]) for plane in PLANES}
+    checked = {plane: _checked_grey(f"exemplar_{plane}", exemplars[plane]) for plane in PLANES}
+    return {plane: image for plane, (image, _) in checked.items()}, checked["xy"][1]
 
 
-def _checked_grey(role: str, image: np.ndarray) -> np.ndarray:
-    arr = _checked_image(role, image)
+def _checked_grey(role: str, image: np.ndarray) -> tuple[np.ndarray, InputBits]:
+    arr, depth = _checked_image(role, image)
     if arr.ndim != 2:
         raise InvalidInput(role, f"solid methods take grey exemplars; this one has shape {arr.shape}")
-    return arr
+    return arr, depth
 
 
 def _output_size(

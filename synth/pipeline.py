@@ -19,12 +19,21 @@ import numpy as np
 
 from synth.api import PLANES, Progress, Result, synthesize
 from synth.errors import InvalidInput
-from synth.io import ImageSource, load_image, sample_bits
+from synth.io import ImageSource, InputBits, load_image_bits, sample_bits
 
-__all__ = ["INPUT_ROLES", "Outcome", "load_inputs", "synthesize_to_folder"]
+__all__ = ["INPUT_ROLES", "Inputs", "Outcome", "load_inputs", "synthesize_to_folder"]
 
 #: Every input image a method may declare (``MethodSpec.inputs``).
 INPUT_ROLES: tuple[str, ...] = ("exemplar", *(f"exemplar_{plane}" for plane in PLANES), "constraint")
+
+
+class Inputs(dict[str, np.ndarray]):
+    """Decoded input images by role, and (``bits``) the bit depth each file had (:class:`InputBits`),
+    which :func:`synthesize_to_folder` keeps for the outputs."""
+
+    def __init__(self, images: Mapping[str, np.ndarray], bits: Mapping[str, InputBits]) -> None:
+        super().__init__(images)
+        self.bits = dict(bits)
 
 
 @dataclass(frozen=True)
@@ -36,9 +45,7 @@ class Outcome:
     metrics: dict[str, Any]
 
 
-def load_inputs(
-    sources: Mapping[str, ImageSource], *, max_pixels: int | None = None
-) -> dict[str, np.ndarray]:
+def load_inputs(sources: Mapping[str, ImageSource], *, max_pixels: int | None = None) -> Inputs:
     """Decode every input image (float32 in [0, 1]), checking each before any work starts.
 
     Per-plane exemplars must share one bit depth (an 8-bit and a 16-bit micrograph of one material
@@ -49,10 +56,10 @@ def load_inputs(
     unknown = sorted(set(sources) - set(INPUT_ROLES))
     if unknown:
         raise InvalidInput(unknown[0], f"not an input of any method (inputs: {', '.join(INPUT_ROLES)})")
-    images, bits = {}, {}
+    images, bits, depths = {}, {}, {}
     for role, source in sources.items():
         name = role if isinstance(source, bytes | bytearray | memoryview) else None
-        images[role] = load_image(source, name=name, max_pixels=max_pixels)
+        images[role], depths[role] = load_image_bits(source, name=name, max_pixels=max_pixels)
         if role.startswith("exemplar_"):
             bits[role] = sample_bits(source, name=name)
     if len(set(bits.values())) > 1:
@@ -61,7 +68,7 @@ def load_inputs(
         raise InvalidInput(
             first, f"per-plane exemplars must share one bit depth, so their grey levels compare ({depths})"
         )
-    return images
+    return Inputs(images, depths)
 
 
 def synthesize_to_folder(
@@ -74,7 +81,7 @@ def synthesize_to_folder(
     seed: int = 0,
     progress: Progress | None = None,
     manifest: dict[str, Any] | None = None,
-    bit_depth: int = 8,
+    bit_depth: int | None = None,
     plots: bool = True,
     voxel_size: float | None = None,
     max_output: int | None = None,
@@ -85,6 +92,8 @@ def synthesize_to_folder(
     :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
     the synthesis started and finished (Unix time). A volume is evaluated plane by plane against its
     per-plane exemplars when given; ``voxel_size`` (nm) calibrates its TIFF stack and its fringe lengths.
+    The exemplar's bit depth (from :func:`load_inputs`' ``bits``, else that of the arrays given) is kept
+    for the outputs and said in ``metrics.json`` (``input_bits``).
     """
     from synth.output.artifacts import write_artifacts  # deferred: evaluation and plots only when writing
 
@@ -105,6 +114,8 @@ def synthesize_to_folder(
     if progress is not None:
         progress("writing artifacts", 1.0)
     exemplar = images["exemplar"] if "exemplar" in images else planes["xy"]
+    file_bits = images.bits if isinstance(images, Inputs) else {}
+    input_bits = file_bits.get("exemplar", file_bits.get("exemplar_xy", result.input_bits))
     files, metrics = write_artifacts(
         Path(folder),
         result,
@@ -112,6 +123,7 @@ def synthesize_to_folder(
         images.get("constraint"),
         manifest,
         bit_depth=bit_depth,
+        input_bits=input_bits,
         plots=plots,
         exemplars=planes or None,
         voxel_size=voxel_size,

@@ -68,7 +68,7 @@ def _run(args: argparse.Namespace) -> int:
     if spec is None:
         known = ", ".join(sorted(available_methods()))
         raise InvalidParameter("METHOD", args.method, f"unknown method (known: {known})")
-    if args.bit_depth not in (8, 16):
+    if args.bit_depth is not None and args.bit_depth not in (8, 16):
         raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
     if args.voxel_size is not None and not 0 < args.voxel_size < 1e6:
         raise InvalidParameter("--voxel-size", args.voxel_size, "must be a positive size in nm")
@@ -131,7 +131,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="a method parameter (repeatable)")
-    p.add_argument("--bit-depth", type=int, default=8, help="bit depth of output.png: 8 or 16")
+    p.add_argument(
+        "--bit-depth",
+        type=int,
+        default=None,
+        help="bit depth of output.png: 8 or 16 (default: 16 for 16-bit inputs)",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the comparison plots")
     p.add_argument(
         "--voxel-size",

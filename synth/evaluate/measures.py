@@ -48,7 +48,7 @@ from synth.analysis.tensor import (
 )
 from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
-from synth.io import MIN_SIDE
+from synth.io import MIN_SIDE, array_to_unit
 
 __all__ = [
     "COHERENCE_BINS",
@@ -100,9 +100,12 @@ def as_grey(image: np.ndarray, name: str = "image") -> np.ndarray:
 
     RGB ``(H, W, 3)`` becomes BT.601 luma (:data:`synth.colour.LUMA_WEIGHTS`, as ``load_image``). Raises
     :class:`~synth.errors.InvalidInput` naming ``name`` for other shapes, NaN/inf, values outside
-    [0, 1] or images smaller than 8 px along a side.
+    [0, 1] or images smaller than 8 px along a side. uint8, uint16 and bool arrays are scaled by the
+    one dtype policy (:mod:`synth.io.depth`: by the bit depth their values use), as ``load_image`` does.
     """
     arr = np.asarray(image)
+    if not np.issubdtype(arr.dtype, np.floating):
+        arr = array_to_unit(arr, name)[0]
     if arr.ndim == 3 and arr.shape[-1] == 3:
         arr = to_grey(arr, np.float64)
     elif arr.ndim != 2:
@@ -119,7 +122,11 @@ def check_values(arr: np.ndarray, name: str) -> None:
         raise InvalidInput(name, "is empty or holds NaN/inf values")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < -1e-6 or hi > 1 + 1e-6:
-        raise InvalidInput(name, f"values must lie in [0, 1] (found {lo:.4g} to {hi:.4g})")
+        raise InvalidInput(
+            name,
+            f"values must lie in [0, 1] (found {lo:.4g} to {hi:.4g}): scale float data first, e.g. a / 255 "
+            "for 8-bit values, (a - a.min()) / (a.max() - a.min()) otherwise, or pass the integer array",
+        )
 
 
 def grey_histogram(image: np.ndarray, bins: int = GREY_BINS) -> np.ndarray:

@@ -6,6 +6,7 @@ known-answer volumes of HRTEM-like fringes (carbon onions, turbostratic stacks).
 """
 
 from synth.io.atomic import atomic_write_bytes, atomic_write_json
+from synth.io.depth import InputBits, array_to_unit, used_bits
 from synth.io.images import (
     FORMAT_FILES,
     SUPPORTED_FORMATS,
@@ -13,6 +14,7 @@ from synth.io.images import (
     LoadMode,
     image_to_png_bytes,
     load_image,
+    load_image_bits,
     load_volume,
     sample_bits,
     save_image,
@@ -39,15 +41,19 @@ __all__ = [
     "MIN_SIDE",
     "SUPPORTED_FORMATS",
     "ImageSource",
+    "InputBits",
     "LoadMode",
+    "array_to_unit",
     "atomic_write_bytes",
     "atomic_write_json",
     "image_to_png_bytes",
     "load_image",
+    "load_image_bits",
     "load_volume",
     "sample_bits",
     "save_image",
     "save_volume",
     "sniff_format",
     "to_uint",
+    "used_bits",
 ]

@@ -36,6 +36,7 @@ from PIL import Image, UnidentifiedImageError
 from synth.colour import to_grey
 from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
 from synth.io.atomic import atomic_write_bytes
+from synth.io.depth import FLOAT_BITS, InputBits, unsigned_to_unit
 from synth.io.limits import LIMITS, check_image_shape, resolve_limit
 
 __all__ = [
@@ -45,6 +46,7 @@ __all__ = [
     "LoadMode",
     "image_to_png_bytes",
     "load_image",
+    "load_image_bits",
     "load_volume",
     "sample_bits",
     "save_image",
@@ -160,7 +162,21 @@ def load_image(
 
     A 16-bit-per-channel RGB PNG is read at 8 bits per channel (Pillow's limit); 16-bit grey PNG and
     every TIFF keep their full precision.
+
+    Unsigned integers are scaled by the depth their values use (:mod:`synth.io.depth`): 12-bit data in
+    a 16-bit TIFF (0-4095) by 4095; :func:`load_image_bits` also returns that depth.
     """
+    return load_image_bits(source, name=name, max_pixels=max_pixels, mode=mode)[0]
+
+
+def load_image_bits(
+    source: ImageSource,
+    *,
+    name: str | None = None,
+    max_pixels: int | None = None,
+    mode: LoadMode = "auto",
+) -> tuple[np.ndarray, InputBits]:
+    """:func:`load_image`, and the bits per sample of the file: its container's and those it uses."""
     if mode not in ("auto", "grey", "rgb"):
         raise InvalidParameter("mode", mode, "must be one of 'auto', 'grey', 'rgb'")
     limit = resolve_limit("max_pixels", max_pixels, "max_input_pixels")
@@ -171,12 +187,13 @@ def load_image(
         width, height = struct.unpack(">II", data[16:24])
         if width == 0 or height == 0:
             raise InvalidInput(label, f"the image has zero size ({width}x{height} pixels)")
-    image, fallback_reason = None, None
+    decoded, fallback_reason = None, None
     if sniff_format(data) == "TIFF":
-        image, fallback_reason = _decode_tiff_image(data, label, limit)
-    if image is None:
-        image = _decode_with_pillow(data, label, limit, tiff_reason=fallback_reason)
-    return _apply_mode(image, mode)
+        decoded, fallback_reason = _decode_tiff_image(data, label, limit)
+    if decoded is None:
+        decoded = _decode_with_pillow(data, label, limit, tiff_reason=fallback_reason)
+    image, depth = decoded
+    return _apply_mode(image, mode), depth
 
 
 def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int | None = None) -> np.ndarray:
@@ -263,7 +280,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
         raise
     except _DECODE_ERRORS as exc:
         raise InvalidInput(label, f"corrupt or truncated TIFF data ({_describe(exc)})") from None
-    volume = _to_unit_float(raw, label, bits=bits)
+    volume, _ = _to_unit_float(raw, label, bits=bits)
     if photometric == tifffile.PHOTOMETRIC.MINISWHITE:
         volume = 1.0 - volume
     return np.ascontiguousarray(volume, dtype=np.float32)
@@ -273,7 +290,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
 # saving
 
 
-def to_uint(image: np.ndarray, bit_depth: int = 8) -> np.ndarray:
+def to_uint(image: np.ndarray, bit_depth: int = 8, *, used_bits: int | None = None) -> np.ndarray:
     """Quantise a float image in [0, 1] to unsigned integers: clip, scale, round to nearest.
 
     The one quantisation used by every saver (and by :func:`image_to_png_bytes`).
@@ -284,11 +301,14 @@ def to_uint(image: np.ndarray, bit_depth: int = 8) -> np.ndarray:
         Real-valued array of any shape; values outside [0, 1] are clipped.
     bit_depth : {8, 16}
         8 gives ``uint8`` (0-255), 16 gives ``uint16`` (0-65535).
+    used_bits : int, optional
+        Scale to ``2**used_bits - 1`` within the container instead (12 in a 16-bit container: 0-4095,
+        as the 12-bit camera data it came from, :mod:`synth.io.depth`); at most ``bit_depth``.
 
     Returns
     -------
     numpy.ndarray
-        ``uint8`` or ``uint16`` array of the same shape; ``round(clip(image, 0, 1) * (2**bit_depth - 1))``
+        ``uint8`` or ``uint16`` array of the same shape; ``round(clip(image, 0, 1) * (2**used_bits - 1))``
         with ties to even.
 
     Raises
@@ -311,10 +331,14 @@ def to_uint(image: np.ndarray, bit_depth: int = 8) -> np.ndarray:
     if not np.all(np.isfinite(work)):
         raise InvalidParameter("image", "array with NaN/inf", "must hold finite values to be saved")
     full_scale = np.iinfo(dtype).max
+    if used_bits is not None:
+        if isinstance(used_bits, bool) or not isinstance(used_bits, int) or not 1 <= used_bits <= bit_depth:
+            raise InvalidParameter("used_bits", used_bits, f"must be an integer in [1, {bit_depth}]")
+        full_scale = 2**used_bits - 1
     return np.rint(np.clip(work, 0.0, 1.0) * full_scale).astype(dtype)
 
 
-def image_to_png_bytes(image: np.ndarray, bit_depth: int = 8) -> bytes:
+def image_to_png_bytes(image: np.ndarray, bit_depth: int = 8, *, used_bits: int | None = None) -> bytes:
     """Encode a float image in [0, 1] as PNG bytes (the service's previews and downloads).
 
     Parameters
@@ -324,6 +348,8 @@ def image_to_png_bytes(image: np.ndarray, bit_depth: int = 8) -> bytes:
     bit_depth : {8, 16}
         16 is available for grey images only: Pillow neither writes nor reads 16 bits per RGB
         channel, so 16-bit colour is written as TIFF (:func:`save_image` with a ``.tif`` path).
+    used_bits : int, optional
+        Bits of the container the values use (:func:`to_uint`).
 
     Returns
     -------
@@ -335,7 +361,7 @@ def image_to_png_bytes(image: np.ndarray, bit_depth: int = 8) -> bytes:
     InvalidParameter
         Bad bit depth, bad shape, NaN/inf, or 16-bit RGB.
     """
-    quantised = to_uint(_savable_image(image), bit_depth)
+    quantised = to_uint(_savable_image(image), bit_depth, used_bits=used_bits)
     if bit_depth == 16 and quantised.ndim == 3:
         raise InvalidParameter(
             "bit_depth", bit_depth, "16-bit PNG is for grey images only; save 16-bit RGB as .tif"
@@ -345,7 +371,9 @@ def image_to_png_bytes(image: np.ndarray, bit_depth: int = 8) -> bytes:
     return buf.getvalue()
 
 
-def save_image(path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: int = 8) -> None:
+def save_image(
+    path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: int = 8, used_bits: int | None = None
+) -> None:
     """Write a float image in [0, 1] as PNG (``.png``) or TIFF (``.tif``/``.tiff``), atomically.
 
     Parameters
@@ -357,6 +385,8 @@ def save_image(path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: in
     bit_depth : {8, 16}
         Bits per channel. 16-bit PNG is grey only (see :func:`image_to_png_bytes`); 16-bit TIFF
         takes grey or RGB.
+    used_bits : int, optional
+        Bits of the container the values use (:func:`to_uint`): 12 writes 12-bit data in 16 bits.
 
     Raises
     ------
@@ -371,9 +401,9 @@ def save_image(path: str | os.PathLike[str], image: np.ndarray, *, bit_depth: in
     suffix = target.suffix.lower()
     _uint_dtype(bit_depth)
     if suffix == ".png":
-        data = image_to_png_bytes(image, bit_depth)
+        data = image_to_png_bytes(image, bit_depth, used_bits=used_bits)
     elif suffix in (".tif", ".tiff"):
-        quantised = to_uint(_savable_image(image), bit_depth)
+        quantised = to_uint(_savable_image(image), bit_depth, used_bits=used_bits)
         buf = io.BytesIO()
         tifffile.imwrite(buf, quantised, photometric="rgb" if quantised.ndim == 3 else "minisblack")
         data = buf.getvalue()
@@ -389,6 +419,7 @@ def save_volume(
     bit_depth: int = 16,
     voxel_size: float | tuple[float, float, float] | None = None,
     unit: str = "nm",
+    used_bits: int | None = None,
 ) -> None:
     """Write a ``(D, H, W)`` volume as a multi-page TIFF stack that Fiji opens with D slices, atomically.
 
@@ -408,6 +439,8 @@ def save_volume(
     unit : str
         The length unit of ``voxel_size`` (``'nm'`` by default; ``'um'``, ``'micron'``, ...), stored as
         ImageJ's ``unit``.
+    used_bits : int, optional
+        Bits of the container the values use (:func:`to_uint`).
 
     Raises
     ------
@@ -441,7 +474,12 @@ def save_volume(
     buf = io.BytesIO()
     # photometric explicitly: tifffile would store a stack whose last axis is 3 or 4 long as RGB
     tifffile.imwrite(
-        buf, to_uint(arr, bit_depth), imagej=True, photometric="minisblack", metadata=metadata, **options
+        buf,
+        to_uint(arr, bit_depth, used_bits=used_bits),
+        imagej=True,
+        photometric="minisblack",
+        metadata=metadata,
+        **options,
     )
     atomic_write_bytes(target, buf.getvalue())
 
@@ -544,7 +582,9 @@ def _codec_message(page: tifffile.TiffPage) -> str:
 # helpers: decoding
 
 
-def _decode_tiff_image(data: bytes, label: str, max_pixels: int) -> tuple[np.ndarray | None, str | None]:
+def _decode_tiff_image(
+    data: bytes, label: str, max_pixels: int
+) -> tuple[tuple[np.ndarray, InputBits] | None, str | None]:
     """Decode a 2-D TIFF with tifffile; ``(None, reason)`` means "let Pillow try" (codec, colour model)."""
     try:
         with tifffile.TiffFile(io.BytesIO(data)) as tif:
@@ -588,15 +628,15 @@ def _decode_tiff_image(data: bytes, label: str, max_pixels: int) -> tuple[np.nda
         raise InvalidInput(label, f"corrupt or truncated TIFF data ({_describe(exc)})") from None
     if colormap is not None:
         rgb = np.moveaxis(_colormap_to_unit(colormap)[:, raw], 0, -1)
-        return np.ascontiguousarray(rgb), None
+        return (np.ascontiguousarray(rgb), InputBits(8, 8)), None
     if raw.ndim == 3:
         raw = raw[..., :1] if raw.shape[2] <= 2 else raw[..., :3]  # drop alpha / extra samples
         if raw.shape[2] == 1:
             raw = raw[..., 0]
-    image = _to_unit_float(raw, label, bits=bits)
+    image, depth = _to_unit_float(raw, label, bits=bits)
     if photometric == tifffile.PHOTOMETRIC.MINISWHITE:
         image = 1.0 - image
-    return image, None
+    return (image, depth), None
 
 
 def _colormap_to_unit(colormap: np.ndarray) -> np.ndarray:
@@ -613,7 +653,9 @@ def _colormap_to_unit(colormap: np.ndarray) -> np.ndarray:
     return cmap.astype(np.float32) / np.float32(65535)
 
 
-def _decode_with_pillow(data: bytes, label: str, max_pixels: int, *, tiff_reason: str | None) -> np.ndarray:
+def _decode_with_pillow(
+    data: bytes, label: str, max_pixels: int, *, tiff_reason: str | None
+) -> tuple[np.ndarray, InputBits]:
     """Open, check the format and size from the header, verify, reopen, load, convert."""
     fmt = None
     try:
@@ -649,7 +691,7 @@ def _decode_with_pillow(data: bytes, label: str, max_pixels: int, *, tiff_reason
         raise InvalidInput(label, f"corrupt or truncated {what} data ({_describe(exc)})") from None
 
 
-def _pillow_to_float(im: Image.Image, label: str) -> np.ndarray:
+def _pillow_to_float(im: Image.Image, label: str) -> tuple[np.ndarray, InputBits]:
     """A loaded Pillow image as float in [0, 1], ``(H, W)`` or ``(H, W, 3)``, alpha dropped."""
     mode = im.mode
     if mode in ("P", "PA"):
@@ -665,14 +707,11 @@ def _pillow_to_float(im: Image.Image, label: str) -> np.ndarray:
     return _to_unit_float(arr, label)
 
 
-def _to_unit_float(arr: np.ndarray, label: str, *, bits: int | None = None) -> np.ndarray:
-    """Integers by their full scale (``2**bits - 1``); floats and signed counts checked and rescaled."""
-    if arr.dtype == bool:
-        return arr.astype(np.float32)
-    if np.issubdtype(arr.dtype, np.unsignedinteger):
-        dtype_bits = arr.dtype.itemsize * 8
-        n_bits = bits if bits is not None and 1 <= bits <= dtype_bits else dtype_bits
-        return arr.astype(np.float32) / np.float32(2**n_bits - 1)
+def _to_unit_float(arr: np.ndarray, label: str, *, bits: int | None = None) -> tuple[np.ndarray, InputBits]:
+    """Unsigned integers by the depth they use (:mod:`synth.io.depth`); floats and signed counts checked
+    and rescaled."""
+    if arr.dtype == bool or np.issubdtype(arr.dtype, np.unsignedinteger):
+        return unsigned_to_unit(arr, bits=bits)
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.signedinteger)):
         raise InvalidInput(label, f"unsupported sample type {arr.dtype}")
     if np.issubdtype(arr.dtype, np.floating):
@@ -682,11 +721,11 @@ def _to_unit_float(arr: np.ndarray, label: str, *, bits: int | None = None) -> n
             raise InvalidInput(label, "contains infinite (inf) values; only finite numbers are accepted")
     lo, hi = arr.min(), arr.max()
     if lo >= 0 and hi <= 1:
-        return arr.astype(np.float32)
+        return arr.astype(np.float32), FLOAT_BITS
     if hi == lo:
-        return np.zeros(arr.shape, np.float32)
+        return np.zeros(arr.shape, np.float32), FLOAT_BITS
     work = arr.astype(np.float64)
-    return ((work - float(lo)) / (float(hi) - float(lo))).astype(np.float32)
+    return ((work - float(lo)) / (float(hi) - float(lo))).astype(np.float32), FLOAT_BITS
 
 
 def _apply_mode(image: np.ndarray, mode: LoadMode) -> np.ndarray:

@@ -30,7 +30,15 @@ from synth.analysis.stationarity import exemplar_diagnostics
 from synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from synth.api import Result
 from synth.evaluate.measures import evaluate_pair_fringes, evaluate_volume, to_json_types
-from synth.io import atomic_write_bytes, atomic_write_json, image_to_png_bytes, save_image, save_volume
+from synth.io import (
+    InputBits,
+    array_to_unit,
+    atomic_write_bytes,
+    atomic_write_json,
+    image_to_png_bytes,
+    save_image,
+    save_volume,
+)
 from synth.output.plots import write_plots, write_s2_plot
 from synth.output.render import coherence_image, orientation_image
 from synth.output.volume import write_volume_images
@@ -92,6 +100,12 @@ def _render_extra(arr: np.ndarray, value_range: tuple[float, float] | None = Non
     return np.where(hi > lo, (arr - lo) / np.where(hi > lo, hi - lo, 1), 0).astype(np.float32)
 
 
+def _unit(image: np.ndarray, name: str) -> np.ndarray:
+    """Integer or bool exemplars in [0, 1] by the one dtype policy; float ones as they are (checked later)."""
+    arr = np.asarray(image)
+    return arr if np.issubdtype(arr.dtype, np.floating) else array_to_unit(arr, name)[0]
+
+
 def write_artifacts(
     folder: Path,
     result: Result,
@@ -99,7 +113,8 @@ def write_artifacts(
     constraint: np.ndarray | None = None,
     manifest: dict[str, Any] | None = None,
     *,
-    bit_depth: int = 8,
+    bit_depth: int | None = None,
+    input_bits: InputBits | None = None,
     plots: bool = True,
     exemplars: Mapping[str, np.ndarray] | None = None,
     voxel_size: float | tuple[float, float, float] | None = None,
@@ -120,8 +135,14 @@ def write_artifacts(
         The constraint image, whose tensor field is rendered too.
     manifest : dict, optional
         Fields added to ``manifest.json`` (e.g. a job id).
-    bit_depth : {8, 16}
-        That of ``output.png``; ``output.tiff`` is always 16-bit.
+    bit_depth : {8, 16}, optional
+        That of ``output.png``; ``output.tiff`` is always 16-bit. Default: from ``input_bits``.
+    input_bits : InputBits, optional
+        The exemplar's bit depth (:mod:`synth.io.depth`; default ``result.input_bits``). An input of more
+        than 8 bits gives a 16-bit grey ``output.png``; one that uses fewer bits than its 16-bit
+        container (12-bit camera data: 0-4095) gives ``output.tiff`` at that depth (values 0-4095;
+        ``output.png`` stays full-scale, the picture to look at), and ``metrics.json`` says it:
+        ``input_bits: {container, used}``.
     plots : bool
         Write the comparison plots under ``plots/``.
     exemplars : mapping ``{'xy', 'xz', 'yz'} -> ndarray``, optional
@@ -143,13 +164,27 @@ def write_artifacts(
     folder.mkdir(parents=True, exist_ok=True)
     image = np.asarray(result.image, dtype=np.float32)
     volume = image.ndim == 3 and image.shape[-1] != 3
+    exemplar = _unit(exemplar, "exemplar")
+    if exemplars is not None:
+        exemplars = {plane: _unit(ex, f"exemplar_{plane}") for plane, ex in exemplars.items()}
+    depth = input_bits if input_bits is not None else result.input_bits
+    if depth is not None and depth.container > 16:  # float data: no integer depth to keep
+        depth = None
+    if bit_depth is None:
+        rgb = image.ndim == 3 and not volume
+        bit_depth = 16 if depth is not None and depth.container == 16 and not rgb else 8
+    # data that use fewer bits than their 16-bit container (12-bit cameras) are written back as such
+    used = depth.used if depth is not None and depth.container == 16 and depth.used < 16 else None
     names = ["output.png", "output.tiff"]
+    # output.png is the picture to look at (full scale); output.tiff the data, at the input's depth
     save_image(folder / "output.png", image[image.shape[0] // 2] if volume else image, bit_depth=bit_depth)
     if volume:
-        save_volume(folder / "output.tiff", image, bit_depth=16, voxel_size=voxel_size, unit=unit)
+        save_volume(
+            folder / "output.tiff", image, bit_depth=16, voxel_size=voxel_size, unit=unit, used_bits=used
+        )
         names += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
     else:
-        save_image(folder / "output.tiff", image, bit_depth=16)
+        save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
         tensors = (
             result.tensor_field if result.tensor_field is not None else structure_tensor(image, mode="wrap")
         )
@@ -182,6 +217,8 @@ def write_artifacts(
     )
     metrics["exemplar"] = exemplar_diagnostics(roles)
     doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
+    if depth is not None:
+        doc["input_bits"] = depth.as_json()
     atomic_write_json(folder / "metrics.json", doc)
     names.append("metrics.json")
     if plots:

@@ -28,6 +28,16 @@ _ERRORS = {
     429: {"model": ErrorPublic, "description": "the token's limit of queued jobs is reached"},
 }
 _NOT_FOUND = {404: {"model": ErrorPublic, "description": "no such job (or another token's)"}}
+_BINARY = {"schema": {"type": "string", "format": "binary"}}
+
+
+def _file_answer(description: str, *media_types: str) -> dict[int | str, dict[str, Any]]:
+    """A ``200`` whose body is a file of one of ``media_types`` (the real ones, not JSON)."""
+    content = {
+        media: ({"schema": {"type": "object"}} if media == "application/json" else _BINARY)
+        for media in media_types
+    }
+    return {200: {"description": description, "content": content}, **_NOT_FOUND}
 
 
 def _plane_file(plane: str, fixed: str) -> Any:
@@ -154,7 +164,16 @@ def delete_job(service: ServiceDep, principal: PrincipalDep, job_id: str):
     return service.job_public(job)
 
 
-@router.get("/{job_id}/artifacts/{name:path}", responses=_NOT_FOUND)
+@router.get(
+    "/{job_id}/artifacts/{name:path}",
+    response_class=FileResponse,
+    responses=_file_answer(
+        "the file: PNG images, TIFF images and stacks, JSON metrics and manifest (by the name's extension)",
+        "image/png",
+        "image/tiff",
+        "application/json",
+    ),
+)
 def get_artifact(service: ServiceDep, principal: PrincipalDep, job_id: str, name: str) -> FileResponse:
     """One artifact of a succeeded job (names are listed in the job's ``artifacts``)."""
     job = _job(service, job_id, principal)
@@ -176,7 +195,8 @@ def _stack(path: str, mtime_ns: int) -> np.ndarray:
 
 @router.get(
     "/{job_id}/slices/{plane}/{index}.png",
-    responses={404: {"model": ErrorPublic}, 422: {"model": ErrorPublic}},
+    response_class=Response,
+    responses={**_file_answer("an 8-bit PNG slice", "image/png"), 422: {"model": ErrorPublic}},
 )
 def get_slice(service: ServiceDep, principal: PrincipalDep, job_id: str, plane: str, index: int) -> Response:
     """Slice ``index`` of a volume job's output in ``plane`` (``xy``: fixed z, ``xz``: fixed y,
@@ -195,7 +215,13 @@ def get_slice(service: ServiceDep, principal: PrincipalDep, job_id: str, plane: 
     return Response(data, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
-@router.get("/{job_id}/inputs/{role}", responses=_NOT_FOUND)
+@router.get(
+    "/{job_id}/inputs/{role}",
+    response_class=FileResponse,
+    responses=_file_answer(
+        "the uploaded image (type from its bytes)", "image/png", "image/tiff", "image/jpeg"
+    ),
+)
 def get_input(service: ServiceDep, principal: PrincipalDep, job_id: str, role: str) -> FileResponse:
     """One stored input of the job, served with the image type sniffed from its bytes."""
     job = _job(service, job_id, principal)
@@ -208,7 +234,9 @@ def get_input(service: ServiceDep, principal: PrincipalDep, job_id: str, role: s
     return FileResponse(path, media_type=media_type)
 
 
-@router.get("/{job_id}/preview.png", responses=_NOT_FOUND)
+@router.get(
+    "/{job_id}/preview.png", response_class=FileResponse, responses=_file_answer("a PNG preview", "image/png")
+)
 def get_preview(service: ServiceDep, principal: PrincipalDep, job_id: str) -> FileResponse:
     """A small preview of the running synthesis, when the method provides one."""
     _job(service, job_id, principal)
