@@ -305,7 +305,20 @@ def report(saved: dict[str, Any]) -> str:
     return "\n".join(parts)
 
 
-NOTES = """## What the pictures and figures say (the baseline, 2026-11-27)
+NOTES = """## After the laminar start (issue 24)
+
+The `defaults` rows above were re-run after the laminar start (`structure='auto'`, docs/solid.md) became
+the default; the `paper` rows and the notes below are the baseline before it. One onion exemplar:
+`solid-kopf` 64^3 coherence ratio 0.75-0.77 -> 1.12-1.14 (the shells form; slightly over-ordered, and the
+noise is smoothed away), fringe length KS 0.30-0.31 -> 0.09-0.15, orientation KL 0.01-0.05 -> 0.05-0.18,
+tortuosity KS 0.07-0.09 -> 0.16-0.24; 128^3 coherence 1.15, length KS 0.10-0.18, orientation KL
+0.01-0.03; `solid-chen-wang` 64^3 coherence 0.61-0.67 -> 0.97-0.99 (noise -> shells), length KS
+0.34-0.37 -> 0.10-0.11, orientation KL 0.04-0.07 (worst 0.15), tortuosity KS 0.12-0.17, in 7-9 s of CPU
+instead of 15. Per-plane onions and the turbostratic stack (not isotropic: its sheets have one normal) keep
+the random start and their figures: the tortuosity of the stack (0.26-0.56, too straight) and the
+per-plane onions (coherence 0.62-0.78) are still open.
+
+## What the pictures and figures say (the baseline, 2026-11-27)
 
 **The yardstick holds.** The truths' own slices against their exemplars: coherence ratio 0.99-1.01,
 orientation KL <= 0.05, grey KL 0.00, contrast 0.99-1.00 on every axis. The fringe KS distances of the
