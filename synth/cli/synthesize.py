@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from synth.cli.inputs import add_plane_arguments, input_sources
+from synth.cli.inputs import add_plane_arguments, add_threads_argument, input_sources, threads_from
 from synth.errors import InvalidParameter
 
 __all__ = ["parse_size", "register"]
@@ -35,8 +35,10 @@ def parse_size(text: str) -> tuple[int, ...]:
 class _ProgressBar:
     """A one-line progress bar on a terminal; silent otherwise (logs and pipes stay clean)."""
 
-    def __init__(self, stream: Any = sys.stderr) -> None:
-        self.stream = stream
+    def __init__(self, stream: Any = None) -> None:
+        self.stream = stream = (
+            sys.stderr if stream is None else stream
+        )  # the stderr of the call, not of the import
         self.enabled = hasattr(stream, "isatty") and stream.isatty()
         self.start = time.perf_counter()
 
@@ -71,6 +73,7 @@ def _run(args: argparse.Namespace) -> int:
         raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
     if args.voxel_size is not None and not 0 < args.voxel_size < 1e6:
         raise InvalidParameter("--voxel-size", args.voxel_size, "must be a positive size in nm")
+    threads = threads_from(args)
     params = parse_assignments(args.set or [])
     size = parse_size(args.size) if args.size else None
     sources = input_sources(args)
@@ -91,6 +94,7 @@ def _run(args: argparse.Namespace) -> int:
             bit_depth=args.bit_depth,
             plots=not args.no_plots,
             voxel_size=args.voxel_size,
+            threads=threads,
         )
     finally:
         bar.close()
@@ -123,6 +127,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "a volume at the exemplar's scale)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    add_threads_argument(p)
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="a method parameter (repeatable)")
     p.add_argument("--bit-depth", type=int, default=8, help="bit depth of output.png: 8 or 16")
     p.add_argument("--no-plots", action="store_true", help="skip the comparison plots")

@@ -49,6 +49,7 @@ from synth.analysis.tensor import (
 from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
 from synth.io import MIN_SIDE
+from synth.threads import use_threads
 
 __all__ = [
     "COHERENCE_BINS",
@@ -562,6 +563,7 @@ def evaluate_pair(
     window: int = WINDOW,
     epsilon: float = HIST_EPSILON,
     fringe_options: Mapping[str, Any] | None = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """Compare a 2-D synthesis output with its exemplar (the study's benchmark, section 3.2).
 
@@ -586,6 +588,8 @@ def evaluate_pair(
     fringe_options : mapping, optional
         Keyword arguments of :func:`synth.analysis.fringes.extract_fringes` (``sigma``, ``background``,
         ``min_length``, ...).
+    threads : int, optional
+        numba threads (1 to ``NUMBA_NUM_THREADS``; default all): the same figures whatever the count.
 
     Returns
     -------
@@ -627,7 +631,8 @@ def evaluate_pair(
         pixel_size=pixel_size,
         fringe_options=dict(fringe_options or {}),
     )
-    return _evaluate_pair(exemplar, output, settings)[0]
+    with use_threads(threads):
+        return _evaluate_pair(exemplar, output, settings)[0]
 
 
 def evaluate_pair_fringes(
@@ -639,8 +644,10 @@ def evaluate_pair_fringes(
     ``fringes=False``), so that the fringe overlays (:func:`synth.output.plots.write_plots`) reuse
     them instead of extracting them a second time.
     """
+    threads = options.pop("threads", None)
     settings = _Settings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
-    return _evaluate_pair(exemplar, output, settings)
+    with use_threads(threads):
+        return _evaluate_pair(exemplar, output, settings)
 
 
 def _evaluate_pair(
@@ -776,6 +783,7 @@ def evaluate_volume(
     window: int = WINDOW,
     epsilon: float = HIST_EPSILON,
     fringe_options: Mapping[str, Any] | None = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """Multi-2D comparison of a volume with its exemplar(s), per axis and overall, plus ``S2(r)``.
 
@@ -804,7 +812,8 @@ def evaluate_volume(
         Otsu threshold of each exemplar, applied to the volume in the comparisons with that exemplar.
     s2_periodic : bool
         Periodic ``S2`` estimates (for toroidal samples); by default non-periodic (zero-padded).
-    pixel_size, fringes, grey_bins, orientation_bins, coherence_bins, sigma_d, window, epsilon, fringe_options
+    pixel_size, fringes, grey_bins, orientation_bins, coherence_bins, sigma_d, window, epsilon
+    fringe_options, threads
         As in :func:`evaluate_pair`.
 
     Returns
@@ -840,106 +849,113 @@ def evaluate_volume(
     exemplars took 3.2 s with fringes and about 1 s without on an idle core of the project's machine
     (6.3 s and 2.2 s with the two cores shared five ways); ``S2`` itself takes under 0.1 s.
     """
-    settings = _Settings(
-        grey_bins=grey_bins,
-        orientation_bins=orientation_bins,
-        coherence_bins=coherence_bins,
-        sigma_d=sigma_d,
-        window=window,
-        epsilon=epsilon,
-        fringes=fringes,
-        pixel_size=pixel_size,
-        fringe_options=dict(fringe_options or {}),
-    )
-    axes = tuple(int(a) for a in axes)
-    if not axes or any(a not in (0, 1, 2) for a in axes) or len(set(axes)) != len(axes):
-        raise InvalidParameter("axes", axes, "must be distinct values among 0, 1, 2")
-    if not (isinstance(slice_step, int | np.integer) and slice_step >= 1):
-        raise InvalidParameter("slice_step", slice_step, "must be a positive integer")
-    if threshold is not None and not (
-        isinstance(threshold, int | float | np.integer | np.floating) and 0.0 <= threshold <= 1.0
-    ):
-        raise InvalidParameter("threshold", threshold, "must be a grey level in [0, 1]")
-    planes, isotropic = _volume_exemplars(exemplar, tuple(PLANES[a] for a in axes))
-    vol = np.asarray(volume)
-    if vol.ndim != 3:
-        raise InvalidInput("volume", f"expected a grey (D, H, W) volume, got shape {vol.shape}")
-    vol = vol.astype(np.float64, copy=False)
-    _check_values(vol, "volume")
-    if min(vol.shape) < MIN_SIDE:
-        raise InvalidInput(
-            "volume", f"volume of shape {vol.shape} is too small to evaluate (< {MIN_SIDE} voxels)"
+    with use_threads(threads):
+        settings = _Settings(
+            grey_bins=grey_bins,
+            orientation_bins=orientation_bins,
+            coherence_bins=coherence_bins,
+            sigma_d=sigma_d,
+            window=window,
+            epsilon=epsilon,
+            fringes=fringes,
+            pixel_size=pixel_size,
+            fringe_options=dict(fringe_options or {}),
         )
+        axes = tuple(int(a) for a in axes)
+        if not axes or any(a not in (0, 1, 2) for a in axes) or len(set(axes)) != len(axes):
+            raise InvalidParameter("axes", axes, "must be distinct values among 0, 1, 2")
+        if not (isinstance(slice_step, int | np.integer) and slice_step >= 1):
+            raise InvalidParameter("slice_step", slice_step, "must be a positive integer")
+        if threshold is not None and not (
+            isinstance(threshold, int | float | np.integer | np.floating) and 0.0 <= threshold <= 1.0
+        ):
+            raise InvalidParameter("threshold", threshold, "must be a grey level in [0, 1]")
+        planes, isotropic = _volume_exemplars(exemplar, tuple(PLANES[a] for a in axes))
+        vol = np.asarray(volume)
+        if vol.ndim != 3:
+            raise InvalidInput("volume", f"expected a grey (D, H, W) volume, got shape {vol.shape}")
+        vol = vol.astype(np.float64, copy=False)
+        _check_values(vol, "volume")
+        if min(vol.shape) < MIN_SIDE:
+            raise InvalidInput(
+                "volume", f"volume of shape {vol.shape} is too small to evaluate (< {MIN_SIDE} voxels)"
+            )
 
-    # one exemplar's statistics are computed once, however many planes it serves
-    ref_stats: dict[int, _Stats] = {}
-    ref_moments: dict[int, dict[str, Any]] = {}
-    for ex in planes.values():
-        if id(ex) not in ref_stats:
-            ref_stats[id(ex)], ref_moments[id(ex)] = _image_stats(ex, settings), moments(ex)
-    # with every slice taken, each axis pools every voxel once: the moments are the volume's
-    volume_moments = moments(vol) if slice_step == 1 else None
-    per_axis: dict[str, Any] = {}
-    pooled_axes: list[_Stats] = []
-    values_axes: list[np.ndarray] = []
-    for axis in axes:
-        ex = planes[PLANES[axis]]
-        ref = ref_stats[id(ex)]
-        slices = np.moveaxis(vol, axis, 0)[::slice_step]
-        slice_stats = [_image_stats(s, settings) for s in slices]
-        pooled = _Stats.pool(slice_stats)
-        slice_moments = [moments(s) for s in slices]
-        pooled_moments = volume_moments if volume_moments is not None else moments(slices)
-        block = _compare(ref, pooled, ref_moments[id(ex)], pooled_moments, settings)
-        block["plane"] = PLANES[axis]
-        block["slices"] = {
-            "count": len(slice_stats),
-            "grey_kl": _spread([kl_divergence(ref.grey, s.grey, settings.epsilon) for s in slice_stats]),
-            "orientation_kl": _spread(
-                [kl_divergence(ref.orientation, s.orientation, settings.epsilon) for s in slice_stats]
-            ),
-            "std": _spread([m["std"] for m in slice_moments]),
-            "skewness": _spread([m["skewness"] for m in slice_moments]),
-        }
-        per_axis[str(axis)] = block
-        pooled_axes.append(pooled)
-        if volume_moments is None:
-            values_axes.append(slices.ravel())
-    overall_moments = volume_moments if volume_moments is not None else moments(np.concatenate(values_axes))
-    if isotropic:
-        one = next(iter(planes.values()))
-        overall_ref, overall_ref_moments = ref_stats[id(one)], ref_moments[id(one)]
-    else:
-        used = [planes[PLANES[a]] for a in axes]
-        overall_ref = _Stats.pool(ref_stats[id(ex)] for ex in used)
-        overall_ref_moments = moments(np.concatenate([ex.ravel() for ex in used]))
-    overall = _compare(overall_ref, _Stats.pool(pooled_axes), overall_ref_moments, overall_moments, settings)
-    summary = dict(overall["summary"])
-    record = {**settings.record(), "axes": list(axes), "slice_step": int(slice_step), "s2": None}
-    result: dict[str, Any] = {"kind": "volume", "settings": record, "isotropic": isotropic}
-    if s2:
-        record["s2"] = _s2_settings(threshold, bool(s2_periodic))
-        correlations = _s2_comparisons(planes, vol, threshold, bool(s2_periodic))
+        # one exemplar's statistics are computed once, however many planes it serves
+        ref_stats: dict[int, _Stats] = {}
+        ref_moments: dict[int, dict[str, Any]] = {}
+        for ex in planes.values():
+            if id(ex) not in ref_stats:
+                ref_stats[id(ex)], ref_moments[id(ex)] = _image_stats(ex, settings), moments(ex)
+        # with every slice taken, each axis pools every voxel once: the moments are the volume's
+        volume_moments = moments(vol) if slice_step == 1 else None
+        per_axis: dict[str, Any] = {}
+        pooled_axes: list[_Stats] = []
+        values_axes: list[np.ndarray] = []
         for axis in axes:
-            plane = PLANES[axis]
-            block = per_axis[str(axis)]
-            block["s2"] = {
-                name: {k: v for k, v in correlations["axes"][name][plane].items() if k != "s2"}
-                for name in reversed(PLANE_AXES[plane])
+            ex = planes[PLANES[axis]]
+            ref = ref_stats[id(ex)]
+            slices = np.moveaxis(vol, axis, 0)[::slice_step]
+            slice_stats = [_image_stats(s, settings) for s in slices]
+            pooled = _Stats.pool(slice_stats)
+            slice_moments = [moments(s) for s in slices]
+            pooled_moments = volume_moments if volume_moments is not None else moments(slices)
+            block = _compare(ref, pooled, ref_moments[id(ex)], pooled_moments, settings)
+            block["plane"] = PLANES[axis]
+            block["slices"] = {
+                "count": len(slice_stats),
+                "grey_kl": _spread([kl_divergence(ref.grey, s.grey, settings.epsilon) for s in slice_stats]),
+                "orientation_kl": _spread(
+                    [kl_divergence(ref.orientation, s.orientation, settings.epsilon) for s in slice_stats]
+                ),
+                "std": _spread([m["std"] for m in slice_moments]),
+                "skewness": _spread([m["skewness"] for m in slice_moments]),
             }
-            block["summary"]["s2_relative_error"] = _mean(c["relative_error"] for c in block["s2"].values())
-        summary["s2_relative_error"] = correlations["summary"]["mean"]
-        result["s2"] = correlations
-    summary["per_axis"] = {k: v["summary"] for k, v in per_axis.items()}
-    first = planes[PLANES[axes[0]]]
-    result.update(
-        shape={
-            "exemplar": list(first.shape),
-            "exemplars": {p: list(ex.shape) for p, ex in planes.items()},
-            "volume": list(vol.shape),
-        },
-        axes=per_axis,
-        overall=overall,
-        summary=summary,
-    )
-    return to_json_types(result)
+            per_axis[str(axis)] = block
+            pooled_axes.append(pooled)
+            if volume_moments is None:
+                values_axes.append(slices.ravel())
+        overall_moments = (
+            volume_moments if volume_moments is not None else moments(np.concatenate(values_axes))
+        )
+        if isotropic:
+            one = next(iter(planes.values()))
+            overall_ref, overall_ref_moments = ref_stats[id(one)], ref_moments[id(one)]
+        else:
+            used = [planes[PLANES[a]] for a in axes]
+            overall_ref = _Stats.pool(ref_stats[id(ex)] for ex in used)
+            overall_ref_moments = moments(np.concatenate([ex.ravel() for ex in used]))
+        overall = _compare(
+            overall_ref, _Stats.pool(pooled_axes), overall_ref_moments, overall_moments, settings
+        )
+        summary = dict(overall["summary"])
+        record = {**settings.record(), "axes": list(axes), "slice_step": int(slice_step), "s2": None}
+        result: dict[str, Any] = {"kind": "volume", "settings": record, "isotropic": isotropic}
+        if s2:
+            record["s2"] = _s2_settings(threshold, bool(s2_periodic))
+            correlations = _s2_comparisons(planes, vol, threshold, bool(s2_periodic))
+            for axis in axes:
+                plane = PLANES[axis]
+                block = per_axis[str(axis)]
+                block["s2"] = {
+                    name: {k: v for k, v in correlations["axes"][name][plane].items() if k != "s2"}
+                    for name in reversed(PLANE_AXES[plane])
+                }
+                block["summary"]["s2_relative_error"] = _mean(
+                    c["relative_error"] for c in block["s2"].values()
+                )
+            summary["s2_relative_error"] = correlations["summary"]["mean"]
+            result["s2"] = correlations
+        summary["per_axis"] = {k: v["summary"] for k, v in per_axis.items()}
+        first = planes[PLANES[axes[0]]]
+        result.update(
+            shape={
+                "exemplar": list(first.shape),
+                "exemplars": {p: list(ex.shape) for p, ex in planes.items()},
+                "volume": list(vol.shape),
+            },
+            axes=per_axis,
+            overall=overall,
+            summary=summary,
+        )
+        return to_json_types(result)
