@@ -32,6 +32,7 @@ __all__ = [
     "THREADS_ENV",
     "available_cores",
     "check_threads",
+    "current_threads",
     "max_threads",
     "service_threads",
     "single_threaded_blas",
@@ -63,6 +64,14 @@ def max_threads() -> int:
     import numba
 
     return int(numba.config.NUMBA_NUM_THREADS)
+
+
+def current_threads() -> int:
+    """The thread count of the work running now (numba's, as :func:`use_threads` set it): what other
+    parallel libraries take (SciPy's ``cKDTree.query(workers=...)``), so that the knob holds for them too."""
+    import numba
+
+    return int(numba.get_num_threads())
 
 
 def check_threads(value: Any, name: str = "threads") -> int | None:
