@@ -23,8 +23,8 @@ Parallelism (numba ``prange``, ``parallel=True``): every parallel loop writes on
 (a query's answer, a voxel's value) and reads nothing another iteration writes; sums stay inside one
 iteration, in a fixed order; the k-coherence de-duplication stamps are per block of queries, a fixed
 number of blocks (:data:`KCOHERENCE_BLOCKS`) whatever the threads; the histogram counts change only
-between blocks of voxels, sequentially. So ``NUMBA_NUM_THREADS=1`` and ``2`` give the same bytes
-(tested in a subprocess).
+between blocks of voxels, sequentially. So 1, 2 and 4 threads give the same bytes (tested in a
+subprocess, ``tests/synth/test_threads.py``).
 """
 
 from __future__ import annotations
