@@ -21,6 +21,7 @@ A value already in the environment wins. This module imports nothing heavy (numb
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -41,6 +42,8 @@ __all__ = [
 
 #: The environment variable OpenBLAS reads its thread count from, once, when NumPy loads it.
 BLAS_THREADS = "OPENBLAS_NUM_THREADS"
+
+_NESTED = threading.local()  # how many use_threads blocks the calling thread is inside
 
 #: The service's knob: threads of one job (default: the cores divided between the worker processes).
 THREADS_ENV = "TEXSYNTH_THREADS"
@@ -100,19 +103,25 @@ def check_threads(value: Any, name: str = "threads") -> int | None:
 
 @contextmanager
 def use_threads(threads: int | None) -> Iterator[int]:
-    """Run the enclosed work with ``threads`` numba threads (``None``: every thread of the pool).
+    """Run the enclosed work with ``threads`` numba threads (``None``: the default).
 
+    The default is every thread of the pool, except inside another :func:`use_threads` block of the
+    same thread, whose count it keeps (``synthesize_to_folder(threads=1)`` calls ``synthesize()``).
     Validated as :func:`check_threads`; the previous count is restored on exit. Yields the count.
     """
     import numba
 
     count = check_threads(threads)
-    count = max_threads() if count is None else count
+    depth = getattr(_NESTED, "depth", 0)
     before = numba.get_num_threads()
+    if count is None:
+        count = before if depth else max_threads()
     numba.set_num_threads(count)
+    _NESTED.depth = depth + 1
     try:
         yield count
     finally:
+        _NESTED.depth = depth
         numba.set_num_threads(before)
 
 

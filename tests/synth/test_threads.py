@@ -7,6 +7,8 @@ import json
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numba
@@ -77,6 +79,34 @@ def test_use_threads_sets_the_count_and_restores_it() -> None:
     with use_threads(None) as count:  # the default: the whole pool
         assert count == max_threads() == numba.get_num_threads()
     assert numba.get_num_threads() == before
+
+
+def test_the_default_inside_a_chosen_count_keeps_it() -> None:
+    """``synthesize_to_folder(threads=1)`` calls ``synthesize()`` (no count): the synthesis keeps 1."""
+    with use_threads(1):
+        with use_threads(None) as count:
+            assert count == 1 == numba.get_num_threads()
+        assert numba.get_num_threads() == 1
+
+
+def test_pipeline_runs_the_synthesis_on_the_chosen_count(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import synth.api as api
+    from synth.pipeline import synthesize_to_folder
+
+    real, seen = api.use_threads, []
+
+    @contextmanager
+    def spy(threads: int | None) -> Iterator[int]:
+        with real(threads) as count:
+            seen.append(numba.get_num_threads())  # what the method's kernels run on
+            yield count
+
+    monkeypatch.setattr(api, "use_threads", spy)
+    images = {"exemplar": undulating_laminae((32, 32))}
+    synthesize_to_folder("random-phase", images, tmp_path / "o", size=(32, 32), plots=False, threads=1)
+    assert seen == [1]
 
 
 @pytest.mark.parametrize("value", [0, -1, 2.5, "two", True, max_threads() + 1])
