@@ -30,6 +30,7 @@ from synth.errors import InvalidParameter
 
 __all__ = [
     "BLAS_THREADS",
+    "OMP_WAIT",
     "THREADS_ENV",
     "available_cores",
     "check_threads",
@@ -49,9 +50,20 @@ _NESTED = threading.local()  # how many use_threads blocks the calling thread is
 THREADS_ENV = "TEXSYNTH_THREADS"
 
 
+#: How OpenMP's idle threads wait (numba's ``omp`` threading layer): ``passive`` sleeps instead of spinning.
+OMP_WAIT = "OMP_WAIT_POLICY"
+
+
 def single_threaded_blas() -> None:
-    """Ask for one OpenBLAS thread unless the environment already says; call before importing NumPy."""
+    """Ask for one OpenBLAS thread, and OpenMP threads that sleep while they wait, unless the
+    environment already says; call before importing NumPy.
+
+    Spinning threads burn a core the other jobs of a shared machine need: solid-chen-wang 64^3 with 2
+    threads under load 5 took 7.5-8.7 s of CPU and 11.6-13.1 s wall spinning, 5.4-5.5 s and 8.5 s
+    passive (docs/benchmarks.md, "Threads"). Same bytes either way.
+    """
     os.environ.setdefault(BLAS_THREADS, "1")
+    os.environ.setdefault(OMP_WAIT, "passive")
 
 
 def available_cores() -> int:
