@@ -277,6 +277,7 @@ def run(args: argparse.Namespace) -> int:
     from app.auth import TokenError, Tokens
     from app.main import create_app
     from jobs.config import Settings
+    from synth.threads import available_cores
 
     settings = Settings.from_env(data_dir=args.data_dir, concurrency=args.workers)
     settings.ensure_dirs()
@@ -314,7 +315,8 @@ def run(args: argparse.Namespace) -> int:
             access = f"tokens of {', '.join(tokens.names)}" if tokens.enabled else "no tokens"
             print(
                 f"texsynth is serving at {url}  (data: {settings.data_dir}; {queue}; "
-                f"{'no worker' if supervisor is None else f'{settings.concurrency} worker processes'}; "
+                f"{'no worker' if supervisor is None else f'{settings.concurrency} worker processes'} x "
+                f"{settings.threads} threads of {available_cores()} cores; "
                 f"{access})",
                 flush=True,
             )

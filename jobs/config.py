@@ -15,6 +15,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from synth.io.limits import LIMITS, limit_from_env
+from synth.threads import THREADS_ENV, service_threads
 
 __all__ = ["Settings"]
 
@@ -68,6 +69,9 @@ class Settings(BaseModel):
     soft_time_limit: int = Field(1800, description="seconds before the job is asked to stop (fails)")
     hard_time_limit: int = Field(1860, description="seconds before the worker child is killed")
     concurrency: int = Field(max(1, os.cpu_count() or 1), description="worker processes")
+    threads: int | None = Field(
+        None, ge=1, description="threads of one job; default the cores divided between the worker processes"
+    )
     worker_nice: int = Field(5, description="niceness of worker children, keeps the API responsive")
     max_attempts: int = Field(3, description="runs of one job (worker lost -> re-run) before it fails")
     heartbeat_seconds: float = Field(1.0, description="how often a running job proves it is alive")
@@ -87,10 +91,15 @@ class Settings(BaseModel):
     @classmethod
     def from_env(cls, environ: dict[str, str] | None = None, **overrides: Any) -> Settings:
         """Build from ``TEXSYNTH_<NAME>`` variables (``TEXSYNTH_DATA_DIR``, ...) and ``REDIS_URL``; the
-        size limits from their variables in :data:`synth.io.limits.LIMITS`."""
+        size limits from their variables in :data:`synth.io.limits.LIMITS`. ``threads`` always comes out a
+        number (:func:`synth.threads.service_threads`); a bad ``TEXSYNTH_THREADS`` raises
+        :class:`synth.errors.InvalidParameter`."""
         env = os.environ if environ is None else environ
         values: dict[str, Any] = {}
+        threads = overrides.pop("threads", None) or env.get(THREADS_ENV)
         for name in cls.model_fields:
+            if name == "threads":
+                continue
             if name in LIMITS:
                 found = limit_from_env(name, env)
                 if found is not None:
@@ -105,7 +114,12 @@ class Settings(BaseModel):
             values.setdefault("redis_url", env["REDIS_URL"])
         values.update({k: v for k, v in overrides.items() if v is not None})
         settings = cls.model_validate(values)
-        return settings.model_copy(update={"data_dir": settings.data_dir.expanduser().resolve()})
+        return settings.model_copy(
+            update={
+                "data_dir": settings.data_dir.expanduser().resolve(),
+                "threads": service_threads(settings.concurrency, threads),  # InvalidParameter at start
+            }
+        )
 
     def to_env(self) -> dict[str, str]:
         """The environment that makes :meth:`from_env` rebuild these settings in a child process."""

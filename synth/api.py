@@ -19,6 +19,7 @@ from synth.errors import InvalidInput, InvalidParameter
 from synth.io.depth import InputBits, array_to_unit
 from synth.io.limits import check_output_size
 from synth.params import MethodParams, validate_params
+from synth.threads import check_threads, use_threads
 
 __all__ = [
     "METHODS",
@@ -226,6 +227,7 @@ def synthesize(
     constraint: np.ndarray | None = None,
     exemplars: Mapping[str, np.ndarray] | None = None,
     max_output: int | None = None,
+    threads: int | None = None,
 ) -> Result:
     """Run ``method`` on ``exemplar`` and return a :class:`Result`.
 
@@ -253,6 +255,9 @@ def synthesize(
     max_output : int, optional
         Largest ``size`` (pixels or voxels) accepted; default: :mod:`synth.io.limits`' ``max_output``
         (the service passes its own, lower one).
+    threads : int, optional
+        numba threads the synthesis runs on, 1 to ``NUMBA_NUM_THREADS``; default: all of them (every
+        core). The bytes are the same whatever the count (:mod:`synth.threads`).
     """
     spec = find_method(method)
     if spec is None:
@@ -261,6 +266,7 @@ def synthesize(
     model = validate_params(spec.params_model, params)
     if not isinstance(seed, int | np.integer) or not 0 <= int(seed) < 2**32:
         raise InvalidParameter("seed", seed, "must be an integer in [0, 2**32)")
+    threads = check_threads(threads)
     given = {"exemplar"} if exemplar is not None else set()
     given |= {f"exemplar_{plane}" for plane in exemplars or {}}
     check_inputs(spec, given | ({"constraint"} if constraint is not None else set()))
@@ -273,15 +279,16 @@ def synthesize(
     out_size = _output_size(size, ex, con, spec.output_ndim, planes, max_output)
     extra: dict[str, Any] = {"exemplars": planes} if planes is not None else {}
     start = time.perf_counter()
-    result = spec.run(
-        ex,
-        size=out_size,
-        params=model,
-        seed=int(seed),
-        progress=progress or _noop_progress,
-        constraint=con,
-        **extra,
-    )
+    with use_threads(threads):
+        result = spec.run(
+            ex,
+            size=out_size,
+            params=model,
+            seed=int(seed),
+            progress=progress or _noop_progress,
+            constraint=con,
+            **extra,
+        )
     result.timings.setdefault("total", time.perf_counter() - start)
     return dataclasses.replace(result, input_bits=depth)
 

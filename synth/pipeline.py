@@ -20,6 +20,7 @@ import numpy as np
 from synth.api import PLANES, Progress, Result, synthesize
 from synth.errors import InvalidInput
 from synth.io import ImageSource, InputBits, load_image_bits, sample_bits
+from synth.threads import use_threads
 
 __all__ = ["INPUT_ROLES", "Inputs", "Outcome", "load_inputs", "synthesize_to_folder"]
 
@@ -85,16 +86,49 @@ def synthesize_to_folder(
     plots: bool = True,
     voxel_size: float | None = None,
     max_output: int | None = None,
+    threads: int | None = None,
 ) -> Outcome:
     """Run ``method`` on decoded ``images`` (by role) and write all artifacts into ``folder``.
 
     See :func:`synth.api.synthesize` for the arguments (``max_output`` too) and
     :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
-    the synthesis started and finished (Unix time). A volume is evaluated plane by plane against its
+    the synthesis started and finished (Unix time). ``threads``: numba threads of the synthesis and the
+    evaluation (:mod:`synth.threads`; default every core). A volume is evaluated plane by plane against its
     per-plane exemplars when given; ``voxel_size`` (nm) calibrates its TIFF stack and its fringe lengths.
     The exemplar's bit depth (from :func:`load_inputs`' ``bits``, else that of the arrays given) is kept
     for the outputs and said in ``metrics.json`` (``input_bits``).
     """
+    with use_threads(threads):
+        return _synthesize_to_folder(
+            method,
+            images,
+            folder,
+            size,
+            params,
+            seed,
+            progress,
+            manifest,
+            bit_depth,
+            plots,
+            voxel_size,
+            max_output,
+        )
+
+
+def _synthesize_to_folder(
+    method: str,
+    images: Mapping[str, np.ndarray],
+    folder: str | os.PathLike[str],
+    size: tuple[int, ...] | None,
+    params: dict[str, Any] | None,
+    seed: int,
+    progress: Progress | None,
+    manifest: dict[str, Any] | None,
+    bit_depth: int,
+    plots: bool,
+    voxel_size: float | None,
+    max_output: int | None,
+) -> Outcome:
     from synth.output.artifacts import write_artifacts  # deferred: evaluation and plots only when writing
 
     planes = {plane: images[f"exemplar_{plane}"] for plane in PLANES if f"exemplar_{plane}" in images}

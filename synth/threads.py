@@ -1,24 +1,159 @@
-"""The one place that sets the BLAS thread count: OpenBLAS single-threaded in every texsynth process.
+"""The one place that sets thread counts: numba's per job (the ``threads`` knob), OpenBLAS's to one.
 
-The engine's matrix work is small (the k-coherence PCA of a few thousand neighbourhoods of at most a
-few hundred values), where OpenBLAS's threads cost more than they give and, on a shared 2-core
-machine, spin against the other work (docs/benchmarks.md, "The whole command"). The bytes are the
-same whatever the count (``tests/synth/cli/test_cli_synthesize.py``). The entry points call
-:func:`single_threaded_blas` before NumPy loads OpenBLAS: the ``texsynth`` command (and so the
-workers ``texsynth serve`` starts), ``python -m worker`` and the benchmarks that time the engine. A
-value already in the environment wins. This module imports nothing heavy.
+**numba.** A job runs its parallel kernels (``prange``) on ``threads`` threads: ``--threads N`` on
+``texsynth synthesize``/``evaluate``, ``threads=`` in :func:`synth.api.synthesize` and the evaluation
+entry points, ``TEXSYNTH_THREADS`` in the service. The default is every core this process may use
+(CLI, API); the service divides the cores between its worker processes (:func:`service_threads`).
+The bytes never depend on the count (DESIGN.md, "Parallel and deterministic"): parallel loops write
+only their own slots, draw random numbers from counter-based hashes (:func:`synth.kernels.common.splitmix`)
+and reduce in a fixed order; ``tests/synth/test_threads.py`` checks every method with 1, 2 and 4.
+numba's count is per calling thread and capped by its pool (``NUMBA_NUM_THREADS``, cores by default),
+so :func:`use_threads` is entered in the thread that runs the work.
+
+**OpenBLAS.** The engine's matrix work is small (the k-coherence PCA of a few thousand neighbourhoods
+of at most a few hundred values), where OpenBLAS's threads cost more than they give and, on a shared
+2-core machine, spin against the other work (docs/benchmarks.md, "The whole command"). The entry
+points call :func:`single_threaded_blas` before NumPy loads OpenBLAS: the ``texsynth`` command (and so
+the workers ``texsynth serve`` starts), ``python -m worker`` and the benchmarks that time the engine.
+A value already in the environment wins. This module imports nothing heavy (numba when first used).
 """
 
 from __future__ import annotations
 
 import os
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
 
-__all__ = ["BLAS_THREADS", "single_threaded_blas"]
+from synth.errors import InvalidParameter
+
+__all__ = [
+    "BLAS_THREADS",
+    "OMP_WAIT",
+    "THREADS_ENV",
+    "available_cores",
+    "check_threads",
+    "current_threads",
+    "max_threads",
+    "service_threads",
+    "single_threaded_blas",
+    "use_threads",
+]
 
 #: The environment variable OpenBLAS reads its thread count from, once, when NumPy loads it.
 BLAS_THREADS = "OPENBLAS_NUM_THREADS"
 
+_NESTED = threading.local()  # how many use_threads blocks the calling thread is inside
+
+#: The service's knob: threads of one job (default: the cores divided between the worker processes).
+THREADS_ENV = "TEXSYNTH_THREADS"
+
+
+#: How OpenMP's idle threads wait (numba's ``omp`` threading layer): ``passive`` sleeps instead of spinning.
+OMP_WAIT = "OMP_WAIT_POLICY"
+
 
 def single_threaded_blas() -> None:
-    """Ask for one OpenBLAS thread unless the environment already says; call before importing NumPy."""
+    """Ask for one OpenBLAS thread, and OpenMP threads that sleep while they wait, unless the
+    environment already says; call before importing NumPy.
+
+    Spinning threads burn a core the other jobs of a shared machine need: solid-chen-wang 64^3 with 2
+    threads under load 5 took 7.5-8.7 s of CPU and 11.6-13.1 s wall spinning, 5.4-5.5 s and 8.5 s
+    passive (docs/benchmarks.md, "Threads"). Same bytes either way.
+    """
     os.environ.setdefault(BLAS_THREADS, "1")
+    os.environ.setdefault(OMP_WAIT, "passive")
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells, else the CPU count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def max_threads() -> int:
+    """The most threads a job can have in this process: numba's pool (``NUMBA_NUM_THREADS``)."""
+    import numba
+
+    return int(numba.config.NUMBA_NUM_THREADS)
+
+
+def current_threads() -> int:
+    """The thread count of the work running now (numba's, as :func:`use_threads` set it): what other
+    parallel libraries take (SciPy's ``cKDTree.query(workers=...)``), so that the knob holds for them too."""
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def check_threads(value: Any, name: str = "threads") -> int | None:
+    """``value`` as a thread count (``None`` stays ``None``: the default), or :class:`InvalidParameter`.
+
+    A count is a whole number from 1 to :func:`max_threads`; ``name`` is the field the message names.
+    """
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int):
+        try:
+            if isinstance(value, bool) or float(value) != int(value):
+                raise ValueError
+            value = int(value)
+        except (TypeError, ValueError, OverflowError):
+            raise InvalidParameter(name, value, "must be a whole number of threads, 1 or more") from None
+    top = max_threads()
+    if not 1 <= value <= top:
+        raise InvalidParameter(
+            name,
+            value,
+            f"must be from 1 to {top} (NUMBA_NUM_THREADS; this machine has {available_cores()} cores)",
+        )
+    return int(value)
+
+
+@contextmanager
+def use_threads(threads: int | None) -> Iterator[int]:
+    """Run the enclosed work with ``threads`` numba threads (``None``: the default).
+
+    The default is every thread of the pool, except inside another :func:`use_threads` block of the
+    same thread, whose count it keeps (``synthesize_to_folder(threads=1)`` calls ``synthesize()``).
+    Validated as :func:`check_threads`; the previous count is restored on exit. Yields the count.
+    """
+    import numba
+
+    count = check_threads(threads)
+    depth = getattr(_NESTED, "depth", 0)
+    before = numba.get_num_threads()
+    if count is None:
+        count = before if depth else max_threads()
+    numba.set_num_threads(count)
+    _NESTED.depth = depth + 1
+    try:
+        yield count
+    finally:
+        _NESTED.depth = depth
+        numba.set_num_threads(before)
+
+
+def service_threads(concurrency: int, threads: int | str | None = None) -> int:
+    """Threads of one service job: ``threads`` (``TEXSYNTH_THREADS``) when set, else the cores divided
+    between the ``concurrency`` worker processes (at least one each), so that processes x threads <= cores.
+
+    A value that is not a whole number from 1 to numba's pool (``NUMBA_NUM_THREADS``, else the CPU
+    count) raises :class:`InvalidParameter` naming ``TEXSYNTH_THREADS``: the service stops at start.
+    """
+    if threads is None or (isinstance(threads, str) and not threads.strip()):
+        return max(1, available_cores() // max(1, int(concurrency)))
+    raw = os.environ.get("NUMBA_NUM_THREADS", "").strip()
+    pool = int(raw) if raw.isdigit() and int(raw) > 0 else max(1, os.cpu_count() or 1)
+    try:
+        value = int(str(threads).strip())
+    except ValueError:
+        value = 0
+    if not 1 <= value <= pool:
+        raise InvalidParameter(
+            THREADS_ENV, threads, f"must be a whole number from 1 to {pool} (NUMBA_NUM_THREADS, else CPUs)"
+        )
+    return value

@@ -46,13 +46,15 @@ def run(args: argparse.Namespace) -> int:
         os.environ["TEXSYNTH_DATA_DIR"] = os.path.abspath(args.data_dir)
     if args.concurrency:
         os.environ["TEXSYNTH_CONCURRENCY"] = str(args.concurrency)
+    from synth.threads import available_cores
     from worker.celery_app import app, last_heartbeat, settings
     from worker.lifeline import ShutdownGuard
 
     name = args.name or f"texsynth-{os.getpid()}@{socket.gethostname()}"
     if not args.quiet:
         print(
-            f"texsynth worker {name}: {settings.concurrency} processes, data {settings.data_dir}, "
+            f"texsynth worker {name}: {settings.concurrency} processes x {settings.threads} threads "
+            f"({available_cores()} cores), data {settings.data_dir}, "
             f"broker {'redis' if settings.redis_url else 'filesystem (embedded)'}",
             flush=True,
         )

@@ -122,6 +122,7 @@ def run_job(
             progress=progress,
             manifest=manifest,
             max_output=settings.max_output_pixels,
+            threads=settings.threads,
         )
         timings = {k: float(v) for k, v in outcome.result.timings.items()}
         if store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics):

@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from synth.cli.inputs import add_threads_argument, threads_from
 from synth.errors import InvalidInput
 
 __all__ = ["format_table", "register", "run"]
@@ -263,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInput(
             "--exemplar", "missing: give --exemplar, or --exemplar-xy, --exemplar-xz and --exemplar-yz"
         )
-    options = {"pixel_size": args.pixel_size, "fringes": not args.no_fringes}
+    options = {"pixel_size": args.pixel_size, "fringes": not args.no_fringes, "threads": threads_from(args)}
     exemplars = {p: load_image(path, mode="grey") for p, path in planes.items()} if given else None
     exemplar = load_image(args.exemplar) if args.exemplar is not None else None
     if _is_stack(args.output):
@@ -358,6 +359,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the synthesis output: an image, or a volume as a multi-page TIFF",
     )
     parser.add_argument("--json", action="store_true", help="print all metrics as JSON instead of a table")
+    add_threads_argument(parser)
     parser.add_argument(
         "--plots", type=Path, metavar="DIR", help="also write the comparison plots (PNG) into DIR"
     )

@@ -12,7 +12,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-__all__ = ["PLANES", "PLANE_HELP", "add_plane_arguments", "input_sources"]
+__all__ = [
+    "PLANES",
+    "PLANE_HELP",
+    "add_plane_arguments",
+    "add_threads_argument",
+    "input_sources",
+    "threads_from",
+]
 
 PLANE_HELP = {
     "xy": "what the xy slices (fixed z: x right, y down) look like",
@@ -40,3 +47,19 @@ def input_sources(args: argparse.Namespace) -> dict[str, Path]:
     roles = {"exemplar": args.exemplar, "constraint": args.constraint}
     roles.update({f"exemplar_{plane}": getattr(args, f"exemplar_{plane}") for plane in PLANES})
     return {role: Path(path) for role, path in roles.items() if path is not None}
+
+
+def add_threads_argument(parser: argparse.ArgumentParser) -> None:
+    """``--threads N``: the job's numba threads (default: every core; the same bytes whatever N)."""
+    parser.add_argument(
+        "--threads",
+        metavar="N",
+        help="threads to run on, 1 to NUMBA_NUM_THREADS (default: every core); the same bytes whatever N",
+    )
+
+
+def threads_from(args: argparse.Namespace) -> int | None:
+    """``--threads`` checked (:func:`synth.threads.check_threads`): a bad value is one line and exit 2."""
+    from synth.threads import check_threads
+
+    return check_threads(args.threads, "--threads")

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from synth.cli.inputs import add_plane_arguments, input_sources
+from synth.cli.inputs import add_plane_arguments, add_threads_argument, input_sources, threads_from
 from synth.errors import InvalidParameter
 
 __all__ = ["parse_size", "register"]
@@ -72,6 +72,7 @@ def _run(args: argparse.Namespace) -> int:
         raise InvalidParameter("--bit-depth", args.bit_depth, "must be 8 or 16")
     if args.voxel_size is not None and not 0 < args.voxel_size < 1e6:
         raise InvalidParameter("--voxel-size", args.voxel_size, "must be a positive size in nm")
+    threads = threads_from(args)
     params = parse_assignments(args.set or [])
     size = parse_size(args.size) if args.size else None
     sources = input_sources(args)
@@ -92,6 +93,7 @@ def _run(args: argparse.Namespace) -> int:
             bit_depth=args.bit_depth,
             plots=not args.no_plots,
             voxel_size=args.voxel_size,
+            threads=threads,
         )
     finally:
         bar.close()
@@ -130,6 +132,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "a volume at the exemplar's scale)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    add_threads_argument(p)
     p.add_argument("--set", action="append", metavar="NAME=VALUE", help="a method parameter (repeatable)")
     p.add_argument(
         "--bit-depth",

@@ -49,6 +49,7 @@ from synth.analysis.tensor import (
 from synth.colour import to_grey
 from synth.errors import InvalidInput, InvalidParameter
 from synth.io import MIN_SIDE, array_to_unit
+from synth.threads import use_threads
 
 __all__ = [
     "COHERENCE_BINS",
@@ -578,6 +579,7 @@ def evaluate_pair(
     window: int = WINDOW,
     epsilon: float = HIST_EPSILON,
     fringe_options: Mapping[str, Any] | None = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """Compare a 2-D synthesis output with its exemplar (the study's benchmark, section 3.2).
 
@@ -602,6 +604,8 @@ def evaluate_pair(
     fringe_options : mapping, optional
         Keyword arguments of :func:`synth.analysis.fringes.extract_fringes` (``sigma``, ``background``,
         ``min_length``, ...).
+    threads : int, optional
+        Threads for the measures (:func:`synth.threads.use_threads`; default: as set, else every core).
 
     Returns
     -------
@@ -643,7 +647,8 @@ def evaluate_pair(
         pixel_size=pixel_size,
         fringe_options=dict(fringe_options or {}),
     )
-    return _evaluate_pair(exemplar, output, settings)[0]
+    with use_threads(threads):
+        return _evaluate_pair(exemplar, output, settings)[0]
 
 
 def evaluate_pair_fringes(
@@ -655,8 +660,10 @@ def evaluate_pair_fringes(
     ``fringes=False``), so that the fringe overlays (:func:`synth.output.plots.write_plots`) reuse
     them instead of extracting them a second time.
     """
+    threads = options.pop("threads", None)
     settings = MeasureSettings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
-    return _evaluate_pair(exemplar, output, settings)
+    with use_threads(threads):
+        return _evaluate_pair(exemplar, output, settings)
 
 
 def _evaluate_pair(
@@ -792,6 +799,7 @@ def evaluate_volume(
     window: int = WINDOW,
     epsilon: float = HIST_EPSILON,
     fringe_options: Mapping[str, Any] | None = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """Multi-2D comparison of a volume with its exemplar(s), per axis and overall, plus ``S2(r)``.
 
@@ -820,7 +828,8 @@ def evaluate_volume(
         Otsu threshold of each exemplar, applied to the volume in the comparisons with that exemplar.
     s2_periodic : bool
         Periodic ``S2`` estimates (for toroidal samples); by default non-periodic (zero-padded).
-    pixel_size, fringes, grey_bins, orientation_bins, coherence_bins, sigma_d, window, epsilon, fringe_options
+    pixel_size, fringes, grey_bins, orientation_bins, coherence_bins, sigma_d, window, epsilon
+    fringe_options, threads
         As in :func:`evaluate_pair`.
 
     Returns
@@ -856,6 +865,47 @@ def evaluate_volume(
     exemplars took 3.2 s with fringes and about 1 s without on an idle core of the project's machine
     (6.3 s and 2.2 s with the two cores shared five ways); ``S2`` itself takes under 0.1 s.
     """
+    with use_threads(threads):
+        return _evaluate_volume(
+            exemplar,
+            volume,
+            axes=axes,
+            slice_step=slice_step,
+            pixel_size=pixel_size,
+            fringes=fringes,
+            s2=s2,
+            threshold=threshold,
+            s2_periodic=s2_periodic,
+            grey_bins=grey_bins,
+            orientation_bins=orientation_bins,
+            coherence_bins=coherence_bins,
+            sigma_d=sigma_d,
+            window=window,
+            epsilon=epsilon,
+            fringe_options=fringe_options,
+        )
+
+
+def _evaluate_volume(
+    exemplar: np.ndarray | Mapping[str, np.ndarray],
+    volume: np.ndarray,
+    *,
+    axes: Iterable[int] = (0, 1, 2),
+    slice_step: int = 1,
+    pixel_size: float | None = None,
+    fringes: bool = True,
+    s2: bool = True,
+    threshold: float | None = None,
+    s2_periodic: bool = False,
+    grey_bins: int = GREY_BINS,
+    orientation_bins: int = ORIENTATION_BINS,
+    coherence_bins: int = COHERENCE_BINS,
+    sigma_d: float = SIGMA_D,
+    window: int = WINDOW,
+    epsilon: float = HIST_EPSILON,
+    fringe_options: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+
     settings = MeasureSettings(
         grey_bins=grey_bins,
         orientation_bins=orientation_bins,

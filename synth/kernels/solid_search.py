@@ -23,8 +23,8 @@ Parallelism (numba ``prange``, ``parallel=True``): every parallel loop writes on
 (a query's answer, a voxel's value) and reads nothing another iteration writes; sums stay inside one
 iteration, in a fixed order; the k-coherence de-duplication stamps are per block of queries, a fixed
 number of blocks (:data:`KCOHERENCE_BLOCKS`) whatever the threads; the histogram counts change only
-between blocks of voxels, sequentially. So ``NUMBA_NUM_THREADS=1`` and ``2`` give the same bytes
-(tested in a subprocess).
+between blocks of voxels, sequentially. So 1, 2 and 4 threads give the same bytes (tested in a
+subprocess, ``tests/synth/test_threads.py``).
 """
 
 from __future__ import annotations
@@ -65,9 +65,15 @@ __all__ = [
 ]
 
 
-#: Below this many items (queries, voxels) a kernel runs on the calling thread only: waking the thread
-#: pool costs more than it saves (on a loaded machine, the tests ran 3x slower with 2 threads).
-PARALLEL_MIN_ITEMS = 16384
+#: Below this much work (items of about a microsecond each: voxels, plain queries) a kernel runs on the
+#: calling thread only: waking the thread pool costs more than it saves (on a loaded machine, the tests
+#: ran 3x slower with 2 threads at 16384). Kernels whose items cost more count them with a weight
+#: (:data:`KCOHERENCE_WEIGHT`). At 4096, solid-kopf 64^3 runs every search and update on the pool.
+PARALLEL_MIN_ITEMS = 4096
+
+#: Work of one k-coherence query in :data:`PARALLEL_MIN_ITEMS` units (about 8 us against 1 us for a
+#: gathered neighbourhood or an updated voxel: 3606 queries took 10 ms on one thread).
+KCOHERENCE_WEIGHT = 8
 
 
 @contextmanager
@@ -444,7 +450,7 @@ def kcoherence_search(
     tag0 = int(counter[0])
     counter[0] += m + 1  # tags only grow: stamps never need clearing
     kset = sets.kset if k is None or k >= sets.kset.shape[1] else np.ascontiguousarray(sets.kset[:, :k])
-    with _threads_for(m):
+    with _threads_for(m * KCOHERENCE_WEIGHT):
         _kcoherence_kernel(
             np.ascontiguousarray(queries, dtype=np.float32),
             np.ascontiguousarray(centres, dtype=np.int64),

@@ -50,6 +50,7 @@ from synth.kernels.solid_search import (
     rerank,
 )
 from synth.pixel.synthesis import level_neighbourhood_size
+from synth.threads import current_threads
 
 __all__ = [
     "PLANES",
@@ -240,7 +241,9 @@ class ExemplarNeighbourhoods:
         else:
             proj = (queries - self.mean) @ self.basis
             # Independent queries: the answer does not depend on how the tree splits the work.
-            _, cand = self.tree.query(proj.astype(np.float64), k=TREE_CANDIDATES, eps=TREE_EPS, workers=-1)
+            _, cand = self.tree.query(
+                proj.astype(np.float64), k=TREE_CANDIDATES, eps=TREE_EPS, workers=current_threads()
+            )
             idx, d2 = rerank(
                 queries, self.vectors, np.asarray(cand, dtype=np.int64).reshape(len(queries), -1)
             )
@@ -301,7 +304,7 @@ def exemplar_neighbourhoods(
     kset = np.full((h * w, max(k, 1)), -1, dtype=np.int64)
     if k > 0:
         kk = min(len(centres), 2 * k + 1)
-        _, cand = tree.query(proj, k=kk, eps=TREE_EPS, workers=-1)
+        _, cand = tree.query(proj, k=kk, eps=TREE_EPS, workers=current_threads())
         cand = np.asarray(cand, dtype=np.int64).reshape(len(centres), kk)
         diff = vectors[np.minimum(cand, len(centres) - 1)] - vectors[:, None, :]
         d2 = np.einsum("mkj,mkj->mk", diff, diff, dtype=np.float64)

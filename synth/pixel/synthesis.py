@@ -54,6 +54,7 @@ from synth.kernels.pixel_search import (
     position_distance,
     synthesize_chunk,
 )
+from synth.threads import current_threads
 
 __all__ = [
     "CandidateWindow",
@@ -319,7 +320,8 @@ def k_coherence_sets(
     _, eigvec = np.linalg.eigh(sample.T @ sample)
     projected = vectors @ eigvec[:, ::-1][:, :dims]
     kk = min(k + 1, len(projected))
-    _, idx = cKDTree(projected).query(projected, k=kk, workers=-1)  # independent queries: same answer
+    # independent queries: the same answer on any number of workers
+    _, idx = cKDTree(projected).query(projected, k=kk, workers=current_threads())
     idx = idx.reshape(len(projected), kk)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]

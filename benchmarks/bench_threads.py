@@ -1,0 +1,215 @@
+"""Speed-up from 1 to 2 threads (issue 25): whole ``texsynth synthesize`` processes and the synthesis alone.
+
+Run ``python -m benchmarks.bench_threads`` (``--runs N``, ``--cases kopf-64,kopf-128,chen-wang-64``);
+writes the ``threads`` section of docs/benchmarks.md. Each run is a fresh ``python -m synth.cli
+synthesize METHOD --threads N`` process on the real HRTEM soot crop (``hrtem-soot-128.png``; a
+generated laminae pattern when ``../shared/data`` is absent), plots off, every other artifact written
+(the volume's evaluation included). The child wraps :func:`synth.pipeline.synthesize` to time the
+synthesis alone (wall and CPU of the process, the only threads then at work being the job's); the
+parent times the whole process (wall from start to exit, CPU from ``os.wait4``: all threads, user +
+system). One untimed run first (numba's cache on disk, as after any earlier run of the user's), then
+runs with 1 and 2 threads alternated (1, 2, 2, 1, 1, 2, ...) so that both see the same load; medians.
+The 1-minute load average is read before and after every run and reported: on a machine shared with
+other jobs, a 2-thread run cannot get two cores, and the wall-time speed-up is then a floor (CPU time
+says what the work costs; its growth from 1 to 2 threads is the parallel overhead). The bytes of
+every run are compared: the same with 1 and 2 threads. The CPU time of the synthesis' busiest
+thread (Linux's per-thread counters) gives a speed-up estimate that the load inflates less (see the
+section's note).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks._report import DATA, machine, write_section
+
+ROOT = Path(__file__).resolve().parent.parent
+#: name -> (method, size WxHxD)
+CASES = {
+    "kopf-64": ("solid-kopf", "64x64x64"),
+    "kopf-128": ("solid-kopf", "128x128x128"),
+    "chen-wang-64": ("solid-chen-wang", "64x64x64"),
+}
+
+_CHILD = """
+import json, os, sys, time
+import synth.pipeline as pipeline
+from synth.cli import main
+
+inner = pipeline.synthesize
+spent = {}
+tick = os.sysconf("SC_CLK_TCK")
+
+def per_thread():
+    out = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            fields = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        out[tid] = (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+def timed(*args, **kwargs):
+    wall, cpu, threads = time.perf_counter(), time.process_time(), per_thread()
+    try:
+        return inner(*args, **kwargs)
+    finally:
+        spent["wall"], spent["cpu"] = time.perf_counter() - wall, time.process_time() - cpu
+        after = per_thread()
+        spent["busiest"] = max(after[t] - threads.get(t, 0.0) for t in after)
+
+pipeline.synthesize = timed
+code = main(sys.argv[1:])
+print("SYNTHESIS " + json.dumps(spent))
+sys.exit(code)
+"""
+
+
+def _exemplar(folder: Path) -> Path:
+    soot = DATA / "hrtem-soot-128.png"
+    if soot.is_file():
+        return soot
+    from synth.io import save_image
+    from synth.io.patterns import undulating_laminae
+
+    path = folder / "laminae-128.png"
+    save_image(path, undulating_laminae((128, 128)))
+    return path
+
+
+def _load() -> float:
+    return os.getloadavg()[0]
+
+
+def run_once(method: str, size: str, threads: int, exemplar: Path, folder: Path) -> dict[str, float | str]:
+    """One whole process: wall, CPU (all threads), the synthesis' wall and CPU, load, output digest."""
+    out = folder / f"out-{threads}"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    words = ["synthesize", method, "--exemplar", str(exemplar), "--size", size, "--seed", "1"]
+    words += ["--no-plots", "--threads", str(threads), "--out", str(out)]
+    load_before = _load()
+    start = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _CHILD, *words],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    stdout = proc.stdout.read() if proc.stdout else ""
+    stderr = proc.stderr.read() if proc.stderr else ""
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"{method} {size} --threads {threads} failed: {stderr.strip()[-400:]}")
+    line = next(x for x in stdout.splitlines() if x.startswith("SYNTHESIS "))
+    spent = json.loads(line.removeprefix("SYNTHESIS "))
+    digest = hashlib.sha256((out / "output.tiff").read_bytes()).hexdigest()
+    return {
+        "wall": wall,
+        "cpu": usage.ru_utime + usage.ru_stime,
+        "synthesis_wall": spent["wall"],
+        "synthesis_cpu": spent["cpu"],
+        "synthesis_busiest": spent["busiest"],
+        "load": max(load_before, _load()),
+        "digest": digest,
+    }
+
+
+def measure(name: str, runs: int, folder: Path, exemplar: Path) -> dict[str, object]:
+    """Paired runs of one case with 1 and 2 threads: medians per thread count, loads, same bytes."""
+    method, size = CASES[name]
+    run_once(method, size, 2, exemplar, folder)  # untimed: numba's cache and bytecode on disk
+    rows: dict[int, list[dict[str, float | str]]] = {1: [], 2: []}
+    for i in range(runs):
+        for threads in (1, 2) if i % 2 == 0 else (2, 1):
+            rows[threads].append(run_once(method, size, threads, exemplar, folder))
+            print(f"{name} threads={threads}: {rows[threads][-1]}", flush=True)
+    keys = ("wall", "cpu", "synthesis_wall", "synthesis_cpu", "synthesis_busiest")
+    med = {t: {k: statistics.median(float(r[k]) for r in rows[t]) for k in keys} for t in rows}
+    loads = [float(r["load"]) for t in rows for r in rows[t]]
+    digests = {str(r["digest"]) for t in rows for r in rows[t]}
+    return {
+        "case": name,
+        "method": method,
+        "size": size,
+        "runs": runs,
+        "median": med,
+        "load": (min(loads), statistics.median(loads), max(loads)),
+        "same_bytes": len(digests) == 1,
+    }
+
+
+def report(results: list[dict[str, object]]) -> str:
+    lines = [
+        "## Threads: 1 -> 2 (`python -m benchmarks.bench_threads`)",
+        "",
+        "Whole `texsynth synthesize METHOD --threads N --no-plots` processes on `hrtem-soot-128.png`"
+        " (seed 1), 1 and 2 threads alternated, medians; CPU = user + system of all the process's"
+        " threads. 'Synthesis' is `synth.api.synthesize` alone inside the same process. Speed-up ="
+        " wall(1) / wall(2). Load = 1-minute load average (min / median / max over the runs) on this"
+        " 2-core machine: above about 1, the 2-thread runs could not have both cores, so their speed-up"
+        " is a floor. 'Busiest thread' is the CPU time of the synthesis' busiest thread (from"
+        " /proc/self/task): what its wall time would be with a core per thread and nothing else running,"
+        " so CPU(1) / busiest(2) estimates the speed-up of a quiet machine (it leaves out the time a"
+        " thread waits for another, which overstates; under load the OpenMP threads' spin while they"
+        " wait counts in the busiest thread's time, which understates).",
+        "",
+        "| case | runs | whole wall 1 / 2 threads | speed-up | whole CPU 1 / 2 | synthesis wall 1 / 2 |"
+        " speed-up | synthesis CPU 1 / 2 | busiest thread at 2 | CPU(1) / busiest(2) | load | same bytes |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        m = r["median"]
+        assert isinstance(m, dict)
+        one, two = m[1], m[2]
+        lo, mid, hi = r["load"]  # type: ignore[misc]
+        lines.append(
+            f"| {r['method']} {r['size']} | {r['runs']} | {one['wall']:.1f} / {two['wall']:.1f} s |"
+            f" {one['wall'] / two['wall']:.2f}x | {one['cpu']:.1f} / {two['cpu']:.1f} s |"
+            f" {one['synthesis_wall']:.1f} / {two['synthesis_wall']:.1f} s |"
+            f" {one['synthesis_wall'] / two['synthesis_wall']:.2f}x |"
+            f" {one['synthesis_cpu']:.1f} / {two['synthesis_cpu']:.1f} s | {two['synthesis_busiest']:.1f} s |"
+            f" {one['synthesis_cpu'] / two['synthesis_busiest']:.2f}x |"
+            f" {lo:.1f} / {mid:.1f} / {hi:.1f} | {'yes' if r['same_bytes'] else 'NO'} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=3, help="runs per thread count (default 3)")
+    parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
+    parser.add_argument("--no-write", action="store_true", help="print the table, leave the docs alone")
+    args = parser.parse_args(argv)
+    names = [c.strip() for c in args.cases.split(",") if c.strip()]
+    unknown = [c for c in names if c not in CASES]
+    if unknown:
+        parser.error(f"unknown cases: {', '.join(unknown)}")
+    results = []
+    with tempfile.TemporaryDirectory(prefix="bench-threads-") as tmp:
+        folder = Path(tmp)
+        exemplar = _exemplar(folder)
+        for name in names:
+            results.append(measure(name, args.runs, folder, exemplar))
+    table = report(results)
+    print(table)
+    print(machine())
+    if not args.no_write:
+        write_section("threads", table)
+    return 0 if all(r["same_bytes"] for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,188 @@
+"""The threads knob (:mod:`synth.threads`): its meaning, its bad values, and the same bytes with 1, 2
+and 4 threads for every method (issue 25)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+from synth.api import synthesize
+from synth.cli import main
+from synth.errors import InvalidParameter
+from synth.io import save_image
+from synth.io.patterns import undulating_laminae
+from synth.threads import (
+    THREADS_ENV,
+    available_cores,
+    check_threads,
+    max_threads,
+    service_threads,
+    use_threads,
+)
+
+# Every method at a small size, with 1, 2 and 4 threads in one process whose numba pool has 4 threads
+# (NUMBA_NUM_THREADS=4, more than this machine's cores, so that 4 threads really run), every solid
+# kernel forced onto the pool however small its input: a digest per method and count.
+_EVERY_METHOD = """
+import hashlib, json
+import numpy as np
+import synth.kernels.solid_search as k
+from synth.api import available_methods, synthesize
+from synth.io.patterns import undulating_laminae
+
+k.PARALLEL_MIN_ITEMS = 0
+ex = undulating_laminae((40, 40), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0)
+yy, xx = np.mgrid[0:48, 0:48].astype(np.float32)
+con = (0.5 + 0.5 * np.sin(2 * np.pi * (xx + 6 * np.sin(2 * np.pi * yy / 48)) / 12)).astype(np.float32)
+out = {}
+for name, spec in sorted(available_methods().items()):
+    size = (12, 12, 12) if spec.output_ndim == 3 else (48, 48)
+    params = {"levels": 2} if spec.output_ndim == 3 and "levels" in spec.params_model.model_fields else {}
+    digests = []
+    for threads in (1, 2, 4):
+        r = synthesize(name, ex, size=size, seed=5, params=params,
+                       constraint=con if spec.constraint == "required" else None, threads=threads)
+        h = hashlib.sha256(r.image.tobytes())
+        if r.tensor_field is not None:
+            h.update(np.ascontiguousarray(r.tensor_field).tobytes())
+        digests.append(h.hexdigest())
+    out[name] = digests
+print(json.dumps(out))
+"""
+
+
+def test_every_method_gives_the_same_bytes_with_one_two_and_four_threads() -> None:
+    env = {**os.environ, "NUMBA_NUM_THREADS": "4"}
+    done = subprocess.run(
+        [sys.executable, "-c", _EVERY_METHOD], env=env, capture_output=True, text=True, check=True
+    )
+    digests = json.loads(done.stdout.strip().splitlines()[-1])
+    assert len(digests) >= 10  # every registered method ran
+    differ = {name: d for name, d in digests.items() if len(set(d)) != 1}
+    assert not differ, f"bytes depend on the thread count: {differ}"
+
+
+def test_use_threads_sets_the_count_and_restores_it() -> None:
+    before = numba.get_num_threads()
+    with use_threads(1) as count:
+        assert count == 1 and numba.get_num_threads() == 1
+    assert numba.get_num_threads() == before
+    with use_threads(None) as count:  # the default: the whole pool
+        assert count == max_threads() == numba.get_num_threads()
+    assert numba.get_num_threads() == before
+
+
+def test_the_default_inside_a_chosen_count_keeps_it() -> None:
+    """``synthesize_to_folder(threads=1)`` calls ``synthesize()`` (no count): the synthesis keeps 1."""
+    with use_threads(1):
+        with use_threads(None) as count:
+            assert count == 1 == numba.get_num_threads()
+        assert numba.get_num_threads() == 1
+
+
+def test_pipeline_runs_the_synthesis_on_the_chosen_count(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import synth.api as api
+    from synth.pipeline import synthesize_to_folder
+
+    real, seen = api.use_threads, []
+
+    @contextmanager
+    def spy(threads: int | None) -> Iterator[int]:
+        with real(threads) as count:
+            seen.append(numba.get_num_threads())  # what the method's kernels run on
+            yield count
+
+    monkeypatch.setattr(api, "use_threads", spy)
+    images = {"exemplar": undulating_laminae((32, 32))}
+    synthesize_to_folder("random-phase", images, tmp_path / "o", size=(32, 32), plots=False, threads=1)
+    assert seen == [1]
+
+
+@pytest.mark.parametrize("value", [0, -1, 2.5, "two", True, max_threads() + 1])
+def test_bad_thread_counts_are_named(value: object) -> None:
+    with pytest.raises(InvalidParameter, match="'threads'"):
+        check_threads(value)
+
+
+def test_whole_numbers_pass_as_counts() -> None:
+    assert check_threads(None) is None
+    assert check_threads(1) == 1
+    assert check_threads("1") == 1
+    assert check_threads(np.int64(1)) == 1
+
+
+def test_api_refuses_a_bad_count_before_any_work() -> None:
+    ex = undulating_laminae((32, 32))
+    with pytest.raises(InvalidParameter, match="'threads' = 0"):
+        synthesize("random-phase", ex, size=(32, 32), threads=0)
+    one = synthesize("random-phase", ex, size=(32, 32), threads=1)
+    every = synthesize("random-phase", ex, size=(32, 32))
+    assert one.image.tobytes() == every.image.tobytes()
+
+
+def test_service_divides_the_cores_between_its_workers() -> None:
+    cores = available_cores()
+    assert service_threads(1) == cores
+    assert service_threads(cores) == 1
+    assert service_threads(cores + 3) == 1  # never zero
+    assert service_threads(2, "1") == 1
+    assert service_threads(1, None) * 1 <= cores
+
+
+@pytest.mark.parametrize("raw", ["0", "-2", "abc", "1.5", "999"])
+def test_a_bad_service_value_stops_at_start(raw: str) -> None:
+    from jobs.config import Settings
+
+    with pytest.raises(InvalidParameter, match=THREADS_ENV):
+        Settings.from_env({THREADS_ENV: raw, "TEXSYNTH_CONCURRENCY": "1"})
+
+
+def test_service_settings_carry_the_count_to_the_workers() -> None:
+    from jobs.config import Settings
+
+    settings = Settings.from_env({"TEXSYNTH_CONCURRENCY": "1"})
+    assert settings.threads == available_cores()
+    assert Settings.from_env(settings.to_env()).threads == settings.threads
+    assert Settings.from_env({THREADS_ENV: "1"}).threads == 1
+
+
+@pytest.mark.parametrize("command", ["synthesize", "evaluate"])
+@pytest.mark.parametrize("value", ["0", "x", "1.5"])
+def test_cli_bad_threads_is_one_line_and_exit_2(
+    command: str, value: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    image = tmp_path / "ex.png"
+    save_image(image, undulating_laminae((32, 32)))
+    words = (
+        ["synthesize", "random-phase", "--exemplar", str(image), "--out", str(tmp_path / "o")]
+        if command == "synthesize"
+        else ["evaluate", "--exemplar", str(image), "--output", str(image)]
+    )
+    assert main([*words, "--threads", value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'--threads'" in err[0] and command in err[0]
+
+
+def test_cli_threads_runs_and_gives_the_same_bytes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    image = tmp_path / "ex.png"
+    save_image(image, undulating_laminae((32, 32)))
+    outputs = []
+    for threads in ("1", None):
+        out = tmp_path / f"o{threads}"
+        words = ["synthesize", "random-phase", "--exemplar", str(image), "--size", "32x32", "--no-plots"]
+        assert main([*words, "--out", str(out), *(["--threads", threads] if threads else [])]) == 0
+        outputs.append((out / "output.png").read_bytes())
+    assert outputs[0] == outputs[1]
