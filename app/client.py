@@ -385,15 +385,25 @@ class Client:
         text = raw.decode(errors="replace")[:200] or response.reason_phrase
         return ServiceError(response.status_code, text)
 
-    def _call(self, method: str, path: str, handle: Callable[[Any], T], **kwargs: Any) -> T:
+    def _call(
+        self,
+        method: str,
+        path: str,
+        handle: Callable[[Any], T],
+        *,
+        budget: float | None = None,
+        **kwargs: Any,
+    ) -> T:
         """Send a request and give its answer to ``handle`` (inside the stream, for downloads), with
-        retries. An answer of 400 or more becomes a :class:`ServiceError`."""
+        retries for at most ``budget`` seconds (default ``retry.total``). An answer of 400 or more
+        becomes a :class:`ServiceError`."""
         import httpx
 
         url = self._url(path)
         what = f"{method} {urllib.parse.urlsplit(url).path}"
         start = time.monotonic()
         policy = self.retry
+        total = policy.total if budget is None else min(policy.total, max(0.0, budget))
         for n in range(policy.attempts):
             wait_at_least: float | None = None
             try:
@@ -407,13 +417,20 @@ class Client:
                 # resent only if nothing may have reached the service, unless the request only reads
                 retriable = method == "GET" or isinstance(exc, httpx.ConnectError | httpx.ConnectTimeout)
                 reason = str(exc) or type(exc).__name__
-                error = ServiceError(0, f"cannot reach the service at {self.base_url} ({reason})")
+                detail = f"cannot reach the service at {self.base_url} ({reason})"
+                if not retriable:
+                    detail = (
+                        f"the connection to {self.base_url} broke before an answer ({reason}); the "
+                        f"service may have acted on this {method}: look before sending it again"
+                    )
+                error = ServiceError(0, detail)
             if not retriable or n + 1 >= policy.attempts:
                 raise error
             wait = max(policy.backoff(n), wait_at_least or 0.0)
-            if time.monotonic() - start + wait > policy.total:
-                if wait_at_least is not None and wait_at_least > policy.total:
-                    error.detail += f" (the service asks to retry after {wait_at_least:.0f} s)"
+            if time.monotonic() - start + wait > total:
+                if wait_at_least is not None and wait_at_least > total:
+                    asks = f" (the service asks to retry after {wait_at_least:.0f} s)"
+                    error = ServiceError(error.status, error.detail + asks, error.field)
                 raise error
             if self.on_retry is not None:
                 self.on_retry(what, error, wait)
@@ -528,8 +545,10 @@ class Client:
                 progress(len(jobs) - 1, job)
         return jobs
 
-    def job(self, job_id: str) -> Job:
-        return _model("Job").model_validate(self._json("GET", f"/api/jobs/{urllib.parse.quote(str(job_id))}"))
+    def job(self, job_id: str, *, budget: float | None = None) -> Job:
+        """One job's record; ``budget``: seconds of retries at most (default ``retry.total``)."""
+        answer = self._json("GET", f"/api/jobs/{urllib.parse.quote(str(job_id))}", budget=budget)
+        return _model("Job").model_validate(answer)
 
     def jobs(self, state: str | None = None, limit: int = 50, offset: int = 0) -> Jobs:
         query = {k: v for k, v in {"state": state, "limit": limit, "offset": offset}.items() if v is not None}
@@ -570,7 +589,7 @@ class Client:
 
     def wait_all(
         self,
-        jobs: Sequence[str | Job],
+        jobs: Sequence[str | Job | Mapping[str, Any]],
         *,
         progress: Callable[[Job, int, int], None] | None = None,
         poll: float = 0.5,
@@ -581,7 +600,7 @@ class Client:
         ``progress(job, finished, total)`` after every answer. Failed polls as in :meth:`wait`;
         ``TimeoutError`` names the jobs still unfinished after ``timeout`` seconds.
         """
-        ids = [j if isinstance(j, str) else j.id for j in jobs]
+        ids = [j if isinstance(j, str) else j["id"] if isinstance(j, Mapping) else j.id for j in jobs]
         final: dict[str, Job] = {}
         last: dict[str, Job] = {}
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -590,7 +609,8 @@ class Client:
                 if job_id in final:
                     continue
                 try:
-                    job = self.job(job_id)
+                    left = None if deadline is None else deadline - time.monotonic()
+                    job = self.job(job_id, budget=left)  # retries never outlast the wait's timeout
                 except ServiceError as exc:
                     if not exc.transient:
                         raise
@@ -599,7 +619,7 @@ class Client:
                 if job.state in TERMINAL:
                     final[job_id] = job
                 if progress is not None:
-                    progress(job, len(final), len(ids))
+                    progress(job, len(final), len(set(ids)))
             if len(final) == len(set(ids)):
                 return [final[j] for j in ids]
             if deadline is not None and time.monotonic() > deadline:
