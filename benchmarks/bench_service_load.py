@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from app.client import Client, ServiceError
+from app.client import Client, Retry, ServiceError
 from benchmarks._report import write_section
 from tests.service.conftest import Service, free_port, start_redis
 
@@ -94,7 +94,8 @@ class Run:
         print(self.events[-1], flush=True)
 
     def client_loop(self, index: int, deadline: float) -> None:
-        client = Client(self.service.url, timeout=30)
+        # no retries inside the client: this run counts the service's refusals and failed polls itself
+        client = Client(self.service.url, timeout=30, retry=Retry(attempts=1))
         share = range(index, self.n_jobs, self.n_clients)
         for seed in share:
             job = None
