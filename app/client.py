@@ -40,7 +40,7 @@ import urllib.parse
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, BinaryIO, TypeVar
 
 from synth.cli.inputs import add_plane_arguments, input_sources
 from synth.errors import InvalidInput, SynthError
@@ -642,25 +642,23 @@ class Client:
     ) -> list[Path]:
         """Stream the job's artifacts (all, or ``names``) into files under ``out_dir``; returns their
         paths. Each file appears whole or not at all (written beside, then renamed)."""
+        from synth.io.atomic import atomic_writer  # deferred: synth.io loads Pillow
+
         out = Path(out_dir)
         artifacts = _artifacts(job)
         paths = []
         for name in names if names is not None else artifacts:
             path = out / name
             path.parent.mkdir(parents=True, exist_ok=True)
-            part = path.with_name(f".{path.name}.part")
+            with atomic_writer(path) as fh:
 
-            def save(response: Any, part: Path = part) -> None:
-                with open(part, "wb") as fh:
+                def save(response: Any, fh: BinaryIO = fh) -> None:
+                    fh.seek(0)  # a broken stream is retried from the start
+                    fh.truncate()
                     for chunk in response.iter_bytes(1 << 16):
                         fh.write(chunk)
 
-            try:
-                self._call("GET", artifacts[name], save)  # a broken stream is retried from the start
-                os.replace(part, path)
-            finally:
-                with contextlib.suppress(OSError):
-                    part.unlink()
+                self._call("GET", artifacts[name], save)
             paths.append(path)
         return paths
 

@@ -1,7 +1,8 @@
 """The one atomic file writer: readers see the old file or the new one, never a part.
 
 Every file the engine, the CLI and the service write goes through :func:`atomic_write_bytes` (or its
-JSON form): the data goes to a temporary file beside the target, is flushed to disk, then renamed over
+JSON form; :func:`atomic_writer` for a file written in pieces, e.g. a streamed download): the data
+goes to a temporary file beside the target, is flushed to disk, then renamed over
 the target; on any failure the temporary file is removed. A failure to write (full disk, no
 permission) is the machine's problem, not the input's: it raises :class:`synth.errors.StorageError`
 (an ``OSError``), whose message names the file but not the server's folders.
@@ -13,12 +14,13 @@ import contextlib
 import json
 import os
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from synth.errors import StorageError
 
-__all__ = ["atomic_write_bytes", "atomic_write_json"]
+__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_writer"]
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
@@ -29,6 +31,19 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     StorageError
         The file cannot be written; the message names ``path``'s file name and the system's reason.
     """
+    with atomic_writer(path) as fh:
+        fh.write(data)
+
+
+@contextlib.contextmanager
+def atomic_writer(path: str | os.PathLike[str]) -> Iterator[BinaryIO]:
+    """A binary file to write ``path`` in pieces: it appears whole when the block ends, or not at all.
+
+    The handle writes a temporary file beside ``path``; a writer that must start again (a download
+    retried from its first byte) calls ``fh.seek(0); fh.truncate()``. An exception in the block
+    removes the temporary file and propagates; an ``OSError`` (a failed write, in the block or here)
+    becomes :class:`StorageError` naming the file.
+    """
     target = Path(path)
     tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.tmp")
     created = False
@@ -36,15 +51,17 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
         created = True
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            yield fh
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, target)
+        created = False
     except OSError as exc:
+        raise StorageError(target.name, exc.strerror or str(exc)) from None
+    finally:
         if created:
             with contextlib.suppress(OSError):
                 tmp.unlink()
-        raise StorageError(target.name, exc.strerror or str(exc)) from None
 
 
 def atomic_write_json(path: str | os.PathLike[str], document: Any) -> None:
