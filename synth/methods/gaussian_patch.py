@@ -10,8 +10,7 @@ neighbours (:mod:`synth.patch.gaussian`). ``blending='boundary-cut'`` stitches i
 Efros-Freeman minimum-error cut (Fig. 3); ``'none'`` pastes it (Fig. 2).
 
 Departures, each measured in docs/patch.md and docs/design.md ("gaussian-patch"):
-- ``sigma``, ``theta`` (no values in the paper): 0.05 and 0.05; the overlap: a quarter of the patch;
-- the first patch is an exemplar patch drawn uniformly;
+- ``sigma``, ``theta`` (not in the paper): 0.05, 0.05; overlap a quarter of the patch; first patch drawn;
 - ``estimate='neighbour'`` (the paper: ``'mean'``): one neighbour corrected toward the overlap (Matheron's
   rule, tapered by ``localisation``); ``'draw'``: a draw from the conditional law (sec. 3.1);
 - ``contrast='restore'``: each patch keeps the neighbours' standard deviation (the mean decays);

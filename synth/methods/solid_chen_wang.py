@@ -19,8 +19,7 @@ al., "Fast example-based surface texture synthesis via discrete optimization", T
 Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
 - Kopf's form of histogram re-weighting for both histograms (the paper's formulas are not available);
 - the solver adds a ``consensus`` term (the fit alone is speckled) and Kopf's grey-level histogram;
-- fewer candidates: the voxel's own matches (``solve_radius`` 0), its own k-set (``kset_window`` 1);
-- a level's first voxels come from the first plane's matches, then a solve pass precedes the first search;
+- fewer candidates (``solve_radius`` 0, ``kset_window`` 1); a level starts from the first plane's matches;
 - 3 iterations per level (the study: 10); laminae get 10 (``adapt_to_structure``);
 - parallel passes: the search is Jacobi with the index histogram frozen per call, the solve in blocks;
 - every voxel is searched (Kopf's sparse grid was tried here: worse, no faster);

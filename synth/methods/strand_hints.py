@@ -6,9 +6,7 @@ exemplar-like texture synthesized in the exemplar's own frame (section 2.1: "syn
 the constraint's size first"), so along a constraint strand that runs across the exemplar's fibres
 the hints jump from fibre to fibre; a fibrous exemplar whose fibres each have their own grey level
 (wood grain) then comes out as a patchwork of grey along each strand (docs/arbitrary-shape.md,
-"Continuous strands"). This module lays the hints along the constraint's flow instead (a departure,
-``hint_layout='strands'``).
-
+"Continuous strands"). This module lays them along the constraint's flow (``hint_layout='strands'``).
 How (a piecewise parametrisation of the output by the constraint's strands):
 
 1. **Fibre table** (:func:`fibre_table`): in the exemplar, the streamlines of its own structure
