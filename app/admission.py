@@ -38,6 +38,10 @@ from synth.errors import InvalidInput, InvalidParameter
 
 __all__ = ["Admission", "estimate_memory"]
 
+#: Seconds a client refused for a full queue is told to wait (``Retry-After`` on the 429): a hint, about
+#: the time a small job takes; the refusal stores nothing, so trying again later is always safe.
+QUEUE_RETRY_AFTER = 10
+
 #: Bytes of working memory per input pixel or output element, the generic term (float32 arrays:
 #: the image and its pyramid, feature and distance buffers, tensor fields and the rendered maps).
 GENERIC_BYTES_PER_ELEMENT = 48
@@ -168,4 +172,5 @@ class Admission:
                 f"too many jobs queued: {who} has {active} queued or running, and at most {limit} are "
                 f"allowed (TEXSYNTH_MAX_QUEUED_PER_TOKEN); this submission adds {new_jobs}, room for "
                 f"{room}. Wait for some to finish, or cancel some",
+                headers={"Retry-After": str(QUEUE_RETRY_AFTER)},
             )

@@ -111,6 +111,7 @@ def test_the_queue_limit_per_token_is_429_naming_it(api):
         assert submit(client, {}).status_code == 202
     r = submit(client, {})
     assert r.status_code == 429
+    assert r.headers["Retry-After"] == "10"  # a hint in seconds, as RFC 9110 allows
     body = r.json()
     assert body["error"] == "too_many_jobs"
     assert "at most 3" in body["detail"] and "TEXSYNTH_MAX_QUEUED_PER_TOKEN" in body["detail"]
