@@ -58,7 +58,7 @@ from synth.kernels.solid_kcoherence import (
     search_pass,
     solve_pass,
 )
-from synth.methods.common import SolidParams, checked_progress
+from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
 from synth.methods.solid_kopf import laminar_pilot
 from synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
 from synth.pixel.solid import (
@@ -117,16 +117,9 @@ class SolidChenWangParams(SolidParams):
         f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as the "
         "finest level's.",
     )
-    structure: Literal["auto", "none", "laminar"] = Field(
-        "auto",
-        description="'laminar': start from a volume of curved sheets at the exemplar's period, on the "
-        "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
-        "start; 'auto': laminar when one laminar, isotropic exemplar serves the three planes and "
-        "adapt_to_structure is on.",
-    )
-    structure_length: float = Field(
-        4.0, gt=0.0, le=64.0, description="Curvature length of the laminar start, in periods."
-    )
+    structure: Literal["auto", "none", "laminar"]
+    structure_length: float
+    structure, structure_length = laminar_start_fields()
     k: int = Field(15, ge=0, le=32, description="k-coherence: similar exemplar positions per pixel.")
     # Not given by the paper; measured (docs/solid.md, "Departures from the papers").
     position_weight: float = Field(

@@ -55,7 +55,7 @@ from synth.kernels.solid_search import (
     PackedExemplars,
     irls_update,
 )
-from synth.methods.common import SolidParams, checked_progress
+from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
 from synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
@@ -129,16 +129,9 @@ class SolidKopfParams(SolidParams):
         description="Pull each plane's slices toward its exemplar's orientation histogram (eq 4 on "
         "orientations; 0 = off, the paper).",
     )
-    structure: Literal["auto", "none", "laminar"] = Field(
-        "auto",
-        description="'laminar': start from a volume of curved sheets at the exemplar's period, on the "
-        "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
-        "start; 'auto': laminar when one laminar, isotropic exemplar serves the three planes and "
-        "adapt_to_structure is on.",
-    )
-    structure_length: float = Field(
-        4.0, gt=0.0, le=64.0, description="Curvature length of the laminar start, in periods."
-    )
+    structure: Literal["auto", "none", "laminar"]
+    structure_length: float
+    structure, structure_length = laminar_start_fields()
     iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
     scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
     r: float = Field(0.8, gt=0.0, le=2.0, description="Robust norm exponent (IRLS weights ||s-e||^(r-2)).")
