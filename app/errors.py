@@ -110,9 +110,10 @@ def install_error_handlers(app: FastAPI) -> None:
         if not disk_full(exc):
             raise exc  # anything else is a bug: the server's 500
         request.app.state.service.disk_full_at = time.time()
+        why = getattr(exc, "strerror", None) or exc
         return _error(
             507,
-            f"the server's disk is full ({exc.__class__.__name__}: {getattr(exc, 'strerror', None) or exc}); "
+            f"the server could not write to its disk, which is full ({why}); "
             "nothing was queued or changed, try again later",
             None,
             "insufficient_storage",
