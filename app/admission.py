@@ -19,7 +19,10 @@ were validated (the engine's own checks: finite numbers, sizes, formats):
 - **a sweep's size**: runs (``TEXSYNTH_MAX_SWEEP_RUNS``) and output pixels of all runs together
   (``TEXSYNTH_MAX_SWEEP_PIXELS``), 422;
 - **the owner's queue**: queued + running jobs per token (``TEXSYNTH_MAX_QUEUED_PER_TOKEN``), 429.
-  Without tokens every client is the one anonymous owner, so the limit caps the whole queue.
+  Without tokens every client is the one anonymous owner, so the limit caps the whole queue;
+- **the owner's storage**: bytes of inputs and artifacts its jobs keep (``TEXSYNTH_TOKEN_QUOTA_BYTES``
+  or the token entry's ``quota=``): 507 when this submission's inputs do not fit, 413 when they alone
+  exceed the quota.
 
 Every refusal names the limit, the setting that raises it, and what to change.
 """
@@ -32,11 +35,12 @@ from typing import Any
 
 from fastapi import HTTPException
 
+from app.auth import Principal
 from jobs.config import Settings
 from jobs.store import JobStore
 from synth.errors import InvalidInput, InvalidParameter
 
-__all__ = ["Admission", "estimate_memory"]
+__all__ = ["Admission", "QuotaExceeded", "estimate_memory"]
 
 #: Seconds a client refused for a full queue is told to wait (``Retry-After`` on the 429): a hint, about
 #: the time a small job takes; the refusal stores nothing, so trying again later is always safe.
@@ -51,6 +55,23 @@ SMALL_EXEMPLAR = 512 * 512
 
 def _gib(n: float) -> str:
     return f"{n / 2**30:.1f} GiB"
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{int(n)} bytes"
+
+
+class QuotaExceeded(Exception):
+    """A submission that the owner's storage quota has no room for (HTTP 507, or 413 when the
+    submission alone is larger than the quota)."""
+
+    def __init__(self, status: int, detail: str) -> None:
+        super().__init__(detail)
+        self.status = status
+        self.detail = detail
 
 
 def estimate_memory(
@@ -173,4 +194,28 @@ class Admission:
                 f"allowed (TEXSYNTH_MAX_QUEUED_PER_TOKEN); this submission adds {new_jobs}, room for "
                 f"{room}. Wait for some to finish, or cancel some",
                 headers={"Retry-After": str(QUEUE_RETRY_AFTER)},
+            )
+
+    def check_storage(self, principal: Principal, inputs: Mapping[str, tuple[str, bytes]]) -> None:
+        """The owner's stored bytes with these inputs added within its quota (else
+        :class:`QuotaExceeded`); a quota of 0 means none."""
+        quota = self.settings.token_quota_bytes if principal.quota is None else principal.quota
+        if quota <= 0:
+            return
+        adding = sum(len(data) for _, data in inputs.values())
+        who = f"token '{principal.name}'" if principal.name else "this service (no tokens: one quota for all)"
+        setting = "its token entry's quota=" if principal.quota is not None else "TEXSYNTH_TOKEN_QUOTA_BYTES"
+        if adding > quota:
+            raise QuotaExceeded(
+                413,
+                f"this upload of {_size(adding)} alone is larger than the storage quota of {who}, "
+                f"{_size(quota)} ({setting}); upload a smaller image",
+            )
+        used = self.store.usage(principal.name)
+        if used + adding > quota:
+            raise QuotaExceeded(
+                507,
+                f"storage quota reached: {who} keeps {_size(used)} of inputs and artifacts, and this "
+                f"upload adds {_size(adding)}, more than its quota of {_size(quota)} ({setting}). "
+                "Download what you need and delete finished jobs (DELETE /api/jobs/{id}) to make room",
             )

@@ -7,8 +7,9 @@ carries ``Authorization: Bearer <token>``; a token stands for a *name*, and jobs
 the name that made them (two tokens with one name share their jobs, which lets a token be replaced
 without losing them). An admin entry sees and manages every job.
 
-An entry reads ``name:token`` or ``name:token:admin``; ``TEXSYNTH_API_TOKENS`` holds entries
-separated by commas, the token file one per line (``#`` starts a comment). A token has at least
+An entry reads ``name:token``, ``name:token:admin``, and may end with ``:quota=<bytes>`` (``10GiB``,
+``500MB``; the name's own storage quota, else ``TEXSYNTH_TOKEN_QUOTA_BYTES``); ``TEXSYNTH_API_TOKENS``
+holds entries separated by commas, the token file one per line (``#`` starts a comment). A token has at least
 :data:`MIN_TOKEN_LENGTH` characters (``python -c "import secrets; print(secrets.token_urlsafe())"``).
 
 Files of a job (artifacts, inputs, preview, slices) are also reachable through a **signed URL**: the
@@ -51,6 +52,7 @@ class Principal:
     name: str | None
     admin: bool = False
     job: str | None = None
+    quota: int | None = None  # bytes its jobs may keep stored; None: the service's default
 
     def can_see(self, owner: str | None, job_id: str | None = None) -> bool:
         if self.job is not None:
@@ -106,8 +108,14 @@ class Tokens:
             if not entry:
                 continue
             parts = entry.split(":")
+            quota = None
+            if len(parts) > 2 and parts[-1].strip().startswith("quota="):
+                quota = _quota(parts.pop().strip()[len("quota=") :], where)
             if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] != "admin"):
-                raise TokenError(f"{where}: an entry must read name:token or name:token:admin")
+                raise TokenError(
+                    f"{where}: an entry must read name:token or name:token:admin, optionally ending "
+                    "with :quota=<bytes>"
+                )
             name, token = parts[0].strip(), parts[1].strip()
             if not _NAME.match(name):
                 raise TokenError(f"{where}: the name {name!r} may hold only letters, digits and _.@- (1-64)")
@@ -118,7 +126,7 @@ class Tokens:
                 )
             if token in entries and entries[token].name != name:
                 raise TokenError(f"{where}: the token of {name!r} is already given to another name")
-            entries[token] = Principal(name=name, admin=len(parts) == 3)
+            entries[token] = Principal(name=name, admin=len(parts) == 3, quota=quota)
         key = _signing_key(settings.data_dir) if entries else b""
         return cls(entries, key, settings.signed_url_seconds)
 
@@ -152,6 +160,21 @@ class Tokens:
 
     def _mac(self, job_id: str, expires: int) -> str:
         return hmac.new(self._key, f"{job_id}:{expires}".encode(), hashlib.sha256).hexdigest()[:40]
+
+
+_UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12}
+_UNITS |= {"KIB": 2**10, "MIB": 2**20, "GIB": 2**30, "TIB": 2**40}
+
+
+def _quota(text: str, where: str) -> int:
+    """``quota=`` of a token entry in bytes: a whole number with an optional unit (``10GiB``, ``500MB``)."""
+    match = re.fullmatch(r"\s*(\d{1,15})\s*([A-Za-z]{0,3})\s*", text)
+    if match is None or match.group(2).upper() not in _UNITS:
+        raise TokenError(
+            f"{where}: quota={text!r} must be a whole number of bytes, optionally with a unit "
+            "(KB, MB, GB, TB, KiB, MiB, GiB, TiB), e.g. quota=10GiB"
+        )
+    return int(match.group(1)) * _UNITS[match.group(2).upper()]
 
 
 def _signing_key(data_dir: Path) -> bytes:

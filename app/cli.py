@@ -31,6 +31,10 @@ import subprocess
 import sys
 import threading
 import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from jobs.config import Settings
 
 __all__ = ["register"]
 
@@ -271,11 +275,28 @@ def host_notice(host: str | None, tokens: bool) -> tuple[str, str | None]:
     return chosen, None
 
 
+def with_bound_host(settings: Settings, host: str) -> Settings:
+    """``settings`` with the name ``serve`` was told to listen on among the allowed hosts (the Host
+    check, :mod:`app.security`); addresses and every-interface binds add nothing (addresses pass)."""
+    import ipaddress
+
+    name = host.strip().strip("[]").lower()
+    try:
+        ipaddress.ip_address(name)
+        return settings
+    except ValueError:
+        pass
+    if not name or name in settings.allowed_hosts:
+        return settings
+    return settings.model_copy(update={"allowed_hosts": (*settings.allowed_hosts, name)})
+
+
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from app.auth import TokenError, Tokens
     from app.main import create_app
+    from app.server import uvicorn_config
     from jobs.config import Settings
     from synth.threads import available_cores
 
@@ -289,6 +310,7 @@ def run(args: argparse.Namespace) -> int:
     host, notice = host_notice(args.host, tokens.enabled)
     if notice:
         print(notice, file=sys.stderr, flush=True)
+    settings = with_bound_host(settings, host)
     env = {**os.environ, **settings.to_env()}
     cwd = os.getcwd()
     env["PYTHONPATH"] = os.pathsep.join(p for p in (cwd, env.get("PYTHONPATH", "")) if p)
@@ -301,10 +323,7 @@ def run(args: argparse.Namespace) -> int:
             return 2
         lock.record(None)
     supervisor = None if args.no_worker else WorkerSupervisor(env, lock, settings.shutdown_grace)
-    config = uvicorn.Config(
-        create_app(settings), host=host, port=args.port, log_level="warning", timeout_graceful_shutdown=3
-    )
-    server = uvicorn.Server(config)
+    server = uvicorn.Server(uvicorn_config(create_app(settings), settings, host, args.port))
     url = f"http://{'localhost' if host in ('127.0.0.1', '0.0.0.0', '::') else host}:{args.port}/"
 
     def announce() -> None:

@@ -26,7 +26,13 @@ from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
 from app.openapi import install_openapi
 from app.schemas import ErrorPublic
-from app.security import AuthMiddleware, SameOriginMiddleware, SecurityHeadersMiddleware
+from app.security import (
+    AllowedHostsMiddleware,
+    AuthMiddleware,
+    SameOriginMiddleware,
+    SecurityHeadersMiddleware,
+    served_hosts,
+)
 from app.service import Service
 from jobs.config import Settings
 from synth import __version__
@@ -75,11 +81,16 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
         },
     )
     app.state.service = service
-    # Outermost last: headers on every answer, then the same-origin rule, then tokens, then the body
-    # limit (an unauthenticated upload is refused before its body is read).
-    app.add_middleware(BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes)
+    # Outermost last: headers on every answer, then the Host check, the same-origin rule, tokens, then
+    # the body limit (an unauthenticated upload is refused before its body is read).
+    app.add_middleware(
+        BodyLimitMiddleware, max_body_bytes=settings.max_body_bytes, client_timeout=settings.client_timeout
+    )
     app.add_middleware(AuthMiddleware, tokens=service.tokens)
     app.add_middleware(SameOriginMiddleware, allowed=settings.allowed_origins)
+    app.add_middleware(
+        AllowedHostsMiddleware, allowed=served_hosts(settings.allowed_hosts, settings.allowed_origins)
+    )
     app.add_middleware(SecurityHeadersMiddleware)
     install_error_handlers(app)
     for module in (jobs, methods, metrics, sweeps, health):

@@ -6,6 +6,9 @@
   files: an uploaded file, even one carrying ``<script>``, cannot execute. The API docs (``/docs``,
   served from the installed Swagger UI, no CDN) get a policy that also allows their inline start-up
   script, still from this origin only.
+- :class:`AllowedHostsMiddleware` (DNS rebinding, issue 26): a page on another site can rebind its
+  own name to 127.0.0.1 and then talk to the service "same-origin"; its requests still carry that
+  name in ``Host``. Only the names the service serves pass (:func:`host_allowed`), else 400.
 - :class:`SameOriginMiddleware` (CSRF): a state-changing request (POST, PUT, PATCH, DELETE) that a
   browser sent from another origin is refused with 403, judged from ``Sec-Fetch-Site`` and
   ``Origin``; clients that are not browsers send neither and pass.
@@ -18,8 +21,11 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import re
+import socket
+from collections.abc import Iterable
 from urllib.parse import parse_qs, urlsplit
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -28,6 +34,7 @@ from app.auth import ANONYMOUS, Principal, Tokens
 
 __all__ = [
     "CONTENT_SECURITY_POLICY",
+    "AllowedHostsMiddleware",
     "AuthMiddleware",
     "SameOriginMiddleware",
     "SecurityHeadersMiddleware",
@@ -85,6 +92,81 @@ class SecurityHeadersMiddleware:
             await send(message)
 
         await self.app(scope, receive, with_headers)
+
+
+def split_host(header: str) -> str:
+    """The name or address of a ``Host`` header, without port or brackets, lower case, no final dot."""
+    value = header.strip().lower()
+    if value.startswith("["):  # an IPv6 literal: [::1]:8000
+        return value[1:].partition("]")[0]
+    name, colon, port = value.rpartition(":")
+    if colon and port.isdigit() and ":" not in name:
+        value = name
+    return value.rstrip(".")
+
+
+def host_allowed(host: str, allowed: Iterable[str]) -> bool:
+    """Whether ``host`` (from :func:`split_host`) is one this service serves.
+
+    IP addresses pass: a browser sends an address as ``Host`` only when the page itself was loaded
+    from that address, which no other site can arrange (rebinding needs a name the attacker owns).
+    So do ``localhost`` and its subdomains (RFC 6761: they resolve to loopback) and the ``allowed``
+    names: ``name``, ``.domain`` for the domain and every subdomain, ``*`` for anything.
+    """
+    if not host:
+        return False
+    try:
+        ipaddress.ip_address(host)
+        return True
+    except ValueError:
+        pass
+    if host == "localhost" or host.endswith(".localhost"):
+        return True
+    for entry in allowed:
+        entry = entry.strip().lower().rstrip(".")
+        if entry in ("*", host) or (entry.startswith(".") and (host.endswith(entry) or host == entry[1:])):
+            return True
+    return False
+
+
+def served_hosts(allowed_hosts: Iterable[str], allowed_origins: Iterable[str] = ()) -> tuple[str, ...]:
+    """The names to accept besides addresses and localhost: ``TEXSYNTH_ALLOWED_HOSTS``, the hosts of
+    ``TEXSYNTH_ALLOWED_ORIGINS`` (a proxy's public name) and this machine's own name."""
+    names = [split_host(h) if not h.strip().startswith((".", "*")) else h.strip() for h in allowed_hosts]
+    names += [urlsplit(origin).hostname or "" for origin in allowed_origins]
+    machine = socket.gethostname().lower()
+    names += [machine, machine.partition(".")[0]]
+    return tuple(dict.fromkeys(n for n in names if n))
+
+
+class AllowedHostsMiddleware:
+    """Answers 400 to a request whose ``Host`` is not a name this service serves (DNS rebinding).
+
+    A request without ``Host`` (HTTP/1.0 from a script) passes: every browser sends one.
+    """
+
+    def __init__(self, app: ASGIApp, allowed: tuple[str, ...] = ()) -> None:
+        self.app = app
+        self.allowed = allowed
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http":
+            header = dict(scope.get("headers") or []).get(b"host")
+            if header is not None:
+                host = split_host(header.decode("latin-1"))
+                if not host_allowed(host, self.allowed):
+                    shown = host.encode("ascii", "backslashreplace").decode()[:100]
+                    await send_json_error(
+                        send,
+                        400,
+                        f"this service does not answer to the host name {shown!r} (a page that points its "
+                        "own name at this machine could otherwise use it: DNS rebinding). Use localhost "
+                        "or the machine's address, or add the name to TEXSYNTH_ALLOWED_HOSTS "
+                        "(comma-separated; '.example.org' allows every subdomain)",
+                        "bad_host",
+                    )
+                    return
+        await self.app(scope, receive, send)
 
 
 _UNSAFE_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})

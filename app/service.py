@@ -12,10 +12,12 @@ import itertools
 import json
 import math
 import random
+import re
+import shutil
 import threading
 import time
 import uuid
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,7 +72,8 @@ class Service:
         self.settings = settings
         settings.ensure_dirs()
         self.tokens = Tokens.from_settings(settings)
-        self.store = JobStore(settings.db_path, settings.jobs_dir)
+        self.store = JobStore(settings.db_path, settings.jobs_dir, keep_open=True)
+        self.disk_full_at: float | None = None  # when a write last failed for lack of room (health)
         self.admission = Admission(settings, self.store)
         self._admit_lock = threading.Lock()  # a quota check and the records it counts, together
         self.celery = create_celery(settings)
@@ -202,17 +205,34 @@ class Service:
     def submit(self, req: JobRequest, principal: Principal = ANONYMOUS) -> JobRecord:
         with self._admit_lock:
             self.admission.check_queue(principal.name, 1)
-            job = self.store.create_job(
-                method=req.method,
-                params=req.params,
-                size=req.size,
-                seed=req.seed,
-                inputs=req.inputs,
-                manifest={**self.manifest(req), "owner": principal.name},
-                owner=principal.name,
-            )
+            self.admission.check_storage(principal, req.inputs)
+            job_id = uuid.uuid4().hex
+            with self._undone_on_error([job_id]):
+                job = self.store.create_job(
+                    method=req.method,
+                    params=req.params,
+                    size=req.size,
+                    seed=req.seed,
+                    inputs=req.inputs,
+                    manifest={**self.manifest(req), "owner": principal.name},
+                    owner=principal.name,
+                    job_id=job_id,
+                )
         self._queue([job.id])
         return self.store.get(job.id) or job
+
+    @contextlib.contextmanager
+    def _undone_on_error(self, job_ids: list[str], sweep_id: str | None = None) -> Iterator[None]:
+        """Jobs being created are forgotten again if their creation fails (a full disk: 507), their
+        half-written folders included: a refused submission leaves nothing behind."""
+        try:
+            yield
+        except BaseException:
+            with contextlib.suppress(Exception):  # the disk may refuse even that: the folders still go
+                self.store.discard(job_ids, sweep_id)
+            for job_id in job_ids:
+                shutil.rmtree(self.store.job_dir(job_id), ignore_errors=True)
+            raise
 
     def _queue(self, job_ids: list[str], sweep_id: str | None = None) -> None:
         """Send the jobs; if the broker refuses, forget them (records and files) and say so: a refused
@@ -265,11 +285,28 @@ class Service:
             points.append((point_params, size))
         self.admission.check_sweep(runs, sum(math.prod(size.values()) for _, size in points))
         sweep_id = uuid.uuid4().hex
-        job_ids: list[str] = []
+        job_ids = [uuid.uuid4().hex for _ in points]
         with self._admit_lock:
             self.admission.check_queue(principal.name, runs)
-            for params, size in points:
-                job = self.store.create_job(
+            self.admission.check_storage(principal, req.inputs)
+            self._create_sweep_jobs(req, grid, points, principal, sweep_id, job_ids)
+        self._queue(job_ids, sweep_id)
+        return sweep_id
+
+    def _create_sweep_jobs(
+        self,
+        req: JobRequest,
+        grid: dict,
+        points: list[tuple[dict[str, Any], dict[str, int]]],
+        principal: Principal,
+        sweep_id: str,
+        job_ids: list[str],
+    ) -> None:
+        """The sweep's jobs (one per grid point, ids given) and its record, or none of them."""
+        with self._undone_on_error(job_ids, sweep_id):
+            for job_id, (params, size) in zip(job_ids, points, strict=True):
+                self.store.create_job(
+                    job_id=job_id,
                     method=req.method,
                     params=params,
                     size=size,
@@ -284,14 +321,11 @@ class Service:
                         "owner": principal.name,
                     },
                     owner=principal.name,
-                    share_inputs_of=job_ids[0] if job_ids else None,  # the upload stored once
+                    share_inputs_of=job_ids[0] if job_id != job_ids[0] else None,  # the upload stored once
                 )
-                job_ids.append(job.id)
             self.store.create_sweep(
                 sweep_id, req.method, grid, req.params, job_ids, owner=principal.name, size=req.size
             )
-        self._queue(job_ids, sweep_id)
-        return sweep_id
 
     # -- reporting ----------------------------------------------------------------------------------
 
@@ -410,12 +444,23 @@ class BrokerUnavailable(RuntimeError):
     """The broker did not take the job (HTTP 503)."""
 
 
+#: Deepest nesting of lists and objects accepted in ``params`` and ``grid`` (no parameter nests at
+#: all; Python's JSON parser overflows its stack near 1000, which was a 500).
+MAX_JSON_DEPTH = 32
+
+
 def _parse_json(value: str | dict, field: str) -> Any:
     """Strict JSON: ``NaN``, ``Infinity`` and numbers beyond float range (``1e400``) are refused,
-    naming the field (they would pass some parameter bounds and break the job record)."""
+    naming the field (they would pass some parameter bounds and break the job record); so is nesting
+    deeper than :data:`MAX_JSON_DEPTH`, judged from the text before it is parsed."""
     if isinstance(value, dict):
         document = value
     else:
+        depth = _nesting(value or "")
+        if depth > MAX_JSON_DEPTH:
+            raise InvalidParameter(
+                field, value[:80], f"is nested {depth} levels deep; at most {MAX_JSON_DEPTH} are accepted"
+            )
         try:
             document = json.loads(value or "{}", parse_constant=_no_constant)
         except json.JSONDecodeError as exc:
@@ -426,6 +471,20 @@ def _parse_json(value: str | dict, field: str) -> Any:
             raise InvalidParameter(field, value[:80], str(exc)) from None
     _check_finite(document, field)
     return document
+
+
+def _nesting(text: str) -> int:
+    """The deepest nesting of ``[`` and ``{`` in JSON ``text``, brackets inside strings not counted
+    (an upper bound for text that is not valid JSON, which the parser then refuses)."""
+    depth = deepest = 0
+    for bracket in _BRACKETS.findall(_STRINGS.sub("", text)):
+        depth += 1 if bracket in "[{" else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
+_STRINGS = re.compile(r'"(?:\\.|[^"\\])*"')
+_BRACKETS = re.compile(r"[\[\]{}]")
 
 
 def _no_constant(name: str) -> Any:

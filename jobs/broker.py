@@ -7,8 +7,12 @@ have run stayed queued (issue 14). Here
 
 - a message is written under a hidden temporary name, flushed, then renamed to its ``.msg`` name, so a
   reader sees a complete message or none;
-- a message that still cannot be read (empty, not JSON, not a kombu envelope) is moved to
-  ``quarantine/`` beside the queue folder with a warning, and the reader goes on to the next one.
+- a message that still cannot be read (empty, not JSON, not a complete kombu envelope: every field
+  kombu's consumer reads, with its type, and a body that decodes, :func:`check_envelope`) is moved to
+  ``quarantine/`` beside the queue folder with a warning naming the file, and the reader goes on;
+- :func:`prune_mailboxes` (called by the reaper) unbinds the control mailboxes of workers that died
+  and deletes their messages: the filesystem transport writes every broadcast (a cancel's revoke)
+  into every mailbox ever bound, and a dead worker's ``*.pidbox.msg`` files piled up for ever.
 
 The reaper (:mod:`jobs.reaper`) re-sends a job whose message no worker received in time, so a job
 whose message was quarantined or lost still runs. Selected by the broker URL ``texsynth-fs://``
@@ -17,11 +21,14 @@ whose message was quarantined or lost still runs. Selected by the broker URL ``t
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import shutil
 import tempfile
+import time
 import uuid
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from queue import Empty
 from time import monotonic
@@ -35,7 +42,14 @@ from kombu.utils.json import dumps, loads
 from synth.errors import StorageError
 from synth.io.atomic import atomic_write_bytes
 
-__all__ = ["SCHEME", "SafeChannel", "SafeTransport", "quarantine_folder"]
+__all__ = [
+    "SCHEME",
+    "SafeChannel",
+    "SafeTransport",
+    "check_envelope",
+    "prune_mailboxes",
+    "quarantine_folder",
+]
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +60,47 @@ SCHEME = "texsynth-fs"
 def quarantine_folder(queue_folder: str | os.PathLike[str]) -> Path:
     """Where unreadable messages go: ``quarantine/`` beside the queue folder."""
     return Path(queue_folder).parent / "quarantine"
+
+
+def check_envelope(message: Any, codecs: Mapping[str, Any]) -> None:
+    """Raise ``ValueError`` saying what is missing or wrong unless ``message`` is a complete kombu
+    envelope: what :class:`kombu.transport.virtual.Message` and the consumer read (``properties`` with
+    a ``delivery_tag`` and a ``delivery_info`` naming ``exchange`` and ``routing_key``, ``headers``,
+    the content type and encoding) with their types, and a body that its ``body_encoding`` decodes."""
+    if not isinstance(message, dict):
+        raise ValueError(f"the message is a JSON {type(message).__name__}, not an object")
+    _typed(message, "body", str)
+    properties = _typed(message, "properties", dict)
+    _typed(properties, "delivery_tag", str, "properties.")
+    info = _typed(properties, "delivery_info", dict, "properties.")
+    for key in ("exchange", "routing_key"):
+        _typed(info, key, str, "properties.delivery_info.")
+    headers = message.get("headers")
+    if headers is not None and not isinstance(headers, dict):
+        raise ValueError("'headers' is not an object")
+    if headers and headers.get("compression") is not None and not isinstance(headers["compression"], str):
+        raise ValueError("'headers.compression' is not a string")
+    for key in ("content-type", "content-encoding"):
+        if message.get(key) is not None and not isinstance(message[key], str):
+            raise ValueError(f"'{key}' is not a string")
+    encoding = properties.get("body_encoding")
+    if encoding is not None and not isinstance(encoding, str):
+        raise ValueError("'properties.body_encoding' is not a string")
+    if encoding and encoding.lower() != "utf-8":
+        if encoding not in codecs:
+            raise ValueError(f"unknown body encoding {encoding!r}")
+        try:
+            codecs[encoding].decode(message["body"])
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"the body is not valid {encoding} ({exc})") from None
+
+
+def _typed(mapping: dict, key: str, kind: type, prefix: str = "") -> Any:
+    if key not in mapping:
+        raise ValueError(f"no '{prefix}{key}'")
+    if not isinstance(mapping[key], kind):
+        raise ValueError(f"'{prefix}{key}' is a {type(mapping[key]).__name__}, not a {kind.__name__}")
+    return mapping[key]
 
 
 class SafeChannel(filesystem.Channel):
@@ -73,8 +128,7 @@ class SafeChannel(filesystem.Channel):
                 with open(taken, "rb") as fh:
                     payload = fh.read()
                 message = loads(bytes_to_str(payload))
-                if not isinstance(message, dict) or "body" not in message:
-                    raise ValueError("not a kombu message envelope")
+                check_envelope(message, self.codecs)
             except (OSError, ValueError) as exc:
                 self._quarantine(taken, filename, exc)
                 continue
@@ -87,9 +141,73 @@ class SafeChannel(filesystem.Channel):
         try:
             folder.mkdir(parents=True, exist_ok=True)
             shutil.move(taken, folder / filename)
-        except OSError:
+        except OSError as error:
             Path(taken).unlink(missing_ok=True)
-        log.warning("embedded queue: message %s set aside in %s (%s)", filename, folder.name, exc)
+            log.warning(
+                "embedded queue: unreadable message %s deleted, it could not be set aside (%s): %s",
+                filename,
+                error,
+                exc,
+            )
+            return
+        log.warning("embedded queue: unreadable message set aside as %s: %s", folder / filename, exc)
+
+
+#: The suffix of a Celery worker's control mailbox (queue ``<node name>.celery.pidbox``).
+MAILBOX = ".celery.pidbox"
+
+
+def prune_mailboxes(
+    queue_folder: str | os.PathLike[str],
+    control_folder: str | os.PathLike[str],
+    live_nodes: Iterable[str],
+    max_age: float,
+    now: float | None = None,
+) -> int:
+    """Delete control messages nobody read for ``max_age`` seconds, and unbind the mailboxes of the
+    nodes that left them unread and are not in ``live_nodes`` (workers with a fresh heartbeat): a
+    live worker reads its mailbox within a second or two. Returns how many messages were deleted."""
+    now = time.time() if now is None else now
+    live = set(live_nodes)
+    messages: dict[str, list[Path]] = {}
+    for path in Path(queue_folder).glob("*.pidbox.msg"):
+        messages.setdefault(path.name.partition(".")[2][: -len(".msg")], []).append(path)
+    dead = set()
+    for queue, paths in messages.items():
+        with contextlib.suppress(OSError):
+            if min(p.stat().st_mtime for p in paths) < now - max_age and queue[: -len(MAILBOX)] not in live:
+                dead.add(queue)
+    if dead:
+        _unbind(Path(control_folder) / f"{MAILBOX[1:]}.exchange", dead)
+    removed = 0
+    for queue, paths in messages.items():
+        for path in paths:
+            with contextlib.suppress(OSError):
+                if queue in dead or path.stat().st_mtime < now - max_age:
+                    path.unlink()
+                    removed += 1
+    if dead:
+        log.warning("embedded queue: mailboxes of stopped workers removed: %s", ", ".join(sorted(dead)))
+    return removed
+
+
+def _unbind(table: Path, queues: set[str]) -> None:
+    """Remove ``queues`` from a fanout exchange's table, under the lock kombu's transport takes."""
+    try:
+        fh = table.open("rb+", buffering=0)
+    except OSError:
+        return
+    with fh:
+        filesystem.lock(fh, filesystem.LOCK_EX)
+        try:
+            entries = loads(bytes_to_str(fh.read()))
+            kept = [entry for entry in entries if entry[2] not in queues]
+            if len(kept) != len(entries):
+                fh.seek(0)
+                fh.write(str_to_bytes(dumps(kept)))
+                fh.truncate()
+        finally:
+            filesystem.unlock(fh)
 
 
 class SafeTransport(filesystem.Transport):

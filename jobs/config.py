@@ -20,7 +20,7 @@ from synth.threads import THREADS_ENV, service_threads
 __all__ = ["Settings"]
 
 _ENV_PREFIX = "TEXSYNTH_"
-_LISTS = ("extra_methods", "allowed_origins")
+_LISTS = ("extra_methods", "allowed_origins", "allowed_hosts")
 
 
 class Settings(BaseModel):
@@ -59,6 +59,26 @@ class Settings(BaseModel):
     admin_token: str | None = Field(None, repr=False, description="a token that sees and manages every job")
     allowed_origins: tuple[str, ...] = Field(
         (), description="other origins (scheme://host[:port]) whose pages may POST/DELETE (a proxy)"
+    )
+    allowed_hosts: tuple[str, ...] = Field(
+        (),
+        description="host names (Host header) this service answers to besides localhost names, IP addresses "
+        "and this machine's name: 'lab.example', '.example' for every subdomain, '*' for any",
+    )
+    token_quota_bytes: int = Field(
+        10 * 2**30,
+        ge=0,
+        description="bytes of inputs and artifacts one token may keep stored (0: no quota; without "
+        "tokens, everyone together); a token file entry may give its own",
+    )
+    # Connections (app/server.py): slow or idle clients are closed, and the open connections capped.
+    client_timeout: float = Field(
+        15.0,
+        gt=0.0,
+        description="seconds a client has to send a request's head, and may pause inside its body",
+    )
+    max_connections: int = Field(
+        256, ge=1, description="open connections the API serves at once (HTTP 503 above)"
     )
     signed_url_seconds: int = Field(
         3600, description="lifetime of the signed file URLs (artifacts, inputs) given to token holders"

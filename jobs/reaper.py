@@ -10,6 +10,9 @@ message was lost or set aside as unreadable), or that a live worker received but
 that time while workers have room (its message was lost with a broker connection): no queue may lose
 work. A cancel that the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
 
+On the embedded queue it also removes the control mailboxes of workers that stopped
+(:func:`jobs.broker.prune_mailboxes`): messages no worker read within ``resend_seconds``.
+
 Every minute it also applies the retention period (:func:`purge_expired`): a job that ended more than
 ``retention_days`` ago is deleted, files and record, like ``DELETE /api/jobs/{id}``; and a job folder
 left without a record for an hour (a run that outlived its job's deletion) is removed.
@@ -23,10 +26,11 @@ import threading
 import time
 from collections.abc import Callable
 
+from jobs.broker import prune_mailboxes
 from jobs.config import Settings
 from jobs.store import JobRecord, JobStore, pid_alive
 
-__all__ = ["Reaper", "purge_expired", "reap_once", "stranded"]
+__all__ = ["Reaper", "prune_dead_mailboxes", "purge_expired", "reap_once", "stranded"]
 
 #: A job folder without a record this old (seconds) is left over, never a job being created.
 ORPHAN_SECONDS = 3600.0
@@ -131,6 +135,14 @@ def reap_once(
     return actions
 
 
+def prune_dead_mailboxes(store: JobStore, settings: Settings) -> int:
+    """The embedded broker's control messages that no worker read within ``resend_seconds``, and the
+    mailboxes of the workers that left them (none with a fresh heartbeat); returns how many went."""
+    live = [w["name"] for w in store.workers(fresh_within=max(10.0, settings.stale_seconds))]
+    folder = settings.broker_dir
+    return prune_mailboxes(folder / "queue", folder / "control", live, max_age=settings.resend_seconds)
+
+
 def purge_expired(store: JobStore, settings: Settings, now: float | None = None) -> list[str]:
     """Delete the jobs that ended more than ``retention_days`` ago (none if it is 0) and left-over
     job folders without a record; returns the ids (folder names) removed."""
@@ -171,6 +183,8 @@ class Reaper(threading.Thread):
         next_purge = 0.0
         while not self._stop_event.wait(self.interval):
             try:
+                if self.settings.embedded:
+                    prune_dead_mailboxes(self.store, self.settings)
                 reap_once(self.store, self.settings, self.send, self.terminate, self.terminated)
                 if time.monotonic() >= next_purge:
                     next_purge = time.monotonic() + self.purge_interval

@@ -74,7 +74,9 @@ CREATE TABLE IF NOT EXISTS jobs (
     timings TEXT NOT NULL DEFAULT '{}',
     metrics TEXT NOT NULL DEFAULT '{}',
     owner TEXT,
-    size TEXT
+    size TEXT,
+    input_bytes INTEGER,
+    artifact_bytes INTEGER
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);
 CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created);
@@ -142,6 +144,8 @@ class JobRecord:
     metrics: dict[str, Any] = field(default_factory=dict)
     owner: str | None = None  # the token name that submitted it (None: made without tokens)
     size: dict[str, int] = field(default_factory=dict)  # the output's width, height (, depth)
+    input_bytes: int | None = None  # bytes its inputs hold on disk (a sweep's shared upload: its first run)
+    artifact_bytes: int | None = None  # bytes of its committed artifacts
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> JobRecord:
@@ -172,11 +176,15 @@ def pid_alive(pid: int | None) -> bool:
 class JobStore:
     """Job, sweep and worker records in one SQLite file, safe across processes (WAL, short writes)."""
 
-    def __init__(self, db_path: Path, jobs_dir: Path) -> None:
+    def __init__(self, db_path: Path, jobs_dir: Path, *, keep_open: bool = False) -> None:
+        """``keep_open``: hold one connection for the life of this store (the API's), so that SQLite
+        keeps its write-ahead log and shared-memory files: on a full disk, where they could not be
+        made again, the records can still be read."""
         self.db_path = Path(db_path)
         self.jobs_dir = Path(jobs_dir)
         self.host = socket.gethostname()
         self.jobs_dir.mkdir(parents=True, exist_ok=True)
+        self._kept: sqlite3.Connection | None = None
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
             db.executescript(_SCHEMA)
@@ -186,7 +194,15 @@ class JobStore:
                     if column not in columns:
                         with contextlib.suppress(sqlite3.OperationalError):  # another process added it
                             db.execute(f"ALTER TABLE {table} ADD COLUMN {column} TEXT")
+            columns = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
+            for column in ("input_bytes", "artifact_bytes"):  # records made before the storage quota
+                if column not in columns:
+                    with contextlib.suppress(sqlite3.OperationalError):
+                        db.execute(f"ALTER TABLE jobs ADD COLUMN {column} INTEGER")
             db.execute("CREATE INDEX IF NOT EXISTS jobs_owner ON jobs(owner, state)")
+        if keep_open:
+            self._kept = sqlite3.connect(self.db_path, timeout=30.0, check_same_thread=False)
+            self._kept.execute("SELECT 1 FROM jobs LIMIT 1").fetchall()  # opens the log files
 
     # -- plumbing -------------------------------------------------------------------------------
 
@@ -246,6 +262,7 @@ class JobStore:
         folder = self.job_dir(job_id)
         (folder / "inputs").mkdir(parents=True)
         names = {}
+        written = 0
         for role, (filename, data) in inputs.items():
             suffix = Path(filename).suffix.lower()[:8] if filename else ""
             names[role] = f"{role}{suffix}"
@@ -253,14 +270,14 @@ class JobStore:
             shared = share_inputs_of and self.job_dir(share_inputs_of) / "inputs" / names[role]
             if not shared or not _link(shared, target):
                 atomic_write_bytes(target, data)
+                written += len(data)
         now = time.time()
         manifest = {**manifest, "job_id": job_id, "inputs": names, "created": now}
         atomic_write_json(folder / "manifest.json", manifest)
         with self._connect() as db:
             db.execute(
-                "INSERT INTO jobs"
-                " (id, created, method, params, size, seed, inputs, sweep_id, state, updated, owner)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
+                "INSERT INTO jobs (id, created, method, params, size, seed, inputs, sweep_id, state,"
+                " updated, owner, input_bytes) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
                 (
                     job_id,
                     now,
@@ -272,6 +289,7 @@ class JobStore:
                     sweep_id,
                     now,
                     owner,
+                    written,
                 ),
             )
         record = self.get(job_id)
@@ -315,6 +333,29 @@ class JobStore:
     def count(self) -> int:
         with self._connect() as db:
             return db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
+
+    def usage(self, owner: str | None) -> int:
+        """Bytes the jobs of ``owner`` keep stored: inputs and artifacts (``None``: jobs made without
+        a token). Records made before these were counted are measured from their folders first."""
+        with self._connect() as db:
+            old = db.execute(
+                "SELECT id FROM jobs WHERE owner IS ? AND (input_bytes IS NULL OR"
+                " (artifact_bytes IS NULL AND state = 'succeeded'))",
+                (owner,),
+            ).fetchall()
+            for (job_id,) in old:
+                inputs, artifacts = _folder_bytes(self.job_dir(job_id) / "inputs"), _folder_bytes(
+                    self.job_dir(job_id) / "out"
+                )
+                db.execute(
+                    "UPDATE jobs SET input_bytes = ?, artifact_bytes = ? WHERE id = ?",
+                    (inputs, artifacts, job_id),
+                )
+            return db.execute(
+                "SELECT COALESCE(SUM(COALESCE(input_bytes, 0) + COALESCE(artifact_bytes, 0)), 0)"
+                " FROM jobs WHERE owner IS ?",
+                (owner,),
+            ).fetchone()[0]
 
     def count_active(self, owner: str | None) -> int:
         """Queued and running jobs of ``owner`` (``None``: those made without a token)."""
@@ -402,6 +443,7 @@ class JobStore:
         """
         now = time.time()
         out = self.job_dir(job_id) / "out"
+        size = _folder_bytes(staging)
         with self._transaction() as db:
             row = db.execute(
                 "SELECT 1 FROM jobs WHERE id = ? AND run_token = ? AND state = 'running'"
@@ -417,9 +459,9 @@ class JobStore:
             os.replace(staging, out)
             db.execute(
                 "UPDATE jobs SET state = 'succeeded', stage = 'done', fraction = 1, finished = ?,"
-                " updated = ?,"
+                " updated = ?, artifact_bytes = ?,"
                 " artifacts = ?, timings = ?, metrics = ?, run_token = NULL WHERE id = ?",
-                (now, now, json.dumps(artifacts), json.dumps(timings), json.dumps(metrics), job_id),
+                (now, now, size, json.dumps(artifacts), json.dumps(timings), json.dumps(metrics), job_id),
             )
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
@@ -595,6 +637,18 @@ class JobStore:
             for r in rows
             if now - r["heartbeat"] <= fresh_within and (r["host"] != self.host or pid_alive(r["pid"]))
         ]
+
+
+def _folder_bytes(folder: Path) -> int:
+    """Bytes of the files under ``folder`` (0 if absent); a file with several hard links counts its
+    share (size / links), so a sweep's shared upload adds up to its size once over its runs."""
+    total = 0
+    for path in folder.rglob("*") if folder.is_dir() else ():
+        with contextlib.suppress(OSError):
+            info = path.stat()
+            if path.is_file():
+                total += info.st_size // max(1, info.st_nlink)
+    return total
 
 
 def _link(source: Path, target: Path) -> bool:

@@ -31,11 +31,12 @@ A. Akl et al., "Structure tensor based synthesis of directional textures ...", I
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Literal, NamedTuple
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator
 from scipy.spatial import cKDTree
 from skimage.transform import resize
 
@@ -241,12 +242,13 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         description="k-coherence sets over D_M (memory grows with M); 0: neighbours' sources and hints only.",
     )
 
-    @model_validator(mode="after")
-    def _whole_turn(self) -> ArbitraryShapeParams:
-        m = 360.0 / self.angular_step
-        if abs(m - round(m)) > 1e-6:
+    @field_validator("angular_step")
+    @classmethod
+    def _whole_turn(cls, step: float) -> float:
+        m = 360.0 / step
+        if not math.isfinite(m) or abs(m - round(m)) > 1e-6:  # 1e-308 makes M infinite
             raise ValueError("angular_step must divide 360 degrees (5 gives the paper's 72 rotations)")
-        return self
+        return step
 
     @property
     def n_rotations(self) -> int:

@@ -43,7 +43,7 @@ def _client(settings: Settings):
     service = app.state.service
     service.send = lambda job_id: None  # no broker traffic: these tests are about the API's answers
     service.send_group = lambda job_ids: None
-    return TestClient(app), service
+    return TestClient(app, base_url="http://localhost"), service
 
 
 @pytest.fixture
@@ -338,7 +338,7 @@ def test_a_cross_origin_delete_is_refused(open_api):
 
 def test_the_pages_own_requests_and_non_browsers_pass(open_api):
     client, _ = open_api
-    own = {"Origin": "http://testserver", "Sec-Fetch-Site": "same-origin"}
+    own = {"Origin": "http://localhost", "Sec-Fetch-Site": "same-origin"}
     assert submit(client, own).status_code == 202
     assert submit(client, {"Sec-Fetch-Site": "none"}).status_code == 202
     assert submit(client, {}).status_code == 202  # curl, the Python client

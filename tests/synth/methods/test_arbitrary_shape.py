@@ -17,7 +17,8 @@ from synth.analysis.tensor import (
 )
 from synth.api import available_methods, synthesize
 from synth.io.patterns import concentric_rings, grating, waves, wood_grain
-from synth.methods.arbitrary_shape import orientation_agreement
+from synth.methods.arbitrary_shape import ArbitraryShapeParams, orientation_agreement
+from synth.params import validate_params
 
 # Small and fast: 15-degree steps (M = 24), 7x7 neighbourhoods; the parameters as given (the tests
 # below pin each field's meaning; the recipes have their own tests).
@@ -246,6 +247,14 @@ def test_rgb_exemplar_and_pyramids() -> None:
 def test_invalid_parameters_are_named(params: dict, name: str) -> None:
     with pytest.raises(InvalidParameter, match=name):
         _run(_fringes(0), grating((32, 32), 0.5), **params)
+
+
+@pytest.mark.parametrize("step", [7.0, 1e-308, 5e-324])
+def test_an_angular_step_that_does_not_divide_the_turn_is_named(step: float) -> None:
+    # 1e-308 makes 360 / step infinite: an OverflowError (a 500 in the service) before issue 26
+    with pytest.raises(InvalidParameter) as caught:
+        validate_params(ArbitraryShapeParams, {"angular_step": step})
+    assert caught.value.name == "angular_step"
 
 
 def test_k_sets_over_a_large_dictionary_are_refused() -> None:
