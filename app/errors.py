@@ -13,6 +13,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
 from app.service import BrokerUnavailable
+from jobs.storage import StorageUnavailable
 from synth.errors import (
     InputTooLarge,
     InvalidInput,
@@ -83,6 +84,15 @@ def install_error_handlers(app: FastAPI) -> None:
             f"the server could not store the job ({exc}); nothing was queued, try again later",
             None,
             "insufficient_storage",
+        )
+
+    @app.exception_handler(StorageUnavailable)
+    async def _store_down(request: Request, exc: StorageUnavailable) -> JSONResponse:
+        return _error(
+            503,
+            "the object store is unreachable; nothing was queued, try again shortly",
+            None,
+            "unavailable",
         )
 
     @app.exception_handler(BrokerUnavailable)
