@@ -165,6 +165,17 @@ class Settings(BaseModel):
         """What :class:`jobs.store.JobStore` opens: the URL, or the SQLite file of the data directory."""
         return self.database_url or self.db_path
 
+    def where(self) -> str:
+        """Where records and files live, for a start-up line (no password): '' for the data directory."""
+        parts = []
+        if self.database_url:
+            from sqlalchemy.engine import make_url
+
+            parts.append(f"records {make_url(self.database_url).render_as_string(hide_password=True)}")
+        if self.storage_url:
+            parts.append(f"files {self.storage_url}")
+        return "; ".join(parts)
+
     @property
     def scratch_dir(self) -> Path:
         """This machine's own folder for a run's inputs and artifacts before upload (object storage)."""

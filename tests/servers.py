@@ -136,6 +136,7 @@ class SeaweedS3:
         self.folder.mkdir(parents=True, exist_ok=True)
         self.ports = {name: free_port() for name in ("master", "volume", "filer", "s3")}
         self.grpc = {name: free_port() for name in ("master", "volume", "filer", "s3")}
+        self.extra = (free_port(), free_port())
         self.proc: subprocess.Popen | None = None
 
     @property
@@ -165,6 +166,8 @@ class SeaweedS3:
         ]
         for name in ("master", "volume", "filer", "s3"):
             args += [f"-{name}.port={self.ports[name]}", f"-{name}.port.grpc={self.grpc[name]}"]
+        # the gateway's side servers (Iceberg catalogue, Lance namespace) default to fixed ports
+        args += [f"-s3.port.iceberg={self.extra[0]}", f"-s3.port.lance={self.extra[1]}"]
         with open(self.folder / "weed.log", "ab") as log:
             self.proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         deadline = time.monotonic() + timeout

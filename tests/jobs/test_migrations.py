@@ -143,3 +143,32 @@ def test_an_sqlite_url_is_the_same_file(tmp_path):
 def test_a_bad_database_url_names_the_variable(tmp_path, url, says):
     with pytest.raises(ValueError, match=f"TEXSYNTH_DATABASE_URL.*{says}"):
         JobStore(url, tmp_path / "jobs")
+
+
+@pytest.mark.parametrize("kind", ["sqlite", "postgresql"])
+def test_processes_starting_together_migrate_once(request, tmp_path, kind):
+    """API and workers open a fresh database at the same moment: one migrates, the others wait."""
+    import threading
+
+    database = str(tmp_path / "jobs.sqlite") if kind == "sqlite" else request.getfixturevalue("pg_url")
+    barrier, errors = threading.Barrier(4), []
+
+    def open_store() -> None:
+        barrier.wait()
+        try:
+            JobStore(database, tmp_path / "jobs").count()
+        except Exception as exc:  # reported below with the others
+            errors.append(exc)
+
+    threads = [threading.Thread(target=open_store) for _ in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert not errors
+    store = JobStore(database, tmp_path / "jobs")
+    with store._connect() as db:
+        assert [
+            tuple(r) if kind == "sqlite" else (r[0],)
+            for r in db.execute("SELECT version_num FROM alembic_version").fetchall()
+        ] == [(HEAD,)]
