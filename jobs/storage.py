@@ -225,9 +225,12 @@ class S3Storage(Storage):
         return f"{self.prefix}jobs/{job_id}/{rel}"
 
     def _transient(self) -> tuple[type[BaseException], ...]:
+        from boto3.exceptions import S3TransferFailedError, S3UploadFailedError
         from botocore.exceptions import BotoCoreError
 
-        return (BotoCoreError, ConnectionError)
+        # the transfer manager wraps what went wrong (a 500 of a store still starting, a cut
+        # connection) in its own errors: tried again like the others
+        return (BotoCoreError, ConnectionError, S3UploadFailedError, S3TransferFailedError)
 
     def _retry(self, operation: Callable[[], _T], seconds: float | None = None) -> _T:
         """``operation()``, tried again while the store does not answer (or answers 5xx)."""
@@ -361,12 +364,23 @@ class S3Storage(Storage):
         self._delete_prefix(self.key(job_id))
 
     def orphans(self, known, older_than):
-        newest: dict[str, float] = {}
         root = f"{self.prefix}jobs/"
-        for item in self._keys(root):
-            job_id = item["Key"][len(root) :].split("/", 1)[0]
-            newest[job_id] = max(newest.get(job_id, 0.0), item["LastModified"].timestamp())
-        return [job_id for job_id, at in newest.items() if job_id not in known and at < older_than]
+        found, token = [], None
+        while True:  # one listing of the job prefixes; the objects of unknown ones only
+            args = {"Bucket": self.bucket, "Prefix": root, "Delimiter": "/"}
+            if token:
+                args["ContinuationToken"] = token
+            page = self._retry(lambda args=args: self.client.list_objects_v2(**args), 30.0)
+            for entry in page.get("CommonPrefixes", []):
+                job_id = entry["Prefix"][len(root) :].rstrip("/")
+                if job_id in known:
+                    continue
+                stamps = [item["LastModified"].timestamp() for item in self._keys(entry["Prefix"])]
+                if stamps and max(stamps) < older_than:  # (some stores list emptied prefixes)
+                    found.append(job_id)
+            if not page.get("IsTruncated"):
+                return found
+            token = page["NextContinuationToken"]
 
     def ok(self) -> bool:
         try:

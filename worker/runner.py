@@ -97,6 +97,7 @@ def run_job(
     job = store.get(job_id)
     assert job is not None
     staging = store.storage.staging(job_id, token)
+    committed = False
     beat = _Heartbeat(store, job_id, token, settings.heartbeat_seconds)
     beat.start()
     progress = JobProgress(store, job_id, token)
@@ -127,9 +128,9 @@ def run_job(
         if not store.storage.local:
             progress("uploading artifacts", 1.0)
         store.storage.publish(job_id, token, staging)  # a crash from here to the commit: re-run
-        if store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics):
+        committed = store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics)
+        if committed:
             return {"job": job_id, "state": "succeeded"}
-        store.storage.discard_run(job_id, token)
         return _stopped(store, job_id, token)
     except Cancelled:
         return _stopped(store, job_id, token)
@@ -150,6 +151,8 @@ def run_job(
         return {"job": job_id, "state": "failed", "message": message}
     finally:
         beat.done.set()
+        if not committed:  # what this run uploaded (object storage) is nobody's artifacts
+            store.storage.discard_run(job_id, token)
         store.storage.forget_run(job_id, token)
 
 

@@ -115,3 +115,26 @@ def test_the_storage_url_chooses_the_implementation(tmp_path):
         open_storage("gs://bucket", tmp_path / "jobs", tmp_path / "s")
     with pytest.raises(ValueError, match="TEXSYNTH_STORAGE_URL"):
         S3Storage("s3://", tmp_path, client=object())
+
+
+def test_an_upload_the_store_refuses_while_starting_is_tried_again(tmp_path):
+    """A store just restarted answers 500 for a moment; boto3's transfer manager wraps that in its own
+    error, which must be tried again like the others (it failed two jobs of the multi-host run)."""
+    from boto3.exceptions import S3UploadFailedError
+
+    class Flaky:
+        def __init__(self) -> None:
+            self.calls: list[str] = []
+
+        def upload_file(self, path: str, bucket: str, key: str) -> None:
+            self.calls.append(key)
+            if len(self.calls) == 1:
+                raise S3UploadFailedError("An error occurred (InternalError) when calling PutObject")
+
+    client = Flaky()
+    storage = S3Storage("s3://bucket/p", tmp_path / "scratch", retry_seconds=5, client=client)
+    staging = storage.staging("j", "t")
+    staging.mkdir(parents=True)
+    (staging / "output.png").write_bytes(b"x")
+    storage.publish("j", "t", staging)
+    assert client.calls == ["p/jobs/j/runs/t/output.png"] * 2
