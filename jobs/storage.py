@@ -296,16 +296,15 @@ class S3Storage(Storage):
         folder = self.run_scratch(job_id, token) / "inputs"
         folder.mkdir(parents=True, exist_ok=True)
         found = {}
-        for name in names:
-            target = folder / name
+        for rel in [*(f"inputs/{name}" for name in names), "manifest.json"]:
+            target = folder / rel.rsplit("/", 1)[-1]
+            # a worker waits for the store up to retry_seconds (the API's reads only briefly)
             self._retry(
-                lambda n=name, t=target: self.client.download_file(
-                    self.bucket, self.key(job_id, f"inputs/{n}"), str(t)
-                )
+                lambda r=rel, t=target: self.client.download_file(self.bucket, self.key(job_id, r), str(t))
             )
-            found[name] = target.read_bytes()
-        manifest = json.loads(self.read(job_id, "manifest.json", None))
-        return found, manifest
+            found[rel] = target.read_bytes()
+        manifest = json.loads(found.pop("manifest.json"))
+        return {name: found[f"inputs/{name}"] for name in names}, manifest
 
     def staging(self, job_id, token):
         return self.run_scratch(job_id, token) / "out"
