@@ -91,7 +91,12 @@ class Cluster:
         self.redis_port = free_port()
         self.redis = start_redis(self.redis_port, root)
         self.pg = Postgres().start()
-        self.s3 = SeaweedS3(root / "seaweed").start()
+        try:
+            self.s3 = SeaweedS3(root / "seaweed").start()
+        except BaseException:  # nothing of this run may outlive it
+            self.pg.cleanup()
+            os.killpg(self.redis.pid, signal.SIGKILL)
+            raise
         self.database = self.pg.create_database("texsynth")
         self.env = {
             **os.environ,
