@@ -177,7 +177,8 @@ class SeaweedS3:
             if _port_open(self.ports["s3"]) and self._make_bucket():
                 return self
             if time.monotonic() > deadline:
-                raise RuntimeError("SeaweedFS's S3 gateway did not answer within {timeout:.0f} s")
+                self.stop()
+                raise RuntimeError(f"SeaweedFS's S3 gateway did not answer within {timeout:.0f} s")
             time.sleep(0.3)
 
     def client(self):  # boto3's clients have no importable type
