@@ -13,7 +13,7 @@ COPY synth ./synth
 COPY app ./app
 COPY worker ./worker
 COPY jobs ./jobs
-RUN pip install -c constraints.txt . \
+RUN pip install -c constraints.txt '.[cluster]' \
     && useradd --create-home --uid 1000 texsynth \
     && mkdir -p /data /numba-cache && chown texsynth /data /numba-cache
 

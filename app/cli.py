@@ -333,7 +333,8 @@ def run(args: argparse.Namespace) -> int:
             queue = "Redis" if settings.redis_url else "embedded queue (no server needed)"
             access = f"tokens of {', '.join(tokens.names)}" if tokens.enabled else "no tokens"
             print(
-                f"texsynth is serving at {url}  (data: {settings.data_dir}; {queue}; "
+                f"texsynth is serving at {url}  (data: {settings.data_dir}; "
+                f"{settings.where() + '; ' if settings.where() else ''}{queue}; "
                 f"{'no worker' if supervisor is None else f'{settings.concurrency} worker processes'} x "
                 f"{settings.threads} threads of {available_cores()} cores; "
                 f"{access})",

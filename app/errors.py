@@ -20,6 +20,7 @@ from starlette.exceptions import HTTPException
 
 from app.admission import QuotaExceeded
 from app.service import BrokerUnavailable
+from jobs.storage import StorageUnavailable
 from synth.errors import (
     InputTooLarge,
     InvalidInput,
@@ -125,6 +126,15 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(QuotaExceeded)
     async def _quota(request: Request, exc: QuotaExceeded) -> JSONResponse:
         return _error(exc.status, exc.detail, None, "quota_exceeded")
+
+    @app.exception_handler(StorageUnavailable)
+    async def _store_down(request: Request, exc: StorageUnavailable) -> JSONResponse:
+        return _error(
+            503,
+            "the object store is unreachable; nothing was queued, try again shortly",
+            None,
+            "unavailable",
+        )
 
     @app.exception_handler(BrokerUnavailable)
     async def _broker(request: Request, exc: BrokerUnavailable) -> JSONResponse:

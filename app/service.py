@@ -29,7 +29,7 @@ from jobs.config import Settings
 from jobs.methods import methods
 from jobs.queue import QUEUE, TASK_NAME, create_celery
 from jobs.reaper import Reaper
-from jobs.store import SIZE_FIELDS, TERMINAL, JobRecord, JobStore
+from jobs.store import SIZE_FIELDS, TERMINAL, JobRecord
 from synth import __version__ as synth_version
 from synth.api import MethodSpec, check_inputs
 from synth.errors import InvalidParameter
@@ -72,7 +72,7 @@ class Service:
         self.settings = settings
         settings.ensure_dirs()
         self.tokens = Tokens.from_settings(settings)
-        self.store = JobStore(settings.db_path, settings.jobs_dir, keep_open=True)
+        self.store = settings.open_store(keep_open=True)
         self.disk_full_at: float | None = None  # when a write last failed for lack of room (health)
         self.admission = Admission(settings, self.store)
         self._admit_lock = threading.Lock()  # a quota check and the records it counts, together

@@ -3,19 +3,23 @@
 Every value comes from an environment variable (``TEXSYNTH_*``, plus ``REDIS_URL``) or its default,
 so the API process and every worker process on every machine read the same configuration. With no
 ``REDIS_URL`` the service runs on the embedded default: Celery's filesystem transport and an SQLite
-result backend, both under the data directory.
+result backend, both under the data directory. ``TEXSYNTH_DATABASE_URL`` and ``TEXSYNTH_STORAGE_URL``
+move the job records and files off it (docs/deploy.md).
 """
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from synth.io.limits import LIMITS, limit_from_env
 from synth.threads import THREADS_ENV, service_threads
+
+if TYPE_CHECKING:
+    from jobs.store import JobStore
 
 __all__ = ["Settings"]
 
@@ -30,6 +34,14 @@ class Settings(BaseModel):
 
     data_dir: Path = Field(Path("data"), description="job inputs, artifacts, job records, embedded broker")
     redis_url: str | None = Field(None, description="Redis for broker and results; unset = embedded default")
+    database_url: str | None = Field(
+        None,
+        repr=False,
+        description="SQLAlchemy URL of the job records (postgresql+psycopg://...); unset = the SQLite file",
+    )
+    storage_url: str | None = Field(
+        None, description="s3://bucket/prefix for inputs and artifacts; unset = the data directory"
+    )
     # Input limits: checked by the API before anything is stored or queued, and by the worker again.
     # The image limits are synth.io.limits': their defaults and their variables are written there.
     max_body_bytes: int = Field(32 * 2**20, description="largest accepted request body (HTTP 413 above)")
@@ -167,6 +179,35 @@ class Settings(BaseModel):
     @property
     def db_path(self) -> Path:
         return self.data_dir / "jobs.sqlite"
+
+    @property
+    def database(self) -> Path | str:
+        """What :class:`jobs.store.JobStore` opens: the URL, or the SQLite file of the data directory."""
+        return self.database_url or self.db_path
+
+    def where(self) -> str:
+        """Where records and files live, for a start-up line (no password): '' for the data directory."""
+        parts = []
+        if self.database_url:
+            from sqlalchemy.engine import make_url
+
+            parts.append(f"records {make_url(self.database_url).render_as_string(hide_password=True)}")
+        if self.storage_url:
+            parts.append(f"files {self.storage_url}")
+        return "; ".join(parts)
+
+    @property
+    def scratch_dir(self) -> Path:
+        """This machine's own folder for a run's inputs and artifacts before upload (object storage)."""
+        return self.data_dir / "scratch"
+
+    def open_store(self, *, keep_open: bool = False) -> JobStore:
+        """The job store these settings name (records and files); imported here to keep config light."""
+        from jobs.storage import open_storage
+        from jobs.store import JobStore
+
+        storage = open_storage(self.storage_url, self.jobs_dir, self.scratch_dir)
+        return JobStore(self.database, self.jobs_dir, storage, keep_open=keep_open)
 
     @property
     def broker_dir(self) -> Path:

@@ -14,14 +14,14 @@ On the embedded queue it also removes the control mailboxes of workers that stop
 (:func:`jobs.broker.prune_mailboxes`): messages no worker read within ``resend_seconds``.
 
 Every minute it also applies the retention period (:func:`purge_expired`): a job that ended more than
-``retention_days`` ago is deleted, files and record, like ``DELETE /api/jobs/{id}``; and a job folder
-left without a record for an hour (a run that outlived its job's deletion) is removed.
+``retention_days`` ago is deleted, files (or objects) and record, like ``DELETE /api/jobs/{id}``; and
+a job folder (objects) left without a record for an hour (a run that outlived its job's deletion) is
+removed.
 """
 
 from __future__ import annotations
 
 import logging
-import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -110,6 +110,7 @@ def reap_once(
                 job.id,
                 f"the worker running this job stopped; re-queued (run {job.attempts + 1} "
                 f"of at most {settings.max_attempts})",
+                seen=job.updated,
             ):
                 send(job.id)
                 actions.append((job.id, "requeued"))
@@ -118,7 +119,7 @@ def reap_once(
             and job.received_pid
             and job.received_host == store.host
             and not pid_alive(job.received_pid)
-        ) and store.requeue(job.id, "the worker holding this job stopped; re-queued"):
+        ) and store.requeue(job.id, "the worker holding this job stopped; re-queued", seen=job.updated):
             send(job.id)
             actions.append((job.id, "resent"))
     for job in stranded(store, settings, now):
@@ -127,7 +128,7 @@ def reap_once(
             if job.received_pid
             else ("no worker received this job; sent again")
         )
-        if store.requeue(job.id, why):
+        if store.requeue(job.id, why, seen=job.updated):
             send(job.id)
             actions.append((job.id, "resent"))
     for job_id, action in actions:
@@ -152,9 +153,9 @@ def purge_expired(store: JobStore, settings: Settings, now: float | None = None)
         for job_id in store.expired(now - settings.retention_days * 86400.0):
             if store.delete(job_id):
                 removed.append(job_id)
-    for folder in store.orphan_folders(now - ORPHAN_SECONDS):
-        shutil.rmtree(folder, ignore_errors=True)
-        removed.append(folder.name)
+    for job_id in store.orphan_folders(now - ORPHAN_SECONDS):
+        store.storage.delete(job_id)
+        removed.append(job_id)
     if removed:
         log.warning("reaper: %d finished job(s) past the retention period deleted", len(removed))
     return removed

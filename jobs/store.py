@@ -1,4 +1,4 @@
-"""The service's own job records (SQLite under the data directory) and each job's folder.
+"""The service's own job records (SQLite under the data directory, or PostgreSQL) and each job's files.
 
 Celery's result backend cannot say what happened to a job: it answers PENDING for ids it never saw
 and leaves a crashed task in its last state. So the API and the workers keep one row per job here;
@@ -13,7 +13,8 @@ A run owns a job through its ``run_token``: progress, heartbeats and the final c
 while the token is the job's current one, so a run that was superseded (worker presumed dead, job
 cancelled) can never overwrite the state or the artifacts of another.
 
-Each job's folder::
+The records live in :class:`jobs.db.Database` (schema: Alembic, ``jobs/migrations``); the files in a
+:class:`jobs.storage.Storage`: by default each job's folder in the data directory::
 
     jobs/<id>/inputs/exemplar.<ext>   the uploaded bytes, unchanged (a sweep's runs share one file:
                                       hard links)
@@ -21,84 +22,32 @@ Each job's folder::
     jobs/<id>/preview.png             small preview of the running synthesis (replaced atomically)
     jobs/<id>/.run-<token>/           one run's artifacts while it writes them
     jobs/<id>/out/                    the committed artifacts of the run that succeeded
+
+or, with ``TEXSYNTH_STORAGE_URL=s3://...``, the same under object keys (:mod:`jobs.storage`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
-import shutil
 import socket
 import sqlite3
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from synth.io.atomic import atomic_write_bytes, atomic_write_json
+from jobs.db import Database
+from jobs.storage import LocalStorage, Storage
 
 __all__ = ["STATES", "TERMINAL", "JobRecord", "JobStore", "pid_alive"]
 
 STATES = ("queued", "running", "succeeded", "failed", "cancelled")
 TERMINAL = frozenset({"succeeded", "failed", "cancelled"})
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS jobs (
-    id TEXT PRIMARY KEY,
-    created REAL NOT NULL,
-    method TEXT NOT NULL,
-    params TEXT NOT NULL,
-    seed INTEGER NOT NULL,
-    inputs TEXT NOT NULL,
-    sweep_id TEXT,
-    state TEXT NOT NULL,
-    stage TEXT NOT NULL DEFAULT '',
-    fraction REAL NOT NULL DEFAULT 0,
-    message TEXT NOT NULL DEFAULT '',
-    started REAL,
-    finished REAL,
-    updated REAL NOT NULL,
-    attempts INTEGER NOT NULL DEFAULT 0,
-    run_token TEXT,
-    host TEXT,
-    pid INTEGER,
-    heartbeat REAL,
-    received_host TEXT,
-    received_pid INTEGER,
-    cancel_requested REAL,
-    preview_at REAL,
-    artifacts TEXT NOT NULL DEFAULT '[]',
-    timings TEXT NOT NULL DEFAULT '{}',
-    metrics TEXT NOT NULL DEFAULT '{}',
-    owner TEXT,
-    size TEXT,
-    input_bytes INTEGER,
-    artifact_bytes INTEGER
-);
-CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);
-CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created);
-CREATE INDEX IF NOT EXISTS jobs_sweep ON jobs(sweep_id);
-CREATE TABLE IF NOT EXISTS sweeps (
-    id TEXT PRIMARY KEY,
-    created REAL NOT NULL,
-    method TEXT NOT NULL,
-    grid TEXT NOT NULL,
-    params TEXT NOT NULL,
-    job_ids TEXT NOT NULL,
-    owner TEXT,
-    size TEXT
-);
-CREATE TABLE IF NOT EXISTS workers (
-    name TEXT PRIMARY KEY,
-    host TEXT NOT NULL,
-    pid INTEGER NOT NULL,
-    started REAL NOT NULL,
-    heartbeat REAL NOT NULL
-);
-"""
 
 _JSON_COLUMNS = ("params", "inputs", "artifacts", "timings", "metrics")
 #: The output's sides, a record's ``size`` (never inside ``params``). Records made before ``size``
@@ -146,14 +95,18 @@ class JobRecord:
     size: dict[str, int] = field(default_factory=dict)  # the output's width, height (, depth)
     input_bytes: int | None = None  # bytes its inputs hold on disk (a sweep's shared upload: its first run)
     artifact_bytes: int | None = None  # bytes of its committed artifacts
+    artifacts_run: str | None = None  # object storage: the run whose uploaded artifacts are the job's
 
     @classmethod
-    def from_row(cls, row: sqlite3.Row) -> JobRecord:
+    def from_row(cls, row: Any) -> JobRecord:
         values = dict(row)
         for name in _JSON_COLUMNS:
             values[name] = json.loads(values[name])
         values["size"] = _split_size(values["params"], json.loads(values["size"] or "null"))
         return cls(**values)
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
 def pid_alive(pid: int | None) -> bool:
@@ -173,63 +126,53 @@ def pid_alive(pid: int | None) -> bool:
         return True
 
 
-class JobStore:
-    """Job, sweep and worker records in one SQLite file, safe across processes (WAL, short writes)."""
+def _retrying(method: _F) -> _F:
+    """Run a store method again while a database server is unreachable (SQLite: just once)."""
 
-    def __init__(self, db_path: Path, jobs_dir: Path, *, keep_open: bool = False) -> None:
-        """``keep_open``: hold one connection for the life of this store (the API's), so that SQLite
-        keeps its write-ahead log and shared-memory files: on a full disk, where they could not be
-        made again, the records can still be read."""
-        self.db_path = Path(db_path)
+    @functools.wraps(method)
+    def wrapper(self: JobStore, *args: Any, **kwargs: Any) -> Any:
+        return self.db.retrying(lambda: method(self, *args, **kwargs))
+
+    return wrapper  # type: ignore[return-value]
+
+
+class JobStore:
+    """Job, sweep and worker records, safe across processes and hosts; the jobs' files in ``storage``.
+
+    ``database``: the SQLite file (a path), or an SQLAlchemy URL (``postgresql+psycopg://...``).
+    ``storage``: default the job folders under ``jobs_dir``.
+    """
+
+    def __init__(
+        self, database: Path | str, jobs_dir: Path, storage: Storage | None = None, *, keep_open: bool = False
+    ) -> None:
+        """``keep_open`` (SQLite): hold one connection for the life of this store (the API's), so that
+        SQLite keeps its write-ahead log and shared-memory files: on a full disk, where they could not
+        be made again, the records can still be read."""
         self.jobs_dir = Path(jobs_dir)
         self.host = socket.gethostname()
-        self.jobs_dir.mkdir(parents=True, exist_ok=True)
+        self.storage = storage if storage is not None else LocalStorage(self.jobs_dir)
+        self.db = Database(database)
+        self.db_path = self.db.path
         self._kept: sqlite3.Connection | None = None
-        with self._connect() as db:
-            db.execute("PRAGMA journal_mode=WAL")
-            db.executescript(_SCHEMA)
-            for table in ("jobs", "sweeps"):  # records made before owners and sizes had columns
-                columns = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
-                for column in ("owner", "size"):
-                    if column not in columns:
-                        with contextlib.suppress(sqlite3.OperationalError):  # another process added it
-                            db.execute(f"ALTER TABLE {table} ADD COLUMN {column} TEXT")
-            columns = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
-            for column in ("input_bytes", "artifact_bytes"):  # records made before the storage quota
-                if column not in columns:
-                    with contextlib.suppress(sqlite3.OperationalError):
-                        db.execute(f"ALTER TABLE jobs ADD COLUMN {column} INTEGER")
-            db.execute("CREATE INDEX IF NOT EXISTS jobs_owner ON jobs(owner, state)")
-        if keep_open:
+        if keep_open and self.db_path is not None:
             self._kept = sqlite3.connect(self.db_path, timeout=30.0, check_same_thread=False)
             self._kept.execute("SELECT 1 FROM jobs LIMIT 1").fetchall()  # opens the log files
 
     # -- plumbing -------------------------------------------------------------------------------
 
-    @contextlib.contextmanager
-    def _connect(self) -> Iterator[sqlite3.Connection]:
-        db = sqlite3.connect(self.db_path, timeout=30.0, isolation_level=None)
-        db.row_factory = sqlite3.Row
-        db.execute("PRAGMA busy_timeout=30000")
-        db.execute("PRAGMA synchronous=NORMAL")
-        try:
-            yield db
-        finally:
-            db.close()
+    def _connect(self) -> contextlib.AbstractContextManager[Any]:
+        return self.db.connect()
 
-    @contextlib.contextmanager
-    def _transaction(self) -> Iterator[sqlite3.Connection]:
-        with self._connect() as db:
-            db.execute("BEGIN IMMEDIATE")
-            try:
-                yield db
-            except BaseException:
-                db.execute("ROLLBACK")
-                raise
-            db.execute("COMMIT")
+    def _transaction(self) -> contextlib.AbstractContextManager[Any]:
+        return self.db.transaction()
 
     def job_dir(self, job_id: str) -> Path:
         return self.jobs_dir / job_id
+
+    def after_fork(self) -> None:
+        """In a forked child: drop the parent's pooled database connections."""
+        self.db.dispose()
 
     # -- jobs: submission and queries ------------------------------------------------------------
 
@@ -247,7 +190,7 @@ class JobStore:
         owner: str | None = None,
         share_inputs_of: str | None = None,
     ) -> JobRecord:
-        """Store the inputs and manifest in a new job folder, then insert the record as ``queued``.
+        """Store the inputs and manifest (a new job folder), then insert the record as ``queued``.
 
         ``size`` holds the output's ``width``, ``height`` (and ``depth``); ``params`` the method's
         parameters only. ``inputs`` maps a role (``exemplar``, ``constraint``) to ``(file name,
@@ -259,21 +202,35 @@ class JobStore:
         removes only its own link, so the runs share the bytes safely.
         """
         job_id = job_id or uuid.uuid4().hex
-        folder = self.job_dir(job_id)
-        (folder / "inputs").mkdir(parents=True)
-        names = {}
-        written = 0
+        names, files = {}, {}
         for role, (filename, data) in inputs.items():
             suffix = Path(filename).suffix.lower()[:8] if filename else ""
             names[role] = f"{role}{suffix}"
-            target = folder / "inputs" / names[role]
-            shared = share_inputs_of and self.job_dir(share_inputs_of) / "inputs" / names[role]
-            if not shared or not _link(shared, target):
-                atomic_write_bytes(target, data)
-                written += len(data)
+            files[names[role]] = data
+        # the quota's count: a sweep's shared upload is stored (and counted) once, by its first run
+        written = 0 if share_inputs_of else sum(len(data) for data in files.values())
         now = time.time()
         manifest = {**manifest, "job_id": job_id, "inputs": names, "created": now}
-        atomic_write_json(folder / "manifest.json", manifest)
+        self.storage.save_inputs(job_id, files, manifest, share_inputs_of)
+        self._insert_job(job_id, now, method, params, size, seed, names, sweep_id, owner, written)
+        record = self.get(job_id)
+        assert record is not None
+        return record
+
+    @_retrying
+    def _insert_job(
+        self,
+        job_id: str,
+        now: float,
+        method: str,
+        params: dict[str, Any],
+        size: dict[str, int] | None,
+        seed: int,
+        names: dict[str, str],
+        sweep_id: str | None,
+        owner: str | None,
+        input_bytes: int,
+    ) -> None:
         with self._connect() as db:
             db.execute(
                 "INSERT INTO jobs (id, created, method, params, size, seed, inputs, sweep_id, state,"
@@ -289,18 +246,17 @@ class JobStore:
                     sweep_id,
                     now,
                     owner,
-                    written,
+                    input_bytes,
                 ),
             )
-        record = self.get(job_id)
-        assert record is not None
-        return record
 
+    @_retrying
     def get(self, job_id: str) -> JobRecord | None:
         with self._connect() as db:
             row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return None if row is None else JobRecord.from_row(row)
 
+    @_retrying
     def list(
         self,
         *,
@@ -330,42 +286,50 @@ class JobStore:
             ).fetchall()
         return [JobRecord.from_row(r) for r in rows], count
 
+    @_retrying
     def count(self) -> int:
         with self._connect() as db:
             return db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
 
+    @_retrying
     def usage(self, owner: str | None) -> int:
         """Bytes the jobs of ``owner`` keep stored: inputs and artifacts (``None``: jobs made without
-        a token). Records made before these were counted are measured from their folders first."""
+        a token). Records made before these were counted are measured from their folders first (a
+        data directory; in an object store they count from then on)."""
+        same = "IS NOT DISTINCT FROM" if self.db.postgres else "IS"
         with self._connect() as db:
             old = db.execute(
-                "SELECT id FROM jobs WHERE owner IS ? AND (input_bytes IS NULL OR"
+                f"SELECT id FROM jobs WHERE owner {same} ? AND (input_bytes IS NULL OR"
                 " (artifact_bytes IS NULL AND state = 'succeeded'))",
                 (owner,),
             ).fetchall()
-            for (job_id,) in old:
-                inputs, artifacts = _folder_bytes(self.job_dir(job_id) / "inputs"), _folder_bytes(
-                    self.job_dir(job_id) / "out"
-                )
+            for row in old:
+                job_id = row[0]
+                local = self.storage.local
+                inputs = _folder_bytes(self.job_dir(job_id) / "inputs") if local else 0
+                artifacts = _folder_bytes(self.job_dir(job_id) / "out") if local else 0
                 db.execute(
                     "UPDATE jobs SET input_bytes = ?, artifact_bytes = ? WHERE id = ?",
                     (inputs, artifacts, job_id),
                 )
             return db.execute(
                 "SELECT COALESCE(SUM(COALESCE(input_bytes, 0) + COALESCE(artifact_bytes, 0)), 0)"
-                " FROM jobs WHERE owner IS ?",
+                f" FROM jobs WHERE owner {same} ?",
                 (owner,),
             ).fetchone()[0]
 
+    @_retrying
     def count_active(self, owner: str | None) -> int:
         """Queued and running jobs of ``owner`` (``None``: those made without a token)."""
+        same = "IS NOT DISTINCT FROM" if self.db.postgres else "IS"
         with self._connect() as db:
             return db.execute(
-                "SELECT COUNT(*) FROM jobs WHERE owner IS ? AND state IN ('queued', 'running')", (owner,)
+                f"SELECT COUNT(*) FROM jobs WHERE owner {same} ? AND state IN ('queued', 'running')", (owner,)
             ).fetchone()[0]
 
     # -- jobs: the worker's side ----------------------------------------------------------------
 
+    @_retrying
     def mark_received(self, job_id: str, pid: int) -> None:
         """A worker's main process took the job's message off the broker (it may be lost with it)."""
         with self._connect() as db:
@@ -375,6 +339,7 @@ class JobStore:
                 (self.host, pid, time.time(), job_id),
             )
 
+    @_retrying
     def claim(self, job_id: str, pid: int, stale_seconds: float) -> tuple[str | None, str]:
         """Start a run of ``job_id``: returns ``(run_token, '')``, or ``(None, why not)``.
 
@@ -384,7 +349,7 @@ class JobStore:
         """
         now = time.time()
         with self._transaction() as db:
-            row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            row = db.execute("SELECT * FROM jobs WHERE id = ?" + self.db.for_update, (job_id,)).fetchone()
             if row is None:
                 return None, "unknown job"
             job = JobRecord.from_row(row)
@@ -413,6 +378,7 @@ class JobStore:
             return True
         return job.heartbeat is None or now - job.heartbeat > stale_seconds
 
+    @_retrying
     def progress(self, job_id: str, token: str, stage: str, fraction: float, preview: bool = False) -> bool:
         """Record progress; ``False`` means this run must stop (cancelled, or no longer the job's run)."""
         now = time.time()
@@ -425,6 +391,7 @@ class JobStore:
             )
             return cur.rowcount == 1
 
+    @_retrying
     def heartbeat(self, job_id: str, token: str) -> bool:
         with self._connect() as db:
             cur = db.execute(
@@ -433,40 +400,47 @@ class JobStore:
             )
             return cur.rowcount == 1
 
+    @_retrying
     def commit_success(
         self, job_id: str, token: str, staging: Path, artifacts: list[str], timings: dict, metrics: dict
     ) -> bool:
-        """Make ``staging`` the job's ``out/`` folder and mark it succeeded, if this run still owns it.
+        """Make the run's staged (and published) artifacts the job's and mark it succeeded, if this
+        run still owns it.
 
-        Holding the database's write lock while swapping folders means no other run can commit (or
-        be told it owns the job) in between: the job's artifacts always come from exactly one run.
+        Holding the database's write lock (PostgreSQL: the job's row lock) while swapping folders means
+        no other run can commit (or be told it owns the job) in between: the job's artifacts always
+        come from exactly one run. In an object store the swap is the ``artifacts_run`` column.
         """
         now = time.time()
-        out = self.job_dir(job_id) / "out"
         size = _folder_bytes(staging)
         with self._transaction() as db:
             row = db.execute(
                 "SELECT 1 FROM jobs WHERE id = ? AND run_token = ? AND state = 'running'"
-                " AND cancel_requested IS NULL",
+                " AND cancel_requested IS NULL" + self.db.for_update,
                 (job_id, token),
             ).fetchone()
             if row is None:
                 return False
-            old = None
-            if out.exists():
-                old = out.with_name(f".old-{token}")
-                os.replace(out, old)
-            os.replace(staging, out)
+            clean = self.storage.commit(job_id, token, staging)
             db.execute(
                 "UPDATE jobs SET state = 'succeeded', stage = 'done', fraction = 1, finished = ?,"
-                " updated = ?, artifact_bytes = ?,"
-                " artifacts = ?, timings = ?, metrics = ?, run_token = NULL WHERE id = ?",
-                (now, now, size, json.dumps(artifacts), json.dumps(timings), json.dumps(metrics), job_id),
+                " updated = ?, artifacts = ?, timings = ?, metrics = ?, run_token = NULL,"
+                " artifacts_run = ?, artifact_bytes = ? WHERE id = ?",
+                (
+                    now,
+                    now,
+                    json.dumps(artifacts),
+                    json.dumps(timings),
+                    json.dumps(metrics),
+                    None if self.storage.local else token,
+                    size,
+                    job_id,
+                ),
             )
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        clean()
         return True
 
+    @_retrying
     def finish(self, job_id: str, token: str | None, state: str, message: str = "") -> bool:
         """End the job as ``failed`` or ``cancelled`` (if ``token`` is given, only if the run owns it).
 
@@ -487,6 +461,7 @@ class JobStore:
 
     # -- jobs: the API's and the reaper's side --------------------------------------------------
 
+    @_retrying
     def request_cancel(self, job_id: str) -> JobRecord | None:
         """Cancel: a queued job is cancelled at once; a running one is asked to stop."""
         now = time.time()
@@ -503,28 +478,34 @@ class JobStore:
             )
         return self.get(job_id)
 
+    @_retrying
     def discard(self, job_ids: list[str], sweep_id: str | None = None) -> None:
         """Forget jobs that were never queued (the broker refused them): records, folders, their sweep.
 
         Only ``queued`` jobs that no worker received are removed, so a job that did reach a worker is
         never lost by this.
         """
+        removed = []
         with self._transaction() as db:
             for job_id in job_ids:
                 cur = db.execute(
                     "DELETE FROM jobs WHERE id = ? AND state = 'queued' AND received_pid IS NULL", (job_id,)
                 )
                 if cur.rowcount:
-                    shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+                    removed.append(job_id)
             if sweep_id is not None:
                 db.execute("DELETE FROM sweeps WHERE id = ?", (sweep_id,))
+        for job_id in removed:
+            self.storage.delete(job_id)
 
+    @_retrying
     def delete(self, job_id: str) -> bool:
         """Forget a finished job: its record, its folder (inputs, artifacts), and its sweep's record
         once the sweep has no job left. ``False`` if the job is not finished (or not there)."""
         with self._transaction() as db:
             row = db.execute(
-                "SELECT sweep_id FROM jobs WHERE id = ? AND state IN ('succeeded', 'failed', 'cancelled')",
+                "SELECT sweep_id FROM jobs WHERE id = ? AND state IN ('succeeded', 'failed', 'cancelled')"
+                + self.db.for_update,
                 (job_id,),
             ).fetchone()
             if row is None:
@@ -533,9 +514,10 @@ class JobStore:
             sweep_id = row["sweep_id"]
             if sweep_id and not db.execute("SELECT 1 FROM jobs WHERE sweep_id = ?", (sweep_id,)).fetchone():
                 db.execute("DELETE FROM sweeps WHERE id = ?", (sweep_id,))
-        shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+        self.storage.delete(job_id)
         return True
 
+    @_retrying
     def expired(self, finished_before: float, limit: int = 500) -> list[str]:
         """Ids of jobs that ended before ``finished_before`` (oldest first, at most ``limit``)."""
         with self._connect() as db:
@@ -546,32 +528,41 @@ class JobStore:
             ).fetchall()
         return [r["id"] for r in rows]
 
-    def orphan_folders(self, older_than: float) -> list[Path]:
-        """Job folders without a record, untouched since ``older_than`` (a run that outlived its
-        job's deletion may leave one); fresh folders are skipped, their record may be on its way."""
-        with self._connect() as db:
-            known = {r[0] for r in db.execute("SELECT id FROM jobs")}
-        found = []
-        for folder in self.jobs_dir.iterdir():
-            if folder.name in known or not folder.is_dir():
-                continue
-            with contextlib.suppress(OSError):
-                if folder.stat().st_mtime < older_than:
-                    found.append(folder)
-        return found
+    def orphan_folders(self, older_than: float) -> list[str]:
+        """Ids of job folders (objects) without a record, untouched since ``older_than`` (a run that
+        outlived its job's deletion may leave one); fresh ones are skipped, their record may be on its
+        way."""
+        known = self._known_ids()
+        return self.storage.orphans(known, older_than)
 
-    def requeue(self, job_id: str, message: str) -> bool:
-        """A run was lost: put the job back to ``queued`` (the caller sends a new message)."""
-        now = time.time()
+    @_retrying
+    def _known_ids(self) -> set[str]:
         with self._connect() as db:
-            cur = db.execute(
-                "UPDATE jobs SET state = 'queued', stage = 'queued', fraction = 0, message = ?,"
-                " run_token = NULL, received_host = NULL, received_pid = NULL, updated = ?"
-                " WHERE id = ? AND state IN ('queued', 'running')",
-                (message, now, job_id),
-            )
+            return {r[0] for r in db.execute("SELECT id FROM jobs").fetchall()}
+
+    @_retrying
+    def requeue(self, job_id: str, message: str, seen: float | None = None) -> bool:
+        """A run was lost: put the job back to ``queued`` (the caller sends a new message).
+
+        ``seen``: the record's ``updated`` when the caller judged it lost; the job is re-queued only if
+        nothing changed it since, so two reapers (two API processes) re-send a lost job once, and a
+        run that reported meanwhile is left alone.
+        """
+        now = time.time()
+        query = (
+            "UPDATE jobs SET state = 'queued', stage = 'queued', fraction = 0, message = ?,"
+            " run_token = NULL, received_host = NULL, received_pid = NULL, updated = ?"
+            " WHERE id = ? AND state IN ('queued', 'running')"
+        )
+        args: list[Any] = [message, now, job_id]
+        if seen is not None:
+            query += " AND updated = ?"
+            args.append(seen)
+        with self._connect() as db:
+            cur = db.execute(query, args)
             return cur.rowcount == 1
 
+    @_retrying
     def active(self) -> list[JobRecord]:
         with self._connect() as db:
             rows = db.execute("SELECT * FROM jobs WHERE state IN ('queued', 'running')").fetchall()
@@ -579,6 +570,7 @@ class JobStore:
 
     # -- sweeps -------------------------------------------------------------------------------------
 
+    @_retrying
     def create_sweep(
         self,
         sweep_id: str,
@@ -605,6 +597,7 @@ class JobStore:
                 ),
             )
 
+    @_retrying
     def get_sweep(self, sweep_id: str) -> dict[str, Any] | None:
         with self._connect() as db:
             row = db.execute("SELECT * FROM sweeps WHERE id = ?", (sweep_id,)).fetchone()
@@ -618,6 +611,7 @@ class JobStore:
 
     # -- workers ------------------------------------------------------------------------------------
 
+    @_retrying
     def worker_heartbeat(self, name: str, pid: int, started: float) -> None:
         with self._connect() as db:
             db.execute(
@@ -627,6 +621,7 @@ class JobStore:
                 (name, self.host, pid, started, time.time()),
             )
 
+    @_retrying
     def workers(self, fresh_within: float) -> list[dict[str, Any]]:
         """Workers whose main process reported within ``fresh_within`` seconds (and, here, is alive)."""
         now = time.time()
@@ -650,11 +645,3 @@ def _folder_bytes(folder: Path) -> int:
                 total += info.st_size // max(1, info.st_nlink)
     return total
 
-
-def _link(source: Path, target: Path) -> bool:
-    """Hard-link ``source`` as ``target``; ``False`` (the caller writes a copy) if it cannot."""
-    try:
-        os.link(source, target)
-    except OSError:
-        return False
-    return True

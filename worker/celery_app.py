@@ -34,7 +34,7 @@ def store() -> JobStore:
     """This process's job store (opened on first use, after a fork)."""
     global _store
     if _store is None:
-        _store = JobStore(settings.db_path, settings.jobs_dir)
+        _store = settings.open_store()
     return _store
 
 
@@ -72,7 +72,9 @@ def last_heartbeat() -> None:
 @signals.worker_process_init.connect
 def _on_child_start(**_):
     global _store
-    _store = None  # never share an SQLite connection across a fork
+    if _store is not None:
+        _store.after_fork()  # the parent's pooled server connections stay the parent's
+    _store = None  # never share a database connection across a fork
     ShutdownGuard.forget_in_child()  # a child's signals are its own, not its main process's
     if settings.worker_nice:
         os.nice(settings.worker_nice)  # the API stays responsive on a machine busy with jobs

@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"texsynth worker {name}: {settings.concurrency} processes x {settings.threads} threads "
             f"({available_cores()} cores), data {settings.data_dir}, "
-            f"broker {'redis' if settings.redis_url else 'filesystem (embedded)'}",
+            f"broker {'redis' if settings.redis_url else 'filesystem (embedded)'}"
+            + (f"; {settings.where()}" if settings.where() else ""),
             flush=True,
         )
     # before Celery forks its pool and installs its signal handlers: its shutdown can hang (issue 30)

@@ -8,7 +8,6 @@ from __future__ import annotations
 import sys
 
 from jobs.config import Settings
-from jobs.store import JobStore
 
 #: A worker that has not reported for this long is unhealthy (15 missed heartbeats).
 FRESH_SECONDS = 30.0
@@ -16,7 +15,7 @@ FRESH_SECONDS = 30.0
 
 def main() -> int:
     settings = Settings.from_env()
-    store = JobStore(settings.db_path, settings.jobs_dir)
+    store = settings.open_store()
     mine = [w for w in store.workers(fresh_within=FRESH_SECONDS) if w["host"] == store.host]
     if not mine:
         print(f"no worker of {store.host} reported within {FRESH_SECONDS:.0f} s", file=sys.stderr)

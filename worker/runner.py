@@ -3,24 +3,23 @@
 This is the body of the Celery task, kept free of Celery so that it reads top to bottom. It is
 idempotent, the condition for at-least-once delivery (``acks_late``): a duplicate delivery of a job
 that is running or finished does nothing; a re-delivery after a crash takes the job over and writes
-a fresh set of artifacts into its own staging folder, committed only if it still owns the job.
+a fresh set of artifacts into its own staging folder, published (uploaded, with object storage) and
+then committed only if it still owns the job: a crash in between leaves the job to be re-run.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import os
-import shutil
 import threading
 import time
 from typing import Any
 
 from jobs.config import Settings
 from jobs.methods import methods
+from jobs.storage import StorageUnavailable
 from jobs.store import JobStore
 from synth.errors import Cancelled, SynthError
-from synth.io.atomic import atomic_write_bytes
 from synth.output.preview import preview_png
 from synth.pipeline import load_inputs, synthesize_to_folder
 
@@ -53,10 +52,10 @@ class JobProgress:
         wrote_preview = False
         if preview is not None and now - self._last_preview >= 1.0:
             try:
-                atomic_write_bytes(self.store.job_dir(self.job_id) / "preview.png", preview_png(preview))
+                self.store.storage.put_preview(self.job_id, preview_png(preview))
                 wrote_preview = True
                 self._last_preview = now
-            except (ValueError, TypeError) as exc:  # a malformed preview must not kill the run
+            except (ValueError, TypeError, StorageUnavailable) as exc:  # a preview must not kill the run
                 log.warning("job %s: preview not written: %s", self.job_id, exc)
         if stage == self._last_stage and now - self._last_write < self.min_interval and not wrote_preview:
             return
@@ -97,18 +96,19 @@ def run_job(
         return {"job": job_id, "state": "skipped", "message": why}
     job = store.get(job_id)
     assert job is not None
-    folder = store.job_dir(job_id)
-    staging = folder / f".run-{token}"
+    staging = store.storage.staging(job_id, token)
+    committed = False
     beat = _Heartbeat(store, job_id, token, settings.heartbeat_seconds)
     beat.start()
     progress = JobProgress(store, job_id, token)
     try:
         progress("loading inputs", 0.0)
-        manifest = json.loads((folder / "manifest.json").read_text())
+        files, manifest = store.storage.fetch_inputs(job_id, list(job.inputs.values()), token)
         images = load_inputs(  # under the service's limits, as the API checked them
-            {role: (folder / "inputs" / name).read_bytes() for role, name in job.inputs.items()},
+            {role: files[name] for role, name in job.inputs.items()},
             max_pixels=settings.max_input_pixels,
         )
+        del files
         methods(settings)  # registers TEXSYNTH_EXTRA_METHODS in this process
         size = tuple(job.size[k] for k in ("depth", "height", "width") if k in job.size) or None
         manifest["attempt"] = job.attempts
@@ -125,7 +125,11 @@ def run_job(
             threads=settings.threads,
         )
         timings = {k: float(v) for k, v in outcome.result.timings.items()}
-        if store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics):
+        if not store.storage.local:
+            progress("uploading artifacts", 1.0)
+        store.storage.publish(job_id, token, staging)  # a crash from here to the commit: re-run
+        committed = store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics)
+        if committed:
             return {"job": job_id, "state": "succeeded"}
         return _stopped(store, job_id, token)
     except Cancelled:
@@ -147,7 +151,9 @@ def run_job(
         return {"job": job_id, "state": "failed", "message": message}
     finally:
         beat.done.set()
-        shutil.rmtree(staging, ignore_errors=True)
+        if not committed:  # what this run uploaded (object storage) is nobody's artifacts
+            store.storage.discard_run(job_id, token)
+        store.storage.forget_run(job_id, token)
 
 
 def _stopped(store: JobStore, job_id: str, token: str) -> dict:

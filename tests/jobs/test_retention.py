@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import os
-import sqlite3
 import time
 
 import pytest
 
 from jobs.config import Settings
 from jobs.reaper import ORPHAN_SECONDS, purge_expired
-from jobs.store import _SCHEMA, JobStore
+from jobs.store import JobStore
 
 UPLOAD = b"\x89PNG" + bytes(range(256)) * 64  # the bytes are never decoded here
 
@@ -108,16 +107,3 @@ def test_the_reaper_removes_old_folders_without_a_record(store, tmp_path):
     os.utime(orphan, (old, old))
     assert purge_expired(store, Settings(data_dir=tmp_path)) == ["orphan"]
     assert not orphan.exists() and fresh.exists()
-
-
-def test_records_made_before_owners_get_the_column(tmp_path):
-    old_schema = _SCHEMA.replace(",\n    owner TEXT", "")
-    assert "owner" not in old_schema
-    db = sqlite3.connect(tmp_path / "jobs.sqlite")
-    db.executescript(old_schema)
-    db.commit()
-    db.close()
-    JobStore(tmp_path / "jobs.sqlite", tmp_path / "jobs")
-    db = sqlite3.connect(tmp_path / "jobs.sqlite")
-    assert "owner" in {r[1] for r in db.execute("PRAGMA table_info(jobs)")}
-    assert "owner" in {r[1] for r in db.execute("PRAGMA table_info(sweeps)")}

@@ -1,4 +1,5 @@
-"""The job record state machine and the reaper, without processes (fast, deterministic)."""
+"""The job record state machine and the reaper, without processes (fast, deterministic), on SQLite
+and on PostgreSQL."""
 
 from __future__ import annotations
 
@@ -13,9 +14,12 @@ from jobs.store import JobStore
 DEAD_PID = 2**22 + 12345  # above pid_max on Linux: never a live process
 
 
-@pytest.fixture
-def store(tmp_path) -> JobStore:
-    return JobStore(tmp_path / "jobs.sqlite", tmp_path / "jobs")
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store(request, tmp_path) -> JobStore:
+    """Every test of the state machine runs on the SQLite file and on a PostgreSQL server."""
+    if request.param == "sqlite":
+        return JobStore(tmp_path / "jobs.sqlite", tmp_path / "jobs")
+    return JobStore(request.getfixturevalue("pg_url"), tmp_path / "jobs")
 
 
 def _job(store: JobStore) -> str:

@@ -129,7 +129,9 @@ class Service:
                 os.killpg(os.getpgid(w["pid"]), signal.SIGKILL)
 
     def store(self) -> JobStore:
-        return JobStore(self.data_dir / "jobs.sqlite", self.data_dir / "jobs")
+        """The service's job records (its database; its files stay where they are)."""
+        database = self.env.get("TEXSYNTH_DATABASE_URL") or self.data_dir / "jobs.sqlite"
+        return JobStore(database, self.data_dir / "jobs")
 
     def client(self) -> Client:
         return Client(self.url, timeout=30)

@@ -37,6 +37,8 @@ def health(service: ServiceDep, response: Response) -> dict:
             f"{len(waiting)} queued job(s) not received by any worker although workers are idle; "
             "the reaper sends them again"
         )
+    if not service.store.storage.ok():
+        problems.append("the object store is unreachable (check TEXSYNTH_STORAGE_URL and AWS_*)")
     if not broker:
         problems.append("the broker is unreachable (check REDIS_URL / the data directory)")
     if not workers:

@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
+import mimetypes
 from functools import lru_cache
 from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Response, UploadFile
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 
 from app.api.deps import PrincipalDep, ServiceDep
 from app.auth import Principal
 from app.schemas import DeletedPublic, ErrorPublic, JobPublic, JobsPublic
-from app.service import Upload
-from jobs.store import STATES
+from app.service import Service, Upload
+from jobs.store import STATES, JobRecord
 from synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
@@ -180,8 +181,30 @@ def get_artifact(service: ServiceDep, principal: PrincipalDep, job_id: str, name
     if name not in job.artifacts:
         listed = ", ".join(job.artifacts) or f"none yet (the job is {job.state})"
         raise HTTPException(404, f"job {job_id} has no artifact {name!r}; artifacts: {listed}")
-    path = service.store.job_dir(job_id) / "out" / name
-    return FileResponse(path, filename=path.name if not name.endswith(".png") else None)
+    filename = name.rsplit("/", 1)[-1] if not name.endswith(".png") else None
+    path = service.store.storage.local_path(job_id, f"out/{name}", job.artifacts_run)
+    if path is not None:
+        return FileResponse(path, filename=filename)
+    return _stream(service, job, f"out/{name}", mimetypes.guess_type(name)[0], filename)
+
+
+def _stream(
+    service: Service,
+    job: JobRecord,
+    rel: str,
+    media_type: str | None,
+    filename: str | None = None,
+    headers: dict[str, str] | None = None,
+) -> StreamingResponse:
+    """A file from the object store, streamed (never written to the API's disk)."""
+    try:
+        chunks, size = service.store.storage.open(job.id, rel, job.artifacts_run)
+    except FileNotFoundError:
+        raise HTTPException(404, f"job {job.id} has no file {rel!r} (yet)") from None
+    headers = {"Content-Length": str(size), **(headers or {})}
+    if filename is not None:
+        headers["Content-Disposition"] = f'attachment; filename="{filename}"'
+    return StreamingResponse(chunks, media_type=media_type or "application/octet-stream", headers=headers)
 
 
 _PLANE_AXIS = {"xy": 0, "xz": 1, "yz": 2}
@@ -191,6 +214,13 @@ _PLANE_AXIS = {"xy": 0, "xz": 1, "yz": 2}
 def _stack(path: str, mtime_ns: int) -> np.ndarray:
     """A finished job's ``output.tiff`` as a float volume (cached: a viewer asks for many slices)."""
     return load_volume(path, name="output.tiff", max_voxels=2**31 - 1)
+
+
+@lru_cache(maxsize=4)
+def _stored_stack(service: Service, job_id: str, run: str) -> np.ndarray:
+    """The same from the object store (run ``run``'s upload; read in memory, not to disk)."""
+    data = service.store.storage.read(job_id, "out/output.tiff", run)
+    return load_volume(data, name="output.tiff", max_voxels=2**31 - 1)
 
 
 @router.get(
@@ -206,8 +236,11 @@ def get_slice(service: ServiceDep, principal: PrincipalDep, job_id: str, plane: 
         raise HTTPException(422, f"plane must be one of {', '.join(_PLANE_AXIS)}, not {plane!r}")
     if "output.tiff" not in job.artifacts or job.size.get("depth") is None:
         raise HTTPException(404, f"job {job_id} has no volume (it is {job.state}; 2-D jobs have no slices)")
-    path = service.store.job_dir(job_id) / "out" / "output.tiff"
-    volume = _stack(str(path), path.stat().st_mtime_ns)
+    path = service.store.storage.local_path(job_id, "out/output.tiff", job.artifacts_run)
+    if path is not None:
+        volume = _stack(str(path), path.stat().st_mtime_ns)
+    else:
+        volume = _stored_stack(service, job_id, job.artifacts_run or "")
     axis = _PLANE_AXIS[plane]
     if not 0 <= index < volume.shape[axis]:
         raise HTTPException(422, f"index must lie in [0, {volume.shape[axis] - 1}] for plane {plane}")
@@ -227,7 +260,15 @@ def get_input(service: ServiceDep, principal: PrincipalDep, job_id: str, role: s
     job = _job(service, job_id, principal)
     if role not in job.inputs:
         raise HTTPException(404, f"job {job_id} has no {role!r} input; inputs: {', '.join(job.inputs)}")
-    path = service.store.job_dir(job_id) / "inputs" / job.inputs[role]
+    rel = f"inputs/{job.inputs[role]}"
+    path = service.store.storage.local_path(job_id, rel, None)
+    if path is None:
+        try:
+            data = service.store.storage.read(job_id, rel, None)  # inputs are small (the body limit)
+        except FileNotFoundError:
+            raise HTTPException(404, f"job {job_id} has no stored {role!r} input") from None
+        fmt = sniff_format(data[:16])
+        return Response(data, media_type=FORMAT_FILES[fmt][1] if fmt else "application/octet-stream")
     with open(path, "rb") as fh:  # the type from the bytes, whatever name an older record kept
         fmt = sniff_format(fh.read(16))
     media_type = FORMAT_FILES[fmt][1] if fmt else "application/octet-stream"
@@ -239,8 +280,10 @@ def get_input(service: ServiceDep, principal: PrincipalDep, job_id: str, role: s
 )
 def get_preview(service: ServiceDep, principal: PrincipalDep, job_id: str) -> FileResponse:
     """A small preview of the running synthesis, when the method provides one."""
-    _job(service, job_id, principal)
-    path = service.store.job_dir(job_id) / "preview.png"
+    job = _job(service, job_id, principal)
+    path = service.store.storage.local_path(job_id, "preview.png", None)
+    if path is None:
+        return _stream(service, job, "preview.png", "image/png", headers={"Cache-Control": "no-store"})
     if not path.exists():
         raise HTTPException(404, "no preview yet")
     return FileResponse(path, headers={"Cache-Control": "no-store"})
