@@ -21,7 +21,7 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api.routes import health, jobs, methods, metrics, sweeps
+from app.api.routes import examples, health, jobs, methods, metrics, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
 from app.openapi import install_openapi
@@ -93,7 +93,7 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     )
     app.add_middleware(SecurityHeadersMiddleware)
     install_error_handlers(app)
-    for module in (jobs, methods, metrics, sweeps, health):
+    for module in (jobs, methods, metrics, sweeps, examples, health):
         app.include_router(module.router)
     install_openapi(app, service.methods, tokens=service.tokens.enabled)
 
@@ -119,6 +119,12 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:
         return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon() -> FileResponse:
+        return FileResponse(
+            STATIC / "favicon.ico", media_type="image/x-icon", headers={"Cache-Control": "max-age=86400"}
+        )
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     return app

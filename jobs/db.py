@@ -29,7 +29,7 @@ from typing import Any, TypeVar
 __all__ = ["HEAD", "Connection", "Database", "migrate"]
 
 #: The newest migration (``jobs/migrations/versions``); a test checks it is Alembic's head.
-HEAD = "0003"
+HEAD = "0004"
 #: Key of the PostgreSQL advisory lock held while migrating (any constant shared by all processes).
 _MIGRATE_LOCK = 0x7465787379
 _T = TypeVar("_T")

@@ -47,9 +47,15 @@ from jobs.storage import LocalStorage, Storage
 __all__ = ["STATES", "TERMINAL", "JobRecord", "JobStore", "pid_alive"]
 
 STATES = ("queued", "running", "succeeded", "failed", "cancelled")
+#: The highest progress a cancelled job reports: it stopped before the end (JobStore.finish).
+CANCELLED_AT_MOST = 0.99
 TERMINAL = frozenset({"succeeded", "failed", "cancelled"})
 
 _JSON_COLUMNS = ("params", "inputs", "artifacts", "timings", "metrics")
+#: What a job keeps beside its parameters (the ``extras`` JSON column): ``input_names``, the file name
+#: each input was uploaded under (shown in lists; the stored file is named by its role), and a volume's
+#: ``voxel_size`` and ``voxel_unit`` (the TIFF stack's calibration).
+EXTRA_FIELDS = ("input_names", "voxel_size", "voxel_unit")
 #: The output's sides, a record's ``size`` (never inside ``params``). Records made before ``size``
 #: had its own column kept them in ``params``: reading one moves them out.
 SIZE_FIELDS = ("width", "height", "depth")
@@ -96,6 +102,7 @@ class JobRecord:
     input_bytes: int | None = None  # bytes its inputs hold on disk (a sweep's shared upload: its first run)
     artifact_bytes: int | None = None  # bytes of its committed artifacts
     artifacts_run: str | None = None  # object storage: the run whose uploaded artifacts are the job's
+    extras: dict[str, Any] = field(default_factory=dict)  # EXTRA_FIELDS
 
     @classmethod
     def from_row(cls, row: Any) -> JobRecord:
@@ -103,6 +110,7 @@ class JobRecord:
         for name in _JSON_COLUMNS:
             values[name] = json.loads(values[name])
         values["size"] = _split_size(values["params"], json.loads(values["size"] or "null"))
+        values["extras"] = json.loads(values.get("extras") or "{}")
         return cls(**values)
 
 
@@ -189,6 +197,7 @@ class JobStore:
         job_id: str | None = None,
         owner: str | None = None,
         share_inputs_of: str | None = None,
+        extras: dict[str, Any] | None = None,
     ) -> JobRecord:
         """Store the inputs and manifest (a new job folder), then insert the record as ``queued``.
 
@@ -199,7 +208,7 @@ class JobStore:
         ``share_inputs_of`` names a job (of the same sweep) whose stored inputs are the same bytes:
         they are hard-linked instead of written again, so a sweep stores its upload once. Nothing
         ever writes into an input file (a replacement would be a new file), and deleting one job
-        removes only its own link, so the runs share the bytes safely.
+        removes only its own link, so the runs share the bytes safely. ``extras``: :data:`EXTRA_FIELDS`.
         """
         job_id = job_id or uuid.uuid4().hex
         names, files = {}, {}
@@ -212,7 +221,7 @@ class JobStore:
         now = time.time()
         manifest = {**manifest, "job_id": job_id, "inputs": names, "created": now}
         self.storage.save_inputs(job_id, files, manifest, share_inputs_of)
-        self._insert_job(job_id, now, method, params, size, seed, names, sweep_id, owner, written)
+        self._insert_job(job_id, now, method, params, size, seed, names, sweep_id, owner, written, extras)
         record = self.get(job_id)
         assert record is not None
         return record
@@ -230,11 +239,13 @@ class JobStore:
         sweep_id: str | None,
         owner: str | None,
         input_bytes: int,
+        extras: dict[str, Any] | None,
     ) -> None:
         with self._connect() as db:
             db.execute(
                 "INSERT INTO jobs (id, created, method, params, size, seed, inputs, sweep_id, state,"
-                " updated, owner, input_bytes) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
+                " updated, owner, input_bytes, extras)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?, ?)",
                 (
                     job_id,
                     now,
@@ -247,6 +258,7 @@ class JobStore:
                     now,
                     owner,
                     input_bytes,
+                    json.dumps({k: v for k, v in (extras or {}).items() if k in EXTRA_FIELDS}),
                 ),
             )
 
@@ -263,11 +275,15 @@ class JobStore:
         state: str | None = None,
         sweep_id: str | None = None,
         owner: str | None = None,
+        method: str | None = None,
         limit: int = 50,
         offset: int = 0,
     ) -> tuple[list[JobRecord], int]:
         """Jobs, newest first, and the total number matching the filters (``owner``: one owner's)."""
         where, args = [], []
+        if method:
+            where.append("method = ?")
+            args.append(method)
         if owner is not None:
             where.append("owner = ?")
             args.append(owner)
@@ -444,15 +460,20 @@ class JobStore:
     def finish(self, job_id: str, token: str | None, state: str, message: str = "") -> bool:
         """End the job as ``failed`` or ``cancelled`` (if ``token`` is given, only if the run owns it).
 
-        A failed job keeps the stage it had reached, so that the page can say where it failed.
+        A failed job keeps the stage it had reached, so that the page can say where it failed; a
+        cancelled one keeps its progress where it stopped, below :data:`CANCELLED_AT_MOST` (a job
+        stopped while writing its artifacts, at 1.0, did not finish: it never reads as 100 % done).
         """
         assert state in ("failed", "cancelled")
         now = time.time()
         query = (
             "UPDATE jobs SET state = ?, message = ?, stage = CASE WHEN ? = 'failed' THEN stage ELSE ? END,"
+            # (no MIN(a, b): PostgreSQL's is LEAST)
+            " fraction = CASE WHEN ? = 'cancelled' AND fraction > ? THEN ? ELSE fraction END,"
             " finished = ?, updated = ?, run_token = NULL WHERE id = ? AND state IN ('queued', 'running')"
         )
-        args: list[Any] = [state, message, state, state, now, now, job_id]
+        cap = CANCELLED_AT_MOST
+        args: list[Any] = [state, message, state, state, state, cap, cap, now, now, job_id]
         if token is not None:
             query += " AND run_token = ?"
             args.append(token)

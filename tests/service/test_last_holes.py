@@ -140,7 +140,7 @@ def test_deeply_nested_params_are_a_422_naming_params(api, raw):
         files={"exemplar": ("e.png", _png())},
     )
     assert r.status_code == 422, r.text
-    assert r.json()["field"] == "params" and "nested" in r.json()["detail"]
+    assert r.json()["field"] == "params" and "nested" in r.json()["message"]
     assert service.store.count() == 0
 
 
