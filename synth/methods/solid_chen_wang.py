@@ -21,8 +21,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - the solver adds a ``consensus`` term (the fit alone is speckled) and Kopf's grey-level histogram;
 - fewer candidates (``solve_radius`` 0, ``kset_window`` 1); a level starts from the first plane's matches;
 - 3 iterations per level (the study: 10); laminae get 10 (``adapt_to_structure``);
-- parallel passes: the search is Jacobi with the index histogram frozen per call, the solve in blocks;
-- every voxel is searched (Kopf's sparse grid was tried here: worse, no faster);
+- parallel passes (Jacobi search, index histogram frozen per call; solve in blocks); every voxel searched;
+- a final rank remap onto the exemplars' grey levels (``grey_remap``, as Kopf): the solver loses the tails;
 - laminae only: orientation re-weighting (``orientation_gain`` 32) and an annealing schedule
   (60 ``coarse_iterations``, ``solve_radius`` 1);
 - the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
@@ -71,6 +71,7 @@ from synth.pixel.solid import (
     exemplar_offsets,
     gather_plane,
     is_laminar,
+    match_histogram,
     plan_levels,
     plane_offsets,
     run_levels,
@@ -203,6 +204,11 @@ class SolidChenWangParams(SolidParams):
         le=100.0,
         description="How strongly a voxel follows what most of its neighbours propose.",
         json_schema_extra=ui(details=("Solver: weight of the proposals' consensus.")),
+    )
+    grey_remap: bool = Field(
+        True,
+        description="Remap the finished volume onto the exemplars' grey levels, rank for rank (off: paper).",
+        json_schema_extra=ui(details=("Off: every voxel keeps its exemplar pixel's value (the paper).")),
     )
     sigma: float = Field(
         0.0,
@@ -626,8 +632,16 @@ class _ChenWangLoop:
             fn(self.bank, self.geometry, self.state, weights, order, start, stop, self.scratch)
 
     def finish(self) -> tuple[np.ndarray, dict]:
+        """The finest level's volume (remapped onto the exemplars' grey levels with ``grey_remap``)."""
         self.stats["usage_spread"] = _usage_spread(self.state.origin, self.bank, self.geometry.active)
-        return np.clip(self.state.volume, 0.0, 1.0).astype(np.float32), self.stats
+        volume = np.clip(self.state.volume, 0.0, 1.0).astype(np.float32)
+        pooled = np.concatenate(
+            [self.plan.exemplars[PLANES.index(p)][0].ravel() for p in self.params.planes]
+        ).astype(np.float32)
+        self.stats["contrast_before_remap"] = float(volume.std() / max(float(pooled.std()), 1e-12))
+        if self.params.grey_remap:  # Kopf's final rank remap (docs/solid.md, "Departures from the papers")
+            volume = match_histogram(volume, pooled)
+        return volume, self.stats
 
 
 def synthesize_solid_chen_wang(
