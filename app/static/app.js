@@ -102,10 +102,10 @@ async function api(path, options = {}) {
     const detail = typeof body === "object" ? body.detail : `HTTP ${resp.status}: ${body}`;
     const errors = Array.isArray(detail)
       ? detail.map((d) => ({ field: String((d.loc || []).at(-1) ?? ""), where: (d.loc || [])[0], msg: String(d.msg || "") }))
-      : body?.field ? [{ field: body.field, msg: String(detail) }] : [];
+      : body?.field ? [{ field: body.field, msg: String(detail).replace(/^parameter 'params' = \{.*\}: (Value error, )?/s, "") }] : [];
     const message = Array.isArray(detail)
       ? detail.map((d) => { const f = String((d.loc || []).at(-1) ?? ""); return d.msg.includes(f) ? d.msg : `${f}: ${d.msg}`; }).join("; ")
-      : typeof detail === "string" ? detail : JSON.stringify(detail);
+      : typeof detail === "string" ? detail.replace(/^parameter 'params' = \{.*\}: (Value error, )?/s, "") : JSON.stringify(detail);
     const err = new Error(message);
     err.field = errors[0]?.field;
     err.errors = errors;
@@ -221,6 +221,7 @@ function fieldFor(name, raw, required) {
     el("span", { class: "hint help", id: help, text: helpText }),
     el("span", { class: "field-error", id: error, hidden: true }));
   field.schema = { ...prop, required: required && !prop.nullable, items };
+  field.input = input;
   return field;
 }
 
@@ -247,7 +248,7 @@ const formFields = (root) => [...root.querySelectorAll(".field[data-kind]")];
 // The value a field holds, typed as its schema says; undefined = leave it to the engine (empty, nullable).
 function fieldValue(field) {
   const kind = field.dataset.kind;
-  const input = field.querySelector("[id^=param-]");
+  const input = field.input;
   if (kind === "array") return [...field.querySelectorAll("input[data-item]:checked")].map((c) => c.value);
   if (kind === "boolean") return input.checked;
   const text = input.value.trim();
@@ -263,7 +264,7 @@ function fieldValue(field) {
 function setFieldValue(name, value) {
   const field = document.querySelector(`.field[data-name="${name}"]`);
   if (!field) return false;
-  const input = field.querySelector("[id^=param-]");
+  const input = field.input;
   const kind = field.dataset.kind;
   if (kind === "array") {
     const chosen = new Set(Array.isArray(value) ? value : [value]);
@@ -289,7 +290,7 @@ function checkField(field) {
   const s = field.schema || {};
   const kind = field.dataset.kind;
   const title = (s.title || field.dataset.name).toLowerCase();
-  const input = field.querySelector("[id^=param-]");
+  const input = field.input;
   if (kind === "array") {
     const chosen = fieldValue(field);
     const least = s.minItems ?? 1;
@@ -321,7 +322,7 @@ function clearFieldError(field) {
 // Mark a field rejected: red, its one-line reason under it, read with it by screen readers.
 function markField(field, message) {
   field.classList.add("invalid");
-  const input = field.querySelector("[id^=param-], #seed");
+  const input = field.input || field.querySelector("#seed");
   if (input) {
     input.classList.add("invalid");
     input.setAttribute("aria-invalid", "true");
