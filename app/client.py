@@ -381,7 +381,10 @@ class Client:
         except ValueError:
             err = None
         if isinstance(err, dict) and "detail" in err:
-            return ServiceError(response.status_code, str(err["detail"]), err.get("field"))
+            detail = err["detail"]
+            if not isinstance(detail, str):  # a 422's list of fields: its one-line summary
+                detail = err.get("message") or json.dumps(detail)
+            return ServiceError(response.status_code, str(detail), err.get("field"))
         text = raw.decode(errors="replace")[:200] or response.reason_phrase
         return ServiceError(response.status_code, text)
 

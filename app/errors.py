@@ -3,9 +3,17 @@
 Engine errors map by kind (DESIGN.md): InputTooLarge -> 413, UnsupportedFormat -> 415,
 InvalidInput / InvalidParameter -> 422; a broker that does not answer -> 503; a file the server
 cannot write (full disk) -> 507, naming the file but none of the server's folders.
+
+A ``422`` has FastAPI's shape, one entry per bad field, so that a form can mark each one:
+``{"detail": [{"loc": ["params", "neighbourhood_size"], "msg": "neighbourhood_size must be odd",
+"type": "invalid_parameter", "input": 12}], "field": "neighbourhood_size", "message": "<one line>"}``;
+``loc`` starts with ``params`` for a method's parameter, ``body`` for another form field or an input
+image, ``query`` for a list's filter. Other errors keep ``detail`` a sentence.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -17,6 +25,7 @@ from synth.errors import (
     InputTooLarge,
     InvalidInput,
     InvalidParameter,
+    InvalidParameters,
     StorageError,
     SynthError,
     UnsupportedFormat,
@@ -39,8 +48,55 @@ _HTTP_KINDS = {
 }
 
 
+#: Form fields of the submit and sweep routes that are not a method's parameters, and the lists' queries.
+FORM_FIELDS = frozenset(
+    {"method", "params", "seed", "width", "height", "depth", "voxel_size", "voxel_unit", "grid"}
+)
+QUERY_FIELDS = frozenset({"state", "method", "limit", "offset"})
+
+
 def _error(status: int, detail: str, field: str | None, kind: str) -> JSONResponse:
     return JSONResponse({"detail": detail, "field": field, "error": kind}, status_code=status)
+
+
+def field_loc(name: str, *, query: bool = False) -> list[str]:
+    """Where a field lives, FastAPI's way: ``['params', 'k']``, ``['body', 'width']``,
+    ``['query', 'state']``."""
+    head = name.split(".", 1)[0]
+    if query and head in QUERY_FIELDS:
+        return ["query", *name.split(".")]
+    if head in FORM_FIELDS or head.startswith(("exemplar", "constraint")):
+        return ["body", *name.split(".")]
+    return ["params", *name.split(".")]
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def unprocessable(items: list[dict[str, Any]], kind: str = "invalid_parameter") -> JSONResponse:
+    """A ``422`` listing ``items`` (``loc``, ``msg``, ``type``, maybe ``input``) in FastAPI's shape."""
+    first = items[0]
+    field = ".".join(str(p) for p in first["loc"][1:]) or None
+    message = "; ".join(
+        f"{'.'.join(str(p) for p in item['loc'][1:]) or 'request'}: {item['msg']}" for item in items
+    )
+    return JSONResponse({"detail": items, "field": field, "error": kind, "message": message}, status_code=422)
+
+
+def _parameter_items(exc: InvalidParameter) -> list[dict[str, Any]]:
+    problems = exc.problems if isinstance(exc, InvalidParameters) else [exc]
+    items = []
+    for problem in problems:
+        item: dict[str, Any] = {
+            "loc": field_loc(problem.name),
+            "msg": _one_line(problem.reason),
+            "type": "invalid_parameter",
+        }
+        if isinstance(problem.value, int | float | str | bool) or problem.value is None:
+            item["input"] = problem.value if not isinstance(problem.value, str) else problem.value[:80]
+        items.append(item)
+    return items
 
 
 def synth_error_response(exc: SynthError) -> JSONResponse:
@@ -49,10 +105,12 @@ def synth_error_response(exc: SynthError) -> JSONResponse:
     if isinstance(exc, UnsupportedFormat):
         return _error(415, str(exc), exc.source, "unsupported_format")
     if isinstance(exc, InvalidInput):
-        return _error(422, str(exc), exc.source, "invalid_input")
+        item = {"loc": field_loc(exc.source), "msg": _one_line(exc.problem), "type": "invalid_input"}
+        return unprocessable([item], "invalid_input")
     if isinstance(exc, InvalidParameter):
-        return _error(422, str(exc), exc.name, "invalid_parameter")
-    return _error(422, str(exc), None, "invalid_request")
+        return unprocessable(_parameter_items(exc))
+    item = {"loc": ["body"], "msg": _one_line(str(exc)), "type": "invalid_request"}
+    return unprocessable([item], "invalid_request")
 
 
 def install_error_handlers(app: FastAPI) -> None:
@@ -63,18 +121,34 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(HTTPException)
     async def _http(request: Request, exc: HTTPException) -> JSONResponse:
         detail = str(exc.detail)
+        if exc.status_code == 422:
+            return unprocessable([{"loc": ["path"], "msg": _one_line(detail), "type": "invalid_request"}])
         response = _error(exc.status_code, detail, None, _HTTP_KINDS.get(exc.status_code, "error"))
         response.headers.update(exc.headers or {})
         return response
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
-        err = exc.errors()[0]
-        loc = [str(p) for p in err.get("loc", ()) if p not in ("body", "query", "path", "form")]
-        field = ".".join(loc) or None
-        return _error(
-            422, f"{field or 'request'}: {err.get('msg', 'invalid value')}", field, "invalid_parameter"
-        )
+        items, seen = [], set()
+        for err in exc.errors():
+            where = [str(p) for p in err.get("loc", ())]
+            place = where[0] if where and where[0] in ("body", "query", "path") else "body"
+            name = [p for p in where if p not in ("body", "query", "path", "form")]
+            key = (place, *name)
+            if key in seen:
+                continue
+            seen.add(key)
+            item = {
+                "loc": [place, *name],
+                "msg": _one_line(err.get("msg", "invalid value")),
+                "type": str(err.get("type", "invalid_parameter")),
+            }
+            value = err.get("input")
+            if isinstance(value, int | float | str | bool):
+                item["input"] = value if not isinstance(value, str) else value[:80]
+            items.append(item)
+        fallback = {"loc": ["body"], "msg": "invalid request", "type": "invalid_request"}
+        return unprocessable(items or [fallback])
 
     @app.exception_handler(StorageError)
     async def _storage(request: Request, exc: StorageError) -> JSONResponse:

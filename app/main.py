@@ -109,5 +109,11 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     def index() -> FileResponse:
         return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
 
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon() -> FileResponse:
+        return FileResponse(
+            STATIC / "favicon.ico", media_type="image/x-icon", headers={"Cache-Control": "max-age=86400"}
+        )
+
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     return app

@@ -12,6 +12,7 @@ from jobs.store import STATES
 __all__ = [
     "DeletedPublic",
     "ErrorPublic",
+    "FieldError",
     "HealthPublic",
     "JobPublic",
     "JobState",
@@ -22,10 +23,25 @@ __all__ = [
 ]
 
 
+class FieldError(BaseModel):
+    """One bad field of a ``422`` (FastAPI's shape)."""
+
+    loc: list[str | int] = Field(
+        description="where: ['params', NAME] for a method's parameter, ['body', NAME] for another form "
+        "field or an input image, ['query', NAME] for a list's filter"
+    )
+    msg: str = Field(description="what is wrong with it, one line")
+    type: str = Field(description="machine-readable kind")
+    input: Any = Field(None, description="the value given, when it is a plain value")
+
+
 class ErrorPublic(BaseModel):
-    detail: str = Field(description="what is wrong and what to do about it")
-    field: str | None = Field(None, description="the form field or parameter at fault")
+    detail: str | list[FieldError] = Field(
+        description="what is wrong and what to do about it; a 422 lists one entry per bad field"
+    )
+    field: str | None = Field(None, description="the form field or parameter at fault (the first one)")
     error: str = Field(description="machine-readable kind: input_too_large, unsupported_format, ...")
+    message: str | None = Field(None, description="a 422's entries as one line of text")
 
 
 class JobState(StrEnum):

@@ -36,7 +36,11 @@ from synth.io.limits import MAX_SIDE, MIN_SIDE, check_output_size
 from synth.params import validate_params
 from synth.pipeline import load_inputs
 
-__all__ = ["SIZE_FIELDS", "JobRequest", "Service", "Upload"]
+__all__ = ["SIZE_FIELDS", "VOXEL_UNITS", "JobRequest", "Service", "Upload"]
+
+#: Length units a volume's voxel size may be given in (ImageJ's names; "um" is a micrometre).
+VOXEL_UNITS: tuple[str, ...] = ("nm", "um", "mm", "pm", "angstrom")
+VOXEL_SIZE_MAX = 1e6
 
 
 def _output_shape(size: dict[str, int]) -> tuple[int, ...]:
@@ -118,13 +122,46 @@ class Service:
         return known[name]
 
     def size_schema(self, spec: MethodSpec) -> dict[str, Any]:
-        side = {"type": "integer", "minimum": MIN_SIDE, "maximum": MAX_SIDE, "default": 128}
-        props = {
-            "width": {**side, "title": "Output width (px)"},
-            "height": {**side, "title": "Output height (px)"},
+        """The output's size fields (sent as form fields), with the form hints of the parameters'
+        schemas (:func:`synth.params.ui`); a volume's also says its voxel size (ImageJ calibration)."""
+        unit = "px" if spec.output_ndim == 2 else "voxels"
+        side = {"type": "integer", "minimum": MIN_SIDE, "maximum": MAX_SIDE, "default": 128, "x-basic": True}
+        props: dict[str, Any] = {
+            "width": {**side, "title": "Output width", "x-unit": unit, "description": "Width of the output."},
+            "height": {
+                **side,
+                "title": "Output height",
+                "x-unit": unit,
+                "description": "Height of the output.",
+            },
         }
         if spec.output_ndim == 3:
-            props["depth"] = {**side, "default": 64, "title": "Output depth (slices)"}
+            props["depth"] = {
+                **side,
+                "default": 64,
+                "title": "Output depth",
+                "x-unit": "voxels",
+                "description": "Number of slices of the volume (z).",
+            }
+            props["voxel_size"] = {
+                "type": ["number", "null"],
+                "exclusiveMinimum": 0,
+                "maximum": VOXEL_SIZE_MAX,
+                "default": None,
+                "nullable": True,
+                "title": "Voxel size",
+                "x-basic": True,
+                "x-unit-field": "voxel_unit",  # the unit is that field's value
+                "description": "Size of one voxel, written into the TIFF stack for Fiji; empty: "
+                "uncalibrated.",
+            }
+            props["voxel_unit"] = {
+                "type": "string",
+                "enum": list(VOXEL_UNITS),
+                "default": "nm",
+                "title": "Voxel unit",
+                "description": "Length unit of the voxel size (used only when a voxel size is given).",
+            }
         return {"type": "object", "properties": props}
 
     # -- submission -----------------------------------------------------------------------------

@@ -13,6 +13,7 @@ __all__ = [
     "InputTooLarge",
     "InvalidInput",
     "InvalidParameter",
+    "InvalidParameters",
     "StorageError",
     "SynthError",
     "UnsupportedFormat",
@@ -51,6 +52,23 @@ class InvalidParameter(SynthError):
         self.value = value
         self.reason = reason
         super().__init__(f"parameter '{name}' = {value!r}: {reason}")
+
+
+class InvalidParameters(InvalidParameter):
+    """Several parameters are wrong at once; ``problems`` has one :class:`InvalidParameter` per field.
+
+    It is the first problem too (``name``, ``value``, ``reason``), so a caller that handles one
+    parameter error handles this; the message names them all on one line.
+    """
+
+    def __init__(self, problems: list[InvalidParameter]) -> None:
+        if not problems:
+            raise ValueError("InvalidParameters needs at least one problem")
+        self.problems = list(problems)
+        first = problems[0]
+        super().__init__(first.name, first.value, first.reason)
+        if len(problems) > 1:
+            self.args = ("; ".join(str(p) for p in problems),)
 
 
 class Cancelled(SynthError):

@@ -60,6 +60,7 @@ from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
 from synth.methods.strand_hints import StrandHints, fibre_table, strand_hints
 from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
+from synth.params import ui
 from synth.pixel.synthesis import (
     CandidateWindow,
     Guidance,
@@ -140,43 +141,104 @@ class ArbitraryShapeParams(NeighbourhoodParams):
 
     recipe: Literal["auto", "fibres", "weak", "paper"] = Field(
         "auto",
-        description="Settings chosen for the exemplar: 'fibres' for strongly oriented exemplars (strands "
-        "continue along the constraint), 'weak' for weakly oriented ones (soot), 'paper' the parameters "
-        "as given (their defaults: the paper's settings); 'auto' picks 'fibres' when the exemplar's mean "
-        "coherence is at least 0.7, else 'weak'. A recipe sets only the parameters left at their "
-        "defaults: a value you change is kept.",
+        description="Settings picked for the exemplar: 'fibres' for strongly oriented ones, 'weak' for "
+        "soot, 'paper' as given; 'auto' decides.",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Settings chosen for the exemplar: 'fibres' for strongly oriented exemplars (strands "
+                "continue along the constraint), 'weak' for weakly oriented ones (soot), 'paper' the "
+                "parameters "
+                "as given (their defaults: the paper's settings); 'auto' picks 'fibres' when the exemplar's "
+                "mean "
+                "coherence is at least 0.7, else 'weak'. A recipe sets only the parameters left at their "
+                "defaults: a value you change is kept."
+            ),
+        ),
     )
     angular_step: float = Field(
-        5.0, gt=0.0, le=180.0, description="Degrees between the rotated copies of D_M (M = 360 / step)."
+        5.0,
+        gt=0.0,
+        le=180.0,
+        description="Angle between the exemplar's rotated copies; must divide 360 (M = 360 / step copies).",
+        json_schema_extra=ui(
+            basic=True,
+            unit="degrees",
+            details=("Degrees between the rotated copies of D_M (M = 360 / step)."),
+        ),
     )
-    levels: int = Field(1, ge=1, le=4, description="Gaussian pyramid levels (the paper: 1 or 2).")
-    iterations: int = Field(2, ge=1, le=10, description="Passes per pyramid level (the paper: 2).")
+    levels: int = Field(
+        1,
+        ge=1,
+        le=4,
+        description="Number of pyramid levels, coarse to fine (the paper: 1 or 2).",
+        json_schema_extra=ui(basic=True, details=("Gaussian pyramid levels (the paper: 1 or 2).")),
+    )
+    iterations: int = Field(
+        2,
+        ge=1,
+        le=10,
+        description="Passes over the output at each pyramid level (the paper: 2).",
+        json_schema_extra=ui(basic=True, details=("Passes per pyramid level (the paper: 2).")),
+    )
     # The paper gives no value of W; 0.1 follows the constraint best at an unchanged grey-level
     # histogram on the generated constraints (docs/arbitrary-shape.md, measured for 0.5, 0.3, 0.1).
     w: float = Field(
-        0.1, ge=0.0, le=1.0, description="W of eq 5: weight of the intensity SSD against the tensor STD."
+        0.1,
+        ge=0.0,
+        le=1.0,
+        description="How strongly the grey levels weigh against the orientation tensors when matching (W, "
+        "Eq. 5).",
+        json_schema_extra=ui(
+            basic=True, details=("W of eq 5: weight of the intensity SSD against the tensor STD.")
+        ),
     )
-    metric: Metric = Field("ED", description="Tensor dissimilarity: ED (the paper), SO, FN or LE.")
+    metric: Metric = Field(
+        "ED",
+        description="How two orientation tensors are compared: Euclidean (ED, the paper), "
+        "shape-orientation (SO), Frobenius (FN), log-Euclidean (LE).",
+        json_schema_extra=ui(details=("Tensor dissimilarity: ED (the paper), SO, FN or LE.")),
+    )
     alpha: float = Field(
-        0.5, ge=0.0, le=1.0, description="SO metric: weight of orientation against coherence."
+        0.5,
+        ge=0.0,
+        le=1.0,
+        description="With shape-orientation only: weight of orientation against coherence (α).",
+        json_schema_extra=ui(details=("SO metric: weight of orientation against coherence.")),
     )
     rotation_reference: Literal["dominant", "absolute", "local"] = Field(
         "dominant",
-        description="'dominant': turn the exemplar's tensors by O_con minus the exemplar's dominant "
-        "orientation (structures follow the constraint, keeping the exemplar's own orientation "
-        "spread); 'absolute': by O_con (the paper, literally); 'local': by O_con minus each tensor's "
-        "own orientation (S_con's orientation is O_con exactly; for weakly oriented exemplars).",
+        description="How the exemplar is turned to follow the constraint: by the difference to its "
+        "'dominant' angle, 'absolute', or 'local'.",
+        json_schema_extra=ui(
+            details=(
+                "'dominant': turn the exemplar's tensors by O_con minus the exemplar's dominant "
+                "orientation (structures follow the constraint, keeping the exemplar's own orientation "
+                "spread); 'absolute': by O_con (the paper, literally); 'local': by O_con minus each tensor's "
+                "own orientation (S_con's orientation is O_con exactly; for weakly oriented exemplars)."
+            )
+        ),
     )
     restrict_rotations: bool = Field(
         True,
-        description="Search only the copies turned by the local constraint angle (within rotation_window).",
+        description="Search only the rotated copies near the constraint's local angle (within the rotation "
+        "window).",
+        json_schema_extra=ui(
+            details=("Search only the copies turned by the local constraint angle (within rotation_window).")
+        ),
     )
     rotation_window: float = Field(
         2.5,
         ge=0.0,
         le=90.0,
-        description="Half-width (degrees) of the window of copies searched with restrict_rotations "
-        "(at least the nearest copy).",
+        description="Half-width of the range of rotated copies searched around the local angle.",
+        json_schema_extra=ui(
+            unit="degrees",
+            details=(
+                "Half-width (degrees) of the window of copies searched with restrict_rotations "
+                "(at least the nearest copy)."
+            ),
+        ),
     )
     # Measured (docs/arbitrary-shape.md): with 'local', the wanted copy jumps with the exemplar's own
     # orientation noise from pixel to pixel, and a strict window breaks coherent copying (soot: 0.37
@@ -184,61 +246,126 @@ class ArbitraryShapeParams(NeighbourhoodParams):
     # better.
     window_search: Literal["strict", "hints"] | None = Field(
         None,
-        description="How restrict_rotations restricts: 'strict' searches only the copies in the window "
-        "at every position; 'hints' proposes one in-window candidate per position but lets neighbours' "
-        "sources from other copies compete. Default: strict, hints with rotation_reference='local'.",
+        description="How the rotation window restricts: 'strict' everywhere, or 'hints' that neighbours "
+        "may outvote; automatic by the reference.",
+        json_schema_extra=ui(
+            details=(
+                "How restrict_rotations restricts: 'strict' searches only the copies in the window "
+                "at every position; 'hints' proposes one in-window candidate per position but lets "
+                "neighbours' "
+                "sources from other copies compete. Default: strict, hints with rotation_reference='local'."
+            )
+        ),
     )
     transfer_candidates: bool = Field(
         True,
-        description="With the strict window: a neighbour's coherent proposal from another rotated copy is "
-        "moved to the same exemplar point of the copy at the local angle instead of being dropped, so "
-        "strands continue where the constraint's angle crosses a copy's step (False: dropped, the "
-        "previous behaviour).",
+        description="Move a neighbour's proposal from another rotated copy to the copy at the local angle "
+        "instead of dropping it.",
+        json_schema_extra=ui(
+            details=(
+                "With the strict window: a neighbour's coherent proposal from another rotated copy is "
+                "moved to the same exemplar point of the copy at the local angle instead of being dropped, "
+                "so "
+                "strands continue where the constraint's angle crosses a copy's step (False: dropped, the "
+                "previous behaviour)."
+            )
+        ),
     )
     histogram_weight: float = Field(
         0.0,
         ge=0.0,
         le=100.0,
-        description="Grey-level histogram matching: a candidate whose grey-level bin the output already "
-        "over-uses has its distance multiplied by 1 + weight * excess (0: off, the paper).",
+        description="How strongly over-used grey levels are avoided; 0 is off (the paper).",
+        json_schema_extra=ui(
+            details=(
+                "Grey-level histogram matching: a candidate whose grey-level bin the output already "
+                "over-uses has its distance multiplied by 1 + weight * excess (0: off, the paper)."
+            )
+        ),
     )
     constraint_tensors: Literal["rotated-exemplar", "constraint"] = Field(
         "rotated-exemplar",
-        description="'rotated-exemplar': S_con, the exemplar's tensors turned by O_con (the method); "
-        "'constraint': the constraint image's own tensors (the paper's naive I_sor/O, for comparison).",
+        description="Orientation field to follow: the exemplar's tensors turned to the constraint (S_con), "
+        "or the constraint's own.",
+        json_schema_extra=ui(
+            details=(
+                "'rotated-exemplar': S_con, the exemplar's tensors turned by O_con (the method); "
+                "'constraint': the constraint image's own tensors (the paper's naive I_sor/O, for "
+                "comparison)."
+            )
+        ),
     )
     hint_layout: Literal["texture", "strands"] | None = Field(
         None,
-        description="Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized "
-        "in the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
-        "constraint's strands, so that each output strand is offered one fibre (one grey level) along its "
-        "length (synth.methods.strand_hints). Default: 'strands' with the 'fibres' recipe when the "
-        "exemplar's fibres carry their own grey levels (fibre grey spread at least 0.35, e.g. a wood "
-        "grain) and restrict_rotations is on, else 'texture'.",
+        description="Where the starting hints come from: a 'texture' made from the exemplar, or exemplar "
+        "fibres laid along 'strands'.",
+        json_schema_extra=ui(
+            details=(
+                "Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized "
+                "in the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
+                "constraint's strands, so that each output strand is offered one fibre (one grey level) "
+                "along its "
+                "length (synth.methods.strand_hints). Default: 'strands' with the 'fibres' recipe when the "
+                "exemplar's fibres carry their own grey levels (fibre grey spread at least 0.35, e.g. a wood "
+                "grain) and restrict_rotations is on, else 'texture'."
+            )
+        ),
     )
     strand_hint_spacing: int = Field(
         128,
         ge=8,
         le=1024,
-        description="With hint_layout='strands': pixels between the cuts across the strands where a strand's "
-        "hinted fibre changes (longer runs of one fibre with a larger spacing).",
+        description="With strand hints: length along a strand before its hinted fibre changes.",
+        json_schema_extra=ui(
+            unit="px",
+            details=(
+                "With hint_layout='strands': pixels between the cuts across the strands where a strand's "
+                "hinted fibre changes (longer runs of one fibre with a larger spacing)."
+            ),
+        ),
     )
     initial_sources: Literal["random", "hints"] | None = Field(
         None,
-        description="How the output starts: 'random' sources and a first pass in the neighbourhood's scan "
-        "(the paper); 'hints', every position starts from its hint (with hint_layout='strands': the "
-        "exemplar's fibres laid along the constraint) and every pass, the first included, compares the "
-        "square refinement neighbourhood in a random order (refinement='square'). Needs "
-        "restrict_rotations (the hints). Default: 'hints' where hint_layout's default is 'strands', else "
-        "'random'.",
+        description="How the output starts: from 'random' exemplar places (the paper), or from the "
+        "'hints'; automatic by the hints.",
+        json_schema_extra=ui(
+            details=(
+                "How the output starts: 'random' sources and a first pass in the neighbourhood's scan "
+                "(the paper); 'hints', every position starts from its hint (with hint_layout='strands': the "
+                "exemplar's fibres laid along the constraint) and every pass, the first included, compares "
+                "the "
+                "square refinement neighbourhood in a random order (refinement='square'). Needs "
+                "restrict_rotations (the hints). Default: 'hints' where hint_layout's default is 'strands', "
+                "else "
+                "'random'."
+            )
+        ),
     )
-    sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
-    sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
+    sigma_d: float = Field(
+        1.0,
+        gt=0.0,
+        le=16.0,
+        description="Blur before the image gradients of the orientation field (σ_d).",
+        json_schema_extra=ui(unit="px", details=("Structure tensor: derivative scale (pixels).")),
+    )
+    sigma_w: float = Field(
+        3.0,
+        gt=0.0,
+        le=32.0,
+        description="Size of the window over which the orientation field is averaged (σ_w).",
+        json_schema_extra=ui(unit="px", details=("Structure tensor: window scale (pixels).")),
+    )
     k: int = Field(
         0,
         ge=0,
         le=32,
-        description="k-coherence sets over D_M (memory grows with M); 0: neighbours' sources and hints only.",
+        description="Similar places proposed per neighbour across the rotated copies; 0 uses neighbours "
+        "and hints only (memory grows with it).",
+        json_schema_extra=ui(
+            details=(
+                "k-coherence sets over D_M (memory grows with M); 0: neighbours' sources and hints only."
+            )
+        ),
     )
 
     @model_validator(mode="after")

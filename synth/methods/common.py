@@ -10,7 +10,7 @@ from pydantic import Field, ValidationInfo, field_validator, model_validator
 from synth.api import Progress
 from synth.grid.neighbourhood import Shape
 from synth.grid.scan import ScanOrder
-from synth.params import MethodParams
+from synth.params import MethodParams, ui
 from synth.pixel.solid import PLANES, checked_planes
 from synth.pixel.synthesis import SearchSettings
 
@@ -38,9 +38,17 @@ class PatchParams(MethodParams):
 
     periodic: bool = Field(
         False,
-        description="Tileable output: the patches are laid on a torus of the output's size, the last "
-        "column's patches overlapping the first column and the last row the first row, so a 2 x 2 tiling "
-        "shows no seam. Each output side must hold at least two patch steps (patch_size - overlap).",
+        description="Make the output tile seamlessly: patches wrap around its borders (each side needs two "
+        "patch steps).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Tileable output: the patches are laid on a torus of the output's size, the last "
+                "column's patches overlapping the first column and the last row the first row, so a 2 x 2 "
+                "tiling "
+                "shows no seam. Each output side must hold at least two patch steps (patch_size - overlap)."
+            ),
+        ),
     )
 
     @field_validator("overlap", check_fields=False)
@@ -62,54 +70,115 @@ class PatchParams(MethodParams):
 class NeighbourhoodParams(MethodParams):
     """Neighbourhood, scan and search options common to the Wei-Levoy family."""
 
-    neighbourhood_size: int = Field(13, ge=3, le=41, description="Side of the square/L neighbourhood (odd).")
+    neighbourhood_size: int = Field(
+        13,
+        ge=3,
+        le=41,
+        description="Side of the square window of pixels compared when matching (N).",
+        json_schema_extra=ui(
+            basic=True, unit="px", odd=True, details=("Side of the square/L neighbourhood (odd).")
+        ),
+    )
     neighbourhood: Shape = Field(
         "causal",
-        description="'causal' L-shape (with a lexicographic scan) or 'square' non-causal (random walk).",
+        description="Shape of that window: 'causal' uses only the pixels already made, 'square' the pixels "
+        "all around.",
+        json_schema_extra=ui(
+            details=("'causal' L-shape (with a lexicographic scan) or 'square' non-causal (random walk).")
+        ),
     )
     scan: ScanOrder | None = Field(
         None,
-        description="Scan order; default lexicographic for a causal neighbourhood, random for a square one.",
+        description="Order in which pixels are visited; automatic: row by row for 'causal', random for "
+        "'square'.",
+        json_schema_extra=ui(
+            details=("Scan order; default lexicographic for a causal neighbourhood, random for a square one.")
+        ),
     )
     parent_size: int = Field(
-        5, ge=3, le=15, description="Side of the parent-level square neighbourhood (odd)."
+        5,
+        ge=3,
+        le=15,
+        description="Side of the window also compared on the next coarser pyramid level.",
+        json_schema_extra=ui(
+            unit="px", odd=True, details=("Side of the parent-level square neighbourhood (odd).")
+        ),
     )
     search: Literal["kcoherence", "exact"] = Field(
         "kcoherence",
-        description="'exact' compares every exemplar position (slow, the definition); "
-        "'kcoherence' compares k-coherent candidates (fast; measured as good in docs/benchmarks.md).",
+        description="How candidates are found: 'kcoherence' tries a few likely exemplar places (fast), "
+        "'exact' tries them all (slow).",
+        json_schema_extra=ui(
+            details=(
+                "'exact' compares every exemplar position (slow, the definition); "
+                "'kcoherence' compares k-coherent candidates (fast; measured as good in docs/benchmarks.md)."
+            )
+        ),
     )
     k: int = Field(
-        5, ge=0, le=32, description="k-coherence: similar exemplar positions proposed per candidate."
+        5,
+        ge=0,
+        le=32,
+        description="How many similar exemplar places each neighbour proposes (k of the k-coherence search).",
+        json_schema_extra=ui(details=("k-coherence: similar exemplar positions proposed per candidate.")),
     )
     random_candidates: int = Field(
-        2, ge=0, le=64, description="k-coherence: random candidates added per pixel."
+        2,
+        ge=0,
+        le=64,
+        description="Random exemplar places tried per pixel besides the proposed ones.",
+        json_schema_extra=ui(details=("k-coherence: random candidates added per pixel.")),
     )
     falloff: float = Field(
         0.0,
         ge=0.0,
         le=2.0,
-        description="Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
-        "side (Efros & Leung: 1 / 6.4); 0 = every entry weighs the same (Wei & Levoy).",
+        description="How fast the window's pixels weigh less away from its centre; 0 weighs all equally "
+        "(Gaussian σ = falloff × side).",
+        json_schema_extra=ui(
+            details=(
+                "Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
+                "side (Efros & Leung: 1 / 6.4); 0 = every entry weighs the same (Wei & Levoy)."
+            )
+        ),
     )
     refinement: Literal["same", "square"] = Field(
         "same",
-        description="Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
-        "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
-        "proposing candidates, so that a pixel is matched against the pixels after it too.",
+        description="Window of the later passes: 'same' as the first pass, or 'square': all around each "
+        "pixel.",
+        json_schema_extra=ui(
+            details=(
+                "Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
+                "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
+                "proposing candidates, so that a pixel is matched against the pixels after it too."
+            )
+        ),
     )
     refinement_size: int | None = Field(
         None,
         ge=3,
         le=41,
-        description="Side of the square refinement neighbourhood (odd; capped at each level's "
-        "neighbourhood side; default neighbourhood_size).",
+        description="Side of the square window of the later passes; automatic: the neighbourhood size.",
+        json_schema_extra=ui(
+            unit="px",
+            odd=True,
+            details=(
+                "Side of the square refinement neighbourhood (odd; capped at each level's "
+                "neighbourhood side; default neighbourhood_size)."
+            ),
+        ),
     )
     periodic: bool = Field(
         False,
-        description="Toroidal output: the output tiles seamlessly (every stage wraps around its borders). "
-        "A causal neighbourhood then needs 2 or more passes: its refinement passes compare the full "
-        "square in random order, which closes the tile borders.",
+        description="Make the output tile seamlessly: it wraps around its borders.",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Toroidal output: the output tiles seamlessly (every stage wraps around its borders). "
+                "A causal neighbourhood then needs 2 or more passes: its refinement passes compare the full "
+                "square in random order, which closes the tile borders."
+            ),
+        ),
     )
 
     @model_validator(mode="after")
@@ -165,13 +234,31 @@ class SolidParams(MethodParams):
     """Parameters every solid method shares: slice neighbourhoods, a tileable volume, the matched planes."""
 
     neighbourhood_size: int = Field(
-        7, ge=3, le=15, description="Side of the square slice neighbourhoods (odd)."
+        7,
+        ge=3,
+        le=15,
+        description="Side of the square window compared in each slice (N).",
+        json_schema_extra=ui(
+            basic=True, unit="voxels", odd=True, details=("Side of the square slice neighbourhoods (odd).")
+        ),
     )
-    periodic: bool = Field(True, description="Toroidal volume: the output tiles seamlessly.")
-    planes: tuple[str, ...] = Field(
+    periodic: bool = Field(
+        True,
+        description="Make the volume tile seamlessly in 3D: it wraps around its faces.",
+        json_schema_extra=ui(basic=True, details=("Toroidal volume: the output tiles seamlessly.")),
+    )
+    planes: tuple[Literal["xy", "xz", "yz"], ...] = Field(
         PLANES,
-        description="Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
-        "two, e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving the xy slices free.",
+        description="Slice planes that must look like the exemplar: all three for an even material, two "
+        "(e.g. xz, yz) for layers.",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
+                "two, e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving the xy "
+                "slices free."
+            ),
+        ),
     )
 
     @field_validator("planes", mode="before")
@@ -192,13 +279,28 @@ def laminar_start_fields() -> tuple[Any, Any]:
     methods): ``structure, structure_length = laminar_start_fields()`` in a parameter model."""
     structure = Field(
         "auto",
-        description="'laminar': start from a volume of curved sheets at the exemplar's period, on the "
-        "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
-        "start; 'auto': laminar when one isotropic exemplar serves the three planes and adapt_to_structure "
-        "is on, and it is fringed (mean coherence >= 0.6) or a small pilot volume from each start says the "
-        "sheets keep its coherence better (mean coherence 0.45-0.6).",
+        description="How the volume starts: 'laminar' from curved sheets at the exemplar's period, 'none' "
+        "from noise, 'auto' decides from the exemplar.",
+        json_schema_extra=ui(
+            details=(
+                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+                "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's "
+                "random "
+                "start; 'auto': laminar when one isotropic exemplar serves the three planes and "
+                "adapt_to_structure "
+                "is on, and it is fringed (mean coherence >= 0.6) or a small pilot volume from each start "
+                "says the "
+                "sheets keep its coherence better (mean coherence 0.45-0.6)."
+            )
+        ),
     )
-    length = Field(4.0, gt=0.0, le=64.0, description="Curvature length of the laminar start, in periods.")
+    length = Field(
+        4.0,
+        gt=0.0,
+        le=64.0,
+        description="How far the starting sheets run before they bend, in fringe periods.",
+        json_schema_extra=ui(unit="periods", details=("Curvature length of the laminar start, in periods.")),
+    )
     return structure, length
 
 

@@ -41,6 +41,7 @@ from synth.evaluate.coverage import exemplar_coverage
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
 from synth.methods.quilting import precheck_patch_method
+from synth.params import ui
 from synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
 
 __all__ = ["FeatureGuidedParams", "run_feature_guided"]
@@ -56,125 +57,220 @@ class FeatureGuidedParams(PatchParams):
         32,
         ge=8,
         le=256,
-        description="Side of the square patches, pixels (the paper: 32 to 64 for 128 -> 256).",
+        description="Side of the square patches copied from the exemplar.",
+        json_schema_extra=ui(
+            basic=True,
+            unit="px",
+            details=("Side of the square patches, pixels (the paper: 32 to 64 for 128 -> 256)."),
+        ),
     )
     overlap: int | None = Field(
         None,
         ge=2,
         le=255,
-        description="Overlap between neighbouring patches, pixels; default a quarter of the patch.",
+        description="How much neighbouring patches overlap; automatic: a quarter of the patch.",
+        json_schema_extra=ui(
+            basic=True,
+            unit="px",
+            details=("Overlap between neighbouring patches, pixels; default a quarter of the patch."),
+        ),
     )
     feature_weight: float = Field(
         0.5,
         ge=0.0,
         le=1.0,
-        description="Weight of the feature cost against the colour SSD, each scaled by its mean over the "
-        "candidates (the paper: 0.5). 0 = colour only.",
+        description="How strongly matching lines and edges weigh against matching grey levels; 0: grey "
+        "levels only.",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Weight of the feature cost against the colour SSD, each scaled by its mean over the "
+                "candidates (the paper: 0.5). 0 = colour only."
+            ),
+        ),
     )
     candidates: int = Field(
         20,
         ge=1,
         le=1000,
-        description="Patches of least colour SSD on the overlap whose feature cost is computed.",
+        description="How many best patches on grey levels are then compared on their features.",
+        json_schema_extra=ui(
+            details=("Patches of least colour SSD on the overlap whose feature cost is computed.")
+        ),
     )
     tolerance: float = Field(
         0.1,
         ge=0.0,
         le=10.0,
-        description="A patch is drawn among the candidates whose total cost is within (1 + tolerance) "
-        "of the least.",
+        description="A patch is drawn among those whose cost is within (1 + tolerance) of the best.",
+        json_schema_extra=ui(
+            details=(
+                "A patch is drawn among the candidates whose total cost is within (1 + tolerance) "
+                "of the least."
+            )
+        ),
     )
     features: Literal["edges", "ridges"] = Field(
         "edges",
-        description="'edges': gradient magnitude; 'ridges': the Laplacian (thin lines, see polarity).",
+        description="Which features to follow: 'edges' (grey-level steps) or 'ridges' (thin lines).",
+        json_schema_extra=ui(
+            basic=True,
+            details=("'edges': gradient magnitude; 'ridges': the Laplacian (thin lines, see polarity)."),
+        ),
     )
     polarity: Literal["bright", "dark"] = Field(
-        "bright", description="Ridges only: bright lines, or dark lines (HRTEM lattice fringes)."
+        "bright",
+        description="With ridges: follow bright lines, or dark lines (HRTEM lattice fringes).",
+        json_schema_extra=ui(
+            basic=True, details=("Ridges only: bright lines, or dark lines (HRTEM lattice fringes).")
+        ),
     )
     high_percentile: float = Field(
-        90.0, gt=0.0, lt=100.0, description="Percentile of the response that sets the global high threshold."
+        90.0,
+        gt=0.0,
+        lt=100.0,
+        description="Share of the feature response below the threshold for a strong feature.",
+        json_schema_extra=ui(
+            unit="%", details=("Percentile of the response that sets the global high threshold.")
+        ),
     )
     alpha: float = Field(
         0.3,
         gt=0.0,
         le=1.0,
-        description="Local low threshold alpha R around a strong feature of response R (paper: 0.3).",
+        description="Weaker features next to a strong one are kept above this fraction of its strength (α).",
+        json_schema_extra=ui(
+            details=("Local low threshold alpha R around a strong feature of response R (paper: 0.3).")
+        ),
     )
     presmooth: float = Field(
         0.0,
         ge=0.0,
         le=5.0,
-        description="Gaussian scale (px) before the bilateral filter; about 1 for noisy micrographs.",
+        description="Blur before the features are found; about 1 for noisy micrographs.",
+        json_schema_extra=ui(
+            unit="px",
+            details=("Gaussian scale (px) before the bilateral filter; about 1 for noisy micrographs."),
+        ),
     )
     tau: float = Field(
         MATCH_TAU,
         ge=0.0,
         le=100.0,
-        description="Weight of tangent differences in the matching cost (eq 1; paper: 0.1).",
+        description="Weight of direction differences between features when patches are compared (τ, Eq. 1).",
+        json_schema_extra=ui(
+            details=("Weight of tangent differences in the matching cost (eq 1; paper: 0.1).")
+        ),
     )
     beta: float = Field(
         BETA,
         ge=0.0,
         le=100.0,
-        description="Weight of non-bijectivity in the matching cost (eq 2; paper: 0.3).",
+        description="Weight of features that do not pair one-to-one when patches are compared (β, Eq. 2).",
+        json_schema_extra=ui(details=("Weight of non-bijectivity in the matching cost (eq 2; paper: 0.3).")),
     )
     reverse_weight: float | None = Field(
         None,
         ge=0.0,
         le=100.0,
-        description="Weight of the reverse chamfer term: mean gdist from the candidate's features in the "
-        "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq 2). "
-        "None: 4 for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes), 0 for strongly "
-        "oriented ones (laminae, fibres, brick joints).",
+        description="Weight of the check from the candidate's features back to the output's, against "
+        "cluttered patches.",
+        json_schema_extra=ui(
+            details=(
+                "Weight of the reverse chamfer term: mean gdist from the candidate's features in the "
+                "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq 2). "
+                "None: 4 for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes), 0 for strongly "
+                "oriented ones (laminae, fibres, brick joints)."
+            )
+        ),
     )
     warp_tau: float = Field(
         WARP_TAU,
         ge=0.0,
         le=1000.0,
-        description="tau of eq 1 for the deformation's correspondences (paper: 10).",
+        description="Weight of direction differences when pairing features for the warp (τ, Eq. 1).",
+        json_schema_extra=ui(details=("tau of eq 1 for the deformation's correspondences (paper: 10).")),
     )
     deform: bool = Field(
         True,
-        description="Warp each patch near its overlap so its features meet the context's (thin-plate "
-        "spline; the paper's method): fewer or as many broken features as without it on every exemplar "
-        "measured (docs/feature-guided.md).",
+        description="Warp each patch near its overlap so that its features meet the ones already there.",
+        json_schema_extra=ui(
+            details=(
+                "Warp each patch near its overlap so its features meet the context's (thin-plate "
+                "spline; the paper's method): fewer or as many broken features as without it on every "
+                "exemplar "
+                "measured (docs/feature-guided.md)."
+            )
+        ),
     )
     max_shift: float = Field(
         4.0,
         gt=0.0,
         le=64.0,
-        description="Correspondences farther apart than this (px) are not pulled together.",
+        description="Features farther apart than this are not pulled together.",
+        json_schema_extra=ui(
+            unit="px", details=("Correspondences farther apart than this (px) are not pulled together.")
+        ),
     )
     warp_angle: float = Field(
         30.0,
         ge=0.0,
         le=90.0,
-        description="Features whose tangents differ by more than this (degrees) are not pulled together.",
+        description="Features whose directions differ by more than this are not pulled together.",
+        json_schema_extra=ui(
+            unit="degrees",
+            details=("Features whose tangents differ by more than this (degrees) are not pulled together."),
+        ),
     )
     warp_band: float = Field(
         4.0,
         ge=0.0,
         le=64.0,
-        description="The warp's displacement decays to 0 over this many px beyond the overlap; the rest "
-        "of the patch is not moved.",
+        description="Distance beyond the overlap over which the warp fades out.",
+        json_schema_extra=ui(
+            unit="px",
+            details=(
+                "The warp's displacement decays to 0 over this many px beyond the overlap; the rest "
+                "of the patch is not moved."
+            ),
+        ),
     )
     rotations: bool = Field(
-        False, description="Also take patches from the 7 rotated/reflected copies of the exemplar."
+        False,
+        description="Also take patches from the exemplar turned and mirrored (7 more copies).",
+        json_schema_extra=ui(
+            details=("Also take patches from the 7 rotated/reflected copies of the exemplar.")
+        ),
     )
     error: Literal["normalised", "ssd"] | None = Field(
         None,
-        description="Colour error of the candidates on the overlap: 'ssd' = the paper; 'normalised' = SSD "
-        "over the overlap's plus the candidate's own variance (flat ones not preferred for being flat). "
-        "None: 'normalised' for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes, grass, "
-        "gravel), 'ssd' for strongly oriented ones (laminae, fibres, brick joints).",
+        description="How overlaps are compared: 'normalised' does not favour flat patches; 'ssd' is the "
+        "paper's.",
+        json_schema_extra=ui(
+            details=(
+                "Colour error of the candidates on the overlap: 'ssd' = the paper; 'normalised' = SSD "
+                "over the overlap's plus the candidate's own variance (flat ones not preferred for being "
+                "flat). "
+                "None: 'normalised' for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes, "
+                "grass, "
+                "gravel), 'ssd' for strongly oriented ones (laminae, fibres, brick joints)."
+            )
+        ),
     )
     usage_weight: float | None = Field(
         None,
         ge=0.0,
         le=100.0,
-        description="Gain of the penalty on over-used exemplar regions in the candidate search (Chen & "
-        "Wang's position histogram; not the paper); 0 = the paper. None: 1 for weakly oriented exemplars, "
-        "0 for strongly oriented ones (as error).",
+        description="How strongly over-used exemplar places are avoided; 0 is the paper (position "
+        "histogram).",
+        json_schema_extra=ui(
+            details=(
+                "Gain of the penalty on over-used exemplar regions in the candidate search (Chen & "
+                "Wang's position histogram; not the paper); 0 = the paper. None: 1 for weakly oriented "
+                "exemplars, "
+                "0 for strongly oriented ones (as error)."
+            )
+        ),
     )
 
     def feature_options(self) -> dict[str, object]:

@@ -45,6 +45,7 @@ from synth.evaluate.coverage import exemplar_coverage
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
 from synth.methods.quilting import check_patch_geometry
+from synth.params import ui
 from synth.patch.cut import error_surface, strips_cut_mask
 from synth.patch.gaussian import (
     GaussianPatchModel,
@@ -71,22 +72,45 @@ class GaussianPatchParams(PatchParams):
 
     model: Literal["lg", "clg", "rclg"] = Field(
         "rclg",
-        description="'lg': a draw from N(mu, Sigma), overlap ignored; 'clg': conditional mean given the "
-        "overlap (eq. 4); 'rclg': regularised conditional (eq. 7), the overlap may move by about theta.",
+        description="Patch model: 'rclg' follows the overlap loosely, 'clg' exactly, 'lg' ignores it (Eq. "
+        "7, 4, Gaussian draw).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "'lg': a draw from N(mu, Sigma), overlap ignored; 'clg': conditional mean given the "
+                "overlap (eq. 4); 'rclg': regularised conditional (eq. 7), the overlap may move by about "
+                "theta."
+            ),
+        ),
     )
     # (w, N) = (30, 20): the first example of the paper's Figs 2 and 3 (w 10-40, N 10-50 in the paper).
-    patch_size: int = Field(30, ge=4, le=128, description="Side w of the square patches, pixels.")
+    patch_size: int = Field(
+        30,
+        ge=4,
+        le=128,
+        description="Side of the square patches (w).",
+        json_schema_extra=ui(basic=True, unit="px", details=("Side w of the square patches, pixels.")),
+    )
     overlap: int | None = Field(
         None,
         ge=1,
         le=127,
-        description="Overlap between neighbouring patches, pixels; default a quarter of w.",
+        description="How much neighbouring patches overlap; automatic: a quarter of the patch.",
+        json_schema_extra=ui(
+            basic=True,
+            unit="px",
+            details=("Overlap between neighbouring patches, pixels; default a quarter of w."),
+        ),
     )
     neighbours: int = Field(
         5,
         ge=1,
         le=500,
-        description="N: exemplar patches nearest on the overlap that define mu and Sigma (the paper: 20).",
+        description="How many similar exemplar patches form each patch's model (N; the paper: 20).",
+        json_schema_extra=ui(
+            basic=True,
+            details=("N: exemplar patches nearest on the overlap that define mu and Sigma (the paper: 20)."),
+        ),
     )
     # The paper gives no value for sigma or theta: 0.05 / 0.05 are ours (docs/patch.md: sigma = 0.01 lets
     # CLG extrapolate into saturated garbage on brick; a larger theta moves the seam to the overlap's edge).
@@ -94,60 +118,113 @@ class GaussianPatchParams(PatchParams):
         0.05,
         gt=0.0,
         le=1.0,
-        description="Added noise: the model is N(mu, Sigma + sigma^2 I) (grey levels in [0, 1]).",
+        description="Noise added to the model, in grey levels from 0 to 1 (σ).",
+        json_schema_extra=ui(
+            details=("Added noise: the model is N(mu, Sigma + sigma^2 I) (grey levels in [0, 1]).")
+        ),
     )
     theta: float = Field(
         0.05,
         ge=0.0,
         le=10.0,
-        description="RCLG: allowed deviation from the overlap's values (eq. 5); 0 = CLG.",
+        description="How far a new patch may depart from the overlap's values; 0 follows it exactly (θ, "
+        "Eq. 5).",
+        json_schema_extra=ui(details=("RCLG: allowed deviation from the overlap's values (eq. 5); 0 = CLG.")),
     )
     blending: Literal["none", "boundary-cut"] = Field(
         "boundary-cut",
-        description="'boundary-cut' (default): stitch along the Efros-Freeman minimum-error cut (paper, "
-        "Fig. 3); 'none': paste over the overlap (paper, Fig. 2).",
+        description="How patches are joined: a minimum-error 'boundary-cut', or 'none' (pasted over the "
+        "overlap).",
+        json_schema_extra=ui(
+            details=(
+                "'boundary-cut' (default): stitch along the Efros-Freeman minimum-error cut (paper, "
+                "Fig. 3); 'none': paste over the overlap (paper, Fig. 2)."
+            )
+        ),
     )
     estimate: Literal["mean", "draw", "neighbour"] = Field(
         "neighbour",
-        description="CLG/RCLG: 'neighbour' (default, not the paper) = one of the N neighbours, drawn "
-        "uniformly, corrected toward the overlap by the model's gain tapered with the distance from the "
-        "overlap (keeps structure the overlap does not pin, such as a brick's joints); 'mean' = the most "
-        "probable patch (the paper); 'draw' = a random draw from the same conditional law (the paper's "
-        "suggested remedy for its smoothing; docs/patch.md: close to the mean when the overlap pins the "
-        "rank-N model).",
+        description="What each new patch is: a corrected 'neighbour' patch, the model's 'mean', or a "
+        "random 'draw'.",
+        json_schema_extra=ui(
+            details=(
+                "CLG/RCLG: 'neighbour' (default, not the paper) = one of the N neighbours, drawn "
+                "uniformly, corrected toward the overlap by the model's gain tapered with the distance from "
+                "the "
+                "overlap (keeps structure the overlap does not pin, such as a brick's joints); 'mean' = the "
+                "most "
+                "probable patch (the paper); 'draw' = a random draw from the same conditional law (the "
+                "paper's "
+                "suggested remedy for its smoothing; docs/patch.md: close to the mean when the overlap pins "
+                "the "
+                "rank-N model)."
+            )
+        ),
     )
     localisation: float | None = Field(
         None,
         gt=0.0,
         le=1000.0,
-        description="estimate='neighbour': length (pixels) of the Gaussian taper of the correction with the "
-        "distance from the overlap; default the overlap. Ignored by the other estimates.",
+        description="How far from the overlap the correction of a neighbour patch fades out; automatic: "
+        "the overlap.",
+        json_schema_extra=ui(
+            unit="px",
+            details=(
+                "estimate='neighbour': length (pixels) of the Gaussian taper of the correction with the "
+                "distance from the overlap; default the overlap. Ignored by the other estimates."
+            ),
+        ),
     )
     contrast: Literal["restore", "none"] = Field(
         "restore",
-        description="CLG/RCLG: 'restore' scales each new patch's spread to its neighbours' (not the paper; "
-        "without it the conditional mean blurs and contrast decays patch after patch, docs/patch.md); "
-        "'none' = the paper literally.",
+        description="Keep each new patch as contrasted as its neighbours ('restore'), or let contrast fade "
+        "('none').",
+        json_schema_extra=ui(
+            details=(
+                "CLG/RCLG: 'restore' scales each new patch's spread to its neighbours' (not the paper; "
+                "without it the conditional mean blurs and contrast decays patch after patch, "
+                "docs/patch.md); "
+                "'none' = the paper literally."
+            )
+        ),
     )
     error: Literal["normalised", "ssd"] = Field(
         "normalised",
-        description="Overlap distance of the neighbour search: 'normalised' (default, not the paper) = the "
-        "SSD over the overlap's plus the candidate's own variance, so flat candidates are not preferred for "
-        "being flat; 'ssd' = the paper's L2.",
+        description="How overlaps are compared: 'normalised' does not favour flat patches; 'ssd' is the "
+        "plain squared difference.",
+        json_schema_extra=ui(
+            details=(
+                "Overlap distance of the neighbour search: 'normalised' (default, not the paper) = the "
+                "SSD over the overlap's plus the candidate's own variance, so flat candidates are not "
+                "preferred for "
+                "being flat; 'ssd' = the paper's L2."
+            )
+        ),
     )
     usage_weight: float = Field(
         1.0,
         ge=0.0,
         le=100.0,
-        description="Gain of the penalty on over-used exemplar regions in the neighbour search (Chen & "
-        "Wang's position histogram; not the paper). 0 = the paper.",
+        description="How strongly over-used exemplar places are avoided; 0 is the paper (position "
+        "histogram).",
+        json_schema_extra=ui(
+            details=(
+                "Gain of the penalty on over-used exemplar regions in the neighbour search (Chen & "
+                "Wang's position histogram; not the paper). 0 = the paper."
+            )
+        ),
     )
     scales: int = Field(
         1,
         ge=1,
         le=4,
-        description="1 = the paper; > 1: coarse to fine, each scale's neighbours chosen also on the coarser "
-        "scale's output.",
+        description="Number of scales, coarse to fine; 1 is the paper.",
+        json_schema_extra=ui(
+            details=(
+                "1 = the paper; > 1: coarse to fine, each scale's neighbours chosen also on the coarser "
+                "scale's output."
+            )
+        ),
     )
 
 

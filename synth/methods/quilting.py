@@ -43,6 +43,7 @@ from synth.errors import InvalidParameter
 from synth.evaluate.coverage import exemplar_coverage
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import PatchParams, checked_progress
+from synth.params import ui
 from synth.patch.cut import error_surface, strips_cut_mask
 from synth.patch.graphcut import graph_cut_mask
 from synth.patch.layout import PatchLayout, check_periodic_size
@@ -60,36 +61,70 @@ class QuiltingParams(PatchParams):
 
     # Efros & Freeman choose the block "big enough to capture the relevant structures"; 32 px suits the
     # 128 -> 256 exemplars of their figures (and ours).
-    patch_size: int = Field(32, ge=4, le=256, description="Side w of the square patches, pixels.")
+    patch_size: int = Field(
+        32,
+        ge=4,
+        le=256,
+        description="Side of the square patches copied from the exemplar (w).",
+        json_schema_extra=ui(basic=True, unit="px", details=("Side w of the square patches, pixels.")),
+    )
     overlap: int | None = Field(
         None,
         ge=1,
         le=255,
-        description="Overlap between neighbouring patches, pixels; default a sixth of the patch (the paper).",
+        description="How much neighbouring patches overlap; automatic: a sixth of the patch (the paper).",
+        json_schema_extra=ui(
+            basic=True,
+            unit="px",
+            details=(
+                "Overlap between neighbouring patches, pixels; default a sixth of the patch (the paper)."
+            ),
+        ),
     )
     tolerance: float = Field(
         0.1,
         ge=0.0,
         le=10.0,
         description="A patch is drawn among those whose overlap error is within (1 + tolerance) of the best.",
+        json_schema_extra=ui(),
     )
     error: Literal["normalised", "ssd"] = Field(
         "normalised",
-        description="Overlap error: 'normalised' (default, not the paper) = SSD over the template's plus the "
-        "candidate's own variance on the overlap, so flat candidates are not preferred for being flat; "
-        "'ssd' = the paper's sum of squared differences.",
+        description="How overlaps are compared: 'normalised' does not favour flat patches; 'ssd' is the "
+        "paper's plain squared difference.",
+        json_schema_extra=ui(
+            details=(
+                "Overlap error: 'normalised' (default, not the paper) = SSD over the template's plus the "
+                "candidate's own variance on the overlap, so flat candidates are not preferred for being "
+                "flat; "
+                "'ssd' = the paper's sum of squared differences."
+            )
+        ),
     )
     usage_weight: float = Field(
         1.0,
         ge=0.0,
         le=100.0,
-        description="Gain of the penalty on over-used exemplar regions (Chen & Wang's position histogram; "
-        "not the paper): a candidate's error is multiplied by 1 + weight * excess use. 0 = the paper.",
+        description="How strongly over-used exemplar places are avoided; 0 is the paper (position "
+        "histogram).",
+        json_schema_extra=ui(
+            details=(
+                "Gain of the penalty on over-used exemplar regions (Chen & Wang's position histogram; "
+                "not the paper): a candidate's error is multiplied by 1 + weight * excess use. 0 = the paper."
+            )
+        ),
     )
     blending: Literal["boundary-cut", "graph-cut"] = Field(
         "boundary-cut",
-        description="'boundary-cut': minimum-error cut by dynamic programming (Efros & Freeman); "
-        "'graph-cut': minimum s-t cut over the overlap (Kwatra et al. 2003).",
+        description="How patches are stitched: a minimum-error 'boundary-cut' (the paper) or a 'graph-cut' "
+        "(Kwatra 2003).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "'boundary-cut': minimum-error cut by dynamic programming (Efros & Freeman); "
+                "'graph-cut': minimum s-t cut over the overlap (Kwatra et al. 2003)."
+            ),
+        ),
     )
 
 

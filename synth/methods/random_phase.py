@@ -38,7 +38,7 @@ from scipy import fft as sfft
 from synth.api import MethodSpec, Progress, Result, register
 from synth.evaluate.patches import copy_map, copy_share
 from synth.methods.common import checked_progress
-from synth.params import MethodParams
+from synth.params import MethodParams, ui
 
 __all__ = ["RandomPhaseParams", "periodic_component", "random_phase_noise", "run_random_phase"]
 
@@ -48,9 +48,17 @@ class RandomPhaseParams(MethodParams):
 
     periodic: bool = Field(
         False,
-        description="Tileable output. Random-phase noise is periodic by construction when the output is at "
-        "least as large as the exemplar; with periodic=True a smaller output is made from an exemplar crop "
-        "of its size instead of cropped from a larger noise, so it tiles too.",
+        description="Make the output tile seamlessly (always so when the output is at least the exemplar's "
+        "size).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Tileable output. Random-phase noise is periodic by construction when the output is at "
+                "least as large as the exemplar; with periodic=True a smaller output is made from an "
+                "exemplar crop "
+                "of its size instead of cropped from a larger noise, so it tiles too."
+            ),
+        ),
     )
 
 

@@ -60,6 +60,7 @@ from synth.kernels.solid_kcoherence import (
 )
 from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
 from synth.methods.solid_kopf import laminar_pilot
+from synth.params import ui
 from synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
 from synth.pixel.solid import (
     PLANE_AXES,
@@ -102,69 +103,154 @@ class SolidChenWangParams(SolidParams):
     """Parameters of Chen & Wang's solid synthesis (defaults: the paper's and the study's settings)."""
 
     levels: int = Field(
-        5, ge=1, le=8, description="Pyramid levels (at most; fewer when the exemplar or volume is small)."
+        5,
+        ge=1,
+        le=8,
+        description="Largest number of pyramid levels, coarse to fine (fewer when exemplar or volume is "
+        "small).",
+        json_schema_extra=ui(
+            basic=True, details=("Pyramid levels (at most; fewer when the exemplar or volume is small).")
+        ),
     )
     adapt_to_structure: bool = Field(
         True,
-        description="Laminae get at least 10 iterations per level (off: iterations literally).",
+        description="Adapt the schedule to the exemplar: layered ones get more passes per level.",
+        json_schema_extra=ui(
+            details=("Laminae get at least 10 iterations per level (off: iterations literally).")
+        ),
     )
-    iterations: int = Field(3, ge=1, le=20, description="Search + optimisation iterations per level.")
+    iterations: int = Field(
+        3,
+        ge=1,
+        le=20,
+        description="Search-and-update passes over the volume at each level.",
+        json_schema_extra=ui(basic=True, details=("Search + optimisation iterations per level.")),
+    )
     coarse_iterations: int | None = Field(
         None,
         ge=1,
         le=200,
-        description="Iterations at every level but the finest. None: "
-        f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as the "
-        "finest level's.",
+        description="Passes at every level but the finest; automatic: chosen from the exemplar.",
+        json_schema_extra=ui(
+            details=(
+                "Iterations at every level but the finest. None: "
+                f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as "
+                f"the "
+                "finest level's."
+            )
+        ),
     )
     structure: Literal["auto", "none", "laminar"]
     structure_length: float
     structure, structure_length = laminar_start_fields()
-    k: int = Field(15, ge=0, le=32, description="k-coherence: similar exemplar positions per pixel.")
+    k: int = Field(
+        15,
+        ge=0,
+        le=32,
+        description="How many similar exemplar places are listed per pixel (k).",
+        json_schema_extra=ui(details=("k-coherence: similar exemplar positions per pixel.")),
+    )
     # Not given by the paper; measured (docs/solid.md, "Departures from the papers").
     position_weight: float = Field(
-        5.0, ge=0.0, le=100.0, description="Position-histogram weight: 0 = off; larger = more uniform use."
+        5.0,
+        ge=0.0,
+        le=100.0,
+        description="How strongly over-used exemplar places are avoided; 0 is off (position histogram).",
+        json_schema_extra=ui(
+            basic=True, details=("Position-histogram weight: 0 = off; larger = more uniform use.")
+        ),
     )
     index_weight: float = Field(
-        1.0, ge=0.0, le=100.0, description="Index-histogram weight: 0 = off; larger = more uniform matches."
+        1.0,
+        ge=0.0,
+        le=100.0,
+        description="How strongly often-chosen matches are avoided; 0 is off (index histogram).",
+        json_schema_extra=ui(details=("Index-histogram weight: 0 = off; larger = more uniform matches.")),
     )
-    exponent: float = Field(0.8, gt=0.0, le=2.0, description="IRLS exponent r of the energy (Kopf: 0.8).")
-    scan: ScanOrder = Field("hilbert", description="Voxel visiting order of both phases.")
+    exponent: float = Field(
+        0.8,
+        gt=0.0,
+        le=2.0,
+        description="Robustness of the matching energy: below 2, bad matches weigh less (r, Kopf's "
+        "exponent).",
+        json_schema_extra=ui(details=("IRLS exponent r of the energy (Kopf: 0.8).")),
+    )
+    scan: ScanOrder = Field(
+        "hilbert",
+        description="Order in which voxels are visited.",
+        json_schema_extra=ui(details=("Voxel visiting order of both phases.")),
+    )
     random_candidates: int = Field(
-        0, ge=0, le=16, description="Random exemplar positions added to the k-coherent candidates (0: paper)."
+        0,
+        ge=0,
+        le=16,
+        description="Random exemplar places tried per voxel besides the listed ones (0: the paper).",
+        json_schema_extra=ui(
+            details=("Random exemplar positions added to the k-coherent candidates (0: paper).")
+        ),
     )
     # Measured on soot, laminae and the known answer (docs/solid.md, "Departures from the papers").
     grey_weight: float = Field(
         20.0,
         ge=0.0,
         le=1000.0,
-        description="Grey-level histogram weight (Kopf's histogram matching): 0 = off.",
+        description="How strongly the grey-level histogram is kept close to the exemplar's; 0 is off.",
+        json_schema_extra=ui(details=("Grey-level histogram weight (Kopf's histogram matching): 0 = off.")),
     )
-    consensus: float = Field(0.5, ge=0.0, le=100.0, description="Solver: weight of the proposals' consensus.")
+    consensus: float = Field(
+        0.5,
+        ge=0.0,
+        le=100.0,
+        description="How strongly a voxel follows what most of its neighbours propose.",
+        json_schema_extra=ui(details=("Solver: weight of the proposals' consensus.")),
+    )
     sigma: float = Field(
-        0.0, ge=0.0, le=10.0, description="Gaussian entry weighting of the solver (0: flat)."
+        0.0,
+        ge=0.0,
+        le=10.0,
+        description="Gaussian weighting of the window when voxels are updated; 0 weighs all equally (σ).",
+        json_schema_extra=ui(details=("Gaussian entry weighting of the solver (0: flat).")),
     )
     kset_window: int = Field(
         1,
         ge=0,
         le=9,
-        description="Search: window voxels (the voxel first) whose k-coherence sets are candidates.",
+        description="How many nearby voxels' lists of similar places are searched (the voxel first).",
+        json_schema_extra=ui(
+            unit="voxels",
+            details=("Search: window voxels (the voxel first) whose k-coherence sets are candidates."),
+        ),
     )
     solve_radius: int | None = Field(
         None,
         ge=0,
         le=7,
-        description="Solver candidates: matches centred within this many voxels of the voxel. None: "
-        f"{LAMINAR_SOLVE_RADIUS} for laminar exemplars when adapt_to_structure is on, else 0 (the voxel's "
-        "own matches).",
+        description="Updates use matches centred within this distance of the voxel; automatic: chosen from "
+        "the exemplar.",
+        json_schema_extra=ui(
+            unit="voxels",
+            details=(
+                "Solver candidates: matches centred within this many voxels of the voxel. None: "
+                f"{LAMINAR_SOLVE_RADIUS} for laminar exemplars when adapt_to_structure is on, else 0 (the "
+                f"voxel's "
+                "own matches)."
+            ),
+        ),
     )
     orientation_gain: float | None = Field(
         None,
         ge=0.0,
         le=64.0,
-        description="Pull each plane's matches toward its exemplar's orientation histogram (Kopf's eq 4 on "
-        f"orientations; 0 = off, the paper). None: {LAMINAR_ORIENTATION_GAIN:g} for laminar exemplars "
-        "when adapt_to_structure is on, else off.",
+        description="How strongly slices are pulled toward the exemplar's spread of orientations; 0 is "
+        "off; automatic by exemplar.",
+        json_schema_extra=ui(
+            details=(
+                "Pull each plane's matches toward its exemplar's orientation histogram (Kopf's eq 4 on "
+                f"orientations; 0 = off, the paper). None: {LAMINAR_ORIENTATION_GAIN:g} for laminar "
+                f"exemplars "
+                "when adapt_to_structure is on, else off."
+            )
+        ),
     )
 
 

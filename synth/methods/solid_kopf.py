@@ -56,6 +56,7 @@ from synth.kernels.solid_search import (
     irls_update,
 )
 from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
+from synth.params import ui
 from synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
@@ -116,38 +117,84 @@ RANDOM_CANDIDATES = 2
 class SolidKopfParams(SolidParams):
     """Parameters of Kopf et al.'s solid optimisation; defaults are the study's settings."""
 
-    levels: int = Field(5, ge=1, le=8, description="Pyramid levels (fewer when the exemplar is small).")
+    levels: int = Field(
+        5,
+        ge=1,
+        le=8,
+        description="Number of pyramid levels, coarse to fine (fewer when the exemplar is small).",
+        json_schema_extra=ui(basic=True, details=("Pyramid levels (fewer when the exemplar is small).")),
+    )
     adapt_to_structure: bool = Field(
         True,
-        description="Micro-structures (weakly oriented exemplars) use at most 2 levels; laminae at least "
-        "10 iterations per level (off: levels and iterations literally).",
+        description="Adapt the schedule to the exemplar: fewer levels for grainy ones, more passes for "
+        "layered ones.",
+        json_schema_extra=ui(
+            details=(
+                "Micro-structures (weakly oriented exemplars) use at most 2 levels; laminae at least "
+                "10 iterations per level (off: levels and iterations literally)."
+            )
+        ),
     )
     orientation_gain: float = Field(
         ORIENTATION_GAIN,
         ge=0.0,
         le=64.0,
-        description="Pull each plane's slices toward its exemplar's orientation histogram (eq 4 on "
-        "orientations; 0 = off, the paper).",
+        description="How strongly slices are pulled toward the exemplar's spread of orientations; 0 is off "
+        "(the paper).",
+        json_schema_extra=ui(
+            details=(
+                "Pull each plane's slices toward its exemplar's orientation histogram (eq 4 on "
+                "orientations; 0 = off, the paper)."
+            )
+        ),
     )
     structure: Literal["auto", "none", "laminar"]
     structure_length: float
     structure, structure_length = laminar_start_fields()
-    iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
-    scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
-    r: float = Field(0.8, gt=0.0, le=2.0, description="Robust norm exponent (IRLS weights ||s-e||^(r-2)).")
+    iterations: int = Field(
+        4,
+        ge=1,
+        le=50,
+        description="Search-and-update passes over the volume at each level.",
+        json_schema_extra=ui(basic=True, details=("Search + optimisation iterations per level.")),
+    )
+    scan: ScanOrder = Field(
+        "random",
+        description="Order of the voxel updates.",
+        json_schema_extra=ui(details=("Order of the voxel updates in the optimisation step.")),
+    )
+    r: float = Field(
+        0.8,
+        gt=0.0,
+        le=2.0,
+        description="Robustness of the matching energy: below 2, bad matches weigh less (r, Kopf's "
+        "exponent).",
+        json_schema_extra=ui(details=("Robust norm exponent (IRLS weights ||s-e||^(r-2)).")),
+    )
     histogram_matching: bool = Field(
-        True, description="Re-weight toward the exemplar's grey-level histogram."
+        True,
+        description="Keep the volume's grey-level histogram close to the exemplar's.",
+        json_schema_extra=ui(details=("Re-weight toward the exemplar's grey-level histogram.")),
     )
     stride: int = Field(
         2,
         ge=1,
         le=4,
-        description="Neighbourhoods centred on every stride-th voxel of each slice (sparse grid).",
+        description="Compare windows centred on every n-th voxel of each slice (1: all, faster with more).",
+        json_schema_extra=ui(
+            details=("Neighbourhoods centred on every stride-th voxel of each slice (sparse grid).")
+        ),
     )
     search: Literal["tree", "exact"] = Field(
         "tree",
-        description="'tree': k-coherence (k-d tree at the start; fast); 'exact': every exemplar "
-        "neighbourhood (slow).",
+        description="How matches are found: 'tree' tries a few likely places (fast), 'exact' every one "
+        "(slow).",
+        json_schema_extra=ui(
+            details=(
+                "'tree': k-coherence (k-d tree at the start; fast); 'exact': every exemplar "
+                "neighbourhood (slow)."
+            )
+        ),
     )
 
 

@@ -36,6 +36,7 @@ from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.scan import ScanOrder, scan_order
 from synth.kernels.solid_search import KCOHERENCE_BLOCKS
 from synth.methods.common import SolidParams, checked_progress
+from synth.params import ui
 from synth.pixel.solid import (
     PLANES,
     LevelStep,
@@ -64,17 +65,41 @@ RANDOM_CANDIDATES = 2
 class SolidWeiLevoyParams(SolidParams):
     """Parameters of Wei-Levoy solid synthesis; defaults are the study's settings."""
 
-    levels: int = Field(5, ge=1, le=8, description="Pyramid levels (fewer when the exemplar is small).")
-    iterations: int = Field(10, ge=1, le=50, description="Largest number of passes per level.")
+    levels: int = Field(
+        5,
+        ge=1,
+        le=8,
+        description="Number of pyramid levels, coarse to fine (fewer when the exemplar is small).",
+        json_schema_extra=ui(basic=True, details=("Pyramid levels (fewer when the exemplar is small).")),
+    )
+    iterations: int = Field(
+        10,
+        ge=1,
+        le=50,
+        description="Largest number of passes over the volume at each level.",
+        json_schema_extra=ui(basic=True, details=("Largest number of passes per level.")),
+    )
     tolerance: float = Field(
         0.01,
         ge=0.0,
         le=1.0,
-        description="Stop a level once fewer voxels than this fraction change their match.",
+        description="Stop a level once fewer voxels than this share change their match.",
+        json_schema_extra=ui(
+            details=("Stop a level once fewer voxels than this fraction change their match.")
+        ),
     )
-    scan: ScanOrder = Field("hilbert", description="Voxel visiting order.")
+    scan: ScanOrder = Field(
+        "hilbert",
+        description="Order in which voxels are visited.",
+        json_schema_extra=ui(details=("Voxel visiting order.")),
+    )
     search: Literal["kcoherence", "exact"] = Field(
-        "kcoherence", description="'kcoherence' (fast) or 'exact': every exemplar neighbourhood (slow)."
+        "kcoherence",
+        description="How matches are found: 'kcoherence' tries a few likely exemplar places (fast), "
+        "'exact' all (slow).",
+        json_schema_extra=ui(
+            details=("'kcoherence' (fast) or 'exact': every exemplar neighbourhood (slow).")
+        ),
     )
 
 

@@ -46,6 +46,7 @@ from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.neighbourhood import Shape
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from synth.params import ui
 from synth.pixel.synthesis import (
     Guidance,
     check_neighbourhoods_fit,
@@ -70,101 +71,222 @@ class TensorConstrainedParams(NeighbourhoodParams):
     """Parameters of tensor-constrained synthesis; neighbourhood, levels, metric and passes = Akl 2014,
     Table 1, figure 3 column; the search and weighting defaults are issue 13's (see the module docstring)."""
 
-    structure_levels: int = Field(4, ge=1, le=6, description="Pyramid levels of the tensor-field synthesis.")
-    texture_levels: int = Field(1, ge=1, le=6, description="Pyramid levels of the texture synthesis.")
-    structure_iterations: int = Field(2, ge=1, le=10, description="Passes per level, structure stage.")
-    texture_iterations: int = Field(2, ge=1, le=10, description="Passes per level, texture stage.")
+    structure_levels: int = Field(
+        4,
+        ge=1,
+        le=6,
+        description="Pyramid levels of the first stage, which makes the orientation field.",
+        json_schema_extra=ui(basic=True, details=("Pyramid levels of the tensor-field synthesis.")),
+    )
+    texture_levels: int = Field(
+        1,
+        ge=1,
+        le=6,
+        description="Pyramid levels of the second stage, which makes the texture under that field.",
+        json_schema_extra=ui(basic=True, details=("Pyramid levels of the texture synthesis.")),
+    )
+    structure_iterations: int = Field(
+        2,
+        ge=1,
+        le=10,
+        description="Passes per level in the orientation-field stage.",
+        json_schema_extra=ui(details=("Passes per level, structure stage.")),
+    )
+    texture_iterations: int = Field(
+        2,
+        ge=1,
+        le=10,
+        description="Passes per level in the texture stage.",
+        json_schema_extra=ui(details=("Passes per level, texture stage.")),
+    )
     structure_neighbourhood_size: int | None = Field(
         None,
         ge=3,
         le=41,
-        description="Neighbourhood side of the structure stage (default: neighbourhood_size).",
+        description="Window side of the orientation-field stage; automatic: the neighbourhood size.",
+        json_schema_extra=ui(
+            unit="px",
+            odd=True,
+            details=("Neighbourhood side of the structure stage (default: neighbourhood_size)."),
+        ),
     )
     structure_neighbourhood: Shape | None = Field(
-        None, description="Neighbourhood shape of the structure stage (default: neighbourhood)."
+        None,
+        description="Window shape of the orientation-field stage; automatic: as the neighbourhood.",
+        json_schema_extra=ui(
+            details=("Neighbourhood shape of the structure stage (default: neighbourhood).")
+        ),
     )
     metric: Metric = Field(
         "LE",
-        description="Tensor dissimilarity: ED, SO (shape-orientation, the paper's figure 3), FN or LE "
-        "(log-Euclidean, the default: SO is blind to coherence where orientations agree).",
+        description="How two orientation tensors are compared: log-Euclidean (LE), Euclidean (ED), "
+        "shape-orientation (SO) or Frobenius (FN).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Tensor dissimilarity: ED, SO (shape-orientation, the paper's figure 3), FN or LE "
+                "(log-Euclidean, the default: SO is blind to coherence where orientations agree)."
+            ),
+        ),
     )
     alpha: float = Field(
-        0.5, ge=0.0, le=1.0, description="SO metric: weight of orientation against coherence."
+        0.5,
+        ge=0.0,
+        le=1.0,
+        description="With shape-orientation only: weight of orientation against coherence (α).",
+        json_schema_extra=ui(details=("SO metric: weight of orientation against coherence.")),
     )
     p: float = Field(
         0.8,
         ge=0.0,
         le=1.0,
-        description="Eq 13: weight of the pixel part against the tensor part (the paper leaves it open; "
-        "0.5 weighs both equally).",
+        description="How strongly the grey levels weigh against the orientation field when matching (p, "
+        "Eq. 13).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Eq 13: weight of the pixel part against the tensor part (the paper leaves it open; "
+                "0.5 weighs both equally)."
+            ),
+        ),
     )
     refinement_p: float | None = Field(
         1.0,
         ge=0.0,
         le=1.0,
-        description="Eq 13's p in the texture stage's square refinement passes (refinement='square' or "
-        "periodic): 1 = pixels only, the first pass having laid the texture out under the tensor field; "
-        "None = p (the paper: every pass weighs alike).",
+        description="The same weight in the texture stage's later square passes; 1 compares grey levels "
+        "only (p, Eq. 13).",
+        json_schema_extra=ui(
+            details=(
+                "Eq 13's p in the texture stage's square refinement passes (refinement='square' or "
+                "periodic): 1 = pixels only, the first pass having laid the texture out under the tensor "
+                "field; "
+                "None = p (the paper: every pass weighs alike)."
+            )
+        ),
     )
-    sigma_d: float = Field(1.0, gt=0.0, le=16.0, description="Structure tensor: derivative scale (pixels).")
-    sigma_w: float = Field(3.0, gt=0.0, le=32.0, description="Structure tensor: window scale (pixels).")
+    sigma_d: float = Field(
+        1.0,
+        gt=0.0,
+        le=16.0,
+        description="Blur before the image gradients of the orientation field (σ_d).",
+        json_schema_extra=ui(unit="px", details=("Structure tensor: derivative scale (pixels).")),
+    )
+    sigma_w: float = Field(
+        3.0,
+        gt=0.0,
+        le=32.0,
+        description="Size of the window over which the orientation field is averaged (σ_w).",
+        json_schema_extra=ui(unit="px", details=("Structure tensor: window scale (pixels).")),
+    )
     # Measured within 5% of exact search on both stages at k = 3 (docs/benchmarks.md); 2 with the
     # falloff and square refinement below (docs/quality.md, issue 13).
-    k: int = Field(2, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
+    k: int = Field(
+        2,
+        ge=0,
+        le=32,
+        description="How many similar exemplar places each neighbour proposes in the texture stage (k).",
+        json_schema_extra=ui(details=("k-coherence: similar exemplar positions per candidate.")),
+    )
     falloff: float | None = Field(
         None,
         ge=0.0,
         le=2.0,
-        description="Gaussian weighting of both stages' same-level neighbourhood (Efros & Leung 1999): "
-        "sigma = falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper). None: chosen "
-        "from the exemplar, 0 for strongly oriented exemplars with structures in two directions (brick's "
-        "joints: the whole neighbourhood must see whether a joint meets another), 0.156 otherwise.",
+        description="How fast the window's pixels weigh less away from its centre; 0 weighs all equally; "
+        "automatic per stage.",
+        json_schema_extra=ui(
+            details=(
+                "Gaussian weighting of both stages' same-level neighbourhood (Efros & Leung 1999): "
+                "sigma = falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper). None: "
+                "chosen "
+                "from the exemplar, 0 for strongly oriented exemplars with structures in two directions "
+                "(brick's "
+                "joints: the whole neighbourhood must see whether a joint meets another), 0.156 otherwise."
+            )
+        ),
     )
     refinement: Literal["same", "square"] = Field(
         "square",
-        description="Neighbourhood of both stages' refinement passes: 'same' as the first pass (the "
-        "paper), or 'square': the full square of refinement_size in a random order, every neighbour "
-        "proposing candidates.",
+        description="Window of the later passes of both stages: 'same' as the first pass (the paper), or "
+        "'square'.",
+        json_schema_extra=ui(
+            details=(
+                "Neighbourhood of both stages' refinement passes: 'same' as the first pass (the "
+                "paper), or 'square': the full square of refinement_size in a random order, every neighbour "
+                "proposing candidates."
+            )
+        ),
     )
     refinement_size: int | None = Field(
         None,
         ge=3,
         le=41,
-        description="Side of the square refinement neighbourhood (odd; capped at each level's "
-        "neighbourhood side). None: chosen from the exemplar, neighbourhood_size for strongly oriented "
-        "exemplars (mean coherence >= 0.7: laminae, fibres, joints), 7 for weakly oriented ones.",
+        description="Side of the square window of the later passes; automatic: chosen from the exemplar.",
+        json_schema_extra=ui(
+            unit="px",
+            odd=True,
+            details=(
+                "Side of the square refinement neighbourhood (odd; capped at each level's "
+                "neighbourhood side). None: chosen from the exemplar, neighbourhood_size for strongly "
+                "oriented "
+                "exemplars (mean coherence >= 0.7: laminae, fibres, joints), 7 for weakly oriented ones."
+            ),
+        ),
     )
     # The structure stage copies smooth tensor fields: k-coherent candidates there copy large coherent
     # patches and skew the field's orientation distribution (soot 128: field orientation KL 0.22 at
     # k = 3, 0.05 with 16 random candidates and no k-set; 8 measure the same and run 1.6x faster).
     structure_k: int = Field(
-        0, ge=0, le=32, description="Structure stage: k-coherent candidates per neighbour."
+        0,
+        ge=0,
+        le=32,
+        description="How many similar places each neighbour proposes in the orientation-field stage (k).",
+        json_schema_extra=ui(details=("Structure stage: k-coherent candidates per neighbour.")),
     )
     structure_random_candidates: int = Field(
-        8, ge=0, le=64, description="Structure stage: random exemplar positions tried per pixel."
+        8,
+        ge=0,
+        le=64,
+        description="Random exemplar places tried per pixel in the orientation-field stage.",
+        json_schema_extra=ui(details=("Structure stage: random exemplar positions tried per pixel.")),
     )
     # Departure measured in docs/tensor-constrained.md: with 'none' (the paper) a causal structure
     # stage lays out the field once at the coarse levels and some seeds over-represent one slope of
     # bent laminae (field orientation KL above 1); matching the orientation histogram removes that.
     structure_histogram: Literal["none", "position", "orientation"] = Field(
         "orientation",
-        description="Structure stage histogram matching: 'none' (the paper), 'position' (Chen & Wang "
-        "2010: every exemplar position used equally) or 'orientation' (the field's orientation "
-        "histogram pulled toward the exemplar's).",
+        description="What the orientation-field stage keeps balanced: 'orientation' spread, exemplar "
+        "'position' use, or 'none' (the paper).",
+        json_schema_extra=ui(
+            details=(
+                "Structure stage histogram matching: 'none' (the paper), 'position' (Chen & Wang "
+                "2010: every exemplar position used equally) or 'orientation' (the field's orientation "
+                "histogram pulled toward the exemplar's)."
+            )
+        ),
     )
     structure_histogram_weight: float = Field(
         10.0,
         ge=0.0,
         le=100.0,
-        description="Weight of the structure stage's histogram matching (ignored with 'none').",
+        description="How strongly that balance is enforced (ignored with 'none').",
+        json_schema_extra=ui(
+            details=("Weight of the structure stage's histogram matching (ignored with 'none').")
+        ),
     )
 
     texture_histogram_weight: float = Field(
         3.0,
         ge=0.0,
         le=100.0,
-        description="Texture stage: position-histogram matching weight (Chen & Wang 2010, as wei-levoy's "
-        "histogram_weight); 0 = the paper's plain search.",
+        description="How strongly over-used exemplar places are avoided in the texture stage; 0 is the "
+        "paper's plain search.",
+        json_schema_extra=ui(
+            details=(
+                "Texture stage: position-histogram matching weight (Chen & Wang 2010, as wei-levoy's "
+                "histogram_weight); 0 = the paper's plain search."
+            )
+        ),
     )
 
     def periodic_stages(self) -> list[tuple[str, Shape]]:

@@ -32,6 +32,7 @@ from pydantic import Field, model_validator
 from synth.api import MethodSpec, Progress, Result, register
 from synth.grid.pyramid import gaussian_pyramid, level_shapes
 from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from synth.params import ui
 from synth.pixel.synthesis import check_neighbourhoods_fit, synthesize_source_map
 
 __all__ = ["WeiLevoyParams", "run_wei_levoy"]
@@ -40,46 +41,92 @@ __all__ = ["WeiLevoyParams", "run_wei_levoy"]
 class WeiLevoyParams(NeighbourhoodParams):
     """Parameters of the Wei-Levoy baseline."""
 
-    levels: int = Field(2, ge=1, le=6, description="Gaussian pyramid levels of exemplar and output.")
+    levels: int = Field(
+        2,
+        ge=1,
+        le=6,
+        description="Number of pyramid levels, coarse to fine (more levels: larger structures).",
+        json_schema_extra=ui(basic=True, details=("Gaussian pyramid levels of exemplar and output.")),
+    )
     iterations: int = Field(
         2,
         ge=1,
         le=10,
-        description="Passes per pyramid level (default 2; 3 when periodic and not given: a second square "
-        "pass closes the tile borders).",
+        description="Passes over the output at each pyramid level.",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Passes per pyramid level (default 2; 3 when periodic and not given: a second square "
+                "pass closes the tile borders)."
+            ),
+        ),
     )
     # Pixel neighbourhoods need more k-coherent candidates than smooth tensor fields to match exact
     # search within 5% (docs/benchmarks.md, "Fast search against exact search").
-    k: int = Field(10, ge=0, le=32, description="k-coherence: similar exemplar positions per candidate.")
+    k: int = Field(
+        10,
+        ge=0,
+        le=32,
+        description="How many similar exemplar places each neighbour proposes (k of the k-coherence search).",
+        json_schema_extra=ui(details=("k-coherence: similar exemplar positions per candidate.")),
+    )
     kset_size: int = Field(
         7,
         ge=3,
         le=15,
-        description="k-coherence sets: side of the square neighbourhoods compared to build them (odd).",
+        description="Side of the windows compared when listing similar exemplar places before the run.",
+        json_schema_extra=ui(
+            unit="px",
+            odd=True,
+            details=("k-coherence sets: side of the square neighbourhoods compared to build them (odd)."),
+        ),
     )
     kset_dims: int = Field(
-        8, ge=1, le=64, description="k-coherence sets: principal components of those neighbourhoods."
+        8,
+        ge=1,
+        le=64,
+        description="Number of principal components kept of those windows (fewer: faster, rougher).",
+        json_schema_extra=ui(details=("k-coherence sets: principal components of those neighbourhoods.")),
     )
     falloff: float = Field(
         0.156,
         ge=0.0,
         le=2.0,
-        description="Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
-        "side (Efros & Leung: 1 / 6.4 = 0.156); 0 = every entry weighs the same (Wei & Levoy).",
+        description="How fast the window's pixels weigh less away from its centre; 0 weighs all equally "
+        "(Gaussian σ = falloff × side).",
+        json_schema_extra=ui(
+            details=(
+                "Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
+                "side (Efros & Leung: 1 / 6.4 = 0.156); 0 = every entry weighs the same (Wei & Levoy)."
+            )
+        ),
     )
     refinement: Literal["same", "square"] = Field(
         "square",
-        description="Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
-        "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
-        "proposing candidates.",
+        description="Window of the later passes: 'same' as the first pass, or 'square': all around each "
+        "pixel.",
+        json_schema_extra=ui(
+            details=(
+                "Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
+                "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
+                "proposing candidates."
+            )
+        ),
     )
     histogram_weight: float = Field(
         10.0,
         ge=0.0,
         le=100.0,
-        description="Position-histogram matching weight (Chen & Wang 2010): 0 = the paper's plain Wei-Levoy, "
-        "which grows garbage (smears, streaks) on natural textures; larger values push toward every "
-        "exemplar position being copied equally often.",
+        description="How strongly over-used exemplar places are avoided; 0 is the paper's plain method "
+        "(position histogram, Chen & Wang 2010).",
+        json_schema_extra=ui(
+            basic=True,
+            details=(
+                "Position-histogram matching weight (Chen & Wang 2010): 0 = the paper's plain Wei-Levoy, "
+                "which grows garbage (smears, streaks) on natural textures; larger values push toward every "
+                "exemplar position being copied equally often."
+            ),
+        ),
     )
 
     @model_validator(mode="before")

@@ -158,7 +158,7 @@ def test_a_sweep_above_the_pixel_limit_is_422_naming_it(tmp_path):
         )
     assert r.status_code == 422
     assert r.json()["field"] == "grid"
-    assert "TEXSYNTH_MAX_SWEEP_PIXELS" in r.json()["detail"] and "16384 output pixels" in r.json()["detail"]
+    assert "TEXSYNTH_MAX_SWEEP_PIXELS" in r.json()["message"] and "16384 output pixels" in r.json()["message"]
     assert service.store.count() == 0
 
 
@@ -171,8 +171,8 @@ def test_a_sweep_above_the_run_limit_is_422_naming_it(tmp_path):
             files={"exemplar": ("e.png", _png(32))},
         )
     assert r.status_code == 422
-    assert "3 runs is more than the limit of 2" in r.json()["detail"]
-    assert "TEXSYNTH_MAX_SWEEP_RUNS" in r.json()["detail"]
+    assert "3 runs is more than the limit of 2" in r.json()["message"]
+    assert "TEXSYNTH_MAX_SWEEP_RUNS" in r.json()["message"]
 
 
 def test_a_job_whose_memory_estimate_is_too_large_is_422_before_queueing(api):
@@ -186,8 +186,8 @@ def test_a_job_whose_memory_estimate_is_too_large_is_422_before_queueing(api):
     assert r.status_code == 422, r.text
     body = r.json()
     assert body["field"] == "angular_step"
-    assert "360000 rotated copies" in body["detail"] and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["detail"]
-    assert re.search(r"about \d+\.\d GiB", body["detail"])
+    assert "360000 rotated copies" in body["message"] and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["message"]
+    assert re.search(r"about \d+\.\d GiB", body["message"])
     assert service.store.count() == 0
     # the paper's step is fine
     params["angular_step"] = 5
@@ -233,8 +233,8 @@ def test_an_exemplar_far_larger_than_the_output_is_422(api):
     assert r.status_code == 422
     body = r.json()
     assert body["field"] == "exemplar"
-    assert "4096 times the pixels of the 16x16 output" in body["detail"]
-    assert "TEXSYNTH_MAX_INPUT_OUTPUT_RATIO" in body["detail"]
+    assert "4096 times the pixels of the 16x16 output" in body["message"]
+    assert "TEXSYNTH_MAX_INPUT_OUTPUT_RATIO" in body["message"]
     assert service.store.count() == 0
 
 
@@ -274,8 +274,8 @@ def test_a_job_whose_time_estimate_exceeds_the_time_limit_is_422_before_queueing
     )
     assert r.status_code == 422, r.text
     body = r.json()
-    assert body["field"] == "depth" and "TEXSYNTH_SOFT_TIME_LIMIT" in body["detail"]
-    assert re.search(r"about 7\d minutes", body["detail"]) and service.store.count() == 0
+    assert body["field"] == "depth" and "TEXSYNTH_SOFT_TIME_LIMIT" in body["message"]
+    assert re.search(r"about 7\d minutes", body["message"]) and service.store.count() == 0
     # Kopf's rate fits the same volume in the limit; a small Wei-Levoy volume is queued too.
     for method, side in (("solid-kopf", 256), ("solid-wei-levoy", 32)):
         params = {"width": side, "height": side, "depth": side}

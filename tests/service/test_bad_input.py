@@ -70,7 +70,7 @@ class TestRejected:
     def test_truncated_image_422(self, embedded, exemplar_png):
         r = _post(embedded, exemplar_png[: len(exemplar_png) // 2], method="test-blur")
         assert r.status_code == 422 and r.json()["field"] == "exemplar"
-        assert "truncated" in r.json()["detail"] or "corrupt" in r.json()["detail"]
+        assert "truncated" in r.json()["message"] or "corrupt" in r.json()["message"]
 
     @pytest.mark.parametrize(
         ("params", "field"),
@@ -85,7 +85,7 @@ class TestRejected:
     def test_bad_parameter_422_names_the_field(self, embedded, exemplar_png, params, field):
         r = _post(embedded, exemplar_png, method="test-blur", params=params)
         assert r.status_code == 422, r.text
-        assert r.json()["field"] == field and field in r.json()["detail"]
+        assert r.json()["field"] == field and field in r.json()["message"]
 
     @pytest.mark.parametrize(
         ("method", "params", "field", "words"),
@@ -103,7 +103,7 @@ class TestRejected:
         the 64x64 exemplar) is checked at submission from the exemplar's shape."""
         r = _post(embedded, exemplar_png, method=method, params={"width": 64, "height": 64, **params})
         assert r.status_code == 422, r.text
-        assert r.json()["field"] == field and words in r.json()["detail"]
+        assert r.json()["field"] == field and words in r.json()["message"]
 
     @pytest.mark.parametrize(
         ("params", "fields", "field", "words"),
@@ -116,7 +116,7 @@ class TestRejected:
     def test_size_form_fields_are_checked_422(self, embedded, exemplar_png, params, fields, field, words):
         r = _post(embedded, exemplar_png, method="test-blur", params=params, **fields)
         assert r.status_code == 422, r.text
-        assert r.json()["field"] == field and words in r.json()["detail"]
+        assert r.json()["field"] == field and words in r.json()["message"]
 
     def test_params_not_json_422(self, embedded, exemplar_png):
         r = _post(embedded, exemplar_png, method="test-blur", params="{width: 3")
@@ -124,7 +124,7 @@ class TestRejected:
 
     def test_unknown_method_422(self, embedded, exemplar_png):
         r = _post(embedded, exemplar_png, method="no-such-method")
-        assert r.status_code == 422 and r.json()["field"] == "method" and "test-blur" in r.json()["detail"]
+        assert r.status_code == 422 and r.json()["field"] == "method" and "test-blur" in r.json()["message"]
 
     def test_missing_exemplar_422(self, embedded):
         r = _post(embedded, None, method="test-blur")
@@ -172,7 +172,7 @@ class TestNonFiniteAndHuge:
     def test_non_finite_params_422(self, embedded, exemplar_png, raw, field, detail):
         r = _post(embedded, exemplar_png, method="test-blur", params=raw)
         assert r.status_code == 422, r.text
-        assert r.json()["field"] == field and detail in r.json()["detail"]
+        assert r.json()["field"] == field and detail in r.json()["message"]
 
     def test_non_finite_sweep_grid_422(self, embedded, exemplar_png):
         r = httpx.post(
@@ -190,7 +190,7 @@ class TestNonFiniteAndHuge:
         r = httpx.get(embedded.url + "/api/jobs", params={"state": "bogus"})
         body = r.json()
         assert r.status_code == 422 and body["field"] == "state"
-        assert "succeeded" in body["detail"] and "'bogus'" in body["detail"]
+        assert "succeeded" in body["message"] and "'bogus'" in body["message"]
 
 
 @pytest.mark.usefixtures("nothing_queued")

@@ -47,9 +47,9 @@ def test_volume_job_from_per_plane_exemplars(embedded):
         want = np.round(take(stack.astype(np.float64)) / 65535 * 255)
         assert np.abs(got.astype(np.float64) - want).max() <= 1
     r = httpx.get(f"{embedded.url}/api/jobs/{job['id']}/slices/xz/16.png", timeout=30)
-    assert r.status_code == 422 and "index must lie in [0, 15]" in r.json()["detail"]
+    assert r.status_code == 422 and "index must lie in [0, 15]" in r.json()["message"]
     r = httpx.get(f"{embedded.url}/api/jobs/{job['id']}/slices/zz/1.png", timeout=30)
-    assert r.status_code == 422 and "plane must be one of xy, xz, yz" in r.json()["detail"]
+    assert r.status_code == 422 and "plane must be one of xy, xz, yz" in r.json()["message"]
 
 
 @pytest.mark.parametrize(
@@ -79,7 +79,7 @@ def test_bad_volume_inputs_are_refused_before_queueing(embedded, files, params, 
         timeout=30,
     )
     assert r.status_code == 422, r.text
-    assert r.json()["field"] == field and detail in r.json()["detail"]
+    assert r.json()["field"] == field and detail in r.json()["message"]
     assert store.count() == before
 
 
