@@ -135,7 +135,10 @@ const sizeOf = (job) => {
 // aria-describedby (with its range, unit and "odd"), and its constraints are checked before submitting.
 
 function resolve(prop) {
-  // {anyOf: [{enum|type}, {type: null}]} -> the non-null branch, nullable
+  // {anyOf: [{enum|type}, {type: null}]} or {type: [T, "null"]} -> the non-null branch, nullable
+  if (Array.isArray(prop.type)) {
+    return { ...prop, type: prop.type.find((t) => t !== "null"), nullable: prop.nullable || prop.type.includes("null") };
+  }
   if (prop.anyOf) {
     const branch = prop.anyOf.find((b) => b.type !== "null") || {};
     return { ...prop, ...branch, nullable: prop.anyOf.some((b) => b.type === "null") };
@@ -143,19 +146,17 @@ function resolve(prop) {
   return prop;
 }
 
-// "3–15, odd, px": what the schema allows, in words
+// "whole number, 3–15, odd": what the schema allows, in words
 function rangeText(prop) {
   const parts = [];
-  const lo = prop.minimum ?? prop.exclusiveMinimum;
-  const hi = prop.maximum ?? prop.exclusiveMaximum;
-  const loText = lo === undefined ? "" : `${prop.exclusiveMinimum !== undefined && prop.minimum === undefined ? "> " : ""}${lo}`;
-  const hiText = hi === undefined ? "" : `${prop.exclusiveMaximum !== undefined && prop.maximum === undefined ? "< " : ""}${hi}`;
-  if (lo !== undefined && hi !== undefined) parts.push(loText.startsWith(">") || hiText.startsWith("<") ? `${loText}, ${hiText}` : `${lo}–${hi}`);
-  else if (lo !== undefined) parts.push(prop.exclusiveMinimum !== undefined && prop.minimum === undefined ? `> ${lo}` : `≥ ${lo}`);
-  else if (hi !== undefined) parts.push(prop.exclusiveMaximum !== undefined && prop.maximum === undefined ? `< ${hi}` : `≤ ${hi}`);
+  const lo = prop.minimum !== undefined ? `≥ ${prop.minimum}` : prop.exclusiveMinimum !== undefined ? `> ${prop.exclusiveMinimum}` : "";
+  const hi = prop.maximum !== undefined ? `≤ ${prop.maximum}` : prop.exclusiveMaximum !== undefined ? `< ${prop.exclusiveMaximum}` : "";
+  if (prop.minimum !== undefined && prop.maximum !== undefined) parts.push(`${prop.minimum}–${prop.maximum}`);
+  else if (lo && hi) parts.push(`${lo} and ${hi}`);
+  else if (lo || hi) parts.push(lo || hi);
   if (prop["x-odd"]) parts.push("odd");
   if (prop.type === "integer") parts.unshift("whole number");
-  if (prop.nullable) parts.push("empty: automatic");
+  if (prop.nullable && !/empty:/.test(prop.description || "")) parts.push("empty: automatic");
   return parts.join(", ");
 }
 
@@ -198,7 +199,7 @@ function fieldFor(name, raw, required) {
       type: "number", id, "aria-describedby": described, inputmode: prop.type === "integer" ? "numeric" : "decimal",
       min: prop.minimum ?? prop.exclusiveMinimum, max: prop.maximum ?? prop.exclusiveMaximum,
       step: prop.type === "integer" ? (prop["x-odd"] ? 2 : 1) : "any",
-      placeholder: prop.nullable ? "automatic" : "",
+      placeholder: prop.nullable && !/empty:/.test(prop.description || "") ? "automatic" : "",
     });
     input.value = prop.default ?? "";
   } else {
@@ -237,8 +238,26 @@ function isBasic(schema, name) {
 
 function buildFields(schema, basic, advanced) {
   const required = new Set(schema.required || []);
-  for (const [name, prop] of Object.entries(schema.properties || {})) {
+  const props = schema.properties || {};
+  // a field's unit chosen in another field ("x-unit-field": voxel_size's voxel_unit) sits beside it
+  const unitFields = new Set(Object.values(props).map((p) => p["x-unit-field"]).filter(Boolean));
+  for (const [name, prop] of Object.entries(props)) {
+    if (unitFields.has(name)) continue;
     const field = fieldFor(name, prop, required.has(name));
+    const unitName = prop["x-unit-field"];
+    if (unitName && props[unitName]) {
+      const unit = resolve(props[unitName]);
+      const select = el("select", { id: `param-${unitName}`, name: unitName, class: "unit-select",
+        "aria-label": unit.title || unitName, "aria-describedby": `param-${unitName}-help` },
+      ...(unit.enum || []).map((v) => el("option", { value: v, text: v })));
+      select.value = unit.default ?? "";
+      const row = el("span", { class: "input-row" });
+      field.input.replaceWith(row);
+      row.append(field.input, select);
+      field.append(el("span", { class: "visually-hidden", id: `param-${unitName}-help`, text: unit.description || "" }));
+      field.unitInput = select;
+      field.dataset.unitName = unitName;
+    }
     (advanced && !isBasic(schema, name) ? advanced : basic).append(field);
   }
 }
@@ -262,6 +281,11 @@ function fieldValue(field) {
 }
 
 function setFieldValue(name, value) {
+  const unitOwner = document.querySelector(`.field[data-unit-name="${name}"]`);
+  if (unitOwner) {
+    if (value) unitOwner.unitInput.value = value;
+    return true;
+  }
   const field = document.querySelector(`.field[data-name="${name}"]`);
   if (!field) return false;
   const input = field.input;
@@ -281,6 +305,7 @@ function readFields(container) {
   for (const field of formFields(container)) {
     const value = fieldValue(field);
     if (value !== undefined) out[field.dataset.name] = value;
+    if (field.unitInput && value !== undefined) out[field.dataset.unitName] = field.unitInput.value;
   }
   return out;
 }
@@ -476,7 +501,9 @@ async function renderHome(fromJob, setParam) {
   });
   $("#job-form").addEventListener("focusout", (event) => {
     const field = event.target.closest(".field[data-kind]");
-    if (!field) return;
+    // leaving for a button: the submit checks everything (marking now would move the button away
+    // between the press and the release of the mouse)
+    if (!field || (event.relatedTarget && event.relatedTarget.matches("button"))) return;
     const message = checkField(field);
     if (message) markField(field, message);
   });
@@ -755,6 +782,7 @@ async function submitSweep() {
 // -- the job list: thumbnails, method and exemplar, filter by method and state, delete, paging -------
 const PAGE_SIZE = 12;
 let jobsOffset = 0;
+let jobsRequest = 0; // only the latest request's answer is shown (filters change while one is on its way)
 
 function setupJobList(gen) {
   jobsOffset = 0;
@@ -787,9 +815,10 @@ async function refreshJobs(gen = generation, now = false) {
   const query = new URLSearchParams({ limit: PAGE_SIZE, offset: jobsOffset });
   if ($("#filter-method").value) query.set("method", $("#filter-method").value);
   if ($("#filter-state").value) query.set("state", $("#filter-state").value);
+  const request = ++jobsRequest;
   try {
     const { data, count } = await api(`/api/jobs?${query}`);
-    if (gen !== generation) return;
+    if (gen !== generation || request !== jobsRequest) return;
     // an older service ignores ?method=: filter here too
     const rows = data.filter((j) => !query.get("method") || j.method === query.get("method"));
     tbody.replaceChildren(...rows.map((j) => {
@@ -959,7 +988,10 @@ function showViewer(job) {
   const tensors = [["coherence", "coherence.png"], ["orientation", "orientation.png"],
     ["ex-coherence", "exemplar-coherence.png"], ["ex-orientation", "exemplar-orientation.png"]];
   for (const [kind, name] of tensors) {
-    $(`#fig-${kind}`).hidden = !a[name];
+    // a missing exemplar image keeps its place, so the output's stay under the output
+    if (kind.startsWith("ex-")) $(`#fig-${kind}`).classList.toggle("absent", !a[name]);
+    else $(`#fig-${kind}`).hidden = !a[name];
+    $(`#fig-${kind}`).hidden = kind.startsWith("ex-") ? false : !a[name];
     if (a[name]) $(`#view-${kind}`).src = a[name];
   }
   $("#coherence-row").hidden = !a["coherence.png"] && !a["exemplar-coherence.png"];
@@ -1481,7 +1513,13 @@ function csvLink(sweep, text) {
 let sweepSort = { key: null, dir: 1 };
 
 const mean = (xs) => xs.reduce((a, b) => a + b, 0) / xs.length;
-const spread = (xs) => (xs.length > 1 ? Math.sqrt(xs.reduce((a, x) => a + (x - mean(xs)) ** 2, 0) / (xs.length - 1)) : 0);
+// the sample standard deviation; rounding noise of equal values (1e-17) reads as 0
+const spread = (xs) => {
+  if (xs.length < 2) return 0;
+  const m = mean(xs);
+  const sd = Math.sqrt(xs.reduce((a, x) => a + (x - m) ** 2, 0) / (xs.length - 1));
+  return sd <= 1e-9 * Math.max(...xs.map(Math.abs)) ? 0 : sd;
+};
 
 // One row per value of the swept parameter: every measure's mean ± standard deviation over the seeds,
 // the best value by the chosen measure marked, and "use this value" that fills the form with it.
@@ -1506,8 +1544,11 @@ function drawRanking(rows, param, metricCols, chosen, g) {
   $("#ranking-hint").textContent = chosen
     ? `mean ± standard deviation over ${seedsPer} seed${seedsPer === 1 ? "" : "s"}; best by ${label(chosen)} (${DIRECTION_TEXT[direction]}) marked ★`
     : "waiting for the first finished run";
-  $("#sweep-ranking thead").replaceChildren(el("tr", {}, el("th", { text: param }), el("th", { text: "runs done" }),
-    ...metricCols.map((c) => el("th", { text: label(c), class: c === chosen ? "chosen" : "" })), el("th", { text: "" })));
+  // the chosen measure first, then the others
+  const cols = chosen ? [chosen, ...metricCols.filter((c) => c !== chosen)] : metricCols;
+  $("#sweep-ranking thead").replaceChildren(el("tr", {}, el("th", { text: param }),
+    el("th", {}, el("span", { class: "visually-hidden", text: "fill the form" })), el("th", { text: "runs done" }),
+    ...cols.map((c) => el("th", { text: label(c), class: c === chosen ? "chosen" : "" }))));
   $("#sweep-ranking tbody").replaceChildren(...stats.map((s) => {
     const isBest = s === best;
     const use = el("button", { type: "button", class: "secondary use-value", text: "use this value",
@@ -1515,15 +1556,15 @@ function drawRanking(rows, param, metricCols, chosen, g) {
     use.disabled = !s.done.length;
     use.addEventListener("click", () => { location.hash = `#/new?from=${s.done[0].job}&set=${encodeURIComponent(param)}`; });
     return el("tr", { class: isBest ? "best" : "", "data-value": JSON.stringify(s.value) },
-      el("th", {}, String(s.value), isBest ? el("span", { class: "best-mark", text: " ★ best" }) : ""),
-      el("td", { class: "num", text: `${s.done.length} of ${s.runs.length}` }),
-      ...metricCols.map((c) => {
+      el("th", { class: "nowrap" }, String(s.value), isBest ? el("span", { class: "best-mark", text: " ★ best" }) : ""),
+      el("td", {}, use),
+      el("td", { class: "num nowrap", text: `${s.done.length} of ${s.runs.length}` }),
+      ...cols.map((c) => {
         const st = s.cols[c];
         const m = g[name(c)];
         return el("td", { class: `num verdict ${st ? verdictOf(m, st.mean, name(c)) : ""}`,
           text: st ? `${fmtNum(st.mean)}${st.n > 1 ? ` ± ${fmtNum(st.sd)}` : ""}` : "" });
-      }),
-      el("td", {}, use));
+      }));
   }));
 }
 
