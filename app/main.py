@@ -21,7 +21,7 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api.routes import health, jobs, methods, metrics, sweeps
+from app.api.routes import examples, health, jobs, methods, metrics, sweeps
 from app.errors import install_error_handlers
 from app.limits import BodyLimitMiddleware
 from app.openapi import install_openapi
@@ -82,7 +82,7 @@ def create_app(settings: Settings | None = None, *, reaper: bool = True) -> Fast
     app.add_middleware(SameOriginMiddleware, allowed=settings.allowed_origins)
     app.add_middleware(SecurityHeadersMiddleware)
     install_error_handlers(app)
-    for module in (jobs, methods, metrics, sweeps, health):
+    for module in (jobs, methods, metrics, sweeps, examples, health):
         app.include_router(module.router)
     install_openapi(app, service.methods, tokens=service.tokens.enabled)
 

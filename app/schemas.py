@@ -12,6 +12,7 @@ from jobs.store import STATES
 __all__ = [
     "DeletedPublic",
     "ErrorPublic",
+    "ExamplePublic",
     "FieldError",
     "HealthPublic",
     "JobPublic",
@@ -42,6 +43,21 @@ class ErrorPublic(BaseModel):
     field: str | None = Field(None, description="the form field or parameter at fault (the first one)")
     error: str = Field(description="machine-readable kind: input_too_large, unsupported_format, ...")
     message: str | None = Field(None, description="a 422's entries as one line of text")
+
+
+class ExamplePublic(BaseModel):
+    name: str
+    title: str
+    kind: str = Field(description="2d (an exemplar) or constraint (a constraint image)")
+    credit: str
+    licence: str = Field(description="SPDX identifier: CC0-1.0 or MIT")
+    url: str = Field(description="the PNG")
+    thumbnail: str = Field(description="a small PNG for a gallery")
+    suggested_method: str
+    has_fringes: bool = Field(
+        description="whether the image has lattice fringes (synth.evaluate.glossary.fringes_shown): a job "
+        "on it reports fringe statistics"
+    )
 
 
 class JobState(StrEnum):
@@ -87,6 +103,14 @@ class JobPublic(BaseModel):
         description="with tokens: the signed query (?access=...) that opens this job's files without "
         "a header until it expires; the file URLs above already carry it",
     )
+    thumbnail: str | None = Field(
+        None, description="URL of a small PNG: of the output once there is one, else of the exemplar"
+    )
+    artifacts_zip: str | None = Field(None, description="URL of a zip of every artifact (once there are any)")
+    exemplar_name: str | None = Field(None, description="the file name the exemplar was uploaded under")
+    input_names: dict[str, str] = Field(default_factory=dict, description="input role -> uploaded file name")
+    voxel_size: float | None = Field(None, description="a volume's voxel size (TIFF calibration); None: none")
+    voxel_unit: str | None = Field(None, description="the unit of voxel_size")
 
 
 class DeletedPublic(BaseModel):

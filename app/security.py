@@ -132,9 +132,12 @@ class SameOriginMiddleware:
 
 
 _PUBLIC_PATHS = frozenset({"/api/health"})
+#: The bundled examples: the service's own files, the same for everyone (app/api/routes/examples.py).
+_PUBLIC_PREFIXES = ("/api/examples",)
 #: GETs of one job's files, which a signed ``access`` query may open instead of a bearer token.
 _FILE_ROUTE = re.compile(
-    r"^/api/jobs/([0-9A-Za-z_-]+)/(?:artifacts/.+|inputs/[^/]+|preview\.png|slices/[^/]+/[^/]+\.png)$"
+    r"^/api/jobs/([0-9A-Za-z_-]+)/(?:artifacts/.+|artifacts\.zip|thumbnail\.png|inputs/[^/]+|preview\.png"
+    r"|slices/[^/]+/[^/]+\.png)$"
 )
 _MISSING = (
     "this service needs a token: send the header 'Authorization: Bearer <token>' "
@@ -151,7 +154,7 @@ class AuthMiddleware:
 
     def _principal(self, scope: Scope) -> tuple[Principal | None, str]:
         path = scope["path"].rstrip("/") or "/"
-        if path in _PUBLIC_PATHS:
+        if path in _PUBLIC_PATHS or path.startswith(_PUBLIC_PREFIXES):
             return Principal(name=None), ""
         header = dict(scope.get("headers") or []).get(b"authorization")
         if header is not None:

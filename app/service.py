@@ -16,7 +16,7 @@ import threading
 import time
 import uuid
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from celery import group
@@ -65,6 +65,7 @@ class JobRequest:
     seed: int
     inputs: dict[str, tuple[str, bytes]]
     shapes: dict[str, tuple[int, ...]]  # the decoded inputs' array shapes, for admission control
+    extras: dict[str, Any] = field(default_factory=dict)  # jobs.store.EXTRA_FIELDS
 
 
 class Service:
@@ -172,14 +173,17 @@ class Service:
         params_json: str | dict,
         seed: int | None,
         uploads: list[Upload],
-        size: Mapping[str, int | None] | None = None,
+        size: Mapping[str, Any] | None = None,
     ) -> JobRequest:
         """Check a submission completely (method, parameters, size, images) or raise an engine error.
 
         ``size``: the ``width``/``height``/``depth`` form fields; the same names inside ``params``
-        (how the first clients sent them) are still accepted and moved out here."""
+        (how the first clients sent them) are still accepted and moved out here. A volume's
+        ``voxel_size`` and ``voxel_unit`` come with them (:meth:`_validate_voxel`)."""
         spec = self.method(method)
         params = _parse_params(params_json)
+        size = dict(size or {})
+        voxel = self._validate_voxel(spec, size.pop("voxel_size", None), size.pop("voxel_unit", None))
         size = self._validate_size(spec, _take_size(spec, params, size))
         model = validate_params(spec.params_model, params)
         if seed is None:
@@ -212,7 +216,26 @@ class Service:
                 for role, u in by_role.items()
             },
             shapes=shapes,
+            extras={**voxel, "input_names": {u.role: _display_name(u.filename) for u in by_role.values()}},
         )
+
+    def _validate_voxel(self, spec: MethodSpec, size: Any, unit: Any) -> dict[str, Any]:
+        """A volume's calibration: ``voxel_size`` (> 0) in ``voxel_unit`` (one of :data:`VOXEL_UNITS`,
+        ``nm`` when a size comes alone); nothing given: an uncalibrated stack."""
+        if size is None:
+            if unit not in (None, "") and unit not in VOXEL_UNITS:
+                raise InvalidParameter("voxel_unit", unit, f"must be one of {', '.join(VOXEL_UNITS)}")
+            return {}
+        if spec.output_ndim != 3:
+            raise InvalidParameter("voxel_size", size, f"method '{spec.name}' makes 2-D images, not volumes")
+        if isinstance(size, bool) or not isinstance(size, int | float) or not math.isfinite(size):
+            raise InvalidParameter("voxel_size", size, "must be a finite number")
+        if not 0 < size <= VOXEL_SIZE_MAX:
+            raise InvalidParameter("voxel_size", size, f"must be above 0 and at most {VOXEL_SIZE_MAX:g}")
+        unit = unit or "nm"
+        if unit not in VOXEL_UNITS:
+            raise InvalidParameter("voxel_unit", unit, f"must be one of {', '.join(VOXEL_UNITS)}")
+        return {"voxel_size": float(size), "voxel_unit": unit}
 
     def _validate_size(self, spec: MethodSpec, size: dict[str, Any]) -> dict[str, int]:
         needed = ("height", "width") if spec.output_ndim == 2 else ("depth", "height", "width")
@@ -228,11 +251,14 @@ class Service:
         return dict(zip(needed, checked, strict=True))
 
     def manifest(self, req: JobRequest) -> dict[str, Any]:
+        voxel = {k: req.extras[k] for k in ("voxel_size", "voxel_unit") if k in req.extras}
         return {
             "method": req.method,
             "params": req.params,
             "size": req.size,
             "seed": req.seed,
+            **voxel,
+            "input_names": req.extras.get("input_names", {}),
             "texsynth": synth_version,
         }
 
@@ -247,6 +273,7 @@ class Service:
                 inputs=req.inputs,
                 manifest={**self.manifest(req), "owner": principal.name},
                 owner=principal.name,
+                extras=req.extras,
             )
         self._queue([job.id])
         return self.store.get(job.id) or job
@@ -322,6 +349,7 @@ class Service:
                     },
                     owner=principal.name,
                     share_inputs_of=job_ids[0] if job_ids else None,  # the upload stored once
+                    extras=req.extras,
                 )
                 job_ids.append(job.id)
             self.store.create_sweep(
@@ -370,6 +398,7 @@ class Service:
         end = job.finished or (time.time() if job.state == "running" else None)
         access = self.tokens.sign(job.id)
         signed = f"?access={access}" if access else ""
+        names = job.extras.get("input_names", {})
         preview = None
         if job.preview_at and job.state == "running":
             preview = f"{base}/preview.png?t={int(job.preview_at * 1000)}" + (
@@ -401,6 +430,14 @@ class Service:
             "sweep_id": job.sweep_id,
             "owner": job.owner,
             "access": access,
+            # of the output once there is one, else of the exemplar: the query changes with it
+            "thumbnail": f"{base}/thumbnail.png?of={'output' if 'output.png' in job.artifacts else 'input'}"
+            + (f"&access={access}" if access else ""),
+            "artifacts_zip": f"{base}/artifacts.zip{signed}" if job.artifacts else None,
+            "exemplar_name": names.get("exemplar", names.get("exemplar_xy")),
+            "input_names": names,
+            "voxel_size": job.extras.get("voxel_size"),
+            "voxel_unit": job.extras.get("voxel_unit"),
         }
 
     def sweep_public(self, sweep: dict[str, Any]) -> dict[str, Any]:
@@ -499,6 +536,12 @@ def _take_size(spec: MethodSpec, params: dict[str, Any], given: Mapping[str, int
             raise InvalidParameter(name, value, f"given twice, {size[name]} in params and {value} as a field")
         size[name] = value
     return size
+
+
+def _display_name(filename: str) -> str:
+    """An upload's file name as lists show it: the last path part, printable, at most 120 characters."""
+    name = filename.replace("\\", "/").rsplit("/", 1)[-1]
+    return "".join(c for c in name if c.isprintable())[:120]
 
 
 def _flatten(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]:

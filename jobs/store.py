@@ -43,6 +43,8 @@ from synth.io.atomic import atomic_write_bytes, atomic_write_json
 __all__ = ["STATES", "TERMINAL", "JobRecord", "JobStore", "pid_alive"]
 
 STATES = ("queued", "running", "succeeded", "failed", "cancelled")
+#: The highest progress a cancelled job reports: it stopped before the end (JobStore.finish).
+CANCELLED_AT_MOST = 0.99
 TERMINAL = frozenset({"succeeded", "failed", "cancelled"})
 
 _SCHEMA = """
@@ -74,7 +76,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     timings TEXT NOT NULL DEFAULT '{}',
     metrics TEXT NOT NULL DEFAULT '{}',
     owner TEXT,
-    size TEXT
+    size TEXT,
+    extras TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state, created);
 CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created);
@@ -99,6 +102,10 @@ CREATE TABLE IF NOT EXISTS workers (
 """
 
 _JSON_COLUMNS = ("params", "inputs", "artifacts", "timings", "metrics")
+#: What a job keeps beside its parameters (the ``extras`` JSON column): ``input_names``, the file name
+#: each input was uploaded under (shown in lists; the stored file is named by its role), and a volume's
+#: ``voxel_size`` and ``voxel_unit`` (the TIFF stack's calibration).
+EXTRA_FIELDS = ("input_names", "voxel_size", "voxel_unit")
 #: The output's sides, a record's ``size`` (never inside ``params``). Records made before ``size``
 #: had its own column kept them in ``params``: reading one moves them out.
 SIZE_FIELDS = ("width", "height", "depth")
@@ -142,6 +149,7 @@ class JobRecord:
     metrics: dict[str, Any] = field(default_factory=dict)
     owner: str | None = None  # the token name that submitted it (None: made without tokens)
     size: dict[str, int] = field(default_factory=dict)  # the output's width, height (, depth)
+    extras: dict[str, Any] = field(default_factory=dict)  # EXTRA_FIELDS
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> JobRecord:
@@ -149,6 +157,7 @@ class JobRecord:
         for name in _JSON_COLUMNS:
             values[name] = json.loads(values[name])
         values["size"] = _split_size(values["params"], json.loads(values["size"] or "null"))
+        values["extras"] = json.loads(values.get("extras") or "{}")
         return cls(**values)
 
 
@@ -180,9 +189,9 @@ class JobStore:
         with self._connect() as db:
             db.execute("PRAGMA journal_mode=WAL")
             db.executescript(_SCHEMA)
-            for table in ("jobs", "sweeps"):  # records made before owners and sizes had columns
+            for table in ("jobs", "sweeps"):  # records made before owners, sizes, extras had columns
                 columns = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
-                for column in ("owner", "size"):
+                for column in ("owner", "size", "extras") if table == "jobs" else ("owner", "size"):
                     if column not in columns:
                         with contextlib.suppress(sqlite3.OperationalError):  # another process added it
                             db.execute(f"ALTER TABLE {table} ADD COLUMN {column} TEXT")
@@ -230,6 +239,7 @@ class JobStore:
         job_id: str | None = None,
         owner: str | None = None,
         share_inputs_of: str | None = None,
+        extras: dict[str, Any] | None = None,
     ) -> JobRecord:
         """Store the inputs and manifest in a new job folder, then insert the record as ``queued``.
 
@@ -240,7 +250,7 @@ class JobStore:
         ``share_inputs_of`` names a job (of the same sweep) whose stored inputs are the same bytes:
         they are hard-linked instead of written again, so a sweep stores its upload once. Nothing
         ever writes into an input file (a replacement would be a new file), and deleting one job
-        removes only its own link, so the runs share the bytes safely.
+        removes only its own link, so the runs share the bytes safely. ``extras``: :data:`EXTRA_FIELDS`.
         """
         job_id = job_id or uuid.uuid4().hex
         folder = self.job_dir(job_id)
@@ -259,8 +269,8 @@ class JobStore:
         with self._connect() as db:
             db.execute(
                 "INSERT INTO jobs"
-                " (id, created, method, params, size, seed, inputs, sweep_id, state, updated, owner)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
+                " (id, created, method, params, size, seed, inputs, sweep_id, state, updated, owner, extras)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
                 (
                     job_id,
                     now,
@@ -272,6 +282,7 @@ class JobStore:
                     sweep_id,
                     now,
                     owner,
+                    json.dumps({k: v for k, v in (extras or {}).items() if k in EXTRA_FIELDS}),
                 ),
             )
         record = self.get(job_id)
@@ -289,11 +300,15 @@ class JobStore:
         state: str | None = None,
         sweep_id: str | None = None,
         owner: str | None = None,
+        method: str | None = None,
         limit: int = 50,
         offset: int = 0,
     ) -> tuple[list[JobRecord], int]:
         """Jobs, newest first, and the total number matching the filters (``owner``: one owner's)."""
         where, args = [], []
+        if method:
+            where.append("method = ?")
+            args.append(method)
         if owner is not None:
             where.append("owner = ?")
             args.append(owner)
@@ -428,15 +443,18 @@ class JobStore:
     def finish(self, job_id: str, token: str | None, state: str, message: str = "") -> bool:
         """End the job as ``failed`` or ``cancelled`` (if ``token`` is given, only if the run owns it).
 
-        A failed job keeps the stage it had reached, so that the page can say where it failed.
+        A failed job keeps the stage it had reached, so that the page can say where it failed; a
+        cancelled one keeps its progress where it stopped, below :data:`CANCELLED_AT_MOST` (a job
+        stopped while writing its artifacts, at 1.0, did not finish: it never reads as 100 % done).
         """
         assert state in ("failed", "cancelled")
         now = time.time()
         query = (
             "UPDATE jobs SET state = ?, message = ?, stage = CASE WHEN ? = 'failed' THEN stage ELSE ? END,"
+            " fraction = CASE WHEN ? = 'cancelled' THEN MIN(fraction, ?) ELSE fraction END,"
             " finished = ?, updated = ?, run_token = NULL WHERE id = ? AND state IN ('queued', 'running')"
         )
-        args: list[Any] = [state, message, state, state, now, now, job_id]
+        args: list[Any] = [state, message, state, state, state, CANCELLED_AT_MOST, now, now, job_id]
         if token is not None:
             query += " AND run_token = ?"
             args.append(token)

@@ -87,6 +87,7 @@ def synthesize_to_folder(
     voxel_size: float | None = None,
     max_output: int | None = None,
     threads: int | None = None,
+    voxel_unit: str = "nm",
 ) -> Outcome:
     """Run ``method`` on decoded ``images`` (by role) and write all artifacts into ``folder``.
 
@@ -94,7 +95,8 @@ def synthesize_to_folder(
     :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
     the synthesis started and finished (Unix time). ``threads``: numba threads of the synthesis and the
     evaluation (:mod:`synth.threads`; default every core). A volume is evaluated plane by plane against its
-    per-plane exemplars when given; ``voxel_size`` (nm) calibrates its TIFF stack and its fringe lengths.
+    per-plane exemplars when given; ``voxel_size`` (in ``voxel_unit``, nm by default) calibrates its TIFF
+    stack (ImageJ spacing and unit) and, in nm, its fringe lengths.
     The exemplar's bit depth (from :func:`load_inputs`' ``bits``, else that of the arrays given) is kept
     for the outputs and said in ``metrics.json`` (``input_bits``).
     """
@@ -112,6 +114,7 @@ def synthesize_to_folder(
             plots,
             voxel_size,
             max_output,
+            voxel_unit,
         )
 
 
@@ -128,6 +131,7 @@ def _synthesize_to_folder(
     plots: bool,
     voxel_size: float | None,
     max_output: int | None,
+    voxel_unit: str = "nm",
 ) -> Outcome:
     from synth.output.artifacts import write_artifacts  # deferred: evaluation and plots only when writing
 
@@ -161,5 +165,6 @@ def _synthesize_to_folder(
         plots=plots,
         exemplars=planes or None,
         voxel_size=voxel_size,
+        unit=voxel_unit,
     )
     return Outcome(result, files, metrics)

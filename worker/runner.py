@@ -123,6 +123,8 @@ def run_job(
             manifest=manifest,
             max_output=settings.max_output_pixels,
             threads=settings.threads,
+            voxel_size=job.extras.get("voxel_size"),
+            voxel_unit=job.extras.get("voxel_unit") or "nm",
         )
         timings = {k: float(v) for k, v in outcome.result.timings.items()}
         if store.commit_success(job_id, token, staging, outcome.files, timings, outcome.metrics):

@@ -13,7 +13,12 @@ mid-slices' ``coherence_{xy,xz,yz}.png`` and ``orientation_{xy,xz,yz}.png``
 two-point correlations (:func:`synth.evaluate.evaluate_volume`), its plots per plane plus
 ``plots/s2.png``. The metrics also carry the exemplars' diagnostics under ``exemplar`` (their
 stationarity and any warning, :func:`synth.analysis.stationarity.exemplar_diagnostics`), which the
-manifest repeats in short (``exemplar_stationarity``). Every file is written atomically.
+manifest repeats in short (``exemplar_stationarity``); ``headline``, each headline measure with its
+target, direction and verdict (:func:`synth.evaluate.glossary.headline`); and ``fringes.shown``: fringe
+statistics only for an exemplar with lattice fringes (:func:`synth.evaluate.glossary.fringes_shown`),
+else ``{"shown": false, "reason"}``. Every run also gets ``exemplar-coherence.png`` and
+``exemplar-orientation.png``, the exemplar's own tensor images (the ``xy`` one's for per-plane
+exemplars). Every file is written atomically.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ from synth import __version__
 from synth.analysis.stationarity import exemplar_diagnostics
 from synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from synth.api import Result
-from synth.evaluate.measures import evaluate_pair_fringes, evaluate_volume, to_json_types
+from synth.evaluate.glossary import fringes_shown, headline
+from synth.evaluate.measures import as_grey, evaluate_pair_fringes, evaluate_volume, to_json_types
 from synth.io import (
     InputBits,
     array_to_unit,
@@ -189,6 +195,7 @@ def write_artifacts(
             result.tensor_field if result.tensor_field is not None else structure_tensor(image, mode="wrap")
         )
         names += _write_tensor_images(folder, "", np.asarray(tensors))
+    names += _write_tensor_images(folder, "exemplar-", structure_tensor(as_grey(exemplar, "exemplar")))
     if constraint is not None:
         names += _write_tensor_images(
             folder, "constraint_", structure_tensor(np.asarray(constraint, np.float32))
@@ -202,14 +209,22 @@ def write_artifacts(
             names.append(f"{key}.png")
 
     fringes = None
+    shown, reason, presence = fringes_shown(exemplar)
     if volume:
         pixel_size = None
         if voxel_size is not None and unit.strip() == "nm" and len(set(np.broadcast_to(voxel_size, 3))) == 1:
             pixel_size = float(np.broadcast_to(voxel_size, 3)[0])
         targets = exemplars if exemplars is not None else exemplar
-        metrics = to_json_types(evaluate_volume(targets, image, pixel_size=pixel_size))
+        metrics = to_json_types(evaluate_volume(targets, image, pixel_size=pixel_size, fringes=shown))
     else:
-        metrics, fringes = evaluate_pair_fringes(exemplar, image)
+        metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
+    plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
+    status = {"shown": shown, "reason": reason, "exemplar": to_json_types(presence)}
+    if isinstance(metrics.get("fringes"), dict):
+        metrics["fringes"] = {**metrics["fringes"], **status}
+    else:
+        metrics["fringes"] = status
+    metrics["headline"] = headline(metrics.get("summary", {}))
     roles = (
         {f"exemplar_{p}": e for p, e in exemplars.items()}
         if volume and exemplars is not None
@@ -225,9 +240,9 @@ def write_artifacts(
         plot_dir = folder / "plots"
         plot_dir.mkdir(exist_ok=True)
         targets = exemplars if volume and exemplars is not None else exemplar
-        written = write_plots(targets, image, metrics, plot_dir, fringes=fringes)
+        written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes)
         if volume:
-            s2_plot = write_s2_plot(metrics, plot_dir)
+            s2_plot = write_s2_plot(plot_metrics, plot_dir)
             written += [s2_plot] if s2_plot is not None else []
         names += sorted(f"plots/{Path(p).name}" for p in written)
 

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import re
+import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -177,3 +180,178 @@ def test_favicon_is_served_and_linked(open_api):
     assert r.status_code == 200 and r.headers["content-type"] == "image/x-icon"
     assert Image.open(io.BytesIO(r.content)).size == (32, 32)
     assert '<link rel="icon" href="/favicon.ico"' in client.get("/").text
+
+
+# -- examples ------------------------------------------------------------------------------------------
+
+
+def test_examples_are_listed_served_and_credited(open_api):
+    client, _ = open_api
+    listed = client.get("/api/examples").json()
+    names = [e["name"] for e in listed]
+    assert names == ["soot-fringes", "brick", "grass", "gravel", "laminar", "constraint-waves"]
+    methods = {m["name"] for m in client.get("/api/methods").json()["data"]}
+    for e in listed:
+        assert e["licence"] in ("CC0-1.0", "MIT") and e["credit"] and e["title"]
+        assert e["kind"] in ("2d", "constraint") and e["suggested_method"] in methods
+        image = client.get(e["url"])
+        assert image.status_code == 200 and image.headers["content-type"] == "image/png"
+        assert Image.open(io.BytesIO(image.content)).size == (128, 128)
+        thumb = client.get(e["thumbnail"])
+        assert thumb.status_code == 200 and max(Image.open(io.BytesIO(thumb.content)).size) == 96
+    fringed = {e["name"] for e in listed if e["has_fringes"]}
+    assert fringed == {"soot-fringes", "laminar"}  # brick, grass, gravel: no HRTEM fringe statistics
+    assert [e["kind"] for e in listed].count("constraint") == 1
+    assert client.get("/api/examples/nope").status_code == 404
+    assert client.get("/api/examples/..%2Fmain.py").status_code == 404
+
+
+def test_examples_are_public_with_tokens(tmp_path):
+    client, _ = _client(Settings(data_dir=tmp_path / "data", api_tokens="alice:" + "a" * 20))
+    with client:
+        assert client.get("/api/jobs").status_code == 401
+        assert client.get("/api/examples").status_code == 200
+        assert client.get("/api/examples/brick/thumbnail").status_code == 200
+
+
+def test_the_bundled_examples_are_their_sources_and_packaged():
+    from app.examples.build import main
+
+    assert main(["--check"]) == 0
+    text = (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text()
+    assert '"examples/*.png"' in text and '"examples/README.md"' in text
+
+
+# -- job list, thumbnails, zip ---------------------------------------------------------------------------
+
+
+def _submit(client, method="wei-levoy", name="carbon sample.png", **data):
+    form = {"method": method, "width": "32", "height": "32", "seed": "1", **data}
+    return client.post("/api/jobs", data=form, files={"exemplar": (name, _png(40))})
+
+
+def _finish(service, job_id: str, side: int = 64) -> None:
+    """Run the job as a worker would, without synthesis: claim, write artifacts, commit."""
+    token, _ = service.store.claim(job_id, os.getpid(), 10.0)
+    staging = service.store.job_dir(job_id) / f".run-{token}"
+    (staging / "plots").mkdir(parents=True)
+    (staging / "output.png").write_bytes(_png(side, seed=2))
+    (staging / "metrics.json").write_text('{"summary": {}}')
+    (staging / "plots" / "grey.png").write_bytes(_png(8))
+    names = ["output.png", "metrics.json", "plots/grey.png"]
+    assert service.store.commit_success(job_id, token, staging, names, {}, {})
+
+
+def test_the_job_list_filters_pages_and_names_the_exemplar(open_api):
+    client, service = open_api
+    ids = [_submit(client, name=f"sample-{i}.png").json()["id"] for i in range(3)]
+    other = _submit(client, method="quilting", name="C:\\lab\\brick.png").json()["id"]
+    _finish(service, ids[0])
+    page = client.get("/api/jobs", params={"method": "wei-levoy", "limit": 2}).json()
+    assert page["count"] == 3 and [j["id"] for j in page["data"]] == ids[::-1][:2]
+    rest = client.get("/api/jobs", params={"method": "wei-levoy", "limit": 2, "offset": 2}).json()
+    assert [j["id"] for j in rest["data"]] == [ids[0]]
+    done = client.get("/api/jobs", params={"method": "wei-levoy", "state": "succeeded"}).json()
+    assert done["count"] == 1 and done["data"][0]["exemplar_name"] == "sample-0.png"
+    assert client.get(f"/api/jobs/{other}").json()["exemplar_name"] == "brick.png"
+    r = client.get("/api/jobs", params={"method": "nope"})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "method"]
+
+
+def test_thumbnails_show_the_exemplar_then_the_output(open_api):
+    client, service = open_api
+    job = _submit(client).json()
+    r = client.get(job["thumbnail"])
+    assert r.status_code == 200 and Image.open(io.BytesIO(r.content)).size == (40, 40)  # the exemplar
+    _finish(service, job["id"], side=200)
+    after = client.get(f"/api/jobs/{job['id']}").json()["thumbnail"]
+    assert after != job["thumbnail"]  # the query changes, so a cached exemplar thumbnail is not reused
+    image = Image.open(io.BytesIO(client.get(after).content))
+    assert image.size == (66, 66)  # 200 px in blocks of 3 (the last 2 px dropped): at most 96
+
+
+def test_all_artifacts_in_one_zip(open_api):
+    client, service = open_api
+    job = _submit(client).json()
+    assert job["artifacts_zip"] is None
+    assert client.get(f"/api/jobs/{job['id']}/artifacts.zip").status_code == 404
+    _finish(service, job["id"])
+    public = client.get(f"/api/jobs/{job['id']}").json()
+    r = client.get(public["artifacts_zip"])
+    assert r.status_code == 200 and r.headers["content-type"] == "application/zip"
+    assert job["id"] in r.headers["content-disposition"]
+    with zipfile.ZipFile(io.BytesIO(r.content)) as archive:
+        names = archive.namelist()
+        assert names == [f"{job['id']}/{n}" for n in ("output.png", "metrics.json", "plots/grey.png")]
+        assert (
+            archive.read(names[0]) == (service.store.job_dir(job["id"]) / "out" / "output.png").read_bytes()
+        )
+    assert client.get("/api/jobs/nope/artifacts.zip").status_code == 404
+
+
+def test_the_zip_and_thumbnail_keep_ownership_and_signed_urls(tmp_path):
+    from tests.service.test_tokens import ALICE, BOB, A, B
+
+    client, service = _client(Settings(data_dir=tmp_path / "data", api_tokens=f"alice:{ALICE}, bob:{BOB}"))
+    with client:
+        job = client.post(
+            "/api/jobs",
+            headers=A,
+            data={"method": "wei-levoy", "width": "32", "height": "32"},
+            files={"exemplar": ("e.png", _png(40))},
+        ).json()
+        _finish(service, job["id"])
+        public = client.get(f"/api/jobs/{job['id']}", headers=A).json()
+        for url in (public["artifacts_zip"], public["thumbnail"]):
+            assert "access=" in url and client.get(url).status_code == 200  # signed: no header needed
+            bare = url.split("?")[0]
+            assert client.get(bare).status_code == 401
+            assert client.get(bare, headers=B).status_code == 404  # another token's job
+
+
+def test_delete_removes_an_own_finished_job(open_api):
+    client, service = open_api
+    job = _submit(client).json()
+    _finish(service, job["id"])
+    assert client.delete(f"/api/jobs/{job['id']}").json()["state"] == "deleted"
+    assert client.get(f"/api/jobs/{job['id']}").status_code == 404
+    assert client.get("/api/jobs").json()["count"] == 0
+
+
+# -- volumes: voxel size -------------------------------------------------------------------------------
+
+
+def test_voxel_size_is_checked_and_kept(open_api):
+    client, service = open_api
+    base = {"method": "solid-kopf", "width": "16", "height": "16", "depth": "16"}
+    files = {"exemplar": ("e.png", _png(32))}
+    job = client.post("/api/jobs", data={**base, "voxel_size": "0.055"}, files=files).json()
+    assert (job["voxel_size"], job["voxel_unit"]) == (0.055, "nm")  # nm when only a size is given
+    manifest = json.loads((service.store.job_dir(job["id"]) / "manifest.json").read_text())
+    assert manifest["voxel_size"] == 0.055 and manifest["voxel_unit"] == "nm"
+    plain = client.post("/api/jobs", data=base, files=files).json()
+    assert plain["voxel_size"] is None and plain["voxel_unit"] is None  # uncalibrated
+    for extra, loc in (
+        ({"voxel_size": "0"}, "voxel_size"),
+        ({"voxel_size": "2", "voxel_unit": "parsec"}, "voxel_unit"),
+    ):
+        r = client.post("/api/jobs", data={**base, **extra}, files=files)
+        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", loc], r.text
+    r = client.post("/api/jobs", data={"method": "wei-levoy", "voxel_size": "1"}, files=files)
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "voxel_size"]
+    assert client.post("/api/jobs", data={**base, "voxel_size": ""}, files=files).status_code == 202
+
+
+def test_a_cancelled_job_never_reads_as_done(open_api):
+    client, service = open_api
+    job = _submit(client).json()
+    token, _ = service.store.claim(job["id"], os.getpid(), 10.0)
+    assert service.store.progress(job["id"], token, "writing artifacts", 1.0)
+    client.delete(f"/api/jobs/{job['id']}")  # cancel requested while it writes
+    assert service.store.finish(job["id"], token, "cancelled", "cancelled by request")
+    public = client.get(f"/api/jobs/{job['id']}").json()
+    assert public["state"] == "cancelled" and public["fraction"] < 1.0
+    queued = _submit(client).json()
+    client.delete(f"/api/jobs/{queued['id']}")
+    public = client.get(f"/api/jobs/{queued['id']}").json()
+    assert public["state"] == "cancelled" and public["fraction"] == 0.0

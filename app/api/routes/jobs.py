@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
+import zipfile
 from functools import lru_cache
 from typing import Annotated, Any
 
@@ -9,11 +12,12 @@ import numpy as np
 from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Response, UploadFile
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
+from starlette.background import BackgroundTask
 
 from app.api.deps import PrincipalDep, ServiceDep
 from app.auth import Principal
 from app.schemas import DeletedPublic, ErrorPublic, JobPublic, JobsPublic
-from app.service import Upload
+from app.service import VOXEL_UNITS, Upload
 from jobs.store import STATES
 from synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
 
@@ -82,13 +86,23 @@ def read_size(
     width: Annotated[int | None, Form(description="output width (pixels); default 128")] = None,
     height: Annotated[int | None, Form(description="output height (pixels); default 128")] = None,
     depth: Annotated[int | None, Form(description="output depth (slices), solid methods; default 64")] = None,
-) -> dict[str, int | None]:
-    """The output size's form fields (a FastAPI dependency of the routes that submit jobs). Clients of
-    the first API send the same names inside ``params``; both are accepted."""
-    return {"width": width, "height": height, "depth": depth}
+    voxel_size: Annotated[
+        float | None,
+        Form(description="solid methods: the size of a voxel, written into the TIFF stack (ImageJ spacing)"),
+    ] = None,
+    voxel_unit: Annotated[
+        str | None, Form(description=f"the unit of voxel_size: {', '.join(VOXEL_UNITS)}; default nm")
+    ] = None,
+) -> dict[str, Any]:
+    """The output size's form fields (a FastAPI dependency of the routes that submit jobs), and a
+    volume's calibration. Clients of the first API send the sides inside ``params``; both are accepted."""
+    size: dict[str, Any] = {"width": width, "height": height, "depth": depth}
+    if voxel_size is not None or voxel_unit:
+        size.update(voxel_size=voxel_size, voxel_unit=voxel_unit or None)
+    return size
 
 
-SizeDep = Annotated[dict[str, int | None], Depends(read_size)]
+SizeDep = Annotated[dict[str, Any], Depends(read_size)]
 
 
 @router.post("", status_code=202, response_model=JobPublic, responses=_ERRORS)
@@ -114,15 +128,22 @@ def list_jobs(
     service: ServiceDep,
     principal: PrincipalDep,
     state: Annotated[str | None, Query(description=f"one of {', '.join(STATES)}")] = None,
+    method: Annotated[str | None, Query(description="a method name: only its jobs")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=2**31)] = 0,
 ) -> dict:
-    """Jobs, newest first: the token's own (an admin's: everyone's)."""
+    """Jobs, newest first: the token's own (an admin's: everyone's); ``state`` and ``method`` filter,
+    ``limit`` and ``offset`` page (``count`` is the number matching the filters)."""
     if state is not None and state not in STATES:
         raise RequestValidationError(
             [{"loc": ("query", "state"), "msg": f"must be one of {', '.join(STATES)}, not {state!r}"}]
         )
-    jobs, count = service.store.list(state=state, owner=principal.owner_filter, limit=limit, offset=offset)
+    if method is not None and method not in service.methods():
+        known = ", ".join(sorted(service.methods()))
+        raise RequestValidationError([{"loc": ("query", "method"), "msg": f"must be one of {known}"}])
+    jobs, count = service.store.list(
+        state=state, method=method, owner=principal.owner_filter, limit=limit, offset=offset
+    )
     return {"data": [service.job_public(j) for j in jobs], "count": count}
 
 
@@ -182,6 +203,78 @@ def get_artifact(service: ServiceDep, principal: PrincipalDep, job_id: str, name
         raise HTTPException(404, f"job {job_id} has no artifact {name!r}; artifacts: {listed}")
     path = service.store.job_dir(job_id) / "out" / name
     return FileResponse(path, filename=path.name if not name.endswith(".png") else None)
+
+
+@router.get(
+    "/{job_id}/artifacts.zip",
+    response_class=FileResponse,
+    responses=_file_answer("every artifact of the job in one zip", "application/zip"),
+)
+def get_artifacts_zip(service: ServiceDep, principal: PrincipalDep, job_id: str) -> FileResponse:
+    """Every artifact of a finished job in one zip (``<job id>.zip``), under the folder ``<job id>/``."""
+    job = _job(service, job_id, principal)
+    if not job.artifacts:
+        raise HTTPException(404, f"job {job_id} has no artifacts (it is {job.state})")
+    folder = service.store.job_dir(job_id) / "out"
+    handle = tempfile.NamedTemporaryFile(prefix="texsynth-", suffix=".zip", delete=False)  # noqa: SIM115
+    try:
+        with handle, zipfile.ZipFile(handle, "w") as archive:
+            for name in job.artifacts:
+                # PNG and TIFF are compressed already: stored; JSON deflated
+                kind = zipfile.ZIP_DEFLATED if name.endswith(".json") else zipfile.ZIP_STORED
+                archive.write(folder / name, f"{job_id}/{name}", compress_type=kind)
+    except BaseException:
+        os.unlink(handle.name)
+        raise
+    return FileResponse(
+        handle.name,
+        media_type="application/zip",
+        filename=f"texsynth-{job_id}.zip",
+        background=BackgroundTask(os.unlink, handle.name),
+    )
+
+
+@router.get(
+    "/{job_id}/thumbnail.png",
+    response_class=Response,
+    responses=_file_answer("a small PNG of the output, or of the exemplar before there is one", "image/png"),
+)
+def get_thumbnail(service: ServiceDep, principal: PrincipalDep, job_id: str) -> Response:
+    """A PNG of at most :data:`THUMBNAIL_SIDE` px a side: the output's (a volume's middle slice) once the
+    job has one, else its exemplar's (the ``xy`` one of per-plane exemplars), for job lists."""
+    job = _job(service, job_id, principal)
+    folder = service.store.job_dir(job_id)
+    if "output.png" in job.artifacts:
+        source = folder / "out" / "output.png"
+    else:
+        role = next((r for r in ("exemplar", "exemplar_xy") if r in job.inputs), None)
+        if role is None:
+            raise HTTPException(404, f"job {job_id} has neither an output nor an exemplar")
+        source = folder / "inputs" / job.inputs[role]
+    return Response(
+        thumbnail_png(str(source), source.stat().st_mtime_ns),
+        media_type="image/png",
+        headers={"Cache-Control": "max-age=600"},
+    )
+
+
+#: The longest side of a job's thumbnail, pixels.
+THUMBNAIL_SIDE = 96
+
+
+@lru_cache(maxsize=256)
+def thumbnail_png(path: str, mtime_ns: int) -> bytes:
+    """A small 8-bit PNG of the image at ``path`` (cached by its modification time)."""
+    from synth.io import load_image
+
+    image = load_image(path, name="thumbnail")
+    h, w = image.shape[:2]
+    step = max(1, -(-max(h, w) // THUMBNAIL_SIDE))  # ceil: at most THUMBNAIL_SIDE
+    if step > 1:  # block means: fast and alias-free enough for a list
+        h2, w2 = h // step * step, w // step * step
+        blocks = image[:h2, :w2].reshape(h2 // step, step, w2 // step, step, *image.shape[2:])
+        image = blocks.mean(axis=(1, 3))
+    return image_to_png_bytes(np.ascontiguousarray(image, dtype=np.float32))
 
 
 _PLANE_AXIS = {"xy": 0, "xz": 1, "yz": 2}
