@@ -452,7 +452,7 @@ async function showExamples(gen) {
   $("#example-list").replaceChildren(...examples.map((x) => {
     const button = el("button", { type: "button", class: "example", "data-example": x.name,
       "aria-label": `use the example ${x.title}${x.suggested_method ? ` with ${x.suggested_method}` : ""}` },
-    el("img", { src: x.thumbnail, alt: "" }), el("span", { class: "example-title", text: x.title }));
+    el("img", { src: x.thumbnail, alt: "" }), el("span", { class: "example-title", text: x.title.split(" (")[0], title: x.title }));
     button.addEventListener("click", () => useExample(x, button));
     return el("li", {}, button, el("span", { class: "hint credit", text: `${x.credit}${x.licence ? ` (${x.licence})` : ""}` }));
   }));
@@ -822,6 +822,7 @@ async function refreshJobs(gen = generation, now = false) {
     // an older service ignores ?method=: filter here too
     const rows = data.filter((j) => !query.get("method") || j.method === query.get("method"));
     tbody.replaceChildren(...rows.map((j) => {
+      // the service's thumbnail URL (signed); the output or the exemplar for an older service
       const thumbSrc = j.thumbnail || (j.state === "succeeded" ? j.artifacts?.["output.png"] : j.inputs?.exemplar);
       const name = exemplarName(j);
       const action = el("button", { type: "button", class: "link danger", text: ["queued", "running"].includes(j.state) ? "cancel" : "delete",
@@ -829,7 +830,7 @@ async function refreshJobs(gen = generation, now = false) {
       action.addEventListener("click", () => deleteJob(j, action));
       return el("tr", { "data-job": j.id },
         el("td", {}, thumbSrc ? el("a", { href: `#/jobs/${j.id}`, tabindex: "-1" },
-          el("img", { class: "thumb", src: signed(thumbSrc, j.access), alt: "", loading: "lazy" })) : ""),
+          el("img", { class: "thumb", src: thumbSrc, alt: "", loading: "lazy" })) : ""),
         el("td", {}, el("a", { href: `#/jobs/${j.id}`, text: short(j.id) }),
           j.sweep_id ? el("a", { href: `#/sweeps/${j.sweep_id}`, class: "hint sweep-tag", text: " sweep" }) : ""),
         el("td", {}, el("span", { text: j.method }), name ? el("span", { class: "hint exemplar-name", text: ` · ${name}` }) : ""),
@@ -1204,8 +1205,9 @@ const VERDICT_TEXT = { good: "meets the target", near: "near the target", off: "
 // The headline measures of a job: [{name, value, target, direction, verdict}], from the service's own
 // verdicts ({value, target, direction, verdict} per measure) or, for older records, the glossary.
 function headline(metrics, g) {
-  const summary = (metrics && metrics.summary) || {};
-  const judged = (metrics && (metrics.verdicts || metrics.headline)) || {};
+  const judged = (metrics && metrics.headline) || {};
+  // the service's verdicts when it gives them (metrics.headline), else the summary judged here
+  const summary = Object.keys(judged).length ? judged : (metrics && metrics.summary) || {};
   const out = [];
   for (const [name, raw] of Object.entries(summary)) {
     const entry = raw && typeof raw === "object" && "value" in raw ? raw : judged[name];
@@ -1272,9 +1274,9 @@ function showFringes(fringes) {
   const ok = fringes && fringes.shown !== false && fringes.exemplar && fringes.output;
   $("#fringe-metrics").hidden = !ok;
   if (!ok) return;
-  $("#fringe-metrics tbody").replaceChildren(...FRINGE_STATS.filter(([k]) => k in fringes.exemplar).map(([k, label]) =>
-    el("tr", {}, el("th", { text: label }), el("td", { text: fmtNum(fringes.exemplar[k]) }),
-      el("td", { text: fmtNum(fringes.output[k]) }))));
+  const cell = (side, k) => el("td", { class: "num", text: k in side ? fmtNum(side[k]) : "—" });
+  $("#fringe-metrics tbody").replaceChildren(...FRINGE_STATS.filter(([k]) => k in fringes.exemplar || k in fringes.output)
+    .map(([k, label]) => el("tr", {}, el("th", { text: label }), cell(fringes.exemplar, k), cell(fringes.output, k))));
 }
 
 // The exemplar's diagnostics (metrics.exemplar): a plain warning when an exemplar mixes textures.
@@ -1321,7 +1323,7 @@ function showResults(job) {
     .filter((n) => !(fringesHidden(job.metrics) && /fringe/.test(n)))
     .map((n) => figure(a[n], n.slice(6).replace(".png", "").replaceAll("_", " "))));
   // everything in one zip, then each file
-  const zip = signed(`/api/jobs/${job.id}/artifacts.zip`, job.access);
+  const zip = job.artifacts_zip || signed(`/api/jobs/${job.id}/artifacts.zip`, job.access); // the service's is signed
   $("#zip-link").hidden = false;
   $("#zip-link").href = zip;
   $("#zip-link").setAttribute("download", `texsynth-${short(job.id)}.zip`);
