@@ -241,7 +241,12 @@ def main() -> None:
                 page.goto(f"{url}/#/jobs/{volume['id']}")
                 page.wait_for_selector("#job-state.succeeded")
                 page.wait_for_selector("#axis-metrics:not([hidden]) tbody tr")
-                page.wait_for_function("() => document.querySelector('#slice-image').naturalWidth > 0")
+                _wait_images(page, "#volume-viewer img")
+                # the crosshair moved off the middle by a click on the xy slice
+                scale = int(page.input_value("input[name=ortho-zoom]:checked"))
+                page.click("#box-xy", position={"x": 10 * scale, "y": 22 * scale})
+                page.wait_for_timeout(300)
+                _wait_images(page, "#volume-viewer img")
                 _wait_images(page, "#result-images img")
                 page.screenshot(
                     path=str(OUT / "service-volume.png"),
@@ -257,9 +262,14 @@ def main() -> None:
                     path=str(OUT / "service-failed.png"), clip=_clip(page, "h2", "#inputs"), full_page=True
                 )
 
-                # the home page: the form and the recent jobs (failed ones with their reason)
+                # the home page: the examples, the short form, and the jobs (failed ones with their reason)
                 page.goto(f"{url}/")
                 page.wait_for_selector("#jobs-table tbody tr")
+                page.wait_for_selector("#examples:not([hidden]) button.example")
+                _wait_images(page, "#example-list img")
+                _wait_images(page, "#jobs-table img")
+                page.click("button.example[data-example='soot-fringes']")
+                page.wait_for_selector("#exemplar-preview:not([hidden])")
                 page.screenshot(path=str(OUT / "service-home.png"), full_page=True)
                 browser.close()
                 if errors:

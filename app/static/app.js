@@ -616,6 +616,10 @@ async function fillFromJob(id, setParam) {
   $("#method").value = job.method;
   showMethod();
   for (const [name, value] of Object.entries({ ...job.size, ...job.params })) setFieldValue(name, value);
+  if (job.voxel_size) {
+    setFieldValue("voxel_size", job.voxel_size);
+    if (job.voxel_unit) setFieldValue("voxel_unit", job.voxel_unit);
+  }
   $("#seed").value = job.seed;
   const reused = [];
   const missing = [];
@@ -1008,13 +1012,12 @@ function showViewer(job) {
     const outW = tiled ? 2 * W : W;
     const outH = tiled ? 2 * H : H;
     const choice = radioValue("zoom");
-    // fit: the rows side by side within the width, and the whole stage (image and tensor rows) within
-    // the window's height, so the legends below it are never cut off; zoomed: the stage scrolls
+    // fit: exemplar and output side by side within the width and 60 % of the window's height; the
+    // stage then grows with the page (no box of its own), so the tensor rows and the legends below
+    // are never cut off; zoomed in, the stage scrolls in a box
     $("#stage").classList.toggle("zoomed", choice !== "fit");
-    const rows = 1 + !$("#coherence-row").hidden + !$("#orientation-row").hidden;
     const box = $("#stage").clientWidth - 60;
-    const scale = zoomScale(choice, exW + outW, Math.max(exH, outH) + (rows - 1) * Math.max(exH, H),
-      box, 0.75 * window.innerHeight - 60 * rows);
+    const scale = zoomScale(choice, exW + outW, Math.max(exH, outH), box, 0.6 * window.innerHeight);
     setSize(exemplar, exW * scale, exH * scale);
     tiles.querySelectorAll("img").forEach((img) => setSize(img, W * scale, H * scale));
     // The tensor images carry their legend below (and are padded to its width): show only the
@@ -1025,6 +1028,9 @@ function showViewer(job) {
       setSize(img.parentElement, w * scale, h * scale);
       if (img.naturalWidth) setSize(img, img.naturalWidth * scale, img.naturalHeight * scale);
     }
+    // one column for the exemplar and its tensor images, one for the output and its: rows line up
+    const column = Math.max(exW * scale, 120);
+    for (const fig of [exemplar.closest("figure"), $("#fig-ex-coherence"), $("#fig-ex-orientation")]) setSize(fig, column);
     const px = (n) => Math.round(n * scale);
     $("#cap-exemplar").textContent = `exemplar ${exW}×${exH}`;
     $("#cap-output").textContent = `output ${W}×${H}${tiled ? ", tiled 2×2: look for seams along the middle lines" : ""}`;

@@ -317,3 +317,42 @@ def test_the_pages_fit_800_px_without_horizontal_scrolling(browser, embedded, ex
     _fits(page, "job list")
     assert not errors, errors
     page.close()
+
+
+def test_an_example_in_one_click_and_its_results_explained(browser, embedded):  # noqa: F811
+    """The gallery lists the service's examples; a click puts the brick into the form with its method;
+    the job's page shows every headline measure with a target and a verdict, the exemplar's tensor
+    images beside the output's, no fringe measures (brick has none: the reason said), and the zip."""
+    examples = httpx.get(embedded.url + "/api/examples", timeout=10).json()
+    page, errors = _page(browser)
+    page.goto(embedded.url + "/")
+    page.wait_for_selector("#examples:not([hidden]) button.example")
+    assert page.locator("button.example").count() == len(examples)
+    assert "CC0" in page.inner_text("#example-list") and "MIT" in page.inner_text("#example-list")
+    brick = next(x for x in examples if x["name"] == "brick")
+    page.click("button.example[data-example='brick']")
+    page.wait_for_selector("#exemplar-preview:not([hidden])")
+    assert page.evaluate("() => document.querySelector('#exemplar').files[0].name") == "brick.png"
+    assert page.input_value("#method") == brick["suggested_method"]
+    page.fill("#param-width", "48")
+    page.fill("#param-height", "48")
+    page.click("#submit")
+    page.wait_for_url("**/#/jobs/*")
+    page.wait_for_selector("#job-state.succeeded", timeout=120_000)
+    page.wait_for_selector("#metrics tbody tr")
+    # a target and a verdict for every headline measure shown
+    for row in page.locator("#metrics tbody tr").all():
+        cells = row.locator("td").all_inner_texts()
+        assert cells[1].startswith(("<", ">", "|", "1 ±")), cells
+        assert "target" in cells[2], cells
+    # no fringe measures for brick, and why
+    assert page.locator("#metrics tr[data-measure^='fringe_']").count() == 0
+    assert page.is_visible("#fringe-note") and "not shown" in page.inner_text("#fringe-note")
+    assert page.is_hidden("#fringe-metrics")
+    # the exemplar's tensor images beside the output's, and every artifact in one zip
+    for kind in ("coherence", "orientation"):
+        page.wait_for_function(f"() => document.querySelector('#view-ex-{kind}').naturalWidth > 0")
+    zip_url = page.get_attribute("#zip-link", "href")
+    assert httpx.get(embedded.url + zip_url).content[:2] == b"PK"
+    assert not errors, errors
+    page.close()
