@@ -148,11 +148,9 @@ class ArbitraryShapeParams(NeighbourhoodParams):
             details=(
                 "Settings chosen for the exemplar: 'fibres' for strongly oriented exemplars (strands "
                 "continue along the constraint), 'weak' for weakly oriented ones (soot), 'paper' the "
-                "parameters "
-                "as given (their defaults: the paper's settings); 'auto' picks 'fibres' when the exemplar's "
-                "mean "
-                "coherence is at least 0.7, else 'weak'. A recipe sets only the parameters left at their "
-                "defaults: a value you change is kept."
+                "parameters as given (their defaults: the paper's settings); 'auto' picks 'fibres' when "
+                "the exemplar's mean coherence is at least 0.7, else 'weak'. A recipe sets only the "
+                "parameters left at their defaults: a value you change is kept."
             ),
         ),
     )
@@ -214,15 +212,16 @@ class ArbitraryShapeParams(NeighbourhoodParams):
             details=(
                 "'dominant': turn the exemplar's tensors by O_con minus the exemplar's dominant "
                 "orientation (structures follow the constraint, keeping the exemplar's own orientation "
-                "spread); 'absolute': by O_con (the paper, literally); 'local': by O_con minus each tensor's "
-                "own orientation (S_con's orientation is O_con exactly; for weakly oriented exemplars)."
+                "spread); 'absolute': by O_con (the paper, literally); 'local': by O_con minus each "
+                "tensor's own orientation (S_con's orientation is O_con exactly; for weakly oriented "
+                "exemplars)."
             )
         ),
     )
     restrict_rotations: bool = Field(
         True,
-        description="Search only the rotated copies near the constraint's local angle (within the rotation "
-        "window).",
+        description="Search only the rotated copies near the constraint's local angle (within the "
+        "rotation window).",
         json_schema_extra=ui(
             details=("Search only the copies turned by the local constraint angle (within rotation_window).")
         ),
@@ -235,8 +234,8 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         json_schema_extra=ui(
             unit="degrees",
             details=(
-                "Half-width (degrees) of the window of copies searched with restrict_rotations "
-                "(at least the nearest copy)."
+                "Half-width (degrees) of the window of copies searched with restrict_rotations (at least "
+                "the nearest copy)."
             ),
         ),
     )
@@ -250,10 +249,10 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         "may outvote; automatic by the reference.",
         json_schema_extra=ui(
             details=(
-                "How restrict_rotations restricts: 'strict' searches only the copies in the window "
-                "at every position; 'hints' proposes one in-window candidate per position but lets "
-                "neighbours' "
-                "sources from other copies compete. Default: strict, hints with rotation_reference='local'."
+                "How restrict_rotations restricts: 'strict' searches only the copies in the window at "
+                "every position; 'hints' proposes one in-window candidate per position but lets "
+                "neighbours' sources from other copies compete. Default: strict, hints with "
+                "rotation_reference='local'."
             )
         ),
     )
@@ -264,10 +263,9 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         json_schema_extra=ui(
             details=(
                 "With the strict window: a neighbour's coherent proposal from another rotated copy is "
-                "moved to the same exemplar point of the copy at the local angle instead of being dropped, "
-                "so "
-                "strands continue where the constraint's angle crosses a copy's step (False: dropped, the "
-                "previous behaviour)."
+                "moved to the same exemplar point of the copy at the local angle instead of being "
+                "dropped, so strands continue where the constraint's angle crosses a copy's step (False: "
+                "dropped, the previous behaviour)."
             )
         ),
     )
@@ -285,8 +283,8 @@ class ArbitraryShapeParams(NeighbourhoodParams):
     )
     constraint_tensors: Literal["rotated-exemplar", "constraint"] = Field(
         "rotated-exemplar",
-        description="Orientation field to follow: the exemplar's tensors turned to the constraint (S_con), "
-        "or the constraint's own.",
+        description="Orientation field to follow: the exemplar's tensors turned to the constraint "
+        "(S_con), or the constraint's own.",
         json_schema_extra=ui(
             details=(
                 "'rotated-exemplar': S_con, the exemplar's tensors turned by O_con (the method); "
@@ -301,13 +299,12 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         "fibres laid along 'strands'.",
         json_schema_extra=ui(
             details=(
-                "Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized "
-                "in the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
+                "Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized in "
+                "the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
                 "constraint's strands, so that each output strand is offered one fibre (one grey level) "
-                "along its "
-                "length (synth.methods.strand_hints). Default: 'strands' with the 'fibres' recipe when the "
-                "exemplar's fibres carry their own grey levels (fibre grey spread at least 0.35, e.g. a wood "
-                "grain) and restrict_rotations is on, else 'texture'."
+                "along its length (synth.methods.strand_hints). Default: 'strands' with the 'fibres' "
+                "recipe when the exemplar's fibres carry their own grey levels (fibre grey spread at "
+                "least 0.35, e.g. a wood grain) and restrict_rotations is on, else 'texture'."
             )
         ),
     )
@@ -331,13 +328,11 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         json_schema_extra=ui(
             details=(
                 "How the output starts: 'random' sources and a first pass in the neighbourhood's scan "
-                "(the paper); 'hints', every position starts from its hint (with hint_layout='strands': the "
-                "exemplar's fibres laid along the constraint) and every pass, the first included, compares "
-                "the "
-                "square refinement neighbourhood in a random order (refinement='square'). Needs "
-                "restrict_rotations (the hints). Default: 'hints' where hint_layout's default is 'strands', "
-                "else "
-                "'random'."
+                "(the paper); 'hints', every position starts from its hint (with hint_layout='strands': "
+                "the exemplar's fibres laid along the constraint) and every pass, the first included, "
+                "compares the square refinement neighbourhood in a random order (refinement='square'). "
+                "Needs restrict_rotations (the hints). Default: 'hints' where hint_layout's default is "
+                "'strands', else 'random'."
             )
         ),
     )

@@ -38,15 +38,15 @@ class PatchParams(MethodParams):
 
     periodic: bool = Field(
         False,
-        description="Make the output tile seamlessly: patches wrap around its borders (each side needs two "
-        "patch steps).",
+        description="Make the output tile seamlessly: patches wrap around its borders (each side needs "
+        "two patch steps).",
         json_schema_extra=ui(
             basic=True,
             details=(
-                "Tileable output: the patches are laid on a torus of the output's size, the last "
-                "column's patches overlapping the first column and the last row the first row, so a 2 x 2 "
-                "tiling "
-                "shows no seam. Each output side must hold at least two patch steps (patch_size - overlap)."
+                "Tileable output: the patches are laid on a torus of the output's size, the last column's "
+                "patches overlapping the first column and the last row the first row, so a 2 x 2 tiling "
+                "shows no seam. Each output side must hold at least two patch steps (patch_size - "
+                "overlap)."
             ),
         ),
     )
@@ -81,8 +81,8 @@ class NeighbourhoodParams(MethodParams):
     )
     neighbourhood: Shape = Field(
         "causal",
-        description="Shape of that window: 'causal' uses only the pixels already made, 'square' the pixels "
-        "all around.",
+        description="Shape of that window: 'causal' uses only the pixels already made, 'square' the "
+        "pixels all around.",
         json_schema_extra=ui(
             details=("'causal' L-shape (with a lexicographic scan) or 'square' non-causal (random walk).")
         ),
@@ -110,8 +110,8 @@ class NeighbourhoodParams(MethodParams):
         "'exact' tries them all (slow).",
         json_schema_extra=ui(
             details=(
-                "'exact' compares every exemplar position (slow, the definition); "
-                "'kcoherence' compares k-coherent candidates (fast; measured as good in docs/benchmarks.md)."
+                "'exact' compares every exemplar position (slow, the definition); 'kcoherence' compares "
+                "k-coherent candidates (fast; measured as good in docs/benchmarks.md)."
             )
         ),
     )
@@ -137,8 +137,8 @@ class NeighbourhoodParams(MethodParams):
         "(Gaussian σ = falloff × side).",
         json_schema_extra=ui(
             details=(
-                "Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
-                "side (Efros & Leung: 1 / 6.4); 0 = every entry weighs the same (Wei & Levoy)."
+                "Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its side "
+                "(Efros & Leung: 1 / 6.4); 0 = every entry weighs the same (Wei & Levoy)."
             )
         ),
     )
@@ -149,8 +149,9 @@ class NeighbourhoodParams(MethodParams):
         json_schema_extra=ui(
             details=(
                 "Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
-                "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
-                "proposing candidates, so that a pixel is matched against the pixels after it too."
+                "Levoy), or 'square': the full square around each pixel in a random order, every "
+                "neighbour proposing candidates, so that a pixel is matched against the pixels after it "
+                "too."
             )
         ),
     )
@@ -163,8 +164,8 @@ class NeighbourhoodParams(MethodParams):
             unit="px",
             odd=True,
             details=(
-                "Side of the square refinement neighbourhood (odd; capped at each level's "
-                "neighbourhood side; default neighbourhood_size)."
+                "Side of the square refinement neighbourhood (odd; capped at each level's neighbourhood "
+                "side; default neighbourhood_size)."
             ),
         ),
     )
@@ -174,8 +175,8 @@ class NeighbourhoodParams(MethodParams):
         json_schema_extra=ui(
             basic=True,
             details=(
-                "Toroidal output: the output tiles seamlessly (every stage wraps around its borders). "
-                "A causal neighbourhood then needs 2 or more passes: its refinement passes compare the full "
+                "Toroidal output: the output tiles seamlessly (every stage wraps around its borders). A "
+                "causal neighbourhood then needs 2 or more passes: its refinement passes compare the full "
                 "square in random order, which closes the tile borders."
             ),
         ),
@@ -254,9 +255,9 @@ class SolidParams(MethodParams):
         json_schema_extra=ui(
             basic=True,
             details=(
-                "Slice planes whose neighbourhoods are matched: all three (isotropic material), or "
-                "two, e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving the xy "
-                "slices free."
+                "Slice planes whose neighbourhoods are matched: all three (isotropic material), or two, "
+                "e.g. ('xz', 'yz') for laminae (the study's front and side views), leaving the xy slices "
+                "free."
             ),
         ),
     )
@@ -283,14 +284,12 @@ def laminar_start_fields() -> tuple[Any, Any]:
         "from noise, 'auto' decides from the exemplar.",
         json_schema_extra=ui(
             details=(
-                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
-                "levels that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's "
-                "random "
+                "'laminar': start from a volume of curved sheets at the exemplar's period, on the levels "
+                "that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
                 "start; 'auto': laminar when one isotropic exemplar serves the three planes and "
-                "adapt_to_structure "
-                "is on, and it is fringed (mean coherence >= 0.6) or a small pilot volume from each start "
-                "says the "
-                "sheets keep its coherence better (mean coherence 0.45-0.6)."
+                "adapt_to_structure is on, and it is fringed (mean coherence >= 0.6) or a small pilot "
+                "volume from each start says the sheets keep its coherence better (mean coherence "
+                "0.45-0.6)."
             )
         ),
     )

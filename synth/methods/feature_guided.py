@@ -105,8 +105,8 @@ class FeatureGuidedParams(PatchParams):
         description="A patch is drawn among those whose cost is within (1 + tolerance) of the best.",
         json_schema_extra=ui(
             details=(
-                "A patch is drawn among the candidates whose total cost is within (1 + tolerance) "
-                "of the least."
+                "A patch is drawn among the candidates whose total cost is within (1 + tolerance) of the "
+                "least."
             )
         ),
     )
@@ -178,9 +178,9 @@ class FeatureGuidedParams(PatchParams):
         json_schema_extra=ui(
             details=(
                 "Weight of the reverse chamfer term: mean gdist from the candidate's features in the "
-                "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq 2). "
-                "None: 4 for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes), 0 for strongly "
-                "oriented ones (laminae, fibres, brick joints)."
+                "overlap to the context's, so that cluttered candidates stop winning (0 = the paper's eq "
+                "2). None: 4 for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes), 0 for "
+                "strongly oriented ones (laminae, fibres, brick joints)."
             )
         ),
     )
@@ -196,9 +196,8 @@ class FeatureGuidedParams(PatchParams):
         description="Warp each patch near its overlap so that its features meet the ones already there.",
         json_schema_extra=ui(
             details=(
-                "Warp each patch near its overlap so its features meet the context's (thin-plate "
-                "spline; the paper's method): fewer or as many broken features as without it on every "
-                "exemplar "
+                "Warp each patch near its overlap so its features meet the context's (thin-plate spline; "
+                "the paper's method): fewer or as many broken features as without it on every exemplar "
                 "measured (docs/feature-guided.md)."
             )
         ),
@@ -230,8 +229,8 @@ class FeatureGuidedParams(PatchParams):
         json_schema_extra=ui(
             unit="px",
             details=(
-                "The warp's displacement decays to 0 over this many px beyond the overlap; the rest "
-                "of the patch is not moved."
+                "The warp's displacement decays to 0 over this many px beyond the overlap; the rest of "
+                "the patch is not moved."
             ),
         ),
     )
@@ -250,10 +249,9 @@ class FeatureGuidedParams(PatchParams):
             details=(
                 "Colour error of the candidates on the overlap: 'ssd' = the paper; 'normalised' = SSD "
                 "over the overlap's plus the candidate's own variance (flat ones not preferred for being "
-                "flat). "
-                "None: 'normalised' for weakly oriented exemplars (mean coherence < 0.7: HRTEM fringes, "
-                "grass, "
-                "gravel), 'ssd' for strongly oriented ones (laminae, fibres, brick joints)."
+                "flat). None: 'normalised' for weakly oriented exemplars (mean coherence < 0.7: HRTEM "
+                "fringes, grass, gravel), 'ssd' for strongly oriented ones (laminae, fibres, brick "
+                "joints)."
             )
         ),
     )
@@ -265,10 +263,9 @@ class FeatureGuidedParams(PatchParams):
         "histogram).",
         json_schema_extra=ui(
             details=(
-                "Gain of the penalty on over-used exemplar regions in the candidate search (Chen & "
-                "Wang's position histogram; not the paper); 0 = the paper. None: 1 for weakly oriented "
-                "exemplars, "
-                "0 for strongly oriented ones (as error)."
+                "Gain of the penalty on over-used exemplar regions in the candidate search (Chen & Wang's "
+                "position histogram; not the paper); 0 = the paper. None: 1 for weakly oriented "
+                "exemplars, 0 for strongly oriented ones (as error)."
             )
         ),
     )

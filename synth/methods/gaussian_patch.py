@@ -137,8 +137,8 @@ class GaussianPatchParams(PatchParams):
         "overlap).",
         json_schema_extra=ui(
             details=(
-                "'boundary-cut' (default): stitch along the Efros-Freeman minimum-error cut (paper, "
-                "Fig. 3); 'none': paste over the overlap (paper, Fig. 2)."
+                "'boundary-cut' (default): stitch along the Efros-Freeman minimum-error cut (paper, Fig. "
+                "3); 'none': paste over the overlap (paper, Fig. 2)."
             )
         ),
     )
@@ -149,15 +149,11 @@ class GaussianPatchParams(PatchParams):
         json_schema_extra=ui(
             details=(
                 "CLG/RCLG: 'neighbour' (default, not the paper) = one of the N neighbours, drawn "
-                "uniformly, corrected toward the overlap by the model's gain tapered with the distance from "
-                "the "
-                "overlap (keeps structure the overlap does not pin, such as a brick's joints); 'mean' = the "
-                "most "
-                "probable patch (the paper); 'draw' = a random draw from the same conditional law (the "
-                "paper's "
-                "suggested remedy for its smoothing; docs/patch.md: close to the mean when the overlap pins "
-                "the "
-                "rank-N model)."
+                "uniformly, corrected toward the overlap by the model's gain tapered with the distance "
+                "from the overlap (keeps structure the overlap does not pin, such as a brick's joints); "
+                "'mean' = the most probable patch (the paper); 'draw' = a random draw from the same "
+                "conditional law (the paper's suggested remedy for its smoothing; docs/patch.md: close to "
+                "the mean when the overlap pins the rank-N model)."
             )
         ),
     )
@@ -177,14 +173,13 @@ class GaussianPatchParams(PatchParams):
     )
     contrast: Literal["restore", "none"] = Field(
         "restore",
-        description="Keep each new patch as contrasted as its neighbours ('restore'), or let contrast fade "
-        "('none').",
+        description="Keep each new patch as contrasted as its neighbours ('restore'), or let contrast "
+        "fade ('none').",
         json_schema_extra=ui(
             details=(
                 "CLG/RCLG: 'restore' scales each new patch's spread to its neighbours' (not the paper; "
                 "without it the conditional mean blurs and contrast decays patch after patch, "
-                "docs/patch.md); "
-                "'none' = the paper literally."
+                "docs/patch.md); 'none' = the paper literally."
             )
         ),
     )
@@ -196,8 +191,7 @@ class GaussianPatchParams(PatchParams):
             details=(
                 "Overlap distance of the neighbour search: 'normalised' (default, not the paper) = the "
                 "SSD over the overlap's plus the candidate's own variance, so flat candidates are not "
-                "preferred for "
-                "being flat; 'ssd' = the paper's L2."
+                "preferred for being flat; 'ssd' = the paper's L2."
             )
         ),
     )
@@ -209,8 +203,8 @@ class GaussianPatchParams(PatchParams):
         "histogram).",
         json_schema_extra=ui(
             details=(
-                "Gain of the penalty on over-used exemplar regions in the neighbour search (Chen & "
-                "Wang's position histogram; not the paper). 0 = the paper."
+                "Gain of the penalty on over-used exemplar regions in the neighbour search (Chen & Wang's "
+                "position histogram; not the paper). 0 = the paper."
             )
         ),
     )

@@ -96,8 +96,7 @@ class QuiltingParams(PatchParams):
             details=(
                 "Overlap error: 'normalised' (default, not the paper) = SSD over the template's plus the "
                 "candidate's own variance on the overlap, so flat candidates are not preferred for being "
-                "flat; "
-                "'ssd' = the paper's sum of squared differences."
+                "flat; 'ssd' = the paper's sum of squared differences."
             )
         ),
     )
@@ -109,20 +108,20 @@ class QuiltingParams(PatchParams):
         "histogram).",
         json_schema_extra=ui(
             details=(
-                "Gain of the penalty on over-used exemplar regions (Chen & Wang's position histogram; "
-                "not the paper): a candidate's error is multiplied by 1 + weight * excess use. 0 = the paper."
+                "Gain of the penalty on over-used exemplar regions (Chen & Wang's position histogram; not "
+                "the paper): a candidate's error is multiplied by 1 + weight * excess use. 0 = the paper."
             )
         ),
     )
     blending: Literal["boundary-cut", "graph-cut"] = Field(
         "boundary-cut",
-        description="How patches are stitched: a minimum-error 'boundary-cut' (the paper) or a 'graph-cut' "
-        "(Kwatra 2003).",
+        description="How patches are stitched: a minimum-error 'boundary-cut' (the paper) or a "
+        "'graph-cut' (Kwatra 2003).",
         json_schema_extra=ui(
             basic=True,
             details=(
-                "'boundary-cut': minimum-error cut by dynamic programming (Efros & Freeman); "
-                "'graph-cut': minimum s-t cut over the overlap (Kwatra et al. 2003)."
+                "'boundary-cut': minimum-error cut by dynamic programming (Efros & Freeman); 'graph-cut': "
+                "minimum s-t cut over the overlap (Kwatra et al. 2003)."
             ),
         ),
     )

@@ -48,15 +48,14 @@ class RandomPhaseParams(MethodParams):
 
     periodic: bool = Field(
         False,
-        description="Make the output tile seamlessly (always so when the output is at least the exemplar's "
-        "size).",
+        description="Make the output tile seamlessly (always so when the output is at least the "
+        "exemplar's size).",
         json_schema_extra=ui(
             basic=True,
             details=(
                 "Tileable output. Random-phase noise is periodic by construction when the output is at "
                 "least as large as the exemplar; with periodic=True a smaller output is made from an "
-                "exemplar crop "
-                "of its size instead of cropped from a larger noise, so it tiles too."
+                "exemplar crop of its size instead of cropped from a larger noise, so it tiles too."
             ),
         ),
     )

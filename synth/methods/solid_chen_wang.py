@@ -225,8 +225,8 @@ class SolidChenWangParams(SolidParams):
         None,
         ge=0,
         le=7,
-        description="Updates use matches centred within this distance of the voxel; automatic: chosen from "
-        "the exemplar.",
+        description="Updates use matches centred within this distance of the voxel; automatic: chosen "
+        "from the exemplar.",
         json_schema_extra=ui(
             unit="voxels",
             details=(

@@ -130,8 +130,8 @@ class SolidKopfParams(SolidParams):
         "layered ones.",
         json_schema_extra=ui(
             details=(
-                "Micro-structures (weakly oriented exemplars) use at most 2 levels; laminae at least "
-                "10 iterations per level (off: levels and iterations literally)."
+                "Micro-structures (weakly oriented exemplars) use at most 2 levels; laminae at least 10 "
+                "iterations per level (off: levels and iterations literally)."
             )
         ),
     )
@@ -139,8 +139,8 @@ class SolidKopfParams(SolidParams):
         ORIENTATION_GAIN,
         ge=0.0,
         le=64.0,
-        description="How strongly slices are pulled toward the exemplar's spread of orientations; 0 is off "
-        "(the paper).",
+        description="How strongly slices are pulled toward the exemplar's spread of orientations; 0 is "
+        "off (the paper).",
         json_schema_extra=ui(
             details=(
                 "Pull each plane's slices toward its exemplar's orientation histogram (eq 4 on "
@@ -191,8 +191,8 @@ class SolidKopfParams(SolidParams):
         "(slow).",
         json_schema_extra=ui(
             details=(
-                "'tree': k-coherence (k-d tree at the start; fast); 'exact': every exemplar "
-                "neighbourhood (slow)."
+                "'tree': k-coherence (k-d tree at the start; fast); 'exact': every exemplar neighbourhood "
+                "(slow)."
             )
         ),
     )

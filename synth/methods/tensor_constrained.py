@@ -145,8 +145,8 @@ class TensorConstrainedParams(NeighbourhoodParams):
         json_schema_extra=ui(
             basic=True,
             details=(
-                "Eq 13: weight of the pixel part against the tensor part (the paper leaves it open; "
-                "0.5 weighs both equally)."
+                "Eq 13: weight of the pixel part against the tensor part (the paper leaves it open; 0.5 "
+                "weighs both equally)."
             ),
         ),
     )
@@ -160,8 +160,7 @@ class TensorConstrainedParams(NeighbourhoodParams):
             details=(
                 "Eq 13's p in the texture stage's square refinement passes (refinement='square' or "
                 "periodic): 1 = pixels only, the first pass having laid the texture out under the tensor "
-                "field; "
-                "None = p (the paper: every pass weighs alike)."
+                "field; None = p (the paper: every pass weighs alike)."
             )
         ),
     )
@@ -196,12 +195,11 @@ class TensorConstrainedParams(NeighbourhoodParams):
         "automatic per stage.",
         json_schema_extra=ui(
             details=(
-                "Gaussian weighting of both stages' same-level neighbourhood (Efros & Leung 1999): "
-                "sigma = falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper). None: "
-                "chosen "
-                "from the exemplar, 0 for strongly oriented exemplars with structures in two directions "
-                "(brick's "
-                "joints: the whole neighbourhood must see whether a joint meets another), 0.156 otherwise."
+                "Gaussian weighting of both stages' same-level neighbourhood (Efros & Leung 1999): sigma "
+                "= falloff x its side (Efros & Leung: 1 / 6.4 = 0.156); 0 = flat (the paper). None: "
+                "chosen from the exemplar, 0 for strongly oriented exemplars with structures in two "
+                "directions (brick's joints: the whole neighbourhood must see whether a joint meets "
+                "another), 0.156 otherwise."
             )
         ),
     )
@@ -211,8 +209,8 @@ class TensorConstrainedParams(NeighbourhoodParams):
         "'square'.",
         json_schema_extra=ui(
             details=(
-                "Neighbourhood of both stages' refinement passes: 'same' as the first pass (the "
-                "paper), or 'square': the full square of refinement_size in a random order, every neighbour "
+                "Neighbourhood of both stages' refinement passes: 'same' as the first pass (the paper), "
+                "or 'square': the full square of refinement_size in a random order, every neighbour "
                 "proposing candidates."
             )
         ),
@@ -226,9 +224,8 @@ class TensorConstrainedParams(NeighbourhoodParams):
             unit="px",
             odd=True,
             details=(
-                "Side of the square refinement neighbourhood (odd; capped at each level's "
-                "neighbourhood side). None: chosen from the exemplar, neighbourhood_size for strongly "
-                "oriented "
+                "Side of the square refinement neighbourhood (odd; capped at each level's neighbourhood "
+                "side). None: chosen from the exemplar, neighbourhood_size for strongly oriented "
                 "exemplars (mean coherence >= 0.7: laminae, fibres, joints), 7 for weakly oriented ones."
             ),
         ),
@@ -259,8 +256,8 @@ class TensorConstrainedParams(NeighbourhoodParams):
         "'position' use, or 'none' (the paper).",
         json_schema_extra=ui(
             details=(
-                "Structure stage histogram matching: 'none' (the paper), 'position' (Chen & Wang "
-                "2010: every exemplar position used equally) or 'orientation' (the field's orientation "
+                "Structure stage histogram matching: 'none' (the paper), 'position' (Chen & Wang 2010: "
+                "every exemplar position used equally) or 'orientation' (the field's orientation "
                 "histogram pulled toward the exemplar's)."
             )
         ),

@@ -56,8 +56,8 @@ class WeiLevoyParams(NeighbourhoodParams):
         json_schema_extra=ui(
             basic=True,
             details=(
-                "Passes per pyramid level (default 2; 3 when periodic and not given: a second square "
-                "pass closes the tile borders)."
+                "Passes per pyramid level (default 2; 3 when periodic and not given: a second square pass "
+                "closes the tile borders)."
             ),
         ),
     )
@@ -96,8 +96,8 @@ class WeiLevoyParams(NeighbourhoodParams):
         "(Gaussian σ = falloff × side).",
         json_schema_extra=ui(
             details=(
-                "Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its "
-                "side (Efros & Leung: 1 / 6.4 = 0.156); 0 = every entry weighs the same (Wei & Levoy)."
+                "Gaussian weighting of the neighbourhood (Efros & Leung 1999): sigma = falloff x its side "
+                "(Efros & Leung: 1 / 6.4 = 0.156); 0 = every entry weighs the same (Wei & Levoy)."
             )
         ),
     )
@@ -108,8 +108,8 @@ class WeiLevoyParams(NeighbourhoodParams):
         json_schema_extra=ui(
             details=(
                 "Neighbourhood of the refinement passes (2, 3, ...): 'same' as the first pass (Wei & "
-                "Levoy), or 'square': the full square around each pixel in a random order, every neighbour "
-                "proposing candidates."
+                "Levoy), or 'square': the full square around each pixel in a random order, every "
+                "neighbour proposing candidates."
             )
         ),
     )
@@ -123,8 +123,8 @@ class WeiLevoyParams(NeighbourhoodParams):
             basic=True,
             details=(
                 "Position-histogram matching weight (Chen & Wang 2010): 0 = the paper's plain Wei-Levoy, "
-                "which grows garbage (smears, streaks) on natural textures; larger values push toward every "
-                "exemplar position being copied equally often."
+                "which grows garbage (smears, streaks) on natural textures; larger values push toward "
+                "every exemplar position being copied equally often."
             ),
         ),
     )
