@@ -168,7 +168,7 @@ def main() -> None:
                 page.click("#timings-box summary")
                 page.wait_for_function("() => document.querySelector('#result').naturalWidth > 0")
                 page.screenshot(
-                    path=str(OUT / "service-job.png"), clip=_clip(page, "h2", "#inputs"), full_page=True
+                    path=str(OUT / "service-job.png"), clip=_clip(page, "#view h2", "#inputs"), full_page=True
                 )
 
                 # the metrics panel
@@ -194,7 +194,7 @@ def main() -> None:
                 page.wait_for_timeout(300)
                 page.screenshot(
                     path=str(OUT / "service-compare.png"),
-                    clip=_clip(page, "h2", "#compare-params"),
+                    clip=_clip(page, "#view h2", "#compare-params"),
                     full_page=True,
                 )
 
@@ -223,7 +223,7 @@ def main() -> None:
                 _wait_images(page, "#sweep-table img")
                 page.screenshot(
                     path=str(OUT / "service-sweep.png"),
-                    clip=_clip(page, "h2", "#sweep-table"),
+                    clip=_clip(page, "#view h2", "#sweep-table"),
                     full_page=True,
                 )
 
@@ -259,7 +259,7 @@ def main() -> None:
                 page.wait_for_selector("#job-state.failed")
                 page.click("#timings-box summary")
                 page.screenshot(
-                    path=str(OUT / "service-failed.png"), clip=_clip(page, "h2", "#inputs"), full_page=True
+                    path=str(OUT / "service-failed.png"), clip=_clip(page, "#view h2", "#inputs"), full_page=True
                 )
 
                 # the home page: the examples, the short form, and the jobs (failed ones with their reason)

@@ -1103,7 +1103,7 @@ function showVolumeViewer(job) {
     yz: { index: "x", u: "z", v: "y", w: D, h: H, transposed: true },
   };
   const fits = (s) => (W + D) * s + 40 <= $("#volume-viewer").clientWidth;
-  const start = [4, 2, 1].find(fits) || 1;
+  const start = [8, 4, 2, 1].find(fits) || 1;
   document.querySelector(`input[name=ortho-zoom][value="${start}"]`).checked = true;
   let shown = {};
   const show = () => {
