@@ -447,7 +447,11 @@ class Service:
             if job is None:
                 continue
             counts[job.state] = counts.get(job.state, 0) + 1
-            flat = _flatten(job.metrics)
+            # a headline measure's value is summary.<name> already, its target and direction the glossary's:
+            # of the headline, the table keeps the verdicts
+            headline = job.metrics.get("headline", {})
+            flat = _flatten({k: v for k, v in job.metrics.items() if k != "headline"})
+            flat.update({f"headline.{k}.verdict": v.get("verdict") for k, v in headline.items()})
             metric_names += [k for k in flat if k not in metric_names]
             rows.append(
                 {

@@ -219,7 +219,7 @@ def write_artifacts(
     else:
         metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
     plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
-    status = {"shown": shown, "reason": reason, "exemplar": to_json_types(presence)}
+    status = {"shown": shown, "reason": reason, "presence": to_json_types(presence)}  # of the exemplar
     if isinstance(metrics.get("fringes"), dict):
         metrics["fringes"] = {**metrics["fringes"], **status}
     else:

@@ -55,7 +55,10 @@ def test_every_method_runs_from_its_declared_defaults(embedded, name):
     assert job["state"] == "succeeded", job["message"]
     assert {"exemplar-coherence.png", "exemplar-orientation.png", "output.png"} <= set(job["artifacts"])
     metrics = job["metrics"]
-    assert metrics["fringes"]["shown"] is True  # soot has lattice fringes
+    assert metrics["fringes"]["shown"] is True  # soot has lattice fringes: their statistics, both sides
+    assert metrics["fringes"]["presence"]["count"] > 0
+    if not volume:  # a volume's fringe statistics are per axis
+        assert "mean_length" in metrics["fringes"]["exemplar"]
     headline = metrics["headline"]
     assert {"grey_kl", "orientation_kl", "log_euclidean"} <= set(headline)
     for entry in headline.values():

@@ -128,7 +128,7 @@ def test_a_square_neighbourhood_in_random_order_already_wraps_and_is_unchanged()
 def test_periodic_is_in_the_schema_with_a_description(method: str) -> None:
     prop = available_methods()[method].schema()["properties"]["periodic"]
     assert prop["default"] is False and prop["type"] == "boolean"
-    assert "tiles" in prop["description"]
+    assert "tile" in prop["description"] and "tiles" in prop["x-details"]
 
 
 @pytest.mark.parametrize(
