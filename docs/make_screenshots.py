@@ -168,7 +168,7 @@ def main() -> None:
                 page.click("#timings-box summary")
                 page.wait_for_function("() => document.querySelector('#result').naturalWidth > 0")
                 page.screenshot(
-                    path=str(OUT / "service-job.png"), clip=_clip(page, "h2", "#inputs"), full_page=True
+                    path=str(OUT / "service-job.png"), clip=_clip(page, "#view h2", "#inputs"), full_page=True
                 )
 
                 # the metrics panel
@@ -194,7 +194,7 @@ def main() -> None:
                 page.wait_for_timeout(300)
                 page.screenshot(
                     path=str(OUT / "service-compare.png"),
-                    clip=_clip(page, "h2", "#compare-params"),
+                    clip=_clip(page, "#view h2", "#compare-params"),
                     full_page=True,
                 )
 
@@ -223,7 +223,7 @@ def main() -> None:
                 _wait_images(page, "#sweep-table img")
                 page.screenshot(
                     path=str(OUT / "service-sweep.png"),
-                    clip=_clip(page, "h2", "#sweep-table"),
+                    clip=_clip(page, "#view h2", "#sweep-table"),
                     full_page=True,
                 )
 
@@ -241,7 +241,12 @@ def main() -> None:
                 page.goto(f"{url}/#/jobs/{volume['id']}")
                 page.wait_for_selector("#job-state.succeeded")
                 page.wait_for_selector("#axis-metrics:not([hidden]) tbody tr")
-                page.wait_for_function("() => document.querySelector('#slice-image').naturalWidth > 0")
+                _wait_images(page, "#volume-viewer img")
+                # the crosshair moved off the middle by a click on the xy slice
+                scale = int(page.input_value("input[name=ortho-zoom]:checked"))
+                page.click("#box-xy", position={"x": 10 * scale, "y": 22 * scale})
+                page.wait_for_timeout(300)
+                _wait_images(page, "#volume-viewer img")
                 _wait_images(page, "#result-images img")
                 page.screenshot(
                     path=str(OUT / "service-volume.png"),
@@ -254,12 +259,17 @@ def main() -> None:
                 page.wait_for_selector("#job-state.failed")
                 page.click("#timings-box summary")
                 page.screenshot(
-                    path=str(OUT / "service-failed.png"), clip=_clip(page, "h2", "#inputs"), full_page=True
+                    path=str(OUT / "service-failed.png"), clip=_clip(page, "#view h2", "#inputs"), full_page=True
                 )
 
-                # the home page: the form and the recent jobs (failed ones with their reason)
+                # the home page: the examples, the short form, and the jobs (failed ones with their reason)
                 page.goto(f"{url}/")
                 page.wait_for_selector("#jobs-table tbody tr")
+                page.wait_for_selector("#examples:not([hidden]) button.example")
+                _wait_images(page, "#example-list img")
+                _wait_images(page, "#jobs-table img")
+                page.click("button.example[data-example='soot-fringes']")
+                page.wait_for_selector("#exemplar-preview:not([hidden])")
                 page.screenshot(path=str(OUT / "service-home.png"), full_page=True)
                 browser.close()
                 if errors:

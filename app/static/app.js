@@ -98,8 +98,17 @@ async function api(path, options = {}) {
   const resp = await authFetch(path, options);
   const body = resp.headers.get("content-type")?.includes("json") ? await resp.json() : await resp.text();
   if (!resp.ok) {
-    const err = new Error(typeof body === "object" ? body.detail : `HTTP ${resp.status}: ${body}`);
-    err.field = body?.field;
+    // {detail: "one line", field} or FastAPI's {detail: [{loc: [..., FIELD], msg}]}
+    const detail = typeof body === "object" ? body.detail : `HTTP ${resp.status}: ${body}`;
+    const errors = Array.isArray(detail)
+      ? detail.map((d) => ({ field: String((d.loc || []).at(-1) ?? ""), where: (d.loc || [])[0], msg: String(d.msg || "") }))
+      : body?.field ? [{ field: body.field, msg: String(detail).replace(/^parameter 'params' = \{.*\}: (Value error, )?/s, "") }] : [];
+    const message = Array.isArray(detail)
+      ? detail.map((d) => { const f = String((d.loc || []).at(-1) ?? ""); return d.msg.includes(f) ? d.msg : `${f}: ${d.msg}`; }).join("; ")
+      : typeof detail === "string" ? detail.replace(/^parameter 'params' = \{.*\}: (Value error, )?/s, "") : JSON.stringify(detail);
+    const err = new Error(message);
+    err.field = errors[0]?.field;
+    err.errors = errors;
     err.status = resp.status;
     throw err;
   }
@@ -121,9 +130,15 @@ const sizeOf = (job) => {
 };
 
 // -- the parameter form, generated from the method's JSON schema (defaults = the papers' settings) --
+// The schema marks the parameters a user changes ("x-basic"): those, the output size and the seed come
+// first; the rest wait under "Advanced". Each field's help sits outside its label, tied to the input by
+// aria-describedby (with its range, unit and "odd"), and its constraints are checked before submitting.
 
 function resolve(prop) {
-  // {anyOf: [{enum|type}, {type: null}]} -> the non-null branch, nullable
+  // {anyOf: [{enum|type}, {type: null}]} or {type: [T, "null"]} -> the non-null branch, nullable
+  if (Array.isArray(prop.type)) {
+    return { ...prop, type: prop.type.find((t) => t !== "null"), nullable: prop.nullable || prop.type.includes("null") };
+  }
   if (prop.anyOf) {
     const branch = prop.anyOf.find((b) => b.type !== "null") || {};
     return { ...prop, ...branch, nullable: prop.anyOf.some((b) => b.type === "null") };
@@ -131,61 +146,271 @@ function resolve(prop) {
   return prop;
 }
 
+// "whole number, 3–15, odd": what the schema allows, in words
+function rangeText(prop) {
+  const parts = [];
+  const lo = prop.minimum !== undefined ? `≥ ${prop.minimum}` : prop.exclusiveMinimum !== undefined ? `> ${prop.exclusiveMinimum}` : "";
+  const hi = prop.maximum !== undefined ? `≤ ${prop.maximum}` : prop.exclusiveMaximum !== undefined ? `< ${prop.exclusiveMaximum}` : "";
+  if (prop.minimum !== undefined && prop.maximum !== undefined) parts.push(`${prop.minimum}–${prop.maximum}`);
+  else if (lo && hi) parts.push(`${lo} and ${hi}`);
+  else if (lo || hi) parts.push(lo || hi);
+  if (prop["x-odd"]) parts.push("odd");
+  if (prop.type === "integer") parts.unshift("whole number");
+  if (prop.nullable && !/empty:/.test(prop.description || "")) parts.push("empty: automatic");
+  return parts.join(", ");
+}
+
+const unitOf = (prop) => prop["x-unit"] || "";
+
 function fieldFor(name, raw, required) {
   const prop = resolve(raw);
   const title = prop.title || name;
+  const id = `param-${name}`;
+  const help = `${id}-help`;
+  const error = `${id}-error`;
+  const described = `${help} ${error}`;
   let input;
-  if (prop.enum) {
-    input = el("select", { name, "data-kind": "enum" });
+  let kind;
+  const items = prop.type === "array" ? resolve(prop.items || {}) : null;
+  if (items && items.enum) {
+    // a list of names from a fixed set: one checkbox per name, sent as a JSON array
+    kind = "array";
+    const chosen = new Set(prop.default || []);
+    input = el("div", { role: "group", id, "aria-labelledby": `${id}-label`, "aria-describedby": described, class: "choices", tabindex: "-1" },
+      ...items.enum.map((v) => el("label", { class: "check" },
+        el("input", { type: "checkbox", value: v, checked: chosen.has(v), "data-item": name }), ` ${v}`)));
+  } else if (items) {
+    kind = "list"; // free list: comma-separated text, sent as a JSON array
+    input = el("input", { type: "text", id, "aria-describedby": described, placeholder: "comma-separated" });
+    input.value = (prop.default || []).join(", ");
+  } else if (prop.enum) {
+    kind = "enum";
+    input = el("select", { id, "aria-describedby": described });
     if (prop.nullable) input.append(el("option", { value: "", text: "(automatic)" }));
     for (const v of prop.enum) input.append(el("option", { value: v, text: v }));
     input.value = prop.default ?? "";
   } else if (prop.type === "boolean") {
-    input = el("input", { type: "checkbox", name, "data-kind": "boolean" });
+    kind = "boolean";
+    input = el("input", { type: "checkbox", id, "aria-describedby": described });
     input.checked = !!prop.default;
   } else if (prop.type === "integer" || prop.type === "number") {
+    kind = prop.type;
     input = el("input", {
-      type: "number", name, "data-kind": prop.type,
-      min: prop.minimum ?? (prop.exclusiveMinimum !== undefined ? prop.exclusiveMinimum : undefined),
-      max: prop.maximum ?? prop.exclusiveMaximum, step: prop.type === "integer" ? 1 : "any",
-      placeholder: prop.nullable ? "automatic" : "", required: required && !prop.nullable,
+      type: "number", id, "aria-describedby": described, inputmode: prop.type === "integer" ? "numeric" : "decimal",
+      min: prop.minimum ?? prop.exclusiveMinimum, max: prop.maximum ?? prop.exclusiveMaximum,
+      step: prop.type === "integer" ? (prop["x-odd"] ? 2 : 1) : "any",
+      placeholder: prop.nullable && !/empty:/.test(prop.description || "") ? "automatic" : "",
     });
     input.value = prop.default ?? "";
   } else {
-    input = el("input", { type: "text", name, "data-kind": "string", placeholder: prop.nullable ? "automatic" : "" });
+    kind = "string";
+    input = el("input", { type: "text", id, "aria-describedby": described, placeholder: prop.nullable ? "automatic" : "" });
     input.value = prop.default ?? "";
   }
-  input.dataset.default = prop.type === "boolean" ? String(!!prop.default) : String(prop.default ?? "");
-  input.id = `param-${name}`;
-  return el("label", { title: prop.description || "" }, `${title} `, input,
-    el("span", { class: "hint", text: prop.description || "" }));
+  if (kind !== "array") input.setAttribute("name", name);
+  input.dataset.kind = kind;
+  input.dataset.default = JSON.stringify(prop.default ?? null);
+  const unit = unitOf(prop);
+  const label = kind === "array"
+    ? el("span", { id: `${id}-label`, class: "label" }, title, unit ? el("span", { class: "unit", text: ` (${unit})` }) : "")
+    : el("label", { for: id, id: `${id}-label` }, title, unit ? el("span", { class: "unit", text: ` (${unit})` }) : "");
+  const range = rangeText(prop);
+  const helpText = [prop.description || "", range ? `${range[0].toUpperCase()}${range.slice(1)}.` : ""].filter(Boolean).join(" ");
+  const field = el("div", { class: `field kind-${kind}`, "data-name": name, "data-kind": kind },
+    kind === "boolean" ? el("span", { class: "check-row" }, input, label) : label,
+    kind === "boolean" ? "" : input,
+    el("span", { class: "hint help", id: help, text: helpText }),
+    el("span", { class: "field-error", id: error, hidden: true }));
+  field.schema = { ...prop, required: required && !prop.nullable, items };
+  field.input = input;
+  return field;
 }
 
-function buildFields(container, schema) {
-  container.replaceChildren();
+// Which parameters are basic: the schema's "x-basic" marks; a schema without any (an older service)
+// shows every parameter when there are few, otherwise the usual suspects.
+const FALLBACK_BASIC = new Set(["neighbourhood_size", "patch_size", "periodic", "levels", "overlap", "metric", "planes",
+  "structure", "iterations", "lambda_", "weight", "voxel_size"]);
+function isBasic(schema, name) {
+  const props = schema.properties || {};
+  if (Object.values(props).some((p) => "x-basic" in p)) return !!props[name]["x-basic"];
+  return Object.keys(props).length <= 8 || FALLBACK_BASIC.has(name);
+}
+
+function buildFields(schema, basic, advanced) {
   const required = new Set(schema.required || []);
-  for (const [name, prop] of Object.entries(schema.properties || {})) container.append(fieldFor(name, prop, required.has(name)));
+  const props = schema.properties || {};
+  // a field's unit chosen in another field ("x-unit-field": voxel_size's voxel_unit) sits beside it
+  const unitFields = new Set(Object.values(props).map((p) => p["x-unit-field"]).filter(Boolean));
+  for (const [name, prop] of Object.entries(props)) {
+    if (unitFields.has(name)) continue;
+    const field = fieldFor(name, prop, required.has(name));
+    const unitName = prop["x-unit-field"];
+    if (unitName && props[unitName]) {
+      const unit = resolve(props[unitName]);
+      const select = el("select", { id: `param-${unitName}`, name: unitName, class: "unit-select",
+        "aria-label": unit.title || unitName, "aria-describedby": `param-${unitName}-help` },
+      ...(unit.enum || []).map((v) => el("option", { value: v, text: v })));
+      select.value = unit.default ?? "";
+      const row = el("span", { class: "input-row" });
+      field.input.replaceWith(row);
+      row.append(field.input, select);
+      field.append(el("span", { class: "visually-hidden", id: `param-${unitName}-help`, text: unit.description || "" }));
+      field.unitInput = select;
+      field.dataset.unitName = unitName;
+    }
+    (advanced && !isBasic(schema, name) ? advanced : basic).append(field);
+  }
+}
+
+const formFields = (root) => [...root.querySelectorAll(".field[data-kind]")];
+
+// The value a field holds, typed as its schema says; undefined = leave it to the engine (empty, nullable).
+function fieldValue(field) {
+  const kind = field.dataset.kind;
+  const input = field.input;
+  if (kind === "array") return [...field.querySelectorAll("input[data-item]:checked")].map((c) => c.value);
+  if (kind === "boolean") return input.checked;
+  const text = input.value.trim();
+  if (kind === "list") {
+    const type = field.schema.items?.type;
+    return text.split(/[,;\s]+/).filter(Boolean).map((w) => (type === "integer" || type === "number" ? Number(w) : w));
+  }
+  if (text === "") return undefined;
+  if (kind === "integer" || kind === "number") return Number(text);
+  return input.value;
+}
+
+function setFieldValue(name, value) {
+  const unitOwner = document.querySelector(`.field[data-unit-name="${name}"]`);
+  if (unitOwner) {
+    if (value) unitOwner.unitInput.value = value;
+    return true;
+  }
+  const field = document.querySelector(`.field[data-name="${name}"]`);
+  if (!field) return false;
+  const input = field.input;
+  const kind = field.dataset.kind;
+  if (kind === "array") {
+    const chosen = new Set(Array.isArray(value) ? value : [value]);
+    field.querySelectorAll("input[data-item]").forEach((c) => { c.checked = chosen.has(c.value); });
+  } else if (kind === "boolean") input.checked = value === true || value === "true";
+  else if (kind === "list") input.value = (Array.isArray(value) ? value : [value]).join(", ");
+  else input.value = value ?? "";
+  clearFieldError(field);
+  return true;
 }
 
 function readFields(container) {
   const out = {};
-  for (const input of container.querySelectorAll("[name]")) {
-    const kind = input.dataset.kind;
-    if (kind === "boolean") out[input.name] = input.checked;
-    else if (input.value === "") continue; // nullable: let the engine choose
-    else if (kind === "integer") out[input.name] = parseInt(input.value, 10);
-    else if (kind === "number") out[input.name] = parseFloat(input.value);
-    else out[input.name] = input.value;
+  for (const field of formFields(container)) {
+    const value = fieldValue(field);
+    if (value !== undefined) out[field.dataset.name] = value;
+    if (field.unitInput && value !== undefined) out[field.dataset.unitName] = field.unitInput.value;
   }
   return out;
+}
+
+// The field's constraints, checked in the browser: "" when fine, else one line saying what to change.
+function checkField(field) {
+  const s = field.schema || {};
+  const kind = field.dataset.kind;
+  const title = (s.title || field.dataset.name).toLowerCase();
+  const input = field.input;
+  if (kind === "array") {
+    const chosen = fieldValue(field);
+    const least = s.minItems ?? 1;
+    return chosen.length < least ? `${s.title || field.dataset.name}: choose at least ${least}` : "";
+  }
+  if (kind !== "integer" && kind !== "number") return "";
+  const text = input.value.trim();
+  if (text === "") return s.required || !s.nullable ? `${s.title || field.dataset.name}: give a value` : "";
+  const v = Number(text);
+  const unit = unitOf(s) ? ` ${unitOf(s)}` : "";
+  if (!Number.isFinite(v)) return `${s.title || title}: '${text}' is not a number`;
+  if (kind === "integer" && !Number.isInteger(v)) return `${s.title || title} must be a whole number (got ${text})`;
+  if (s.minimum !== undefined && v < s.minimum) return `${s.title || title} must be at least ${s.minimum}${unit} (got ${text})`;
+  if (s.maximum !== undefined && v > s.maximum) return `${s.title || title} must be at most ${s.maximum}${unit} (got ${text})`;
+  if (s.exclusiveMinimum !== undefined && v <= s.exclusiveMinimum) return `${s.title || title} must be more than ${s.exclusiveMinimum}${unit} (got ${text})`;
+  if (s.exclusiveMaximum !== undefined && v >= s.exclusiveMaximum) return `${s.title || title} must be less than ${s.exclusiveMaximum}${unit} (got ${text})`;
+  if (s["x-odd"] && Math.abs(v % 2) !== 1) return `${s.title || title} must be odd (got ${text}): try ${v + 1} or ${v - 1}`;
+  return "";
+}
+
+function clearFieldError(field) {
+  field.classList.remove("invalid");
+  field.querySelectorAll(".invalid").forEach((n) => n.classList.remove("invalid"));
+  field.querySelector("[aria-invalid]")?.removeAttribute("aria-invalid");
+  const box = field.querySelector(".field-error");
+  if (box) { box.hidden = true; box.textContent = ""; }
+}
+
+// Mark a field rejected: red, its one-line reason under it, read with it by screen readers.
+function markField(field, message) {
+  field.classList.add("invalid");
+  const input = field.input || field.querySelector("#seed");
+  if (input) {
+    input.classList.add("invalid");
+    input.setAttribute("aria-invalid", "true");
+  }
+  const box = field.querySelector(".field-error");
+  if (box) { box.hidden = false; box.textContent = message; }
+}
+
+function focusField(field) {
+  const advanced = field.closest("details");
+  if (advanced) advanced.open = true;
+  const target = field.querySelector("input:not([type=hidden]), select") || field;
+  target.focus();
+  field.scrollIntoView({ block: "center" });
+}
+
+function clearErrors() {
+  document.querySelectorAll(".field.invalid").forEach(clearFieldError);
+  document.querySelectorAll(".invalid").forEach((n) => n.classList.remove("invalid"));
+  const box = $("#form-error");
+  if (box) box.hidden = true;
+}
+
+// Every field checked; the bad ones marked, the first focused. True when the form may be sent.
+function checkForm() {
+  clearErrors();
+  const bad = [];
+  for (const field of formFields($("#job-form"))) {
+    const message = checkField(field);
+    if (message) { markField(field, message); bad.push([field, message]); }
+  }
+  const seed = $("#seed");
+  if (seed.value !== "" && !(/^\d+$/.test(seed.value) && Number(seed.value) <= 4294967295)) {
+    const field = seed.closest(".field");
+    const message = `Seed must be a whole number from 0 to 4294967295 (got ${seed.value})`;
+    markField(field, message);
+    bad.push([field, message]);
+  }
+  if (!bad.length) return true;
+  showFormError(bad.length === 1 ? bad[0][1] : `${bad.length} fields need a change: ${bad.map((b) => b[1]).join("; ")}`);
+  focusField(bad[0][0]);
+  return false;
+}
+
+function showFormError(message) {
+  const box = $("#form-error");
+  if (!box) return;
+  box.hidden = false;
+  box.textContent = message;
 }
 
 function showMethod() {
   const m = methods.find((x) => x.name === $("#method").value);
   if (!m) return;
   $("#method-summary").textContent = `${m.summary}${m.paper ? " — " + m.paper : ""}`;
-  buildFields($("#size-fields"), m.size_schema);
-  buildFields($("#param-fields"), m.params_schema);
+  for (const id of ["#size-fields", "#basic-fields", "#advanced-fields"]) $(id).replaceChildren();
+  buildFields(m.size_schema, $("#size-fields"), null);
+  buildFields(m.params_schema, $("#basic-fields"), $("#advanced-fields"));
+  const more = $("#advanced-fields").children.length;
+  $("#advanced-box").hidden = more === 0;
+  $("#advanced-box").open = false;
+  $("#advanced-count").textContent = `(${more} more parameter${more === 1 ? "" : "s"}, each with its default)`;
+  clearErrors();
   // The method declares its inputs (role -> required | optional | alternative): ask for exactly those.
   const inputs = m.inputs || { exemplar: "required" };
   $("#constraint-box").hidden = !inputs.constraint;
@@ -205,7 +430,60 @@ function previewFile(input, img) {
   if (file) img.src = URL.createObjectURL(file);
 }
 
-async function renderHome(fromJob) {
+// Put a fetched image into a file field, as if the person had chosen it.
+function setFile(input, blob, name) {
+  const files = new DataTransfer();
+  files.items.add(new File([blob], name, { type: blob.type || "image/png" }));
+  input.files = files.files;
+  input.dispatchEvent(new Event("change"));
+}
+
+// -- the examples gallery: bundled exemplars (credited), one click to use -------------------------
+async function showExamples(gen) {
+  let examples;
+  try {
+    examples = await api("/api/examples");
+  } catch (err) {
+    return; // a service without examples: no gallery
+  }
+  if (gen !== generation || !$("#examples")) return;
+  examples = Array.isArray(examples) ? examples : examples.data || [];
+  $("#examples").hidden = !examples.length;
+  $("#example-list").replaceChildren(...examples.map((x) => {
+    const button = el("button", { type: "button", class: "example", "data-example": x.name,
+      "aria-label": `use the example ${x.title}${x.suggested_method ? ` with ${x.suggested_method}` : ""}` },
+    el("img", { src: x.thumbnail, alt: "" }), el("span", { class: "example-title", text: x.title.split(" (")[0], title: x.title }));
+    button.addEventListener("click", () => useExample(x, button));
+    return el("li", {}, button, el("span", { class: "hint credit", text: `${x.credit}${x.licence ? ` (${x.licence})` : ""}` }));
+  }));
+}
+
+async function useExample(x, button) {
+  button.disabled = true;
+  try {
+    const resp = await authFetch(x.url);
+    if (!resp.ok) throw new Error(`the example ${x.title} could not be fetched (HTTP ${resp.status})`);
+    const blob = await resp.blob();
+    if (!$("#job-form")) return;
+    if (x.suggested_method && methods.some((m) => m.name === x.suggested_method) && x.kind !== "constraint") {
+      $("#method").value = x.suggested_method;
+      showMethod();
+    }
+    const role = x.kind === "constraint" ? "constraint" : "exemplar";
+    setFile($(`#${role}`), blob, `${x.name}.png`);
+    document.querySelectorAll(".example[aria-pressed]").forEach((b) => b.removeAttribute("aria-pressed"));
+    button.setAttribute("aria-pressed", "true");
+    $("#rerun-note").hidden = false;
+    $("#rerun-note").textContent = `Example "${x.title}" is the ${role}` +
+      (x.kind !== "constraint" && x.suggested_method ? `, with ${x.suggested_method}` : "") + ". Change anything, then submit.";
+  } catch (err) {
+    showFormError(err.message);
+  } finally {
+    button.disabled = false;
+  }
+}
+
+async function renderHome(fromJob, setParam) {
   const gen = generation;
   $("#view").replaceChildren($("#tpl-home").content.cloneNode(true));
   $("#exemplar").addEventListener("change", () => previewFile($("#exemplar"), $("#exemplar-preview")));
@@ -216,34 +494,63 @@ async function renderHome(fromJob) {
   $("#method").addEventListener("change", showMethod);
   $("#reset-params").addEventListener("click", showMethod);
   $("#job-form").addEventListener("submit", submitJob);
+  // a field's error goes as soon as it is edited; the constraints are checked again on leaving it
+  $("#job-form").addEventListener("input", (event) => {
+    const field = event.target.closest(".field");
+    if (field && field.classList.contains("invalid")) clearFieldError(field);
+  });
+  $("#job-form").addEventListener("focusout", (event) => {
+    const field = event.target.closest(".field[data-kind]");
+    // leaving for a button: the submit checks everything (marking now would move the button away
+    // between the press and the release of the mouse)
+    if (!field || (event.relatedTarget && event.relatedTarget.matches("button"))) return;
+    const message = checkField(field);
+    if (message) markField(field, message);
+  });
   $("#sweep-param").addEventListener("change", () => sweepSuggest());
   for (const input of document.querySelectorAll("#sweep-box input")) input.addEventListener("input", sweepPreview);
   $("#sweep-submit").addEventListener("click", submitSweep);
+  setupJobList(gen);
   try {
     methods = (await api("/api/methods")).data;
   } catch (err) {
-    showError(err);
+    showFormError(err.message);
     return;
   }
   if (gen !== generation) return;
-  for (const m of methods) $("#method").append(el("option", { value: m.name, text: m.name }));
+  for (const m of methods) {
+    $("#method").append(el("option", { value: m.name, text: m.name }));
+    $("#filter-method").append(el("option", { value: m.name, text: m.name }));
+  }
   const preferred = methods.find((m) => m.name === "wei-levoy");
   if (preferred) $("#method").value = preferred.name;
   showMethod();
-  if (fromJob) await fillFromJob(fromJob);
-  refreshJobs(gen);
+  showExamples(gen);
+  if (fromJob) await fillFromJob(fromJob, setParam);
 }
 
+// The service's refusal: a 422's fields ({loc: [..., FIELD], msg}) marked, the first focused; or its
+// one-line message (err.field names the field in the older answers).
 function showError(err, target) {
-  const box = $("#form-error");
-  if (!box) return;
-  box.hidden = false;
-  box.textContent = err.message;
-  document.querySelectorAll(".invalid").forEach((n) => n.classList.remove("invalid"));
-  target = target || (err.field && (document.getElementById(`param-${err.field}`) || document.getElementById(err.field)));
+  clearErrors();
+  const rejected = [];
+  const names = formFields(document).map((f) => f.dataset.name).sort((a, b) => b.length - a.length);
+  for (const e of err.errors || []) {
+    let name = e.field;
+    // an older answer names 'params' and the parameter only in its text
+    if (name === "params") name = names.find((n) => new RegExp(`\\b${n}\\b`).test(e.msg)) || name;
+    const field = document.querySelector(`.field[data-name="${name}"]`);
+    if (field) {
+      markField(field, e.msg);
+      rejected.push(field);
+    }
+  }
+  showFormError(err.message);
   if (target) {
     target.classList.add("invalid");
     target.focus();
+  } else if (rejected.length) {
+    focusField(rejected[0]);
   }
 }
 
@@ -262,12 +569,19 @@ function formBody(params, size) {
   return form;
 }
 
-const formParams = () => readFields($("#param-fields"));
+const formParams = () => ({ ...readFields($("#basic-fields")), ...readFields($("#advanced-fields")) });
 const formSize = () => readFields($("#size-fields"));
 
 async function submitJob(event) {
   event.preventDefault();
-  $("#form-error").hidden = true;
+  if (!checkForm()) return;
+  const needed = [...document.querySelectorAll("#job-form input[type=file]")]
+    .find((i) => i.required && !i.files.length && !i.closest("[hidden]"));
+  if (needed) {
+    showFormError(`choose the ${needed.id.replace("_", " ")} image (or click an example)`);
+    needed.focus();
+    return;
+  }
   const button = $("#submit");
   button.disabled = true;
   const form = formBody(formParams(), formSize());
@@ -283,8 +597,9 @@ async function submitJob(event) {
 }
 
 // "Run again with these settings": the job's method, size, seed and parameters, and its stored inputs
-// fetched back from the service and put into the file fields (so nothing needs re-choosing).
-async function fillFromJob(id) {
+// fetched back from the service and put into the file fields (so nothing needs re-choosing). From a
+// sweep's "use this value", `setParam` names the swept parameter whose value was chosen.
+async function fillFromJob(id, setParam) {
   const note = $("#rerun-note");
   let job;
   try {
@@ -300,11 +615,10 @@ async function fillFromJob(id) {
   }
   $("#method").value = job.method;
   showMethod();
-  for (const [name, value] of Object.entries({ ...job.size, ...job.params })) {
-    const input = document.getElementById(`param-${name}`);
-    if (!input) continue;
-    if (input.dataset.kind === "boolean") input.checked = !!value;
-    else input.value = value ?? "";
+  for (const [name, value] of Object.entries({ ...job.size, ...job.params })) setFieldValue(name, value);
+  if (job.voxel_size) {
+    setFieldValue("voxel_size", job.voxel_size);
+    if (job.voxel_unit) setFieldValue("voxel_unit", job.voxel_unit);
   }
   $("#seed").value = job.seed;
   const reused = [];
@@ -317,17 +631,23 @@ async function fillFromJob(id) {
       const blob = await resp.blob();
       if (!input.isConnected) return;
       const ext = { "image/png": "png", "image/tiff": "tiff", "image/jpeg": "jpg" }[blob.type] || "png";
-      const files = new DataTransfer();
-      files.items.add(new File([blob], `${role}-${short(id)}.${ext}`, { type: blob.type }));
-      input.files = files.files;
-      input.dispatchEvent(new Event("change"));
+      setFile(input, blob, `${role}-${short(id)}.${ext}`);
       reused.push(role.replace("_", " "));
     } catch (err) {
       missing.push(role.replace("_", " "));
     }
   }
+  const chosen = setParam && setParam in { ...job.size, ...job.params }
+    ? `${setParam} = ${JSON.stringify({ ...job.size, ...job.params }[setParam])} (chosen in the sweep)` : "";
+  if (chosen) {
+    const field = document.querySelector(`.field[data-name="${setParam}"]`);
+    if (field) {
+      if (field.closest("details")) field.closest("details").open = true;
+      field.classList.add("chosen");
+    }
+  }
   note.hidden = false;
-  note.textContent = `The settings of job ${short(id)} are filled in (method, size, seed ${job.seed}, parameters)` +
+  note.textContent = `The settings of job ${short(id)} are filled in (method, size, seed ${job.seed}, parameters${chosen ? "; " + chosen : ""})` +
     (reused.length ? `; its ${reused.join(", ")} reused` : "") +
     (missing.length ? `; choose the ${missing.join(", ")} again (the browser could not fetch them)` : "") +
     ". Change anything, then submit.";
@@ -338,10 +658,10 @@ async function fillFromJob(id) {
 function sweepChoices() {
   const select = $("#sweep-param");
   if (!select) return;
-  const inputs = [...document.querySelectorAll("#size-fields [name], #param-fields [name]")];
-  select.replaceChildren(...inputs.map((input) => el("option", { value: input.name, text: input.name })));
-  const preferred = inputs.find((i) => i.closest("#param-fields") && ["integer", "number"].includes(i.dataset.kind));
-  if (preferred) select.value = preferred.name;
+  const fields = formFields($("#job-form")).filter((f) => !["array", "list"].includes(f.dataset.kind));
+  select.replaceChildren(...fields.map((f) => el("option", { value: f.dataset.name, text: f.dataset.name })));
+  const preferred = fields.find((f) => !f.closest("#size-fields") && ["integer", "number"].includes(f.dataset.kind));
+  if (preferred) select.value = preferred.dataset.name;
   sweepSuggest();
 }
 
@@ -358,7 +678,10 @@ function sweepSuggest() {
   else if (kind === "boolean") values = ["false", "true"];
   else if (numeric && input.value !== "") {
     const v = Number(input.value);
-    values = kind === "integer" ? [Math.max(Number(input.min || 1), Math.round(v / 2)), v, v * 2] : [v / 2, v, v * 2];
+    const odd = input.closest(".field")?.schema?.["x-odd"];
+    const round = (x) => (odd ? 2 * Math.floor(x / 2) + 1 : Math.round(x));
+    values = kind === "integer" ? [Math.max(Number(input.min || 1), round(v / 2)), v, round(v * 2)] : [v / 2, v, v * 2];
+    if (input.max !== "") values = values.filter((x) => x <= Number(input.max));
   }
   $("#sweep-values").value = [...new Set(values)].join(", ");
   if (numeric && input.value !== "") {
@@ -428,7 +751,7 @@ function sweepPreview() {
 
 // One sweep per seed (the API runs a grid with one seed); the sweep page shows them together.
 async function submitSweep() {
-  $("#form-error").hidden = true;
+  if (!checkForm()) return;
   let plan;
   try {
     plan = sweepPlan();
@@ -460,23 +783,91 @@ async function submitSweep() {
   }
 }
 
-async function refreshJobs(gen = generation) {
+// -- the job list: thumbnails, method and exemplar, filter by method and state, delete, paging -------
+const PAGE_SIZE = 12;
+let jobsOffset = 0;
+let jobsRequest = 0; // only the latest request's answer is shown (filters change while one is on its way)
+
+function setupJobList(gen) {
+  jobsOffset = 0;
+  const again = () => { jobsOffset = 0; refreshJobs(gen, true); };
+  $("#filter-method").addEventListener("change", again);
+  $("#filter-state").addEventListener("change", again);
+  $("#jobs-prev").addEventListener("click", () => { jobsOffset = Math.max(0, jobsOffset - PAGE_SIZE); refreshJobs(gen, true); });
+  $("#jobs-next").addEventListener("click", () => { jobsOffset += PAGE_SIZE; refreshJobs(gen, true); });
+  refreshJobs(gen);
+}
+
+const exemplarName = (j) => j.exemplar_name ?? j.exemplar_filename ?? j.filename ?? (j.input_names || {}).exemplar ?? "";
+
+async function deleteJob(j, button) {
+  const running = ["queued", "running"].includes(j.state);
+  if (!confirm(running ? `Cancel job ${short(j.id)}?` : `Delete job ${short(j.id)} and its files?`)) return;
+  button.disabled = true;
+  try {
+    await api(`/api/jobs/${j.id}`, { method: "DELETE" });
+  } catch (err) {
+    $("#jobs-count").textContent = err.message;
+  }
+  refreshJobs(generation, true);
+}
+
+async function refreshJobs(gen = generation, now = false) {
   const tbody = $("#jobs-table tbody");
   if (!tbody || gen !== generation) return;
+  if (now && timer) clearTimeout(timer);
+  const query = new URLSearchParams({ limit: PAGE_SIZE, offset: jobsOffset });
+  if ($("#filter-method").value) query.set("method", $("#filter-method").value);
+  if ($("#filter-state").value) query.set("state", $("#filter-state").value);
+  const request = ++jobsRequest;
   try {
-    const { data } = await api("/api/jobs?limit=20");
-    tbody.replaceChildren(...data.map((j) => el("tr", {},
-      el("td", {}, el("a", { href: `#/jobs/${j.id}`, text: short(j.id) }),
-        j.sweep_id ? el("a", { href: `#/sweeps/${j.sweep_id}`, class: "hint sweep-tag", text: " sweep" }) : ""),
-      el("td", { text: j.method }),
-      el("td", { text: sizeOf(j) }),
-      el("td", {}, el("span", { class: `state ${j.state}`, text: j.state })),
-      j.state === "failed"
-        ? el("td", { class: "reason", title: j.message, text: j.message })
-        : el("td", { text: j.state === "running" ? `${Math.round(100 * j.fraction)}%` : "" }),
-      el("td", { text: fmtTime(j.created) }))));
+    const { data, count } = await api(`/api/jobs?${query}`);
+    if (gen !== generation || request !== jobsRequest) return;
+    // an older service ignores ?method=: filter here too
+    const rows = data.filter((j) => !query.get("method") || j.method === query.get("method"));
+    tbody.replaceChildren(...rows.map((j) => {
+      // the service's thumbnail URL (signed); the output or the exemplar for an older service
+      const thumbSrc = j.thumbnail || (j.state === "succeeded" ? j.artifacts?.["output.png"] : j.inputs?.exemplar);
+      const name = exemplarName(j);
+      const action = el("button", { type: "button", class: "link danger", text: ["queued", "running"].includes(j.state) ? "cancel" : "delete",
+        "aria-label": `${["queued", "running"].includes(j.state) ? "cancel" : "delete"} job ${short(j.id)}` });
+      action.addEventListener("click", () => deleteJob(j, action));
+      return el("tr", { "data-job": j.id },
+        el("td", {}, thumbSrc ? el("a", { href: `#/jobs/${j.id}`, tabindex: "-1" },
+          el("img", { class: "thumb", src: thumbSrc, alt: "", loading: "lazy" })) : ""),
+        el("td", {}, el("a", { href: `#/jobs/${j.id}`, text: short(j.id) }),
+          j.sweep_id ? el("a", { href: `#/sweeps/${j.sweep_id}`, class: "hint sweep-tag", text: " sweep" }) : ""),
+        el("td", {}, el("span", { text: j.method }), name ? el("span", { class: "hint exemplar-name", text: ` · ${name}` }) : ""),
+        el("td", { text: sizeOf(j) }),
+        el("td", {}, el("span", { class: `state ${j.state}`, text: j.state })),
+        j.state === "failed"
+          ? el("td", { class: "reason", title: j.message, text: j.message })
+          : el("td", { text: j.state === "running" ? `${Math.round(100 * j.fraction)}%` : "" }),
+        el("td", { text: fmtTime(j.created) }),
+        el("td", {}, action));
+    }));
+    const total = typeof count === "number" ? count : jobsOffset + data.length;
+    $("#jobs-count").textContent = total ? `${total} job${total === 1 ? "" : "s"}` : "no jobs yet";
+    $("#jobs-page").textContent = data.length ? `${jobsOffset + 1}–${jobsOffset + data.length} of ${total}` : "";
+    $("#jobs-prev").disabled = jobsOffset === 0;
+    $("#jobs-next").disabled = jobsOffset + data.length >= total;
   } catch (err) { /* the next refresh retries */ }
-  if (gen === generation) timer = setTimeout(() => refreshJobs(gen), 2000);
+  if (gen === generation) {
+    if (timer) clearTimeout(timer);
+    timer = setTimeout(() => refreshJobs(gen), 3000);
+  }
+}
+
+// #/jobs: the list alone
+function renderJobList() {
+  const gen = generation;
+  $("#view").replaceChildren($("#tpl-home").content.cloneNode(true));
+  $("#submit-card").remove();
+  setupJobList(gen);
+  api("/api/methods").then(({ data }) => {
+    if (gen !== generation) return;
+    for (const m of data) $("#filter-method").append(el("option", { value: m.name, text: m.name }));
+  }).catch(() => {});
 }
 
 // -- the job page ----------------------------------------------------------------------------------
@@ -505,14 +896,20 @@ async function renderJob(id) {
     if (gen !== generation) return;
     $("#job-state").textContent = job.state + (job.cancel_requested && job.state === "running" ? " (cancelling)" : "");
     $("#job-state").className = `state ${job.state}`;
-    $("#job-summary").textContent = `${job.method}, ${sizeOf(job)}, seed ${job.seed} — submitted ${fmtTime(job.created)}` +
+    $("#job-summary").textContent = `${job.method}, ${sizeOf(job)}${voxelText(job) ? ` (${voxelText(job)})` : ""}, seed ${job.seed} — submitted ${fmtTime(job.created)}` +
       (job.elapsed ? `, ${job.elapsed.toFixed(1)} s` : "") + (job.attempts > 1 ? `, run ${job.attempts}` : "");
-    $("#progress").value = job.state === "succeeded" ? 1 : job.fraction;
+    // a cancelled job keeps the bar where it stopped (grey); an older record that says 1.0 shows none
+    const cancelled = job.state === "cancelled";
+    const stopped = cancelled && job.fraction >= 1 ? 0 : job.fraction;
+    $("#progress").value = job.state === "succeeded" ? 1 : stopped;
     $("#progress").classList.toggle("failed", job.state === "failed");
-    const stage = ["failed", "cancelled"].includes(job.stage) ? "" : job.stage;
+    $("#progress").classList.toggle("cancelled", cancelled);
+    const stage = ["failed", "cancelled", "done"].includes(job.stage) ? "" : job.stage;
+    const pct = Math.round(100 * job.fraction);
     $("#progress-text").textContent = job.state === "failed"
-      ? `failed at ${Math.round(100 * job.fraction)}%${stage ? ` during ${stage}` : ""}: the reason is below`
-      : `${Math.round(100 * (job.state === "succeeded" ? 1 : job.fraction))}% ${job.stage}`;
+      ? `failed at ${pct}%${stage ? ` during ${stage}` : ""}: the reason is below`
+      : cancelled ? `cancelled${job.fraction < 1 && job.fraction > 0 ? ` at ${pct}%` : ""}${stage ? ` during ${stage}` : ""}`
+        : `${Math.round(100 * (job.state === "succeeded" ? 1 : job.fraction))}% ${job.stage}`;
     $("#cancel").hidden = !["queued", "running"].includes(job.state);
     $("#job-message").hidden = !job.message;
     $("#job-message").textContent = job.message;
@@ -531,6 +928,14 @@ async function renderJob(id) {
     if (["queued", "running"].includes(job.state)) timer = setTimeout(poll, 500);
   };
   poll();
+}
+
+// A volume's voxel size ("voxel 0.055 nm"), or that it is uncalibrated; "" for an image.
+function voxelText(job) {
+  if (!job.size || !job.size.depth) return "";
+  const size = job.voxel_size ?? job.params?.voxel_size ?? job.size?.voxel_size;
+  const unit = job.voxel_unit ?? job.params?.voxel_unit ?? job.size?.voxel_unit ?? "";
+  return size ? `voxel ${size} ${unit}`.trim() : "voxels uncalibrated";
 }
 
 // Where the time went: waiting in the queue, the method's own stages (its Result.timings), and the
@@ -584,10 +989,19 @@ function showViewer(job) {
   // three more copies of the output for the 2x2 tiling (decorative: the first one carries the alt)
   const tiles = $("#tiles");
   for (let i = 0; i < 3; i++) tiles.append(el("img", { src: a["output.png"], alt: "", class: "tile-copy", hidden: true }));
-  for (const kind of ["coherence", "orientation"]) {
-    $(`#fig-${kind}`).hidden = !a[`${kind}.png`];
-    if (a[`${kind}.png`]) $(`#view-${kind}`).src = a[`${kind}.png`];
+  // the tensor images, the exemplar's in its column beside the output's
+  const tensors = [["coherence", "coherence.png"], ["orientation", "orientation.png"],
+    ["ex-coherence", "exemplar-coherence.png"], ["ex-orientation", "exemplar-orientation.png"]];
+  for (const [kind, name] of tensors) {
+    // a missing exemplar image keeps its place, so the output's stay under the output
+    if (kind.startsWith("ex-")) $(`#fig-${kind}`).classList.toggle("absent", !a[name]);
+    else $(`#fig-${kind}`).hidden = !a[name];
+    $(`#fig-${kind}`).hidden = kind.startsWith("ex-") ? false : !a[name];
+    if (a[name]) $(`#view-${kind}`).src = a[name];
   }
+  $("#coherence-row").hidden = !a["coherence.png"] && !a["exemplar-coherence.png"];
+  $("#orientation-row").hidden = !a["orientation.png"] && !a["exemplar-orientation.png"];
+  $("#tensor-legends").hidden = $("#coherence-row").hidden && $("#orientation-row").hidden;
   const layout = () => {
     if (!tiles.isConnected) return; // an image loaded after the page was left
     const tiled = $("#tile").checked;
@@ -597,21 +1011,30 @@ function showViewer(job) {
     const exH = exemplar.naturalHeight || 0;
     const outW = tiled ? 2 * W : W;
     const outH = tiled ? 2 * H : H;
+    const choice = radioValue("zoom");
+    // fit: exemplar and output side by side within the width and 60 % of the window's height; the
+    // stage then grows with the page (no box of its own), so the tensor rows and the legends below
+    // are never cut off; zoomed in, the stage scrolls in a box
+    $("#stage").classList.toggle("zoomed", choice !== "fit");
     const box = $("#stage").clientWidth - 60;
-    const scale = zoomScale(radioValue("zoom"), exW + outW, Math.max(exH, outH), box, 0.6 * window.innerHeight);
+    const scale = zoomScale(choice, exW + outW, Math.max(exH, outH), box, 0.6 * window.innerHeight);
     setSize(exemplar, exW * scale, exH * scale);
     tiles.querySelectorAll("img").forEach((img) => setSize(img, W * scale, H * scale));
     // The tensor images carry their legend below (and are padded to its width): show only the
-    // output-sized part, at the output's scale; the page draws a compact legend instead.
-    for (const kind of ["coherence", "orientation"]) {
+    // image-sized part, at the common scale; the page draws the legends once, below the stage.
+    for (const [kind] of tensors) {
       const img = $(`#view-${kind}`);
-      setSize(img.parentElement, W * scale, H * scale);
+      const [w, h] = kind.startsWith("ex-") ? [exW, exH] : [W, H];
+      setSize(img.parentElement, w * scale, h * scale);
       if (img.naturalWidth) setSize(img, img.naturalWidth * scale, img.naturalHeight * scale);
     }
+    // one column for the exemplar and its tensor images, one for the output and its: rows line up
+    const column = Math.max(exW * scale, 120);
+    for (const fig of [exemplar.closest("figure"), $("#fig-ex-coherence"), $("#fig-ex-orientation")]) setSize(fig, column);
     const px = (n) => Math.round(n * scale);
     $("#cap-exemplar").textContent = `exemplar ${exW}×${exH}`;
     $("#cap-output").textContent = `output ${W}×${H}${tiled ? ", tiled 2×2: look for seams along the middle lines" : ""}`;
-    const label = { fit: "fit", 1: "1:1", 2: "2x", 4: "4x" }[radioValue("zoom")];
+    const label = { fit: "fit", 1: "1:1", 2: "2x", 4: "4x" }[choice];
     $("#zoom-status").textContent = `zoom ${label}: one pixel = ${Number(scale.toFixed(2))} screen pixels; ` +
       `output shown at ${px(W)}×${px(H)}`;
   };
@@ -653,30 +1076,81 @@ function flatten(obj, prefix = "", out = {}) {
   return out;
 }
 
-// A volume's slices, one at a time: the plane (xy = fixed z, xz = fixed y, yz = fixed x) and a slider.
+// A volume's three orthogonal slices at once through one point (x, y, z), like Fiji's orthogonal
+// views: xy (fixed z) with yz (fixed x) beside it, transposed so that y runs down in both, and xz
+// (fixed y) below it, so that x runs right in both. A click on any slice moves the shared crosshair;
+// the sliders do too; zoom and contrast apply to all three.
 function showVolumeViewer(job) {
   const depth = job.size.depth;
   $("#volume-viewer").hidden = !depth;
   if (!depth) return;
-  const count = { xy: depth, xz: job.size.height, yz: job.size.width };
-  const axis = { xy: "z", xz: "y", yz: "x" };
-  const slider = $("#slice-index");
+  const W = job.size.width;
+  const H = job.size.height;
+  const D = depth;
+  const extent = { x: W, y: H, z: D };
+  const pos = { x: Math.floor(W / 2), y: Math.floor(H / 2), z: Math.floor(D / 2) };
+  for (const axis of ["x", "y", "z"]) {
+    const slider = $(`#pos-${axis}`);
+    slider.max = extent[axis] - 1;
+    slider.value = pos[axis];
+    slider.setAttribute("aria-label", `${axis} position of the crosshair, 0 to ${extent[axis] - 1}`);
+    slider.addEventListener("input", () => { pos[axis] = Number(slider.value); show(); });
+  }
+  // the plane's slice index, and its image's (u, v) axes as shown
+  const planes = {
+    xy: { index: "z", u: "x", v: "y", w: W, h: H },
+    xz: { index: "y", u: "x", v: "z", w: W, h: D },
+    yz: { index: "x", u: "z", v: "y", w: D, h: H, transposed: true },
+  };
+  const fits = (s) => (W + D) * s + 40 <= $("#volume-viewer").clientWidth;
+  const start = [8, 4, 2, 1].find(fits) || 1;
+  document.querySelector(`input[name=ortho-zoom][value="${start}"]`).checked = true;
+  let shown = {};
   const show = () => {
-    const plane = $("#slice-plane").value;
-    const index = Math.min(parseInt(slider.value, 10), count[plane] - 1);
-    $("#slice-label").textContent = `${axis[plane]} = ${index} of ${count[plane] - 1}`;
-    $("#slice-image").src = signed(`/api/jobs/${job.id}/slices/${plane}/${index}.png`, job.access);
-    $("#slice-caption").textContent = `${plane} slice at ${axis[plane]} = ${index}`;
+    if (!$("#volume-viewer") || !$("#volume-viewer").isConnected) return;
+    const scale = Number(radioValue("ortho-zoom"));
+    const contrast = Number($("#ortho-contrast").value);
+    $("#ortho-contrast-label").textContent = `${contrast}×`;
+    const cross = $("#ortho-cross").checked;
+    for (const [plane, p] of Object.entries(planes)) {
+      const img = $(`#ortho-${plane}`);
+      const box = $(`#box-${plane}`);
+      const index = pos[p.index];
+      if (shown[plane] !== index) {
+        img.src = signed(`/api/jobs/${job.id}/slices/${plane}/${index}.png`, job.access);
+        shown[plane] = index;
+      }
+      setSize(box, p.w * scale, p.h * scale);
+      // yz is served with y right and z down: transposed, z runs right and y down
+      if (p.transposed) setSize(img, p.h * scale, p.w * scale);
+      else setSize(img, p.w * scale, p.h * scale);
+      img.style.filter = contrast === 1 ? "" : `contrast(${contrast})`;
+      const h = $(".cross-h", box);
+      const v = $(".cross-v", box);
+      h.hidden = v.hidden = !cross;
+      v.style.left = `${(pos[p.u] + 0.5) * scale}px`;
+      h.style.top = `${(pos[p.v] + 0.5) * scale}px`;
+      $(`#cap-${plane}`).textContent = `${plane} slice at ${p.index} = ${index}` +
+        (p.transposed ? " (z right, y down)" : ` (${p.u} right, ${p.v} down)`);
+    }
+    for (const axis of ["x", "y", "z"]) $(`#pos-${axis}`).value = pos[axis];
+    $("#ortho-pos").textContent = `x = ${pos.x}, y = ${pos.y}, z = ${pos.z} (of ${W}×${H}×${D})`;
   };
-  const reset = () => {
-    const plane = $("#slice-plane").value;
-    slider.max = count[plane] - 1;
-    slider.value = Math.floor(count[plane] / 2);
-    show();
-  };
-  $("#slice-plane").onchange = reset;
-  slider.oninput = show;
-  reset();
+  for (const [plane, p] of Object.entries(planes)) {
+    $(`#box-${plane}`).addEventListener("click", (event) => {
+      const rect = event.currentTarget.getBoundingClientRect();
+      const scale = Number(radioValue("ortho-zoom"));
+      const u = Math.floor((event.clientX - rect.left) / scale);
+      const v = Math.floor((event.clientY - rect.top) / scale);
+      pos[p.u] = Math.max(0, Math.min(extent[p.u] - 1, u));
+      pos[p.v] = Math.max(0, Math.min(extent[p.v] - 1, v));
+      show();
+    });
+  }
+  document.querySelectorAll("input[name=ortho-zoom]").forEach((r) => r.addEventListener("change", show));
+  $("#ortho-contrast").addEventListener("input", show);
+  $("#ortho-cross").addEventListener("change", show);
+  show();
 }
 
 // The parameters the job ran with, the method's defaults marked (from its schema).
@@ -704,43 +1178,97 @@ async function measures() {
   return glossary;
 }
 
-// A value against its measure's documented threshold: "good", "off", or "" (no threshold).
-function verdictOf(m, value) {
-  if (!m || m.good_below === null || m.good_below === undefined || typeof value !== "number") return "";
-  return Math.abs(value) < m.good_below ? "good" : "off";
+// A measure's direction in the service's words ("lower", "higher", "near-1", "abs-lower"): from the
+// job's own verdict when it has one, else from the glossary (a signed difference is judged by its size).
+function directionOf(name, m) {
+  if (!m) return "lower";
+  if (m.direction) return m.direction;
+  if (m.better === "closer to 1") return "near-1";
+  if (m.better === "higher") return "higher";
+  return /_difference$/.test(name) ? "abs-lower" : "lower";
+}
+const DIRECTION_TEXT = { lower: "lower is better", higher: "higher is better", "near-1": "closer to 1 is better",
+  "abs-lower": "closer to 0 is better (the sign says which way)" };
+
+function targetText(target, direction) {
+  if (target === null || target === undefined) return "";
+  if (Array.isArray(target)) return `${fmtNum(target[0])}–${fmtNum(target[1])}`;
+  if (typeof target !== "number") return String(target);
+  return { lower: `< ${target}`, higher: `> ${target}`, "abs-lower": `|value| < ${target}`, "near-1": `1 ± ${target}` }[direction] || String(target);
 }
 
-// One row per headline measure: value, a verdict against the documented threshold, and its meaning.
-async function showMetrics(summary) {
-  const g = await measures();
-  const rows = [];
-  for (const [name, value] of Object.entries(summary || {})) {
+// A value against its measure's documented target: "good", "near", "off", or "" (no target).
+function verdictOf(m, value, name = "") {
+  if (!m || m.good_below === null || m.good_below === undefined || typeof value !== "number") return "";
+  const direction = directionOf(name, m);
+  const size = direction === "near-1" ? Math.abs(value - 1) : direction === "lower" ? value : Math.abs(value);
+  if (direction === "higher") return value > m.good_below ? "good" : "off";
+  return size < m.good_below ? "good" : "off";
+}
+const VERDICT_CLASS = { meets: "good", near: "near", misses: "off", good: "good", off: "off" };
+const VERDICT_TEXT = { good: "meets the target", near: "near the target", off: "misses the target" };
+
+// The headline measures of a job: [{name, value, target, direction, verdict}], from the service's own
+// verdicts ({value, target, direction, verdict} per measure) or, for older records, the glossary.
+function headline(metrics, g) {
+  const judged = (metrics && metrics.headline) || {};
+  // the service's verdicts when it gives them (metrics.headline), else the summary judged here
+  const summary = Object.keys(judged).length ? judged : (metrics && metrics.summary) || {};
+  const out = [];
+  for (const [name, raw] of Object.entries(summary)) {
+    const entry = raw && typeof raw === "object" && "value" in raw ? raw : judged[name];
+    const value = entry ? entry.value : raw;
     if (typeof value !== "number") continue;
     const m = g[name];
-    const v = verdictOf(m, value);
-    const verdict = v === "good" ? `good (< ${m.good_below})` : v === "off" ? `off (target < ${m.good_below})` : "";
-    const cls = `verdict ${v}`;
-    rows.push(el("tr", {}, el("th", { text: m ? m.label : name }), el("td", { text: fmtNum(value) }),
-      el("td", {}, el("span", { class: cls, text: verdict })),
-      el("td", { class: "hint", text: m ? `${m.meaning}; ${m.better} is better` : "" })));
+    if (entry && "verdict" in entry) {
+      out.push({ name, value, target: entry.target, direction: entry.direction || directionOf(name, m),
+        verdict: VERDICT_CLASS[entry.verdict] ?? "" });
+    } else {
+      out.push({ name, value, target: m ? m.good_below : null, direction: directionOf(name, m), verdict: verdictOf(m, value, name) });
+    }
   }
+  return out;
+}
+
+const isFringeMeasure = (name) => name.startsWith("fringe_");
+const fringesHidden = (metrics) => metrics && metrics.fringes && metrics.fringes.shown === false;
+
+// One row per headline measure: value, target, a verdict against it, and what it says.
+async function showMetrics(metrics) {
+  const g = await measures();
   if (!$("#metrics")) return; // the page was left while the glossary loaded
+  const hidden = fringesHidden(metrics);
+  const rows = headline(metrics, g).filter((h) => !(hidden && isFringeMeasure(h.name))).map((h) => {
+    const m = g[h.name];
+    const target = targetText(h.target, h.direction);
+    return el("tr", { "data-measure": h.name }, el("th", { text: m ? m.label : h.name }), el("td", { class: "num", text: fmtNum(h.value) }),
+      el("td", { text: target || "no documented target" , class: target ? "" : "hint" }),
+      el("td", {}, el("span", { class: `verdict ${h.verdict}`, text: VERDICT_TEXT[h.verdict] || "—" })),
+      el("td", { class: "hint", text: m ? `${m.meaning}; ${DIRECTION_TEXT[h.direction] || `${m.better} is better`}` : DIRECTION_TEXT[h.direction] || "" }));
+  });
   $("#metrics tbody").replaceChildren(...rows);
+  $("#fringe-note").hidden = !hidden;
+  if (hidden) {
+    $("#fringe-note").textContent = `Fringe measures are not shown: ${metrics.fringes.reason || "the exemplar has no lattice fringes"}.`;
+  }
   // A volume: the same measures per axis (the slices normal to z, y and x: the xy, xz and yz planes).
-  const perAxis = summary && summary.per_axis;
+  const perAxis = metrics && metrics.summary && metrics.summary.per_axis;
   $("#axis-metrics").hidden = !perAxis;
   if (!perAxis) return;
   const axes = [["0", "xy slices"], ["1", "xz slices"], ["2", "yz slices"]].filter(([a]) => perAxis[a]);
   $("#axis-metrics thead").replaceChildren(el("tr", {}, el("th", { text: "measure" }),
     ...axes.map(([, label]) => el("th", { text: label }))));
-  const names = Object.keys(perAxis[axes[0][0]]).filter((n) => typeof perAxis[axes[0][0]][n] === "number");
+  const valueOf = (v) => (v && typeof v === "object" && "value" in v ? v.value : v);
+  const names = Object.keys(perAxis[axes[0][0]]).filter((n) => typeof valueOf(perAxis[axes[0][0]][n]) === "number")
+    .filter((n) => !(hidden && isFringeMeasure(n)));
   $("#axis-metrics tbody").replaceChildren(...names.map((name) => {
     const m = g[name];
     return el("tr", {}, el("th", { text: m ? m.label : name, title: m ? m.meaning : "" }),
       ...axes.map(([a]) => {
-        const v = perAxis[a][name];
-        const off = m && m.good_below != null && typeof v === "number" && Math.abs(v) >= m.good_below;
-        return el("td", { class: off ? "verdict off" : "", text: fmtNum(v) });
+        const raw = perAxis[a][name];
+        const v = valueOf(raw);
+        const verdict = raw && typeof raw === "object" && raw.verdict ? VERDICT_CLASS[raw.verdict] : verdictOf(m, v, name);
+        return el("td", { class: `num verdict ${verdict || ""}`, text: fmtNum(v), title: VERDICT_TEXT[verdict] || "" });
       }));
   }));
 }
@@ -749,12 +1277,12 @@ async function showMetrics(summary) {
 const FRINGE_STATS = [["count", "fringes"], ["mean_length", "mean length (px)"], ["median_length", "median length (px)"],
   ["mean_tortuosity", "mean tortuosity"], ["share_tortuous", "share tortuous"], ["density_per_10k_px", "per 10k px"]];
 function showFringes(fringes) {
-  const ok = fringes && fringes.exemplar && fringes.output;
+  const ok = fringes && fringes.shown !== false && fringes.exemplar && fringes.output;
   $("#fringe-metrics").hidden = !ok;
   if (!ok) return;
-  $("#fringe-metrics tbody").replaceChildren(...FRINGE_STATS.filter(([k]) => k in fringes.exemplar).map(([k, label]) =>
-    el("tr", {}, el("th", { text: label }), el("td", { text: fmtNum(fringes.exemplar[k]) }),
-      el("td", { text: fmtNum(fringes.output[k]) }))));
+  const cell = (side, k) => el("td", { class: "num", text: k in side ? fmtNum(side[k]) : "—" });
+  $("#fringe-metrics tbody").replaceChildren(...FRINGE_STATS.filter(([k]) => k in fringes.exemplar || k in fringes.output)
+    .map(([k, label]) => el("tr", {}, el("th", { text: label }), cell(fringes.exemplar, k), cell(fringes.output, k))));
 }
 
 // The exemplar's diagnostics (metrics.exemplar): a plain warning when an exemplar mixes textures.
@@ -773,13 +1301,15 @@ function showResults(job) {
   $("#results").hidden = false;
   showExemplarWarning(job.metrics);
   showVolumeViewer(job);
-  // A 2-D output, its exemplar and its tensor images go to the viewer; a volume keeps its pictures.
+  // A 2-D output, its exemplar and the tensor images go to the viewer; a volume keeps its pictures.
   $("#viewer").hidden = volume || !a["output.png"];
   if (!$("#viewer").hidden) showViewer(job);
-  const inViewer = volume ? new Set() : new Set(["output.png", "coherence.png", "orientation.png"]);
-  const captions = { "output.png": volume ? "output (middle xy slice)" : "output",
-    "cube.png": "the volume: outer faces and a corner cut away", "slices.png": "mid-slices beside their exemplars",
-    "coherence.png": "coherence (output)", "orientation.png": "orientation (output)",
+  const inViewer = volume ? new Set()
+    : new Set(["output.png", "coherence.png", "orientation.png", "exemplar-coherence.png", "exemplar-orientation.png"]);
+  const captions = { "cube.png": "the volume: outer faces and a corner cut away", "output.png": volume ? "output (middle xy slice)" : "output",
+    "slices.png": "mid-slices beside their exemplars",
+    "exemplar-coherence.png": "coherence (exemplar)", "coherence.png": "coherence (output)",
+    "exemplar-orientation.png": "orientation (exemplar)", "orientation.png": "orientation (output)",
     "constraint_coherence.png": "coherence (constraint)", "constraint_orientation.png": "orientation (constraint)" };
   const images = $("#result-images");
   images.replaceChildren();
@@ -792,13 +1322,22 @@ function showResults(job) {
   compareChoices(job);
   const metrics = Object.entries(flatten(job.metrics)).filter(([k]) => !k.startsWith("settings."));
   const row = ([k, v]) => el("tr", {}, el("th", { text: k }), el("td", { text: fmtNum(v) }));
-  showMetrics((job.metrics && job.metrics.summary) || Object.fromEntries(metrics));
+  showMetrics(job.metrics && job.metrics.summary ? job.metrics : { summary: Object.fromEntries(metrics) });
   showFringes(job.metrics && job.metrics.fringes);
   $("#all-metrics tbody").replaceChildren(...metrics.map(row));
   $("#plots").replaceChildren(...Object.keys(a).filter((n) => n.startsWith("plots/"))
+    .filter((n) => !(fringesHidden(job.metrics) && /fringe/.test(n)))
     .map((n) => figure(a[n], n.slice(6).replace(".png", "").replaceAll("_", " "))));
-  $("#downloads").replaceChildren(...Object.entries(a).map(([n, url]) =>
-    el("li", {}, el("a", { href: url, download: n.replace("plots/", ""), text: n }))));
+  // everything in one zip, then each file
+  const zip = job.artifacts_zip || signed(`/api/jobs/${job.id}/artifacts.zip`, job.access); // the service's is signed
+  $("#zip-link").hidden = false;
+  $("#zip-link").href = zip;
+  $("#zip-link").setAttribute("download", `texsynth-${short(job.id)}.zip`);
+  $("#voxel-note").hidden = !volume;
+  $("#voxel-note").textContent = volume ? `output.tiff: ${voxelText(job)}` +
+    (voxelText(job) === "voxels uncalibrated" ? " (give a voxel size in the form to calibrate it in Fiji)" : " (Fiji reads it as the calibration)") : "";
+  $("#downloads").replaceChildren(el("li", {}, el("a", { href: zip, download: `texsynth-${short(job.id)}.zip`, text: "all artifacts (zip)", id: "zip-download" })),
+    ...Object.entries(a).map(([n, url]) => el("li", {}, el("a", { href: url, download: n.replace("plots/", ""), text: n }))));
 }
 
 // -- comparing two jobs: swipe or blink between their outputs, their metrics side by side ---------
@@ -901,28 +1440,29 @@ async function renderCompare(idA, idB) {
 }
 
 // Which value is better by the measure's direction; "" when equal or unknown.
-function better(m, a, b) {
+function better(direction, a, b) {
   if (typeof a !== "number" || typeof b !== "number" || a === b) return "";
-  const dir = m ? m.better : "lower";
-  const score = (v) => (dir === "higher" ? -v : dir === "closer to 1" ? Math.abs(v - 1) : Math.abs(v));
+  const score = (v) => (direction === "higher" ? -v : direction === "near-1" ? Math.abs(v - 1) : direction === "lower" ? v : Math.abs(v));
   return score(a) < score(b) ? "A" : score(b) < score(a) ? "B" : "";
 }
 
 async function compareMetrics(A, B) {
   const g = await measures();
-  const sa = (A.metrics && A.metrics.summary) || {};
-  const sb = (B.metrics && B.metrics.summary) || {};
-  const names = [...new Set([...Object.keys(sa), ...Object.keys(sb)])]
-    .filter((n) => typeof sa[n] === "number" || typeof sb[n] === "number");
+  const byName = (job) => Object.fromEntries(headline(job.metrics, g)
+    .filter((h) => !(fringesHidden(job.metrics) && isFringeMeasure(h.name))).map((h) => [h.name, h]));
+  const ha = byName(A);
+  const hb = byName(B);
+  const names = [...new Set([...Object.keys(ha), ...Object.keys(hb)])];
   if (!$("#compare-metrics")) return;
-  const cell = (m, v) => el("td", { class: `verdict ${verdictOf(m, v)}`, text: v === undefined ? "—" : fmtNum(v),
-    title: verdictOf(m, v) ? `${verdictOf(m, v)} against the target < ${m.good_below}` : "" });
+  const cell = (h) => el("td", { class: `num verdict ${h ? h.verdict : ""}`, text: h ? fmtNum(h.value) : "—",
+    title: h && h.verdict ? `${VERDICT_TEXT[h.verdict]} (${targetText(h.target, h.direction)})` : "" });
   $("#compare-metrics tbody").replaceChildren(...names.map((name) => {
     const m = g[name];
-    const who = better(m, sa[name], sb[name]);
-    return el("tr", {}, el("th", { text: m ? m.label : name, title: m ? `${m.meaning}; ${m.better} is better` : "" }),
-      cell(m, sa[name]), cell(m, sb[name]),
-      el("td", { text: who ? `${who} (${m ? m.better : "lower"} is better)` : "same" }));
+    const h = ha[name] || hb[name];
+    const who = better(h.direction, ha[name]?.value, hb[name]?.value);
+    return el("tr", {}, el("th", { text: m ? m.label : name, title: m ? m.meaning : "" }),
+      cell(ha[name]), cell(hb[name]),
+      el("td", { text: who ? `${who} (${DIRECTION_TEXT[h.direction] || "lower is better"})` : "same" }));
   }));
 }
 
@@ -947,6 +1487,7 @@ async function renderSweep(ids) {
   const seeds = {}; // sweep id -> the seed its runs share
   const g = await measures();
   if (gen !== generation) return;
+  sweepSort = { key: null, dir: 1 };
   $("#sweep-metric").addEventListener("change", () => draw());
   let sweeps = [];
   const draw = () => drawSweep(sweeps, seeds, g);
@@ -975,6 +1516,64 @@ function csvLink(sweep, text) {
   const a = el("a", { href: `${sweep.url}?format=csv`, download: `sweep-${short(sweep.id)}.csv`, class: "csv", text });
   a.addEventListener("click", tokenDownload);
   return a;
+}
+
+let sweepSort = { key: null, dir: 1 };
+
+const mean = (xs) => xs.reduce((a, b) => a + b, 0) / xs.length;
+// the sample standard deviation; rounding noise of equal values (1e-17) reads as 0
+const spread = (xs) => {
+  if (xs.length < 2) return 0;
+  const m = mean(xs);
+  const sd = Math.sqrt(xs.reduce((a, x) => a + (x - m) ** 2, 0) / (xs.length - 1));
+  return sd <= 1e-9 * Math.max(...xs.map(Math.abs)) ? 0 : sd;
+};
+
+// One row per value of the swept parameter: every measure's mean ± standard deviation over the seeds,
+// the best value by the chosen measure marked, and "use this value" that fills the form with it.
+function drawRanking(rows, param, metricCols, chosen, g) {
+  const values = [...new Set(rows.map((r) => JSON.stringify(r[param])))].map((v) => JSON.parse(v));
+  const name = (c) => c.slice(8);
+  const label = (c) => g[name(c)]?.label || name(c);
+  const stats = values.map((value) => {
+    const runs = rows.filter((r) => JSON.stringify(r[param]) === JSON.stringify(value));
+    const done = runs.filter((r) => r.state === "succeeded");
+    const cols = Object.fromEntries(metricCols.map((c) => {
+      const xs = done.map((r) => r[c]).filter((x) => typeof x === "number");
+      return [c, xs.length ? { mean: mean(xs), sd: spread(xs), n: xs.length } : null];
+    }));
+    return { value, runs, done, cols };
+  });
+  const direction = chosen ? directionOf(name(chosen), g[name(chosen)]) : "lower";
+  const score = (v) => (direction === "higher" ? -v : direction === "near-1" ? Math.abs(v - 1) : direction === "lower" ? v : Math.abs(v));
+  const ranked = stats.filter((s) => chosen && s.cols[chosen]);
+  const best = ranked.length ? ranked.reduce((a, b) => (score(b.cols[chosen].mean) < score(a.cols[chosen].mean) ? b : a)) : null;
+  const seedsPer = Math.max(0, ...stats.map((s) => s.runs.length));
+  $("#ranking-hint").textContent = chosen
+    ? `mean ± standard deviation over ${seedsPer} seed${seedsPer === 1 ? "" : "s"}; best by ${label(chosen)} (${DIRECTION_TEXT[direction]}) marked ★`
+    : "waiting for the first finished run";
+  // the chosen measure first, then the others
+  const cols = chosen ? [chosen, ...metricCols.filter((c) => c !== chosen)] : metricCols;
+  $("#sweep-ranking thead").replaceChildren(el("tr", {}, el("th", { text: param }),
+    el("th", {}, el("span", { class: "visually-hidden", text: "fill the form" })), el("th", { text: "runs done" }),
+    ...cols.map((c) => el("th", { text: label(c), class: c === chosen ? "chosen" : "" }))));
+  $("#sweep-ranking tbody").replaceChildren(...stats.map((s) => {
+    const isBest = s === best;
+    const use = el("button", { type: "button", class: "secondary use-value", text: "use this value",
+      "aria-label": `use ${param} = ${s.value} in the form` });
+    use.disabled = !s.done.length;
+    use.addEventListener("click", () => { location.hash = `#/new?from=${s.done[0].job}&set=${encodeURIComponent(param)}`; });
+    return el("tr", { class: isBest ? "best" : "", "data-value": JSON.stringify(s.value) },
+      el("th", { class: "nowrap" }, String(s.value), isBest ? el("span", { class: "best-mark", text: " ★ best" }) : ""),
+      el("td", {}, use),
+      el("td", { class: "num nowrap", text: `${s.done.length} of ${s.runs.length}` }),
+      ...cols.map((c) => {
+        const st = s.cols[c];
+        const m = g[name(c)];
+        return el("td", { class: `num verdict ${st ? verdictOf(m, st.mean, name(c)) : ""}`,
+          text: st ? `${fmtNum(st.mean)}${st.n > 1 ? ` ± ${fmtNum(st.sd)}` : ""}` : "" });
+      }));
+  }));
 }
 
 function drawSweep(sweeps, seeds, g) {
@@ -1009,9 +1608,32 @@ function drawSweep(sweeps, seeds, g) {
   if (chosen) select.value = chosen;
 
   const label = (c) => g[c.slice(8)]?.label || c.slice(8);
-  $("#sweep-table thead").replaceChildren(el("tr", {}, el("th", { text: "output" }), el("th", { text: "seed" }),
-    ...params.map((p) => el("th", { text: p })), el("th", { text: "state" }),
-    ...metricCols.map((c) => el("th", { text: label(c), title: g[c.slice(8)]?.meaning || "", class: c === chosen ? "chosen" : "" }))));
+  drawRanking(rows, param, metricCols, chosen, g);
+  // every run, sortable by any column (a click on its name; again: the other way)
+  const sort = sweepSort;
+  const sortable = [["seed", "seed"], ...params.map((p) => [p, p]), ["state", "state"], ...metricCols.map((c) => [c, label(c)])];
+  const header = (key, text, title = "") => {
+    const dir = sort.key === key ? sort.dir : 0;
+    const button = el("button", { type: "button", class: "sort", text, title });
+    button.append(el("span", { class: "sort-mark", "aria-hidden": "true", text: dir > 0 ? " ▲" : dir < 0 ? " ▼" : "" }));
+    button.addEventListener("click", () => {
+      sweepSort = { key, dir: sort.key === key ? -sort.dir : 1 };
+      drawSweep(sweeps, seeds, g);
+    });
+    return el("th", { "aria-sort": dir > 0 ? "ascending" : dir < 0 ? "descending" : "none", class: key === chosen ? "chosen" : "", "data-key": key }, button);
+  };
+  $("#sweep-table thead").replaceChildren(el("tr", {}, el("th", { text: "output" }),
+    ...sortable.map(([key, text]) => header(key, text, g[String(key).slice(8)]?.meaning || ""))));
+  if (sort.key) {
+    const cmp = (a, b) => (typeof a === "number" && typeof b === "number" ? a - b : String(a ?? "").localeCompare(String(b ?? ""), undefined, { numeric: true }));
+    rows.sort((a, b) => {
+      const va = a[sort.key];
+      const vb = b[sort.key];
+      if (va === undefined || va === null) return 1; // unfinished runs last, either way
+      if (vb === undefined || vb === null) return -1;
+      return sort.dir * cmp(va, vb);
+    });
+  }
   $("#sweep-table tbody").replaceChildren(...rows.map((r) => {
     const name = `${params.map((p) => `${p} = ${r[p]}`).join(", ")}, seed ${r.seed}`;
     const thumb = r.state === "succeeded"
@@ -1022,7 +1644,7 @@ function drawSweep(sweeps, seeds, g) {
       el("td", {}, el("a", { href: `#/jobs/${r.job}`, class: `state ${r.state}`, text: r.state })),
       ...metricCols.map((c) => {
         const m = g[c.slice(8)];
-        return el("td", { class: `num verdict ${verdictOf(m, r[c])}`, text: r[c] === undefined ? "" : fmtNum(r[c]) });
+        return el("td", { class: `num verdict ${verdictOf(m, r[c], c.slice(8))}`, text: r[c] === undefined ? "" : fmtNum(r[c]) });
       }));
   }));
 
@@ -1155,7 +1777,11 @@ function route() {
   if ((m = hash.match(/^#\/jobs\/([0-9a-f]+)/))) renderJob(m[1]);
   else if ((m = hash.match(/^#\/compare\/([0-9a-f]+)\/([0-9a-f]+)/))) renderCompare(m[1], m[2]);
   else if ((m = hash.match(/^#\/sweeps\/([0-9a-f,]+)/))) renderSweep(m[1].split(",").filter(Boolean));
-  else renderHome((hash.match(/^#\/new\?from=([0-9a-f]+)/) || [])[1]);
+  else if (/^#\/jobs\/?$/.test(hash)) renderJobList();
+  else {
+    const query = new URLSearchParams(hash.split("?")[1] || "");
+    renderHome(query.get("from"), query.get("set"));
+  }
 }
 
 async function health() {

@@ -77,10 +77,14 @@ def test_viewer_zooms_by_keyboard_tiles_the_output_and_shows_timings(browser, em
     assert page.locator("#tiles img:visible").count() == 4
     assert _width(page, "#tiles") >= 2 * 192
     assert "tiled 2\u00d72" in page.inner_text("#cap-output")
-    # the tensor images at the output's size (their own legend cropped away), with a compact legend
+    # the tensor images at the output's size (their own legend cropped away), the exemplar's beside them
+    # at the exemplar's, and the legends below the stage
     for kind in ("coherence", "orientation"):
         assert _width(page, f"#fig-{kind} .crop") == 192
-        assert page.locator(f"#fig-{kind} .legend").is_visible()
+        assert _width(page, f"#fig-ex-{kind} .crop") == 256
+        page.wait_for_function(f"() => document.querySelector('#view-ex-{kind}').naturalWidth > 0")
+    assert page.locator("#tensor-legends .legend").count() == 2
+    assert page.locator("#tensor-legends .legend").first.is_visible()
     # fit keeps exemplar and output side by side inside the page
     page.check("input[name=zoom][value='fit']", force=True)
     assert _width(page, "#view-exemplar") + _width(page, "#tiles") < 1200
