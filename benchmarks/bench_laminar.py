@@ -59,11 +59,14 @@ KOPF_PAPER = {
     "iterations": 10,
     "orientation_gain": 0.0,
     "scan": "hilbert",
+    "structure": "none",
+    "final_step": "average",
 }
 #: (method, label, params, side, modes)
 RUNS: tuple[tuple[str, str, dict[str, Any], int, tuple[str, ...]], ...] = (
     ("solid-kopf", "defaults", {}, 64, ("one", "planes")),
     ("solid-kopf", "paper", KOPF_PAPER, 64, ("one", "planes")),
+    ("solid-kopf", "final-average", {"final_step": "average"}, 64, ("one",)),
     ("solid-chen-wang", "defaults", {}, 64, ("one", "planes")),
     ("solid-kopf", "defaults", {}, 128, ("one",)),
 )

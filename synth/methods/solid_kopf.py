@@ -53,6 +53,7 @@ from synth.kernels.solid_search import (
     HistogramState,
     MatchField,
     PackedExemplars,
+    best_vote,
     irls_update,
 )
 from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
@@ -60,7 +61,11 @@ from synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
     level_phase,
+    oriented_phase,
+    plane_orientation,
+    sheet_normal,
     sheets,
+    stack_period,
     starts_laminar,
     structure_levels,
 )
@@ -129,9 +134,15 @@ class SolidKopfParams(SolidParams):
         description="Pull each plane's slices toward its exemplar's orientation histogram (eq 4 on "
         "orientations; 0 = off, the paper).",
     )
-    structure: Literal["auto", "none", "laminar"]
+    structure: Literal["auto", "none", "laminar", "oriented"]
     structure_length: float
     structure, structure_length = laminar_start_fields()
+    structure = Field(
+        "auto",
+        description=structure.description + " 'oriented': start from a crumpled stack of sheets whose mean "
+        "normal and spread fit the constrained exemplars' fringe orientations (anisotropic laminae, "
+        "per-plane exemplars).",
+    )
     iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
     scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
     r: float = Field(0.8, gt=0.0, le=2.0, description="Robust norm exponent (IRLS weights ||s-e||^(r-2)).")
@@ -143,6 +154,12 @@ class SolidKopfParams(SolidParams):
         ge=1,
         le=4,
         description="Neighbourhoods centred on every stride-th voxel of each slice (sparse grid).",
+    )
+    final_step: Literal["average", "best"] = Field(
+        "average",
+        description="The last step of the finest level: 'average' (the paper: the weighted average of the "
+        "proposals) or 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps the "
+        "exemplar's grain).",
     )
     search: Literal["tree", "exact"] = Field(
         "tree",
@@ -189,7 +206,13 @@ class _KopfLoop:
     """Kopf's search and optimisation steps at each level (:func:`synth.pixel.solid.run_levels`)."""
 
     def __init__(
-        self, params: SolidKopfParams, plan: SolidPlan, run: SolidRun, iterations: int, period: float = 0.0
+        self,
+        params: SolidKopfParams,
+        plan: SolidPlan,
+        run: SolidRun,
+        iterations: int,
+        period: float = 0.0,
+        phi: np.ndarray | None = None,
     ) -> None:
         self.params, self.plan, self.run, self.iterations = params, plan, run, iterations
         self.period = period  # > 0: the laminar start at this period (px of the finest level)
@@ -201,9 +224,7 @@ class _KopfLoop:
         self.meter = ProgressMeter(run.report, float(total))
         self.timings = {"search": 0.0, "optimisation": 0.0}
         self.energies: dict[str, list[float]] = {}
-        if period > 0:
-            length = params.structure_length * period
-            phi = laminar_phase(plan.shapes[0], length, run.rng, periodic=params.periodic)
+        if period > 0 and phi is not None:
             coarsest = plan.levels - 1
             values = np.concatenate([plan.exemplars[p][-1].ravel() for p in run.active])
             self.vol = sheets(level_phase(phi, coarsest), period / 2.0**coarsest, values)
@@ -316,7 +337,9 @@ class _KopfLoop:
         return sum_d2, count
 
     def end_level(self, step: LevelStep) -> None:
-        pass
+        """At the finest level, the discrete last step (``final_step='best'``) on the last matches."""
+        if step.level == 0 and self.params.final_step == "best":
+            self.vol = best_vote(self.vol, self.field, self.packed, self.params.periodic)
 
     def result(self, seed: int) -> Result:
         """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""
@@ -367,12 +390,24 @@ def run_solid_kopf(
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
-    period = 0.0
-    if starts_laminar(params.structure, run.views, params.planes, params.adapt_to_structure, laminar_pilot):
+    period, phi = 0.0, None
+    if params.structure == "oriented":
+        views = {PLANES[p]: run.views[PLANES[p]] for p in run.active}
+        levels = structure_levels(float(np.mean([dominant_period(im) for im in views.values()])), levels)
+        normal = sheet_normal({p: plane_orientation(im) for p, im in views.items()})
+        period = stack_period(views, normal)
+        plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
+        length = params.structure_length * period
+        phi = oriented_phase(plan.shapes[0], views, period, length, run.rng, periodic=params.periodic)
+    elif starts_laminar(params.structure, run.views, params.planes, params.adapt_to_structure, laminar_pilot):
         period = float(np.mean([dominant_period(image) for image in run.constrained()]))
         levels = structure_levels(period, levels)
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
-    loop = _KopfLoop(params, plan, run, iterations, period)
+    if period > 0 and phi is None:
+        phi = laminar_phase(
+            plan.shapes[0], params.structure_length * period, run.rng, periodic=params.periodic
+        )
+    loop = _KopfLoop(params, plan, run, iterations, period, phi)
     run_levels(plan, [iterations] * plan.levels, loop)
     return loop.result(seed)
 
