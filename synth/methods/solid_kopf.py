@@ -20,19 +20,19 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - k-coherence search seeded by the coarser level, the k-d tree only at the very first iteration;
 - 4 iterations per level (the study: 10); a sparse grid of centres whose phase is drawn every iteration;
 - the histogram follows the update in blocks of ``max(4096, N / 16)`` voxels (parallel), not voxel by voxel;
-- the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10
-  iterations;
+- the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10 its;
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
 - neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
-- the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
-  curved sheets at its period (the structure first, Akl 2014 in 3D), on the levels that keep the period;
-  for short-fringed exemplars :func:`laminar_pilot` decides (docs/solid.md, "chosen by a pilot").
+- structured starts (``structure``, :mod:`synth.pixel.laminar`; Akl 2014's structure first, in 3D): curved
+  sheets for isotropic fringes (a pilot for short ones), a crumpled stack fitted to anisotropic ones;
+- after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 
 from __future__ import annotations
 
 import time
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -66,7 +66,7 @@ from synth.pixel.laminar import (
     sheet_normal,
     sheets,
     stack_period,
-    starts_laminar,
+    start_kind,
     structure_levels,
 )
 from synth.pixel.solid import (
@@ -114,6 +114,8 @@ POSITION_GAIN = 1.0
 POSITION_CELLS = 16
 #: Default gain of the orientation-usage re-weighting (docs/solid.md, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
+#: Correlation length of the oriented start's crumples, in periods (docs/solid.md).
+ORIENTED_LENGTH = 2.0
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
 RANDOM_CANDIDATES = 2
 
@@ -139,9 +141,18 @@ class SolidKopfParams(SolidParams):
     structure, structure_length = laminar_start_fields()
     structure = Field(
         "auto",
-        description=structure.description + " 'oriented': start from a crumpled stack of sheets whose mean "
-        "normal and spread fit the constrained exemplars' fringe orientations (anisotropic laminae, "
-        "per-plane exemplars).",
+        description="'laminar': start from a volume of curved sheets at the exemplar's period, on the levels "
+        "that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a crumpled stack whose "
+        "mean normal and spread fit the exemplars' fringe orientations; 'none': the paper's random start; "
+        "'auto' (with adapt_to_structure): 'laminar' for one isotropic exemplar on the three planes that is "
+        "fringed (mean coherence >= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic "
+        "per-plane exemplars; 'oriented' for fringed exemplars of which one is anisotropic; else 'none'.",
+    )
+    oriented_length: float = Field(
+        ORIENTED_LENGTH,
+        gt=0.0,
+        le=64.0,
+        description="Correlation length of the oriented start's crumples, in periods.",
     )
     iterations: int = Field(4, ge=1, le=50, description="Search + optimisation iterations per level.")
     scan: ScanOrder = Field("random", description="Order of the voxel updates in the optimisation step.")
@@ -155,11 +166,12 @@ class SolidKopfParams(SolidParams):
         le=4,
         description="Neighbourhoods centred on every stride-th voxel of each slice (sparse grid).",
     )
-    final_step: Literal["average", "best"] = Field(
-        "average",
+    final_step: Literal["auto", "average", "best"] = Field(
+        "auto",
         description="The last step of the finest level: 'average' (the paper: the weighted average of the "
-        "proposals) or 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps the "
-        "exemplar's grain).",
+        "proposals), 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps the "
+        "exemplar's grain), 'auto': after a laminar or oriented start, the one whose slices keep the "
+        "exemplars' mean coherence better, else 'average'.",
     )
     search: Literal["tree", "exact"] = Field(
         "tree",
@@ -232,6 +244,7 @@ class _KopfLoop:
             self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
         self.src = np.zeros((3, 0), dtype=np.int64)
         self.pooled = np.zeros(0, dtype=np.float32)
+        self.final = "average"  # the last step taken (``final_step``)
 
     def start_level(self, step: LevelStep) -> None:
         """Upsample the volume and the coherent sources (or draw them), and build the level's tables."""
@@ -337,9 +350,24 @@ class _KopfLoop:
         return sum_d2, count
 
     def end_level(self, step: LevelStep) -> None:
-        """At the finest level, the discrete last step (``final_step='best'``) on the last matches."""
-        if step.level == 0 and self.params.final_step == "best":
-            self.vol = best_vote(self.vol, self.field, self.packed, self.params.periodic)
+        """At the finest level, the discrete last step on the last matches: always (``final_step='best'``),
+        or (``'auto'``, after a structured start) when its slices keep the exemplars' mean coherence
+        better than the average's (the average smooths a grainy exemplar's fringes into too-ordered ones;
+        on a smooth exemplar the copies' seams show)."""
+        final = self.params.final_step
+        if step.level != 0 or final == "average" or (final == "auto" and self.period <= 0):
+            return
+        best = best_vote(self.vol, self.field, self.packed, self.params.periodic)
+        if final == "auto":
+            target = float(np.mean([mean_coherence(self.images[p]) for p in self.run.active]))
+            gaps = [
+                abs(np.log(max(slice_coherence(v, _slice_step(v)) / target, 1e-6))) for v in (self.vol, best)
+            ]
+            self.final = "best" if gaps[1] < gaps[0] else "average"
+            if self.final == "average":
+                return
+        self.final = "best"
+        self.vol = best
 
     def result(self, seed: int) -> Result:
         """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""
@@ -370,6 +398,7 @@ class _KopfLoop:
                 "planes": list(params.planes),
                 "contrast_before_remap": contrast,
                 "laminar_start": self.period > 0,
+                "final_step": self.final,
                 "period": self.period if self.period > 0 else None,
             },
         )
@@ -391,15 +420,17 @@ def run_solid_kopf(
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
     period, phi = 0.0, None
-    if params.structure == "oriented":
+    pilot = partial(laminar_pilot, settings={"structure_length": params.structure_length})
+    kind = start_kind(params.structure, run.views, params.planes, params.adapt_to_structure, pilot)
+    if kind == "oriented":
         views = {PLANES[p]: run.views[PLANES[p]] for p in run.active}
         levels = structure_levels(float(np.mean([dominant_period(im) for im in views.values()])), levels)
         normal = sheet_normal({p: plane_orientation(im) for p, im in views.items()})
         period = stack_period(views, normal)
         plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
-        length = params.structure_length * period
+        length = params.oriented_length * period
         phi = oriented_phase(plan.shapes[0], views, period, length, run.rng, periodic=params.periodic)
-    elif starts_laminar(params.structure, run.views, params.planes, params.adapt_to_structure, laminar_pilot):
+    elif kind == "laminar":
         period = float(np.mean([dominant_period(image) for image in run.constrained()]))
         levels = structure_levels(period, levels)
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
@@ -412,28 +443,38 @@ def run_solid_kopf(
     return loop.result(seed)
 
 
+#: The pilot's settings when its caller gives none (solid-chen-wang): those it was measured with before
+#: Kopf's structured starts changed (docs/solid.md), so that its choices do not move with Kopf's defaults.
+PILOT_SETTINGS: dict[str, object] = {"structure_length": 4.0, "final_step": "average"}
 #: Side of the pilot volumes of :func:`laminar_pilot` (two Kopf runs of about 0.5-1 s of CPU each).
 PILOT_SIDE = 32
 
 
-def laminar_pilot(exemplar: np.ndarray) -> bool:
+def laminar_pilot(exemplar: np.ndarray, settings: dict[str, object] | None = None) -> bool:
     """Whether the laminar start keeps ``exemplar``'s coherence better than the random start.
 
-    Two ``PILOT_SIDE^3`` volumes (defaults, seed 0, one from each start) are synthesized, and the start
-    whose slices' mean coherence over the exemplar's (``log`` ratio) is nearer 1 wins: on short-fringed
+    Two ``PILOT_SIDE^3`` volumes (defaults but ``settings``, else :data:`PILOT_SETTINGS`; seed 0; one
+    from each start) are synthesized, and the start whose slices' mean coherence over the exemplar's
+    (``log`` ratio) is nearer 1 wins: on short-fringed
     exemplars the random start gives blobs (real onion crops 0.64-0.74x) and the sheets can be too
     ordered (soot-128 1.54x); docs/solid.md, "The laminar start, chosen by a pilot".
     """
     target = mean_coherence(exemplar)
     gaps = {}
+    pinned = settings if settings is not None else PILOT_SETTINGS
     for structure in ("none", "laminar"):
-        params = SolidKopfParams(structure=structure)
+        params = SolidKopfParams(structure=structure, **pinned)  # type: ignore[arg-type]
         volume = run_solid_kopf(
             exemplar, size=(PILOT_SIDE,) * 3, params=params, seed=0, progress=lambda *_, **__: None
         ).image
         ratio = slice_coherence(volume) / max(target, 1e-6)
         gaps[structure] = abs(np.log(max(ratio, 1e-6)))
     return gaps["laminar"] < gaps["none"]
+
+
+def _slice_step(volume: np.ndarray) -> int:
+    """Every 4th slice, or fewer on large volumes: at most 16 slices along an axis."""
+    return max(4, max(volume.shape) // 16)
 
 
 def slice_coherence(volume: np.ndarray, step: int = 4) -> float:

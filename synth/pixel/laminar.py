@@ -15,6 +15,11 @@ The texture stage (the solid methods) then starts from this volume, its grey lev
 the exemplar's, at the finest pyramid levels where the period is still at least :data:`MIN_PERIOD` px
 (a Gaussian pyramid blurs a 6 px period away after two levels; :func:`structure_levels`).
 
+Anisotropic laminae (a stack seen at an angle, per-plane exemplars, two views) get an *oriented* start
+instead (:func:`oriented_phase`): a stack ``n . r + c u(r)`` whose mean normal ``n`` is fitted to the planes'
+fringe orientations (:func:`sheet_normal`), crumpled as much as their fringes spread. :func:`start_kind`
+chooses between them.
+
 References
 ----------
 A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis of
@@ -46,6 +51,7 @@ __all__ = [
     "sheet_normal",
     "sheets",
     "stack_period",
+    "start_kind",
     "starts_laminar",
     "structure_levels",
 ]
@@ -135,6 +141,32 @@ def starts_laminar(
     if fringed >= START_COHERENCE:
         return True
     return fringed >= PILOT_COHERENCE and pilot is not None and pilot(images[0])
+
+
+def start_kind(
+    structure: str,
+    exemplars: Mapping[str, np.ndarray],
+    planes: Sequence[str],
+    adapt: bool,
+    pilot: Callable[[np.ndarray], bool] | None = None,
+) -> str:
+    """Which structured start a solid synthesis takes: ``'laminar'``, ``'oriented'`` or ``'none'``.
+
+    ``'laminar'``, ``'oriented'``, ``'none'``: as asked. ``'auto'``: :func:`starts_laminar`'s rule first
+    (one isotropic exemplar, fringed or chosen by the pilot: ``'laminar'``); otherwise, with ``adapt`` on
+    and every constrained exemplar fringed (mean coherence >= :data:`START_COHERENCE`): ``'laminar'``
+    when they are all isotropic (per-plane onions), else ``'oriented'`` (stacks, per-plane laminae, two
+    views: :func:`oriented_phase`). Weakly oriented exemplars (soot) keep the paper's random start.
+    """
+    if structure in ("laminar", "oriented", "none"):
+        return structure
+    if starts_laminar(structure, exemplars, planes, adapt, pilot):
+        return "laminar"
+    images = [np.asarray(exemplars[p]) for p in planes]
+    if not adapt or min(mean_coherence(im) for im in images) < START_COHERENCE:
+        return "none"
+    isotropic = all(mean_tensor_coherence(im) < ISOTROPIC_MAX for im in images)
+    return "laminar" if isotropic else "oriented"
 
 
 def structure_levels(period: float, levels: int) -> int:

@@ -370,7 +370,7 @@ def test_oriented_start_keeps_a_tilted_stack() -> None:
     from synth.output.volume import mid_slices
 
     planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
-    params = {"structure": "oriented", "final_step": "best"}
+    params = {"structure": "oriented"}
     res = synthesize("solid-kopf", exemplars=planes, size=(24, 24, 24), params=params, seed=2)
     assert res.stats["laminar_start"] and 5.0 < res.stats["period"] < 7.0
     for axis, plane in enumerate(("xy", "xz", "yz")):

@@ -19,6 +19,7 @@ from synth.pixel.laminar import (
     sheet_normal,
     sheets,
     stack_period,
+    start_kind,
     starts_laminar,
     structure_levels,
 )
@@ -95,6 +96,25 @@ def test_auto_starts_laminar_only_for_one_laminar_exemplar_on_three_planes() -> 
     assert not starts_laminar("auto", dict.fromkeys(("xy", "xz", "yz"), one_way), ("xy", "xz", "yz"), True)
     assert starts_laminar("laminar", dict.fromkeys(("xy", "xz", "yz"), soot_like), ("xy", "xz", "yz"), True)
     assert not starts_laminar("none", three, ("xy", "xz", "yz"), True)
+
+
+def test_start_kind_orients_anisotropic_fringes_and_sheets_isotropic_ones() -> None:
+    """'auto': one isotropic exemplar or isotropic per-plane ones -> sheets; a fringed anisotropic one (a
+    stack, two views of laminae) -> the oriented stack; weak or unadapted -> the paper's random start."""
+    all3 = ("xy", "xz", "yz")
+    lam = _shells()
+    soot_like = np.random.default_rng(0).uniform(0, 1, (64, 64)).astype(np.float32)
+    r, c = np.mgrid[0:64, 0:64].astype(np.float64)
+    one_way = (0.5 + 0.5 * np.cos(2 * np.pi * (r + 0.3 * np.sin(c / 8)) / 6)).astype(np.float32)
+    assert start_kind("auto", dict.fromkeys(all3, lam), all3, True) == "laminar"
+    assert start_kind("auto", {"xy": lam, "xz": lam.T.copy(), "yz": _shells(seed=3)}, all3, True) == "laminar"
+    assert start_kind("auto", dict.fromkeys(all3, one_way), all3, True) == "oriented"
+    assert start_kind("auto", dict.fromkeys(all3, one_way), ("xz", "yz"), True) == "oriented"
+    assert start_kind("auto", dict.fromkeys(all3, one_way), all3, False) == "none"
+    assert start_kind("auto", {"xy": soot_like, "xz": one_way, "yz": one_way}, all3, True) == "none"
+    assert start_kind("auto", dict.fromkeys(all3, soot_like), all3, True) == "none"
+    for kind in ("laminar", "oriented", "none"):
+        assert start_kind(kind, dict.fromkeys(all3, soot_like), all3, True) == kind
 
 
 @pytest.mark.parametrize("method", ["solid-kopf", "solid-chen-wang"])
