@@ -419,6 +419,7 @@ def run_solid_kopf(
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
+    plan_levels(run.views, size, 1, params.neighbourhood_size)  # names bad exemplars before choosing a start
     period, phi = 0.0, None
     pilot = partial(laminar_pilot, settings={"structure_length": params.structure_length})
     kind = start_kind(params.structure, run.views, params.planes, params.adapt_to_structure, pilot)
