@@ -50,6 +50,8 @@ __all__ = [
     "MatchField",
     "PackedExemplars",
     "SliceGeometry",
+    "best_vote",
+    "best_vote_reference",
     "gather_slices",
     "gather_slices_reference",
     "histogram_bin",
@@ -715,6 +717,132 @@ def _irls_update_kernel(vol, order, start, stop, proposals, exemplars, histogram
                 count[_bin(old[idx - lo], bins)] -= 1.0
                 count[_bin(flat[voxels[idx - lo]], bins)] += 1.0
         lo = hi
+
+
+@kernel(inline="always")
+def _best_voxel(vol, v, proposals, exemplars, periodic):
+    """The value proposed by the heaviest matched neighbourhood covering voxel ``v`` (first in the fixed
+    order on ties), and that weight (0 when none covers it)."""
+    match = proposals.match
+    weight = proposals.weight
+    ex_offsets = proposals.ex_offsets
+    axes = proposals.axes
+    on_grid = proposals.on_grid
+    active = proposals.active
+    size = proposals.size
+    ex_values = exemplars.values
+    ex_start = exemplars.start
+    D, H, W = vol.shape
+    HW = H * W
+    r = size // 2
+    z = v // HW
+    y = (v % HW) // W
+    x = v % W
+    best = np.float32(0.0)
+    best_w = 0.0
+    for p in range(3):
+        if active[p] == 0:
+            continue
+        a = axes[p, 0]
+        b = axes[p, 1]
+        if a == 1:
+            pa, na, pb, nb, c = y, H, x, W, z
+        elif b == 2:
+            pa, na, pb, nb, c = z, D, x, W, y
+        else:
+            pa, na, pb, nb, c = z, D, y, H, x
+        for i in range(size):
+            ca = _centre_coordinate(pa - (i - r), na, periodic)
+            if ca < 0 or on_grid[p, 0, ca] == 0:
+                continue
+            for j in range(size):
+                cb = _centre_coordinate(pb - (j - r), nb, periodic)
+                if cb < 0 or on_grid[p, 1, cb] == 0:
+                    continue
+                if a == 1:
+                    u = (c * H + ca) * W + cb
+                elif b == 2:
+                    u = (ca * H + c) * W + cb
+                else:
+                    u = (ca * H + cb) * W + c
+                e = match[p, u]
+                if e < 0:
+                    continue
+                w = np.float64(weight[p, u])
+                if w > best_w:
+                    best_w = w
+                    best = ex_values[ex_start[p] + e + ex_offsets[p, i * size + j]]
+    return best, best_w
+
+
+@kernel(parallel=True)
+def _best_vote_kernel(vol, out, proposals, exemplars, periodic):
+    flat = vol.reshape(-1)
+    res = out.reshape(-1)
+    for v in prange(flat.shape[0]):
+        val, w = _best_voxel(vol, v, proposals, exemplars, periodic)
+        res[v] = val if w > 0.0 else flat[v]
+
+
+def best_vote(vol: np.ndarray, field: MatchField, exemplars: PackedExemplars, periodic: bool) -> np.ndarray:
+    """Every voxel takes the value that the heaviest matched neighbourhood covering it proposes.
+
+    The discrete counterpart of :func:`irls_update` (a new volume, ``vol`` unchanged): where the weighted
+    average blends about ``3 (n / stride)^2`` proposals and smooths the exemplar's grain away, this copies
+    one exemplar pixel, from the neighbourhood that matched best (largest ``field.weight``: IRLS and usage
+    factors). Neighbouring voxels mostly share that neighbourhood, so the copies are coherent pieces of
+    the exemplar. Ties go to the first in (plane, offset row, offset column) order; a voxel no
+    neighbourhood covers keeps its value. Voxels are independent: the same bytes on any thread count.
+    """
+    size = math.isqrt(field.ex_offsets.shape[1])
+    out = np.empty_like(vol)
+    with _threads_for(vol.size):
+        proposals = _Proposals(
+            field.match,
+            field.weight,
+            field.ex_offsets,
+            field.axes,
+            _grid_tables(vol.shape, field),
+            field.active,
+            size,
+        )
+        _best_vote_kernel(vol, out, proposals, exemplars, bool(periodic))
+    return out
+
+
+def best_vote_reference(
+    vol: np.ndarray, field: MatchField, exemplars: PackedExemplars, periodic: bool
+) -> np.ndarray:
+    """Plain NumPy :func:`best_vote` (one voxel at a time, the same order)."""
+    D, H, W = vol.shape
+    stride = field.stride
+    out = vol.copy()
+    for v in range(vol.size):
+        z, y, x = np.unravel_index(v, vol.shape)
+        best_w = 0.0
+        for p in range(3):
+            if not field.active[p]:
+                continue
+            a, b = (int(t) for t in field.axes[p])
+            c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
+            if periodic:
+                c = np.mod(c, [D, H, W])
+                inside = np.ones(len(c), dtype=bool)
+            else:
+                inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
+            on_grid = ((c[:, a] - field.phase[p, 0]) % stride == 0) & (
+                (c[:, b] - field.phase[p, 1]) % stride == 0
+            )
+            for k in np.flatnonzero(inside & on_grid):
+                u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
+                e = field.match[p, u]
+                if e < 0:
+                    continue
+                w = float(field.weight[p, u])
+                if w > best_w:
+                    best_w = w
+                    out[z, y, x] = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
+    return out
 
 
 def _grid_tables(shape: tuple[int, ...], field: MatchField) -> np.ndarray:

@@ -20,19 +20,19 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - k-coherence search seeded by the coarser level, the k-d tree only at the very first iteration;
 - 4 iterations per level (the study: 10); a sparse grid of centres whose phase is drawn every iteration;
 - the histogram follows the update in blocks of ``max(4096, N / 16)`` voxels (parallel), not voxel by voxel;
-- the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10
-  iterations;
+- the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10 its;
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
 - neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
-- the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
-  curved sheets at its period (the structure first, Akl 2014 in 3D), on the levels that keep the period;
-  for short-fringed exemplars :func:`laminar_pilot` decides (docs/solid.md, "chosen by a pilot").
+- structured starts (``structure``, :mod:`synth.pixel.laminar`; Akl 2014's structure first, in 3D): curved
+  sheets for isotropic fringes (a pilot for short ones), a crumpled stack fitted to anisotropic ones;
+- after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 
 from __future__ import annotations
 
 import time
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -53,6 +53,7 @@ from synth.kernels.solid_search import (
     HistogramState,
     MatchField,
     PackedExemplars,
+    best_vote,
     irls_update,
 )
 from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
@@ -61,8 +62,12 @@ from synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
     level_phase,
+    oriented_phase,
+    plane_orientation,
+    sheet_normal,
     sheets,
-    starts_laminar,
+    stack_period,
+    start_kind,
     structure_levels,
 )
 from synth.pixel.solid import (
@@ -110,6 +115,8 @@ POSITION_GAIN = 1.0
 POSITION_CELLS = 16
 #: Default gain of the orientation-usage re-weighting (docs/solid.md, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
+#: Correlation length of the oriented start's crumples, in periods (docs/solid.md).
+ORIENTED_LENGTH = 2.0
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
 RANDOM_CANDIDATES = 2
 
@@ -148,9 +155,34 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
-    structure: Literal["auto", "none", "laminar"]
+    structure: Literal["auto", "none", "laminar", "oriented"]
     structure_length: float
     structure, structure_length = laminar_start_fields()
+    structure = Field(
+        "auto",
+        description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
+        "(the paper); 'auto' picks by the exemplars.",
+        json_schema_extra=ui(
+            details=(
+                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+                "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
+                "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations; "
+                "'none': the paper's random start; 'auto' (with adapt_to_structure): 'laminar' for one "
+                "isotropic exemplar on the three planes that is fringed (mean coherence >= 0.6) or chosen "
+                "by a small pilot (0.45-0.6), or for fringed isotropic per-plane exemplars; 'oriented' "
+                "for fringed exemplars of which one is anisotropic; else 'none'."
+            )
+        ),
+    )
+    oriented_length: float = Field(
+        ORIENTED_LENGTH,
+        gt=0.0,
+        le=64.0,
+        description="How far the oriented start's crumples stay straight, in fringe periods.",
+        json_schema_extra=ui(
+            unit="periods", details=("Correlation length of the oriented start's crumples, in periods.")
+        ),
+    )
     iterations: int = Field(
         4,
         ge=1,
@@ -184,6 +216,13 @@ class SolidKopfParams(SolidParams):
         json_schema_extra=ui(
             details=("Neighbourhoods centred on every stride-th voxel of each slice (sparse grid).")
         ),
+    )
+    final_step: Literal["auto", "average", "best"] = Field(
+        "auto",
+        description="The last step of the finest level: 'average' (the paper: the weighted average of the "
+        "proposals), 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps the "
+        "exemplar's grain), 'auto': after a laminar or oriented start, the one whose slices keep the "
+        "exemplars' mean coherence better, else 'average'.",
     )
     search: Literal["tree", "exact"] = Field(
         "tree",
@@ -236,7 +275,13 @@ class _KopfLoop:
     """Kopf's search and optimisation steps at each level (:func:`synth.pixel.solid.run_levels`)."""
 
     def __init__(
-        self, params: SolidKopfParams, plan: SolidPlan, run: SolidRun, iterations: int, period: float = 0.0
+        self,
+        params: SolidKopfParams,
+        plan: SolidPlan,
+        run: SolidRun,
+        iterations: int,
+        period: float = 0.0,
+        phi: np.ndarray | None = None,
     ) -> None:
         self.params, self.plan, self.run, self.iterations = params, plan, run, iterations
         self.period = period  # > 0: the laminar start at this period (px of the finest level)
@@ -248,9 +293,7 @@ class _KopfLoop:
         self.meter = ProgressMeter(run.report, float(total))
         self.timings = {"search": 0.0, "optimisation": 0.0}
         self.energies: dict[str, list[float]] = {}
-        if period > 0:
-            length = params.structure_length * period
-            phi = laminar_phase(plan.shapes[0], length, run.rng, periodic=params.periodic)
+        if period > 0 and phi is not None:
             coarsest = plan.levels - 1
             values = np.concatenate([plan.exemplars[p][-1].ravel() for p in run.active])
             self.vol = sheets(level_phase(phi, coarsest), period / 2.0**coarsest, values)
@@ -258,6 +301,7 @@ class _KopfLoop:
             self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
         self.src = np.zeros((3, 0), dtype=np.int64)
         self.pooled = np.zeros(0, dtype=np.float32)
+        self.final = "average"  # the last step taken (``final_step``)
 
     def start_level(self, step: LevelStep) -> None:
         """Upsample the volume and the coherent sources (or draw them), and build the level's tables."""
@@ -363,7 +407,24 @@ class _KopfLoop:
         return sum_d2, count
 
     def end_level(self, step: LevelStep) -> None:
-        pass
+        """At the finest level, the discrete last step on the last matches: always (``final_step='best'``),
+        or (``'auto'``, after a structured start) when its slices keep the exemplars' mean coherence
+        better than the average's (the average smooths a grainy exemplar's fringes into too-ordered ones;
+        on a smooth exemplar the copies' seams show)."""
+        final = self.params.final_step
+        if step.level != 0 or final == "average" or (final == "auto" and self.period <= 0):
+            return
+        best = best_vote(self.vol, self.field, self.packed, self.params.periodic)
+        if final == "auto":
+            target = float(np.mean([mean_coherence(self.images[p]) for p in self.run.active]))
+            gaps = [
+                abs(np.log(max(slice_coherence(v, _slice_step(v)) / target, 1e-6))) for v in (self.vol, best)
+            ]
+            self.final = "best" if gaps[1] < gaps[0] else "average"
+            if self.final == "average":
+                return
+        self.final = "best"
+        self.vol = best
 
     def result(self, seed: int) -> Result:
         """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""
@@ -394,6 +455,7 @@ class _KopfLoop:
                 "planes": list(params.planes),
                 "contrast_before_remap": contrast,
                 "laminar_start": self.period > 0,
+                "final_step": self.final,
                 "period": self.period if self.period > 0 else None,
             },
         )
@@ -414,38 +476,63 @@ def run_solid_kopf(
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
-    period = 0.0
-    if starts_laminar(params.structure, run.views, params.planes, params.adapt_to_structure, laminar_pilot):
+    plan_levels(run.views, size, 1, params.neighbourhood_size)  # names bad exemplars before choosing a start
+    period, phi = 0.0, None
+    pilot = partial(laminar_pilot, settings={"structure_length": params.structure_length})
+    kind = start_kind(params.structure, run.views, params.planes, params.adapt_to_structure, pilot)
+    if kind == "oriented":
+        views = {PLANES[p]: run.views[PLANES[p]] for p in run.active}
+        levels = structure_levels(float(np.mean([dominant_period(im) for im in views.values()])), levels)
+        normal = sheet_normal({p: plane_orientation(im) for p, im in views.items()})
+        period = stack_period(views, normal)
+        plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
+        length = params.oriented_length * period
+        phi = oriented_phase(plan.shapes[0], views, period, length, run.rng, periodic=params.periodic)
+    elif kind == "laminar":
         period = float(np.mean([dominant_period(image) for image in run.constrained()]))
         levels = structure_levels(period, levels)
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
-    loop = _KopfLoop(params, plan, run, iterations, period)
+    if period > 0 and phi is None:
+        phi = laminar_phase(
+            plan.shapes[0], params.structure_length * period, run.rng, periodic=params.periodic
+        )
+    loop = _KopfLoop(params, plan, run, iterations, period, phi)
     run_levels(plan, [iterations] * plan.levels, loop)
     return loop.result(seed)
 
 
+#: The pilot's settings when its caller gives none (solid-chen-wang): those it was measured with before
+#: Kopf's structured starts changed (docs/solid.md), so that its choices do not move with Kopf's defaults.
+PILOT_SETTINGS: dict[str, object] = {"structure_length": 4.0, "final_step": "average"}
 #: Side of the pilot volumes of :func:`laminar_pilot` (two Kopf runs of about 0.5-1 s of CPU each).
 PILOT_SIDE = 32
 
 
-def laminar_pilot(exemplar: np.ndarray) -> bool:
+def laminar_pilot(exemplar: np.ndarray, settings: dict[str, object] | None = None) -> bool:
     """Whether the laminar start keeps ``exemplar``'s coherence better than the random start.
 
-    Two ``PILOT_SIDE^3`` volumes (defaults, seed 0, one from each start) are synthesized, and the start
-    whose slices' mean coherence over the exemplar's (``log`` ratio) is nearer 1 wins: on short-fringed
+    Two ``PILOT_SIDE^3`` volumes (defaults but ``settings``, else :data:`PILOT_SETTINGS`; seed 0; one
+    from each start) are synthesized, and the start whose slices' mean coherence over the exemplar's
+    (``log`` ratio) is nearer 1 wins: on short-fringed
     exemplars the random start gives blobs (real onion crops 0.64-0.74x) and the sheets can be too
     ordered (soot-128 1.54x); docs/solid.md, "The laminar start, chosen by a pilot".
     """
     target = mean_coherence(exemplar)
     gaps = {}
+    pinned = settings if settings is not None else PILOT_SETTINGS
     for structure in ("none", "laminar"):
-        params = SolidKopfParams(structure=structure)
+        params = SolidKopfParams(structure=structure, **pinned)  # type: ignore[arg-type]
         volume = run_solid_kopf(
             exemplar, size=(PILOT_SIDE,) * 3, params=params, seed=0, progress=lambda *_, **__: None
         ).image
         ratio = slice_coherence(volume) / max(target, 1e-6)
         gaps[structure] = abs(np.log(max(ratio, 1e-6)))
     return gaps["laminar"] < gaps["none"]
+
+
+def _slice_step(volume: np.ndarray) -> int:
+    """Every 4th slice, or fewer on large volumes: at most 16 slices along an axis."""
+    return max(4, max(volume.shape) // 16)
 
 
 def slice_coherence(volume: np.ndarray, step: int = 4) -> float:

@@ -15,6 +15,11 @@ The texture stage (the solid methods) then starts from this volume, its grey lev
 the exemplar's, at the finest pyramid levels where the period is still at least :data:`MIN_PERIOD` px
 (a Gaussian pyramid blurs a 6 px period away after two levels; :func:`structure_levels`).
 
+Anisotropic laminae (a stack seen at an angle, per-plane exemplars, two views) get an *oriented* start
+instead (:func:`oriented_phase`): a stack ``n . r + c u(r)`` whose mean normal ``n`` is fitted to the planes'
+fringe orientations (:func:`sheet_normal`), crumpled as much as their fringes spread. :func:`start_kind`
+chooses between them.
+
 References
 ----------
 A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis of
@@ -41,7 +46,12 @@ __all__ = [
     "laminar_volume",
     "level_phase",
     "mean_tensor_coherence",
+    "oriented_phase",
+    "plane_orientation",
+    "sheet_normal",
     "sheets",
+    "stack_period",
+    "start_kind",
     "starts_laminar",
     "structure_levels",
 ]
@@ -133,6 +143,32 @@ def starts_laminar(
     return fringed >= PILOT_COHERENCE and pilot is not None and pilot(images[0])
 
 
+def start_kind(
+    structure: str,
+    exemplars: Mapping[str, np.ndarray],
+    planes: Sequence[str],
+    adapt: bool,
+    pilot: Callable[[np.ndarray], bool] | None = None,
+) -> str:
+    """Which structured start a solid synthesis takes: ``'laminar'``, ``'oriented'`` or ``'none'``.
+
+    ``'laminar'``, ``'oriented'``, ``'none'``: as asked. ``'auto'``: :func:`starts_laminar`'s rule first
+    (one isotropic exemplar, fringed or chosen by the pilot: ``'laminar'``); otherwise, with ``adapt`` on
+    and every constrained exemplar fringed (mean coherence >= :data:`START_COHERENCE`): ``'laminar'``
+    when they are all isotropic (per-plane onions), else ``'oriented'`` (stacks, per-plane laminae, two
+    views: :func:`oriented_phase`). Weakly oriented exemplars (soot) keep the paper's random start.
+    """
+    if structure in ("laminar", "oriented", "none"):
+        return structure
+    if starts_laminar(structure, exemplars, planes, adapt, pilot):
+        return "laminar"
+    images = [np.asarray(exemplars[p]) for p in planes]
+    if not adapt or min(mean_coherence(im) for im in images) < START_COHERENCE:
+        return "none"
+    isotropic = all(mean_tensor_coherence(im) < ISOTROPIC_MAX for im in images)
+    return "laminar" if isotropic else "oriented"
+
+
 def structure_levels(period: float, levels: int) -> int:
     """How many of the finest pyramid levels keep a period of at least :data:`MIN_PERIOD` px (>= 1)."""
     used = 1
@@ -201,3 +237,122 @@ def sheets(phi: np.ndarray, period: float, values: np.ndarray) -> np.ndarray:
     out = np.empty(wave.size, dtype=np.float32)
     out[ranks] = ref[(np.arange(wave.size, dtype=np.int64) * ref.size) // wave.size]
     return out.reshape(shape)
+
+
+#: Crumple amplitudes (rms of ``|grad u|``) among which :func:`oriented_phase` fits the exemplars' spread.
+CRUMPLES = tuple(np.round(np.arange(0.0, 0.62, 0.05), 2))
+#: Side of the probe volume on which the crumple is fitted (the fit costs a few FFTs of this size).
+CRUMPLE_PROBE = 48
+
+
+def plane_orientation(image: np.ndarray) -> tuple[np.ndarray, float]:
+    """The dominant fringe normal of a grey image in its (row, column) axes, and how dominant it is.
+
+    Returns the unit principal eigenvector ``(d_row, d_col)`` of the mean gradient outer product
+    (Gaussian derivatives of 1 px) and its anisotropy ``(l1 - l2) / (l1 + l2)`` (0: every orientation
+    equally, 1: one); the sign of the vector is arbitrary (a fringe normal is an orientation).
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    gr = ndi.gaussian_filter(img, 1.0, order=(1, 0), mode="reflect")
+    gc = ndi.gaussian_filter(img, 1.0, order=(0, 1), mode="reflect")
+    j = np.array([[np.mean(gr * gr), np.mean(gr * gc)], [np.mean(gr * gc), np.mean(gc * gc)]])
+    evals, evecs = np.linalg.eigh(j)
+    return evecs[:, 1], float((evals[1] - evals[0]) / max(evals[1] + evals[0], 1e-12))
+
+
+def sheet_normal(orientations: Mapping[str, tuple[np.ndarray, float]]) -> np.ndarray:
+    """The unit 3D sheet normal ``(n_z, n_y, n_x)`` whose traces best fit the planes' fringe normals.
+
+    Sheets of normal ``n`` show, in a plane of volume axes ``(a, b)`` (:data:`synth.pixel.solid.PLANE_AXES`),
+    fringes whose normal is ``(n_a, n_b)``; a plane whose fringe normal is ``d`` asks
+    ``n_a d_b - n_b d_a = 0``. Each plane's equation is weighted by its anisotropy and ``n`` is the
+    least-squares solution of unit length (the smallest right singular vector), its largest component
+    made positive. ``orientations`` maps plane names to :func:`plane_orientation` answers.
+    """
+    axes = {"xy": (1, 2), "xz": (0, 2), "yz": (0, 1)}
+    rows = []
+    for plane, (d, weight) in orientations.items():
+        a, b = axes[plane]
+        row = np.zeros(3)
+        row[a], row[b] = d[1], -d[0]
+        rows.append(weight * row)
+    _, _, vt = np.linalg.svd(np.array(rows))
+    n = vt[-1]
+    return n if n[np.argmax(np.abs(n))] > 0 else -n
+
+
+def _crumple_field(shape: tuple[int, ...], sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """A periodic smooth displacement (white noise low-passed by a Gaussian of ``sigma``), rms gradient 1."""
+    u = _smooth_field(shape, sigma, rng)  # type: ignore[arg-type]
+    grad = np.sqrt(sum(g**2 for g in np.gradient(u)).mean())
+    return u / max(float(grad), 1e-12)
+
+
+def _wave_vector(normal: np.ndarray, period: float, shape: tuple[int, ...], periodic: bool) -> np.ndarray:
+    """``normal / period``, each component rounded to a whole number of periods across a periodic volume."""
+    k = normal / period
+    if periodic:
+        k = np.array([np.round(ki * s) / s for ki, s in zip(k, shape, strict=True)])
+    return k
+
+
+def stack_period(exemplars: Mapping[str, np.ndarray], normal: np.ndarray) -> float:
+    """The sheets' spacing (px) behind the planes' apparent periods: a plane of axes ``(a, b)`` cuts sheets of
+    spacing ``lambda`` and normal ``n`` into fringes ``lambda / |(n_a, n_b)|`` apart; each plane's
+    :func:`dominant_period` times ``|(n_a, n_b)|``, weighted by ``|(n_a, n_b)|^2`` (a plane nearly parallel
+    to the sheets sees few, long fringes)."""
+    axes = {"xy": (1, 2), "xz": (0, 2), "yz": (0, 1)}
+    num = den = 0.0
+    for plane, image in exemplars.items():
+        a, b = axes[plane]
+        trace = float(np.hypot(normal[a], normal[b]))
+        num += trace**2 * dominant_period(image) * trace
+        den += trace**2
+    return num / max(den, 1e-12)
+
+
+def oriented_phase(
+    shape: tuple[int, int, int],
+    exemplars: Mapping[str, np.ndarray],
+    period: float,
+    length: float,
+    rng: np.random.Generator,
+    *,
+    periodic: bool = True,
+) -> np.ndarray:
+    """The phase (voxels) of a crumpled stack whose slices keep the planes' fringe orientations.
+
+    The oriented start (the structure first, for an anisotropic laminar material: Akl 2014's two stages
+    carried to 3D): the mean sheet normal ``n`` is fitted to the exemplars' dominant fringe normals
+    (:func:`sheet_normal`), ``period`` is the sheets' spacing (:func:`stack_period`); the phase is
+    ``phi = period k . r + c u(r)``, ``k = n / period`` (rounded to whole periods across a periodic
+    volume: it stays tileable), ``u`` a smooth displacement of correlation ``length / 2`` voxels and unit
+    rms gradient, and ``c`` the crumple among :data:`CRUMPLES` whose probe volume's slices best match the
+    exemplars' anisotropy (:func:`plane_orientation`): the local normals spread as the fringes do.
+    """
+    fits = {p: plane_orientation(image) for p, image in exemplars.items()}
+    normal = sheet_normal(fits)
+    sigma = max(length, 1.0) / 2.0
+    probe = (CRUMPLE_PROBE,) * 3
+    u_probe = _crumple_field(probe, sigma, rng)
+    ramp_probe = _ramp(_wave_vector(normal, period, probe, True), probe)
+    normal_axis = {"xy": 0, "xz": 1, "yz": 2}
+    best, best_err = 0.0, np.inf
+    for c in CRUMPLES:
+        wave = np.cos(2.0 * np.pi * (ramp_probe + c * u_probe / period))
+        err = 0.0
+        for plane, (_, target) in fits.items():
+            axis = normal_axis[plane]
+            got = np.mean(
+                [plane_orientation(np.take(wave, i, axis=axis))[1] for i in range(0, CRUMPLE_PROBE, 8)]
+            )
+            err += (got - target) ** 2
+        if err < best_err - 1e-12:
+            best, best_err = float(c), err
+    u = _crumple_field(shape, sigma, rng)
+    return period * _ramp(_wave_vector(normal, period, shape, periodic), shape) + best * u
+
+
+def _ramp(k: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``k . r`` over a volume of ``shape`` (float64)."""
+    return sum(k[i] * np.arange(shape[i]).reshape([-1 if j == i else 1 for j in range(3)]) for i in range(3))

@@ -346,3 +346,40 @@ def test_orientation_gain_changes_the_volume() -> None:
     plain = synthesize("solid-kopf", ex, size=(12, 12, 12), seed=3)
     pulled = synthesize("solid-kopf", ex, size=(12, 12, 12), params={"orientation_gain": 4.0}, seed=3)
     assert not np.array_equal(plain.image, pulled.image)
+
+
+def test_final_step_best_copies_exemplar_grain() -> None:
+    """'best' ends on exemplar pixels: a rougher volume than the average; same seed, same bytes."""
+    ex = undulating_laminae((32, 32), 6, 4, 32, noise=0.3, seed=2)
+    params = {**_small("solid-kopf"), "histogram_matching": False}
+    mean = synthesize("solid-kopf", ex, size=SIZE, params=params, seed=1).image
+    best = synthesize("solid-kopf", ex, size=SIZE, params={**params, "final_step": "best"}, seed=1).image
+    again = synthesize("solid-kopf", ex, size=SIZE, params={**params, "final_step": "best"}, seed=1).image
+    assert best.tobytes() == again.tobytes()
+    assert np.isin(best, ex).mean() > 0.99 and np.isin(mean, ex).mean() < 0.5
+
+    def roughness(v: np.ndarray) -> float:
+        return float(np.mean([np.abs(np.diff(v, axis=a)).mean() for a in range(3)]))
+
+    assert roughness(best) > 1.2 * roughness(mean)
+
+
+def test_oriented_start_keeps_a_tilted_stack() -> None:
+    """Per-plane slices of sheets normal to (1, 1, 1): the oriented start gives each plane its orientation."""
+    from synth.io.laminar import turbostratic_volume
+    from synth.output.volume import mid_slices
+
+    planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
+    params = {"structure": "oriented"}
+    res = synthesize("solid-kopf", exemplars=planes, size=(24, 24, 24), params=params, seed=2)
+    assert res.stats["laminar_start"] and 5.0 < res.stats["period"] < 7.0
+    for axis, plane in enumerate(("xy", "xz", "yz")):
+        got = dominant_orientation(structure_tensor(np.take(res.image, 12, axis=axis)))
+        want = dominant_orientation(structure_tensor(planes[plane]))
+        assert abs(wrap_angle(got - want)) < np.radians(15), plane
+
+
+@pytest.mark.parametrize(("field", "value"), [("final_step", "median"), ("structure", "stacked")])
+def test_bad_start_and_final_step_are_named(field: str, value: str) -> None:
+    with pytest.raises(InvalidParameter, match=field):
+        synthesize("solid-kopf", _soft(), size=SIZE, params={field: value})

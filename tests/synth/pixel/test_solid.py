@@ -11,6 +11,8 @@ from synth.kernels.solid_search import (
     HistogramState,
     MatchField,
     PackedExemplars,
+    best_vote,
+    best_vote_reference,
     gather_slices,
     gather_slices_reference,
     irls_update,
@@ -379,3 +381,32 @@ def test_progress_chunks_stop_when_the_report_cancels() -> None:
         for a, b in ProgressMeter(cancel, total=10.0).chunks(10, 1.0, "stage", step=1):
             done.append((a, b))
     assert done == [(0, 1), (1, 2), (2, 3)]
+
+
+@pytest.mark.parametrize(("periodic", "stride"), [(True, 1), (True, 2), (False, 2)])
+def test_best_vote_equals_reference(periodic: bool, stride: int) -> None:
+    rng = np.random.default_rng(8)
+    shape = (5, 6, 7)
+    images = [_exemplar((10, 10), 1), _exemplar((9, 12), 2), _exemplar((11, 10), 3)]
+    field = _field(shape, 3, [im.shape[1] for im in images], stride, rng)
+    field.match[1, ::5] = -1  # some centres without a match
+    packed = PackedExemplars.pack(images)
+    vol = rng.random(shape, dtype=np.float32)
+    before = vol.copy()
+    out = best_vote(vol, field, packed, periodic)
+    np.testing.assert_array_equal(out, best_vote_reference(vol, field, packed, periodic))
+    np.testing.assert_array_equal(vol, before)  # a new volume
+    assert np.isin(out, packed.values).mean() > 0.9  # exemplar pixels, not averages
+
+
+def test_best_vote_copies_the_heaviest_proposal() -> None:
+    """Two planes propose constant exemplars 0.2 and 0.7; the heavier plane wins every voxel."""
+    shape = (4, 4, 4)
+    rng = np.random.default_rng(0)
+    field = _field(shape, 3, [5, 5, 5], 1, rng)
+    field.active[:] = (1, 1, 0)
+    field.weight[0] = 1.0
+    field.weight[1] = 2.0
+    images = [np.full((5, 5), v, np.float32) for v in (0.2, 0.7, 0.0)]
+    out = best_vote(rng.random(shape, dtype=np.float32), field, PackedExemplars.pack(images), True)
+    np.testing.assert_array_equal(out, np.float32(0.7))
