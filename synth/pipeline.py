@@ -161,5 +161,6 @@ def _synthesize_to_folder(
         plots=plots,
         exemplars=planes or None,
         voxel_size=voxel_size,
+        progress=progress,
     )
     return Outcome(result, files, metrics)
