@@ -121,7 +121,7 @@ def run_job(
             seed=job.seed,
             progress=progress,
             manifest=manifest,
-            max_output=settings.max_output_pixels,
+            max_output=settings.max_output(len(size) if size else 2),
             threads=settings.threads,
         )
         timings = {k: float(v) for k, v in outcome.result.timings.items()}
