@@ -33,8 +33,8 @@ def status(field):
             return int(line.split()[1]) * 1024
     return 0
 
-state = {"stage": "imports", "since": time.perf_counter()}
-peaks, seconds, order = {}, {}, []
+state = {"stage": "imports", "since": time.perf_counter(), "cpu": time.process_time()}
+peaks, seconds, cpu, order = {}, {}, {}, []
 
 def sample():
     stage = state["stage"]
@@ -43,11 +43,12 @@ def sample():
     peaks[stage] = max(peaks.get(stage, 0), status("VmRSS"))
 
 def enter(stage):
-    now = time.perf_counter()
+    now, used = time.perf_counter(), time.process_time()
     old = state["stage"]
     seconds[old] = seconds.get(old, 0.0) + now - state["since"]
+    cpu[old] = cpu.get(old, 0.0) + used - state["cpu"]
     sample()
-    state["stage"], state["since"] = stage, now
+    state["stage"], state["since"], state["cpu"] = stage, now, used
     sample()
 
 stop = threading.Event()
@@ -74,7 +75,8 @@ synthesize_to_folder(args["method"], images, args["out"], size=size, seed=1, pro
 enter("end")
 stop.set()
 print(json.dumps({"stages": [{"stage": s, "peak_rss_mb": round(peaks[s] / 2**20),
-                              "seconds": round(seconds.get(s, 0.0), 1)} for s in order if s != "end"],
+                              "seconds": round(seconds.get(s, 0.0), 2),
+                              "cpu_s": round(cpu.get(s, 0.0), 2)} for s in order if s != "end"],
                   "vmhwm_mb": round(status("VmHWM") / 2**20)}))
 """
 
