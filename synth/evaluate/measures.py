@@ -1067,7 +1067,9 @@ def _evaluate_volume(
         slice_stats, slice_moments = [], []
         for s in slices:
             grey = s.astype(np.float64)  # one slice at a time in float64
-            slice_stats.append(image_stats(grey, settings))
+            stats = image_stats(grey, settings)
+            stats.extracted = None  # each slice's fringe objects: unused here, 100s of MB at 512^3
+            slice_stats.append(stats)
             slice_moments.append(moments(grey))
             done += 1
             if progress is not None and (done % 16 == 0 or done == total):
