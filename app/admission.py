@@ -6,13 +6,15 @@ were validated (the engine's own checks: finite numbers, sizes, formats):
 - **the job's working memory**, estimated from the method, its parameters, the output size and the
   decoded inputs, against ``TEXSYNTH_MAX_JOB_MEMORY_BYTES`` (422, naming the parameter that drives
   it). The estimate is coarse and generous on purpose: a generic term (float32 working copies of
-  inputs and output: pyramids, features, distances, tensor maps) plus the terms that are known to
+  inputs and output: pyramids, features, distances, tensor maps), for a volume the measured peak per
+  voxel of a whole solid run (:data:`VOLUME_BYTES_PER_VOXEL`), plus the terms that are known to
   explode: a rotated dictionary's copies (``angular_step``) and its k-coherence sets. The engine
   still checks the k-coherence sets itself in the worker (``synth.methods.arbitrary_shape``); here
   the same bound is applied before queueing, so the person gets the 422 at once;
-- **the job's run time**, estimated from the method's measured rate per output element (a lower
-  bound), against the soft time limit (``TEXSYNTH_SOFT_TIME_LIMIT``, 422 naming the output size): a job
-  the worker would stop after 30 minutes anyway is refused at once;
+- **the job's run time**, estimated from the method's measured rate per output element divided by the
+  threads a job gets (``TEXSYNTH_THREADS``; a lower bound: perfect speed-up), against the soft time
+  limit (``TEXSYNTH_SOFT_TIME_LIMIT``, 422 naming the output size): a job the worker would stop after
+  30 minutes anyway is refused at once. Either refusal states both estimates;
 - **an exemplar much larger than the output** (422): above 512x512 pixels an exemplar may have at
   most ``TEXSYNTH_MAX_INPUT_OUTPUT_RATIO`` times the output's pixels (a 4096^2 exemplar for a 64^2
   output spends minutes loading for nothing);
@@ -40,7 +42,7 @@ from jobs.config import Settings
 from jobs.store import JobStore
 from synth.errors import InvalidInput, InvalidParameter
 
-__all__ = ["Admission", "QuotaExceeded", "estimate_memory"]
+__all__ = ["Admission", "QuotaExceeded", "estimate_memory", "estimate_seconds"]
 
 #: Seconds a client refused for a full queue is told to wait (``Retry-After`` on the 429): a hint, about
 #: the time a small job takes; the refusal stores nothing, so trying again later is always safe.
@@ -49,6 +51,10 @@ QUEUE_RETRY_AFTER = 10
 #: Bytes of working memory per input pixel or output element, the generic term (float32 arrays:
 #: the image and its pyramid, feature and distance buffers, tensor fields and the rendered maps).
 GENERIC_BYTES_PER_ELEMENT = 48
+#: Bytes of a volume job's peak memory per output voxel: a whole ``solid-kopf`` 256^3 run, synthesis and
+#: artifacts (``python -m benchmarks.bench_memory --size 256x256x256``; docs/benchmarks.md, "Big
+#: outputs"), rounded up; the other solid methods are taken to be alike.
+VOLUME_BYTES_PER_VOXEL = 200
 #: Exemplars up to this many pixels are always accepted, whatever the output's size.
 SMALL_EXEMPLAR = 512 * 512
 
@@ -85,6 +91,13 @@ def estimate_memory(
     inputs = sum(math.prod(s[:2]) for s in shapes.values())
     total = GENERIC_BYTES_PER_ELEMENT * (out + inputs)
     driver, why = ("width", f"the output of {out} elements and {inputs} input pixels")
+    if "depth" in size:
+        total = VOLUME_BYTES_PER_VOXEL * out + GENERIC_BYTES_PER_ELEMENT * inputs
+        sides = "x".join(str(size[k]) for k in ("width", "height", "depth"))
+        driver, why = (
+            "depth",
+            f"{VOLUME_BYTES_PER_VOXEL} bytes per voxel of the {sides} volume, as measured",
+        )
     step = params.get("angular_step")
     exemplar = shapes.get("exemplar")
     if isinstance(step, int | float) and step > 0 and exemplar is not None:
@@ -105,6 +118,12 @@ def estimate_memory(
                 f"{rotations} rotated copies of the {w}x{h} exemplar (angular_step={step:g})",
             )
     return int(total), driver, why
+
+
+def estimate_seconds(seconds_per_element: float, elements: int, threads: int) -> float:
+    """A lower bound of a job's run time: the method's one-core rate times the output's elements,
+    divided by the job's threads (a perfect speed-up; measured ones are 1.5-2x on 2 threads)."""
+    return seconds_per_element * elements / max(1, threads)
 
 
 class Admission:
@@ -130,25 +149,31 @@ class Admission:
         """
         limit = self.settings.max_job_memory_bytes
         need, driver, why = estimate_memory(params, size, shapes)
+        elements = math.prod(size.values())
+        threads = max(1, self.settings.threads or 1)
+        seconds = estimate_seconds(seconds_per_element, elements, threads)
+        timing = (
+            f"about {seconds / 60:.0f} minutes with {threads} thread{'s' if threads > 1 else ''} "
+            f"({elements} output elements at {seconds_per_element:.1e} s each on one core of the "
+            "project's machine, split perfectly between the threads)"
+        )
         if need > limit:
             raise InvalidParameter(
                 field_prefix + driver,
                 params.get(driver, size.get(driver)),
                 f"{method} with these settings would need about {_gib(need)} of memory ({why}), more than "
-                f"this service's limit of {_gib(limit)} per job (TEXSYNTH_MAX_JOB_MEMORY_BYTES); "
-                "ask for a smaller output, a smaller exemplar or a coarser setting",
+                f"this service's limit of {_gib(limit)} per job (TEXSYNTH_MAX_JOB_MEMORY_BYTES)"
+                + (f", and would run {timing}" if seconds_per_element > 0 else "")
+                + "; ask for a smaller output, a smaller exemplar or a coarser setting",
             )
-        elements = math.prod(size.values())
-        seconds = seconds_per_element * elements
         if seconds > self.settings.soft_time_limit:
             side = "depth" if "depth" in size else "width"
             raise InvalidParameter(
                 field_prefix + side,
                 size[side],
-                f"{method} would run about {seconds / 60:.0f} minutes for {elements} output elements "
-                f"(at least {seconds_per_element:.1e} s each, measured on 2 cores), more than this "
-                f"service's time limit of {self.settings.soft_time_limit / 60:.0f} minutes per job "
-                "(TEXSYNTH_SOFT_TIME_LIMIT); ask for a smaller output",
+                f"{method} would run {timing}, more than this service's time limit of "
+                f"{self.settings.soft_time_limit / 60:.0f} minutes per job (TEXSYNTH_SOFT_TIME_LIMIT; "
+                f"it would need about {_gib(need)} of memory); ask for a smaller output",
             )
         out = math.prod(v for k, v in size.items() if k != "depth")
         ratio = self.settings.max_input_output_ratio

@@ -249,7 +249,7 @@ class Service:
             )
         values = [size.get(name, 128 if name != "depth" else 64) for name in needed]
         checked = check_output_size(
-            values, spec.output_ndim, names=needed, max_elements=self.settings.max_output_pixels
+            values, spec.output_ndim, names=needed, max_elements=self.settings.max_output(spec.output_ndim)
         )
         return dict(zip(needed, checked, strict=True))
 

@@ -49,7 +49,11 @@ class Settings(BaseModel):
         LIMITS["max_input_pixels"].default, description="largest accepted exemplar/constraint (413 above)"
     )
     max_output_pixels: int = Field(
-        LIMITS["max_output_pixels"].default, description="largest output width*height(*depth)"
+        LIMITS["max_output_pixels"].default, description="largest output width*height"
+    )
+    max_output_voxels: int = Field(
+        LIMITS["max_output_voxels"].default,
+        description="largest output volume width*height*depth (then the memory and time estimates decide)",
     )
     max_sweep_runs: int = Field(64, description="largest parameter grid of one sweep (runs)")
     # Admission control (app/admission.py): per owner (token name; everyone together without tokens).
@@ -119,6 +123,10 @@ class Settings(BaseModel):
         description="a queued job that no worker received this long while workers have room is sent again",
     )
     extra_methods: tuple[str, ...] = Field((), description="modules imported to register more methods")
+
+    def max_output(self, ndim: int) -> int:
+        """The output limit of an image (``ndim`` 2) or a volume (3)."""
+        return self.max_output_voxels if ndim == 3 else self.max_output_pixels
 
     @classmethod
     def from_env(cls, environ: dict[str, str] | None = None, **overrides: Any) -> Settings:

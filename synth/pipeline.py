@@ -166,5 +166,6 @@ def _synthesize_to_folder(
         exemplars=planes or None,
         voxel_size=voxel_size,
         unit=voxel_unit,
+        progress=progress,
     )
     return Outcome(result, files, metrics)

@@ -121,7 +121,7 @@ def run_job(
             seed=job.seed,
             progress=progress,
             manifest=manifest,
-            max_output=settings.max_output_pixels,
+            max_output=settings.max_output(len(size) if size else 2),
             threads=settings.threads,
             voxel_size=job.extras.get("voxel_size"),
             voxel_unit=job.extras.get("voxel_unit") or "nm",

@@ -106,7 +106,7 @@ def binarize(image: np.ndarray, threshold: float | None = None) -> np.ndarray:
         threshold = otsu_threshold(arr)
     if not (isinstance(threshold, int | float | np.integer | np.floating) and math.isfinite(threshold)):
         raise InvalidParameter("threshold", threshold, "must be a finite grey level")
-    return arr >= threshold
+    return arr >= np.float64(threshold)  # in float64 whatever the array's float type (NEP 50)
 
 
 def _max_lag(max_lag: int | None, n: int) -> int:
@@ -166,7 +166,8 @@ def two_point_correlation(
     lines = np.moveaxis(arr, int(axis), -1)
     n = lines.shape[-1]
     lag = _max_lag(max_lag, n)
-    lines = lines.reshape(-1, n).astype(np.uint8, copy=False)
+    lines = lines.reshape(-1, n)
+    lines = lines.view(np.uint8) if lines.dtype == bool else lines.astype(np.uint8, copy=False)
     n_fft = n if periodic else fft.next_fast_len(n + lag, real=True)
     power = np.zeros(n_fft // 2 + 1, dtype=np.float64)
     step = max(1, _CHUNK_SAMPLES // n_fft)

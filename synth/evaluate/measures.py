@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import inspect
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -171,12 +171,28 @@ def kl_divergence(p: np.ndarray, q: np.ndarray, epsilon: float = HIST_EPSILON) -
     return max(0.0, float(np.sum(ps * np.log(ps / qs))))
 
 
-def moments(values: np.ndarray) -> dict[str, float | None]:
+#: Above this many values, :func:`moments` works on float64 pieces of this many instead of one float64
+#: copy of all of them (a 512^3 volume would need 1 GiB per temporary), with the same bits.
+MOMENT_CHUNK = 1 << 20
+
+
+def moments(values: np.ndarray | Sequence[np.ndarray]) -> dict[str, float | None]:
     """Mean, standard deviation (ddof 0), skewness and excess kurtosis (scipy.stats) of grey levels.
 
-    Skewness and kurtosis are ``None`` for a constant image (they are undefined).
+    Skewness and kurtosis are ``None`` for a constant image (they are undefined). ``values``: an array,
+    or a sequence of arrays taken as their ravelled concatenation (pooled slices, without the copy).
+    Above :data:`MOMENT_CHUNK` values the sums are taken in float64 pieces along numpy's own pairwise
+    summation tree (:func:`_pairwise_sums`): the same bits as one float64 copy, in bounded memory.
     """
-    flat = np.asarray(values, dtype=np.float64).ravel()
+    parts = [np.asarray(values)] if isinstance(values, np.ndarray) else [np.asarray(v) for v in values]
+    total = sum(p.size for p in parts)
+    if total > MOMENT_CHUNK:
+        return _streamed_moments(_Flat(parts), total)
+    flat = (
+        np.concatenate([p.astype(np.float64).ravel() for p in parts])
+        if len(parts) > 1
+        else (parts[0].astype(np.float64, copy=False).ravel())
+    )
     std = float(flat.std())
     constant = not np.ptp(flat) > 0
     skewness, kurtosis = (None, None) if constant else _skew_kurtosis(flat)
@@ -200,6 +216,78 @@ def _skew_kurtosis(flat: np.ndarray) -> tuple[float, float]:
         skewness = np.nan if zero else m3 / m2**1.5
         kurtosis = np.nan if zero else m4 / m2**2.0 - 3
     return float(skewness), float(kurtosis)
+
+
+class _Flat:
+    """The ravelled concatenation of ``parts``, read as float64 pieces (no copy of the whole)."""
+
+    def __init__(self, parts: Sequence[np.ndarray]) -> None:
+        self.parts = [p for p in parts if p.size]
+        self.starts = np.cumsum([0] + [p.size for p in self.parts])
+
+    def piece(self, start: int, stop: int) -> np.ndarray:
+        """Values ``[start, stop)`` as a contiguous float64 array."""
+        out = np.empty(stop - start, dtype=np.float64)
+        first = int(np.searchsorted(self.starts, start, side="right")) - 1
+        done = 0
+        for i in range(first, len(self.parts)):
+            if start + done >= stop:
+                break
+            part = self.parts[i]
+            lo = start + done - int(self.starts[i])
+            hi = min(part.size, stop - int(self.starts[i]))
+            rows = part.reshape(-1, part.shape[-1]) if part.ndim > 1 else part.reshape(1, -1)
+            width = rows.shape[1]
+            # rows first (a strided slice of a volume ravels without copying all of it)
+            r0, r1 = lo // width, -(-hi // width)
+            block = np.asarray(rows[r0:r1], dtype=np.float64).ravel()[lo - r0 * width : hi - r0 * width]
+            out[done : done + block.size] = block
+            done += block.size
+        return out
+
+
+def _pairwise_sums(
+    flat: _Flat, start: int, n: int, terms: Callable[[np.ndarray], list[np.ndarray]]
+) -> np.ndarray:
+    """``[sum(t) for t in terms(values[start:start + n])]`` along numpy's pairwise summation tree.
+
+    numpy (2.x) sums a contiguous float64 array by halving it (the first half a multiple of 8 long)
+    down to blocks of 128; a piece that is one node of that tree sums, alone, to the node's value. So
+    the tree is walked here down to nodes of at most :data:`MOMENT_CHUNK` values, each summed by numpy,
+    and the nodes are added as numpy adds them: the bits of one sum over a float64 copy of everything
+    (tested against it).
+    """
+    if n <= MOMENT_CHUNK:
+        return np.array([np.add.reduce(t, initial=0.0) for t in terms(flat.piece(start, start + n))])
+    half = n // 2
+    half -= half % 8
+    return _pairwise_sums(flat, start, half, terms) + _pairwise_sums(flat, start + half, n - half, terms)
+
+
+def _streamed_moments(flat: _Flat, n: int) -> dict[str, float | None]:
+    """:func:`moments` of ``n`` values read in pieces: two passes, the same operations as numpy and scipy."""
+    lo, hi = math.inf, -math.inf
+    for start in range(0, n, MOMENT_CHUNK):
+        piece = flat.piece(start, min(n, start + MOMENT_CHUNK))
+        lo, hi = min(lo, float(piece.min())), max(hi, float(piece.max()))
+    (total,) = _pairwise_sums(flat, 0, n, lambda v: [v])
+    mean = np.float64(total) / n
+
+    def central(v: np.ndarray) -> list[np.ndarray]:
+        d = v - mean
+        d2 = d**2
+        return [d2, d2 * d, d2**2]
+
+    s2, s3, s4 = _pairwise_sums(flat, 0, n, central)
+    m2, m3, m4 = np.float64(s2) / n, np.float64(s3) / n, np.float64(s4) / n
+    std = float(np.sqrt(m2))
+    if not hi - lo > 0:
+        return {"mean": float(mean), "std": std, "skewness": None, "kurtosis": None}
+    with np.errstate(all="ignore"):
+        zero = m2 <= (np.finfo(np.float64).eps * mean) ** 2
+        skewness = np.nan if zero else m3 / m2**1.5
+        kurtosis = np.nan if zero else m4 / m2**2.0 - 3
+    return {"mean": float(mean), "std": std, "skewness": float(skewness), "kurtosis": float(kurtosis)}
 
 
 @dataclass
@@ -724,6 +812,22 @@ def _volume_exemplars(
     return grey, isotropic
 
 
+def _check_volume_values(vol: np.ndarray) -> None:
+    """:func:`check_values` of a volume, slab by slab (no float64 or boolean copy of all of it)."""
+    step = max(1, MOMENT_CHUNK // max(1, vol[0].size))
+    lo, hi, finite = math.inf, -math.inf, vol.size > 0
+    for start in range(0, vol.shape[0], step):
+        slab = vol[start : start + step]
+        finite = finite and bool(np.isfinite(slab).all())
+        if not finite:
+            break
+        lo, hi = min(lo, float(slab.min())), max(hi, float(slab.max()))
+    if not finite:
+        raise InvalidInput("volume", "is empty or holds NaN/inf values")
+    if lo < -1e-6 or hi > 1 + 1e-6:
+        check_values(np.array([lo, hi]), "volume")  # the one message, with the volume's range
+
+
 def _s2_comparisons(
     planes: Mapping[str, np.ndarray],
     vol: np.ndarray,
@@ -800,6 +904,7 @@ def evaluate_volume(
     epsilon: float = HIST_EPSILON,
     fringe_options: Mapping[str, Any] | None = None,
     threads: int | None = None,
+    progress: Callable[[str, float], None] | None = None,
 ) -> dict[str, Any]:
     """Multi-2D comparison of a volume with its exemplar(s), per axis and overall, plus ``S2(r)``.
 
@@ -831,6 +936,8 @@ def evaluate_volume(
     pixel_size, fringes, grey_bins, orientation_bins, coherence_bins, sigma_d, window, epsilon
     fringe_options, threads
         As in :func:`evaluate_pair`.
+    progress : callable ``(stage, fraction)``, optional
+        Told how many of the slices are done (a 512^3 volume has 1536 of them).
 
     Returns
     -------
@@ -883,6 +990,7 @@ def evaluate_volume(
             window=window,
             epsilon=epsilon,
             fringe_options=fringe_options,
+            progress=progress,
         )
 
 
@@ -904,6 +1012,7 @@ def _evaluate_volume(
     window: int = WINDOW,
     epsilon: float = HIST_EPSILON,
     fringe_options: Mapping[str, Any] | None = None,
+    progress: Callable[[str, float], None] | None = None,
 ) -> dict[str, Any]:
 
     settings = MeasureSettings(
@@ -930,8 +1039,9 @@ def _evaluate_volume(
     vol = np.asarray(volume)
     if vol.ndim != 3:
         raise InvalidInput("volume", f"expected a grey (D, H, W) volume, got shape {vol.shape}")
-    vol = vol.astype(np.float64, copy=False)
-    check_values(vol, "volume")
+    if not np.issubdtype(vol.dtype, np.floating):
+        vol = vol.astype(np.float32)  # float32 holds every uint8/uint16/bool voxel exactly
+    _check_volume_values(vol)
     if min(vol.shape) < MIN_SIDE:
         raise InvalidInput(
             "volume", f"volume of shape {vol.shape} is too small to evaluate (< {MIN_SIDE} voxels)"
@@ -948,13 +1058,23 @@ def _evaluate_volume(
     per_axis: dict[str, Any] = {}
     pooled_axes: list[ImageStats] = []
     values_axes: list[np.ndarray] = []
+    total = sum(len(range(0, vol.shape[a], slice_step)) for a in axes)
+    done = 0
     for axis in axes:
         ex = planes[PLANES[axis]]
         ref = ref_stats[id(ex)]
-        slices = np.moveaxis(vol, axis, 0)[::slice_step]
-        slice_stats = [image_stats(s, settings) for s in slices]
+        slices = list(np.moveaxis(vol, axis, 0)[::slice_step])
+        slice_stats, slice_moments = [], []
+        for s in slices:
+            grey = s.astype(np.float64)  # one slice at a time in float64
+            stats = image_stats(grey, settings)
+            stats.extracted = None  # each slice's fringe objects: unused here, 100s of MB at 512^3
+            slice_stats.append(stats)
+            slice_moments.append(moments(grey))
+            done += 1
+            if progress is not None and (done % 16 == 0 or done == total):
+                progress("evaluating the volume's slices", done / total)
         pooled = ImageStats.pool(slice_stats)
-        slice_moments = [moments(s) for s in slices]
         pooled_moments = volume_moments if volume_moments is not None else moments(slices)
         block = compare_stats(ref, pooled, ref_moments[id(ex)], pooled_moments, settings)
         block["plane"] = PLANES[axis]
@@ -970,8 +1090,8 @@ def _evaluate_volume(
         per_axis[str(axis)] = block
         pooled_axes.append(pooled)
         if volume_moments is None:
-            values_axes.append(slices.ravel())
-    overall_moments = volume_moments if volume_moments is not None else moments(np.concatenate(values_axes))
+            values_axes.extend(slices)
+    overall_moments = volume_moments if volume_moments is not None else moments(values_axes)
     if isotropic:
         one = next(iter(planes.values()))
         overall_ref, overall_ref_moments = ref_stats[id(one)], ref_moments[id(one)]

@@ -48,9 +48,9 @@ def atomic_writer(path: str | os.PathLike[str]) -> Iterator[BinaryIO]:
     tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.tmp")
     created = False
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-        created = True
-        with os.fdopen(fd, "wb") as fh:
+        # "x": created here or not at all (O_EXCL); opened by path, so the handle has a name (tifffile asks)
+        with open(tmp, "xb") as fh:
+            created = True
             yield fh
             fh.flush()
             os.fsync(fh.fileno())

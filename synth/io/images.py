@@ -26,6 +26,7 @@ import os
 import struct
 import warnings
 import zlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Literal
 
@@ -35,7 +36,7 @@ from PIL import Image, UnidentifiedImageError
 
 from synth.colour import to_grey
 from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
-from synth.io.atomic import atomic_write_bytes
+from synth.io.atomic import atomic_write_bytes, atomic_writer
 from synth.io.depth import FLOAT_BITS, InputBits, unsigned_to_unit
 from synth.io.limits import LIMITS, check_image_shape, resolve_limit
 
@@ -420,6 +421,7 @@ def save_volume(
     voxel_size: float | tuple[float, float, float] | None = None,
     unit: str = "nm",
     used_bits: int | None = None,
+    progress: Callable[[str, float], None] | None = None,
 ) -> None:
     """Write a ``(D, H, W)`` volume as a multi-page TIFF stack that Fiji opens with D slices, atomically.
 
@@ -441,6 +443,8 @@ def save_volume(
         ImageJ's ``unit``.
     used_bits : int, optional
         Bits of the container the values use (:func:`to_uint`).
+    progress : callable ``(stage, fraction)``, optional
+        Told the fraction of the slices written.
 
     Raises
     ------
@@ -471,17 +475,27 @@ def save_volume(
             raise InvalidParameter("unit", unit, "must be a non-empty length unit such as 'nm' or 'um'")
         metadata.update(spacing=size_z, unit=unit.strip())
         options["resolution"] = (1.0 / size_x, 1.0 / size_y)
-    buf = io.BytesIO()
-    # photometric explicitly: tifffile would store a stack whose last axis is 3 or 4 long as RGB
-    tifffile.imwrite(
-        buf,
-        to_uint(arr, bit_depth, used_bits=used_bits),
-        imagej=True,
-        photometric="minisblack",
-        metadata=metadata,
-        **options,
-    )
-    atomic_write_bytes(target, buf.getvalue())
+    dtype = _uint_dtype(bit_depth)
+
+    # Quantised and written one page (z-slice) at a time: a 512^3 volume is never copied whole, and
+    # an error in any slice (NaN) is raised before the file appears. The bytes are those of one
+    # ``tifffile.imwrite`` of the whole quantised stack (tested).
+    def pages() -> Iterator[np.ndarray]:
+        for z in range(arr.shape[0]):
+            yield to_uint(arr[z], bit_depth, used_bits=used_bits)
+            if progress is not None and ((z + 1) % 16 == 0 or z + 1 == arr.shape[0]):
+                progress("writing output.tiff", (z + 1) / arr.shape[0])
+
+    with atomic_writer(target) as fh, tifffile.TiffWriter(fh, imagej=True) as tif:
+        # photometric explicitly: tifffile would store a stack whose last axis is 3 or 4 long as RGB
+        tif.write(
+            pages(),
+            shape=arr.shape,
+            dtype=dtype,
+            photometric="minisblack",
+            metadata=metadata,
+            **options,
+        )
 
 
 def sample_bits(source: ImageSource, *, name: str | None = None) -> int:

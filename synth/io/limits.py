@@ -8,7 +8,8 @@ before any work starts, naming the input or field.
 :data:`LIMITS` holds each limit's one environment variable and default, and :func:`limit_from_env`
 is the one place that reads them: the engine through :func:`resolve_limit` (an explicit argument
 wins), the service's :class:`jobs.config.Settings` through its ``from_env``. The service's own output
-limit (``max_output_pixels``, lower than the engine's) is passed in by the API and the worker.
+limits (``max_output_pixels`` for images, ``max_output_voxels`` for volumes) are passed in by the API
+and the worker.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ __all__ = [
     "DEFAULT_MAX_PIXELS",
     "DEFAULT_MAX_VOXELS",
     "DEFAULT_SERVICE_MAX_OUTPUT",
+    "DEFAULT_SERVICE_MAX_VOXELS",
     "LIMITS",
     "MAX_ASPECT_RATIO",
     "MAX_SIDE",
@@ -43,8 +45,11 @@ DEFAULT_MAX_PIXELS = 4096 * 4096
 DEFAULT_MAX_VOXELS = 512**3
 #: Largest output (pixels or voxels) the engine makes by default: an 8192^2 image or a 512^3 volume.
 DEFAULT_MAX_OUTPUT = 512**3
-#: Largest output one job of the service may ask for by default (width * height (* depth)).
+#: Largest 2-D output one job of the service may ask for by default (width * height).
 DEFAULT_SERVICE_MAX_OUTPUT = 4096 * 4096
+#: Largest volume one job of the service may ask for by default (width * height * depth); whether it
+#: runs is then the admission's estimate of its memory and time (``app.admission``).
+DEFAULT_SERVICE_MAX_VOXELS = 512**3
 #: Longest side / shortest side above which an image is refused: a 1 x 64 strip holds no texture.
 MAX_ASPECT_RATIO = 64
 #: Shortest side (pixels) of a usable image: smaller than the smallest synthesis neighbourhood.
@@ -69,6 +74,7 @@ LIMITS: dict[str, Limit] = {
     "max_input_voxels": Limit("TEXSYNTH_MAX_VOXELS", DEFAULT_MAX_VOXELS),
     "max_output": Limit("TEXSYNTH_MAX_OUTPUT", DEFAULT_MAX_OUTPUT),
     "max_output_pixels": Limit("TEXSYNTH_MAX_OUTPUT_PIXELS", DEFAULT_SERVICE_MAX_OUTPUT),
+    "max_output_voxels": Limit("TEXSYNTH_MAX_OUTPUT_VOXELS", DEFAULT_SERVICE_MAX_VOXELS),
 }
 
 

@@ -24,7 +24,7 @@ exemplars). Every file is written atomically.
 from __future__ import annotations
 
 import platform
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -125,6 +125,7 @@ def write_artifacts(
     exemplars: Mapping[str, np.ndarray] | None = None,
     voxel_size: float | tuple[float, float, float] | None = None,
     unit: str = "nm",
+    progress: Callable[[str, float], None] | None = None,
 ) -> tuple[list[str], dict[str, Any]]:
     """Write all artifacts of ``result`` into ``folder``; return their names and the metrics.
 
@@ -160,6 +161,9 @@ def write_artifacts(
         also reported in nm. Ignored for 2-D results.
     unit : str
         The unit of ``voxel_size``.
+    progress : callable ``(stage, fraction)``, optional
+        Told each stage (writing the output, its pictures, the evaluation, the plots) and, for a
+        volume, how far the TIFF stack and the slices' evaluation are: minutes at 512^3.
 
     Returns
     -------
@@ -168,6 +172,12 @@ def write_artifacts(
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+
+    def tell(stage: str, fraction: float = 0.0) -> None:
+        if progress is not None:
+            progress(stage, fraction)
+
+    tell("writing output.png")
     image = np.asarray(result.image, dtype=np.float32)
     volume = image.ndim == 3 and image.shape[-1] != 3
     exemplar = _unit(exemplar, "exemplar")
@@ -186,11 +196,20 @@ def write_artifacts(
     save_image(folder / "output.png", image[image.shape[0] // 2] if volume else image, bit_depth=bit_depth)
     if volume:
         save_volume(
-            folder / "output.tiff", image, bit_depth=16, voxel_size=voxel_size, unit=unit, used_bits=used
+            folder / "output.tiff",
+            image,
+            bit_depth=16,
+            voxel_size=voxel_size,
+            unit=unit,
+            used_bits=used,
+            progress=progress,
         )
+        tell("drawing slices, cube and tensor images")
         names += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
     else:
+        tell("writing output.tiff")
         save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
+        tell("drawing the tensor images")
         tensors = (
             result.tensor_field if result.tensor_field is not None else structure_tensor(image, mode="wrap")
         )
@@ -215,8 +234,12 @@ def write_artifacts(
         if voxel_size is not None and unit.strip() == "nm" and len(set(np.broadcast_to(voxel_size, 3))) == 1:
             pixel_size = float(np.broadcast_to(voxel_size, 3)[0])
         targets = exemplars if exemplars is not None else exemplar
-        metrics = to_json_types(evaluate_volume(targets, image, pixel_size=pixel_size, fringes=shown))
+        tell("evaluating the volume's slices")
+        metrics = to_json_types(
+            evaluate_volume(targets, image, pixel_size=pixel_size, fringes=shown, progress=progress)
+        )
     else:
+        tell("evaluating")
         metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
     plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
     status = {"shown": shown, "reason": reason, "presence": to_json_types(presence)}  # of the exemplar
@@ -237,6 +260,7 @@ def write_artifacts(
     atomic_write_json(folder / "metrics.json", doc)
     names.append("metrics.json")
     if plots:
+        tell("drawing the plots")
         plot_dir = folder / "plots"
         plot_dir.mkdir(exist_ok=True)
         targets = exemplars if volume and exemplars is not None else exemplar

@@ -65,6 +65,10 @@ _SHADE = {"top": 1.0, "front": 0.82, "right": 0.64}
 _FLOOR = 0.12
 
 
+#: Voxels per slab when a volume is checked (a 512^3 float32 volume is never copied whole).
+_SLAB = 1 << 22
+
+
 def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
     return ImageFont.load_default(size=size)
 
@@ -77,10 +81,17 @@ def _check_volume(volume: np.ndarray) -> np.ndarray:
         np.issubdtype(vol.dtype, np.floating) or np.issubdtype(vol.dtype, np.integer) or vol.dtype == bool
     ):
         raise InvalidInput("volume", f"array of dtype {vol.dtype} is not a grey volume")
-    vol = vol.astype(np.float64)
-    if not np.isfinite(vol).all():
-        raise InvalidInput("volume", "holds NaN/inf values")
-    return np.clip(vol, 0.0, 1.0)
+    step = max(1, _SLAB // max(1, vol[0].size))
+    for start in range(0, vol.shape[0], step):  # slab by slab: no copy of the whole volume
+        slab = vol[start : start + step]
+        if np.issubdtype(slab.dtype, np.floating) and not np.isfinite(slab).all():
+            raise InvalidInput("volume", "holds NaN/inf values")
+    return vol
+
+
+def _unit(values: np.ndarray) -> np.ndarray:
+    """A slice or face of a checked volume as float64 clipped to [0, 1]: only what is drawn is converted."""
+    return np.clip(np.asarray(values, dtype=np.float64), 0.0, 1.0)
 
 
 def _mid_index(volume_shape: tuple[int, ...], index: tuple[int, int, int] | None) -> tuple[int, int, int]:
@@ -217,7 +228,7 @@ def slices_image(
     """
     vol = _check_volume(volume)
     idx = _mid_index(vol.shape, index)
-    slices = mid_slices(vol, idx)
+    slices = {plane: _unit(s) for plane, s in mid_slices(vol, idx).items()}
     planes, same = _plane_exemplars(exemplars)
     panels_dims = [s.shape for s in slices.values()] + ([e.shape for e in planes.values()] if planes else [])
     largest = max(max(d) for d in panels_dims)
@@ -317,7 +328,10 @@ def _block_view(
         screen(1, 0, 0) - screen(0, 0, 0),
     )
     cz, cy, cx = idx[0], idx[1], idx[2] + 1  # removed octant: z < cz, y < cy, x >= cx
-    grey = _FLOOR + (1.0 - _FLOOR) * vol
+
+    def grey(*index: int | slice) -> np.ndarray:  # one face, shaded from its voxels only
+        return _FLOOR + (1.0 - _FLOOR) * _unit(vol[index])
+
     # kept parts of the outer faces when the corner octant is cut away, as masks over (a, b)
     z_col, y_col, y_row, x_row = (
         np.arange(d)[:, None],
@@ -330,15 +344,15 @@ def _block_view(
     keep_right = (z_col >= cz) | (y_row >= cy) if cut else None
     # (origin, e1, e2, values[a, b], keep[a, b] or None, facing, is a cut face)
     faces = [
-        (screen(0, 0, 0), ez, ex, grey[:, 0, :], keep_front, "front", False),
-        (screen(0, 0, 0), ey, ex, grey[0, :, :], keep_top, "top", False),
-        (screen(0, 0, w), ez, ey, grey[:, :, w - 1], keep_right, "right", False),
+        (screen(0, 0, 0), ez, ex, grey(slice(None), 0, slice(None)), keep_front, "front", False),
+        (screen(0, 0, 0), ey, ex, grey(0, slice(None), slice(None)), keep_top, "top", False),
+        (screen(0, 0, w), ez, ey, grey(slice(None), slice(None), w - 1), keep_right, "right", False),
     ]
     if cut:
         faces += [
-            (screen(0, cy, cx), ez, ex, grey[:cz, cy, cx:], None, "front", True),
-            (screen(cz, 0, cx), ey, ex, grey[cz, :cy, cx:], None, "top", True),
-            (screen(0, 0, cx), ez, ey, grey[:cz, :cy, cx - 1], None, "right", True),
+            (screen(0, cy, cx), ez, ex, grey(slice(None, cz), cy, slice(cx, None)), None, "front", True),
+            (screen(cz, 0, cx), ey, ex, grey(cz, slice(None, cy), slice(cx, None)), None, "top", True),
+            (screen(0, 0, cx), ez, ey, grey(slice(None, cz), slice(None, cy), cx - 1), None, "right", True),
         ]
     canvas = np.full((*size, 3), 255.0)
     outlines = []
@@ -530,7 +544,7 @@ def write_volume_images(
     for plane, img in mid_slices(vol, idx).items():
         fixed = PLANE_AXES[plane][2]
         where = f"{plane} ({fixed} = {idx[_AXIS_INDEX[fixed]]})"
-        tensors = structure_tensor(img.astype(np.float32))
+        tensors = structure_tensor(_unit(img).astype(np.float32))
         coh = coherence(tensors)
         grey = _magnified_rendering(coherence_image(coh), scale)
         coloured = _magnified_rendering(orientation_image(structure_direction(tensors), coherence=coh), scale)

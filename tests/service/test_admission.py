@@ -285,3 +285,57 @@ def test_a_job_whose_time_estimate_exceeds_the_time_limit_is_422_before_queueing
             files={"exemplar": ("e.png", _png(64))},
         )
         assert r.status_code == 202, (method, r.text)
+
+
+def test_a_512_cubed_solid_kopf_job_is_refused_before_queueing_with_both_estimates(api):
+    """Volumes up to 512^3 pass the size limit; the memory estimate (200 bytes a voxel, measured) refuses."""
+    client, service = api
+    params = {"width": 512, "height": 512, "depth": 512}
+    r = client.post(
+        "/api/jobs",
+        data={"method": "solid-kopf", "params": json.dumps(params)},
+        files={"exemplar": ("e.png", _png(64))},
+    )
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["field"] == "depth" and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["detail"]
+    assert "about 25.0 GiB" in body["detail"] and "512x512x512 volume" in body["detail"]
+    assert re.search(r"run about \d+ minutes with 1 thread ", body["detail"])
+    assert service.store.count() == 0
+
+
+def test_a_volume_above_the_voxel_limit_is_422_naming_the_limit(tmp_path):
+    client, service = _client(Settings(data_dir=tmp_path / "data", max_output_voxels=64**3))
+    with client:
+        r = client.post(
+            "/api/jobs",
+            data={"method": "solid-kopf", "params": '{"width": 65, "height": 64, "depth": 64}'},
+            files={"exemplar": ("e.png", _png(64))},
+        )
+    assert r.status_code == 422 and r.json()["field"] == "width"
+    assert "more than the limit of 262144" in r.json()["detail"] and service.store.count() == 0
+
+
+def test_the_voxel_limit_and_the_threads_come_from_the_environment():
+    settings = Settings.from_env({"TEXSYNTH_MAX_OUTPUT_VOXELS": "1000000", "TEXSYNTH_THREADS": "1"})
+    assert settings.max_output(3) == 1_000_000 and settings.max_output(2) == settings.max_output_pixels
+
+
+def test_the_time_estimate_knows_the_threads(tmp_path):
+    """solid-wei-levoy 256^3: about 78 minutes on one thread (refused), 39 on two (refused), 20 on four."""
+    minutes = {}
+    for threads in (1, 2, 4):
+        client, _ = _client(Settings(data_dir=tmp_path / f"data{threads}", threads=threads))
+        with client:
+            r = client.post(
+                "/api/jobs",
+                data={"method": "solid-wei-levoy", "params": '{"width": 256, "height": 256, "depth": 256}'},
+                files={"exemplar": ("e.png", _png(64))},
+            )
+        if threads < 4:
+            assert r.status_code == 422, r.text
+            minutes[threads] = int(re.search(r"about (\d+) minutes with", r.json()["detail"]).group(1))
+            assert f"with {threads} thread" in r.json()["detail"] and "GiB of memory" in r.json()["detail"]
+        else:
+            assert r.status_code == 202, r.text
+    assert minutes[1] in (77, 78, 79) and minutes[2] in (38, 39, 40)

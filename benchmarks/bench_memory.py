@@ -1,0 +1,130 @@
+"""Peak memory of a whole ``texsynth synthesize`` process, and in which stage it is reached (issue 25).
+
+Run ``python -m benchmarks.bench_memory --method solid-kopf --size 256x256x256`` (``--exemplar``,
+``--threads``, ``--no-plots``). A fresh child process runs :func:`synth.pipeline.synthesize_to_folder`
+as the command does, with a progress callback that records the stage (the synthesis' own stages, then
+the writer's: ``output.tiff``, the pictures, the evaluation, the plots) and a thread that samples the
+resident set size (``VmRSS`` in ``/proc/self/status``) every 0.2 s: the largest RSS seen per stage, the
+stage seconds, and the process' peak (``VmHWM``, as ``/usr/bin/time -v`` reports it) come out as one
+JSON document. The admission estimate of the service (:func:`app.admission.estimate_memory`) is
+calibrated from these peaks (docs/benchmarks.md, "Big outputs").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_EXEMPLAR = ROOT / "benchmarks" / "data" / "hrtem-onion-128.png"
+
+_CHILD = r"""
+import json, os, sys, threading, time
+args = json.loads(sys.argv[1])
+
+def status(field):
+    for line in open("/proc/self/status"):
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+state = {"stage": "imports", "since": time.perf_counter(), "cpu": time.process_time()}
+peaks, seconds, cpu, order = {}, {}, {}, []
+
+def sample():
+    stage = state["stage"]
+    if stage not in peaks:
+        order.append(stage)
+    peaks[stage] = max(peaks.get(stage, 0), status("VmRSS"))
+
+def enter(stage):
+    now, used = time.perf_counter(), time.process_time()
+    old = state["stage"]
+    seconds[old] = seconds.get(old, 0.0) + now - state["since"]
+    cpu[old] = cpu.get(old, 0.0) + used - state["cpu"]
+    sample()
+    state["stage"], state["since"], state["cpu"] = stage, now, used
+    sample()
+
+stop = threading.Event()
+def sampler():
+    while not stop.wait(0.2):
+        sample()
+threading.Thread(target=sampler, daemon=True).start()
+
+from synth.pipeline import load_inputs, synthesize_to_folder
+enter("loading")
+images = load_inputs({"exemplar": args["exemplar"]})
+
+def progress(stage, fraction, **_):
+    # the synthesis' stages are many (levels, passes): one bucket; the writer's are named
+    writing = stage == "writing artifacts" or state["stage"] not in ("loading", "synthesis")
+    name = stage if writing else "synthesis"
+    if name != state["stage"]:
+        enter(name)
+
+enter("synthesis")
+size = tuple(int(v) for v in reversed(args["size"].split("x")))
+synthesize_to_folder(args["method"], images, args["out"], size=size, seed=1, progress=progress,
+                     plots=args["plots"], threads=args["threads"])
+enter("end")
+stop.set()
+print(json.dumps({"stages": [{"stage": s, "peak_rss_mb": round(peaks[s] / 2**20),
+                              "seconds": round(seconds.get(s, 0.0), 2),
+                              "cpu_s": round(cpu.get(s, 0.0), 2)} for s in order if s != "end"],
+                  "vmhwm_mb": round(status("VmHWM") / 2**20)}))
+"""
+
+
+def run(method: str, size: str, exemplar: Path, threads: int | None, plots: bool, out: Path) -> dict:
+    """One child process; its stages, their peak RSS and seconds, its ``VmHWM`` and CPU seconds."""
+    args = {
+        "method": method,
+        "size": size,
+        "exemplar": str(exemplar),
+        "threads": threads,
+        "plots": plots,
+        "out": str(out),
+    }
+    start = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _CHILD, json.dumps(args)], cwd=ROOT, stdout=subprocess.PIPE, text=True
+    )
+    stdout = proc.stdout.read() if proc.stdout else ""
+    _, status, usage = os.wait4(proc.pid, 0)
+    if status != 0:
+        raise SystemExit(f"child failed with status {status}")
+    report = json.loads(stdout.strip().splitlines()[-1])
+    report.update(
+        method=method,
+        size=size,
+        threads=threads,
+        wall_s=round(time.perf_counter() - start, 1),
+        cpu_s=round(usage.ru_utime + usage.ru_stime, 1),
+        maxrss_mb=round(usage.ru_maxrss / 1024),
+        load=os.getloadavg()[0],
+    )
+    return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--method", default="solid-kopf")
+    parser.add_argument("--size", default="128x128x128", help="WxH or WxHxD")
+    parser.add_argument("--exemplar", type=Path, default=DEFAULT_EXEMPLAR)
+    parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--no-plots", action="store_true")
+    parser.add_argument("--out", type=Path, default=Path("/tmp") / "texsynth-bench-memory")
+    args = parser.parse_args(argv)
+    report = run(args.method, args.size, args.exemplar, args.threads, not args.no_plots, args.out)
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
