@@ -219,10 +219,16 @@ class SolidKopfParams(SolidParams):
     )
     final_step: Literal["auto", "average", "best"] = Field(
         "auto",
-        description="The last step of the finest level: 'average' (the paper: the weighted average of the "
-        "proposals), 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps the "
-        "exemplar's grain), 'auto': after a laminar or oriented start, the one whose slices keep the "
-        "exemplars' mean coherence better, else 'average'.",
+        description="How each voxel gets its final value: the average of its matches (the paper) or the "
+        "best match's pixel; 'auto' picks by the slices.",
+        json_schema_extra=ui(
+            details=(
+                "The last step of the finest level: 'average' (the paper: the weighted average of the "
+                "proposals), 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps "
+                "the exemplar's grain), 'auto': after a laminar or oriented start, the one whose slices "
+                "keep the exemplars' mean coherence better, else 'average'."
+            )
+        ),
     )
     search: Literal["tree", "exact"] = Field(
         "tree",

@@ -298,9 +298,9 @@ def test_a_512_cubed_solid_kopf_job_is_refused_before_queueing_with_both_estimat
     )
     assert r.status_code == 422, r.text
     body = r.json()
-    assert body["field"] == "depth" and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["detail"]
-    assert "about 25.0 GiB" in body["detail"] and "512x512x512 volume" in body["detail"]
-    assert re.search(r"run about \d+ minutes with 1 thread ", body["detail"])
+    assert body["field"] == "depth" and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["message"]
+    assert "about 25.0 GiB" in body["message"] and "512x512x512 volume" in body["message"]
+    assert re.search(r"run about \d+ minutes with 1 thread ", body["message"])
     assert service.store.count() == 0
 
 
@@ -313,7 +313,7 @@ def test_a_volume_above_the_voxel_limit_is_422_naming_the_limit(tmp_path):
             files={"exemplar": ("e.png", _png(64))},
         )
     assert r.status_code == 422 and r.json()["field"] == "width"
-    assert "more than the limit of 262144" in r.json()["detail"] and service.store.count() == 0
+    assert "more than the limit of 262144" in r.json()["message"] and service.store.count() == 0
 
 
 def test_the_voxel_limit_and_the_threads_come_from_the_environment():
@@ -334,8 +334,8 @@ def test_the_time_estimate_knows_the_threads(tmp_path):
             )
         if threads < 4:
             assert r.status_code == 422, r.text
-            minutes[threads] = int(re.search(r"about (\d+) minutes with", r.json()["detail"]).group(1))
-            assert f"with {threads} thread" in r.json()["detail"] and "GiB of memory" in r.json()["detail"]
+            minutes[threads] = int(re.search(r"about (\d+) minutes with", r.json()["message"]).group(1))
+            assert f"with {threads} thread" in r.json()["message"] and "GiB of memory" in r.json()["message"]
         else:
             assert r.status_code == 202, r.text
     assert minutes[1] in (77, 78, 79) and minutes[2] in (38, 39, 40)
