@@ -1,6 +1,7 @@
 """Admission control in one place: what the service takes on before anything is stored or queued.
 
-:class:`Admission` is asked by :class:`app.service.Service` after a submission's parameters and images
+:class:`Admission` is asked by :class:`texsynth.app.service.Service` after a submission's parameters and
+images
 were validated (the engine's own checks: finite numbers, sizes, formats):
 
 - **the job's working memory**, estimated from the method, its parameters, the output size and the
@@ -9,7 +10,7 @@ were validated (the engine's own checks: finite numbers, sizes, formats):
   inputs and output: pyramids, features, distances, tensor maps), for a volume the measured peak per
   voxel of a whole solid run (:data:`VOLUME_BYTES_PER_VOXEL`), plus the terms that are known to
   explode: a rotated dictionary's copies (``angular_step``) and its k-coherence sets. The engine
-  still checks the k-coherence sets itself in the worker (``synth.methods.arbitrary_shape``); here
+  still checks the k-coherence sets itself in the worker (``texsynth.synth.methods.arbitrary_shape``); here
   the same bound is applied before queueing, so the person gets the 422 at once;
 - **the job's run time**, estimated from the method's measured rate per output element divided by the
   threads a job gets (``TEXSYNTH_THREADS``; a lower bound: perfect speed-up), against the soft time
@@ -37,10 +38,10 @@ from typing import Any
 
 from fastapi import HTTPException
 
-from app.auth import Principal
-from jobs.config import Settings
-from jobs.store import JobStore
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.app.auth import Principal
+from texsynth.jobs.config import Settings
+from texsynth.jobs.store import JobStore
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = ["Admission", "QuotaExceeded", "estimate_memory", "estimate_seconds"]
 
@@ -101,7 +102,7 @@ def estimate_memory(
     step = params.get("angular_step")
     exemplar = shapes.get("exemplar")
     if isinstance(step, int | float) and step > 0 and exemplar is not None:
-        # A rotated dictionary (synth.analysis.rotation): M copies, each on a square tile of the
+        # A rotated dictionary (texsynth.synth.analysis.rotation): M copies, each on a square tile of the
         # exemplar's diagonal, holding the image, its tensors and a mask, plus its features and pyramid.
         rotations = round(360.0 / step)
         h, w = exemplar[:2]

@@ -31,7 +31,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from jobs.config import Settings
+from texsynth.jobs.config import Settings
 
 __all__ = ["ANONYMOUS", "MIN_TOKEN_LENGTH", "Principal", "TokenError", "Tokens"]
 

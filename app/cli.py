@@ -8,7 +8,7 @@ is restarted if it dies; stopping ``serve`` (Ctrl-C) stops it too.
 (a warm shutdown: its running jobs have ``TEXSYNTH_SHUTDOWN_GRACE`` seconds), waits that long and a
 little more, then SIGKILLs the worker's process group. If ``serve`` dies, even by ``kill -9``, the
 worker's main process gets SIGKILL from the kernel (Linux ``PR_SET_PDEATHSIG``; its pool children
-follow) and sees the end of a pipe from ``serve`` (``--parent-fd``, :mod:`worker.lifeline`): never
+follow) and sees the end of a pipe from ``serve`` (``--parent-fd``, :mod:`texsynth.worker.lifeline`): never
 Celery's cold shutdown, which can hang. ``<data dir>/serve.pid`` records ``serve`` and its worker's
 process group, so a ``serve`` that starts after one that vanished stops the worker left over, and one
 that finds another ``serve`` alive on the same data directory refuses to start.
@@ -34,7 +34,7 @@ import time
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from jobs.config import Settings
+    from texsynth.jobs.config import Settings
 
 __all__ = ["register"]
 
@@ -82,7 +82,7 @@ class ServeLock:
     def acquire(self) -> str | None:
         """Check the previous owner: ``None`` if this ``serve`` may start (a worker left over by a
         ``serve`` that vanished is stopped first, and said so), else why it may not."""
-        from jobs.store import pid_alive
+        from texsynth.jobs.store import pid_alive
 
         record = self._read()
         if record.get("host") != self.host:  # none, or another machine's (a shared data directory)
@@ -112,7 +112,9 @@ class ServeLock:
         return None
 
     def record(self, worker_group: int | None) -> None:
-        from synth.io.atomic import atomic_write_bytes  # not at import: building the parser stays light
+        from texsynth.synth.io.atomic import (
+            atomic_write_bytes,  # not at import: building the parser stays light
+        )
 
         record = {"pid": os.getpid(), "host": self.host, "worker_group": worker_group}
         atomic_write_bytes(self.path, json.dumps(record).encode())
@@ -198,7 +200,8 @@ class WorkerSupervisor(threading.Thread):
         read, self._lifeline = os.pipe()  # the write end stays here only (not inheritable)
         try:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "worker", "--loglevel=WARNING", "--quiet", f"--parent-fd={read}"],
+                [sys.executable, "-m", "texsynth.worker", "--loglevel=WARNING", "--quiet",
+                 f"--parent-fd={read}"],
                 env=self.env,
                 start_new_session=True,
                 preexec_fn=die_with_serve,
@@ -277,7 +280,7 @@ def host_notice(host: str | None, tokens: bool) -> tuple[str, str | None]:
 
 def with_bound_host(settings: Settings, host: str) -> Settings:
     """``settings`` with the name ``serve`` was told to listen on among the allowed hosts (the Host
-    check, :mod:`app.security`); addresses and every-interface binds add nothing (addresses pass)."""
+    check, :mod:`texsynth.app.security`); addresses and every-interface binds add nothing (addresses pass)."""
     import ipaddress
 
     name = host.strip().strip("[]").lower()
@@ -294,11 +297,11 @@ def with_bound_host(settings: Settings, host: str) -> Settings:
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from app.auth import TokenError, Tokens
-    from app.main import create_app
-    from app.server import uvicorn_config
-    from jobs.config import Settings
-    from synth.threads import available_cores
+    from texsynth.app.auth import TokenError, Tokens
+    from texsynth.app.main import create_app
+    from texsynth.app.server import uvicorn_config
+    from texsynth.jobs.config import Settings
+    from texsynth.synth.threads import available_cores
 
     settings = Settings.from_env(data_dir=args.data_dir, concurrency=args.workers)
     settings.ensure_dirs()

@@ -2,7 +2,7 @@
 
 ::
 
-    from app.client import Client
+    from texsynth.app.client import Client
 
     client = Client("http://localhost:8000")     # token=... or $TEXSYNTH_TOKEN when the service has tokens
     job = client.submit("carbon.png", method="wei-levoy", width=256, height=128, seed=1)
@@ -17,12 +17,12 @@ and on 5xx/429 answers with exponential backoff and jitter from a seeded generat
 changed something (POST, DELETE) is resent only when the service cannot have acted on it (no
 connection, 429, 503). :meth:`Client.wait` and :meth:`Client.wait_all` outlast an API restart.
 
-Answers are the service's own pydantic models (:mod:`app.schemas`); ``job["id"]`` still works as
+Answers are the service's own pydantic models (:mod:`texsynth.app.schemas`); ``job["id"]`` still works as
 ``job.id`` for scripts written for the first client, whose answers were dicts. Sizes are keywords,
 ``width=``, ``height=``, ``depth=`` (never an ``(H, W)`` tuple). Inputs are paths, bytes, ``(file name,
 bytes)`` or numpy arrays (uint8 -> 8-bit PNG, uint16 and floats in [0, 1] -> 16-bit PNG, or TIFF for
 16-bit colour: lossless). Errors the service reports raise :class:`ServiceError`, a
-:class:`~synth.errors.SynthError`, so the CLI prints them on one line.
+:class:`~texsynth.synth.errors.SynthError`, so the CLI prints them on one line.
 """
 
 from __future__ import annotations
@@ -42,16 +42,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO, TypeVar
 
-from synth.cli.inputs import add_plane_arguments, input_sources
-from synth.errors import InvalidInput, SynthError
+from texsynth.synth.cli.inputs import add_plane_arguments, input_sources
+from texsynth.synth.errors import InvalidInput, SynthError
 
 if TYPE_CHECKING:  # the models are built on first use: see _model
-    from app.schemas import DeletedPublic as Deleted
-    from app.schemas import HealthPublic as Health
-    from app.schemas import JobPublic as Job
-    from app.schemas import JobsPublic as Jobs
-    from app.schemas import MethodPublic as Method
-    from app.schemas import SweepPublic as Sweep
+    from texsynth.app.schemas import DeletedPublic as Deleted
+    from texsynth.app.schemas import HealthPublic as Health
+    from texsynth.app.schemas import JobPublic as Job
+    from texsynth.app.schemas import JobsPublic as Jobs
+    from texsynth.app.schemas import MethodPublic as Method
+    from texsynth.app.schemas import SweepPublic as Sweep
 
 __all__ = [
     "Client",
@@ -90,13 +90,20 @@ class ServiceError(SynthError):
         return self.status == 0 or self.status == 429 or self.status >= 500
 
 
-# -- typed answers: the service's models (app.schemas), readable as dicts too ----------------------
+# -- typed answers: the service's models (texsynth.app.schemas), readable as dicts too ----------------------
 
 
 def _build_models() -> dict[str, type]:
     from pydantic import BaseModel
 
-    from app.schemas import DeletedPublic, HealthPublic, JobPublic, JobsPublic, MethodPublic, SweepPublic
+    from texsynth.app.schemas import (
+        DeletedPublic,
+        HealthPublic,
+        JobPublic,
+        JobsPublic,
+        MethodPublic,
+        SweepPublic,
+    )
 
     class _Subscriptable(BaseModel):
         """``answer["id"]`` as ``answer.id``: scripts of the first client (dict answers) keep working."""
@@ -110,24 +117,25 @@ def _build_models() -> dict[str, type]:
             return getattr(self, key) if key in type(self).model_fields else default
 
     class Job(JobPublic, _Subscriptable):
-        """A job's record (:class:`app.schemas.JobPublic`)."""
+        """A job's record (:class:`texsynth.app.schemas.JobPublic`)."""
 
     class Jobs(JobsPublic, _Subscriptable):
-        """A page of jobs (:class:`app.schemas.JobsPublic`)."""
+        """A page of jobs (:class:`texsynth.app.schemas.JobsPublic`)."""
 
         data: list[Job]
 
     class Method(MethodPublic, _Subscriptable):
-        """A method's description (:class:`app.schemas.MethodPublic`)."""
+        """A method's description (:class:`texsynth.app.schemas.MethodPublic`)."""
 
     class Sweep(SweepPublic, _Subscriptable):
-        """A sweep's table (:class:`app.schemas.SweepPublic`)."""
+        """A sweep's table (:class:`texsynth.app.schemas.SweepPublic`)."""
 
     class Health(HealthPublic, _Subscriptable):
-        """The service's health (:class:`app.schemas.HealthPublic`); ``status`` ``degraded`` on 503."""
+        """The service's health (:class:`texsynth.app.schemas.HealthPublic`); ``status`` ``degraded`` on
+        503."""
 
     class Deleted(DeletedPublic, _Subscriptable):
-        """A finished job deleted (:class:`app.schemas.DeletedPublic`)."""
+        """A finished job deleted (:class:`texsynth.app.schemas.DeletedPublic`)."""
 
     models: dict[str, type] = {m.__name__: m for m in (Job, Jobs, Method, Sweep, Health, Deleted)}
     for model in models.values():
@@ -264,7 +272,7 @@ def encode_array(image: Array, role: str = "exemplar") -> tuple[str, bytes]:
 
 def _file(source: FileLike, role: str) -> tuple[str, bytes]:
     """``(file name, bytes)`` of one input: a path's own name, a byte string's name from its format."""
-    from synth.io import sniff_format
+    from texsynth.synth.io import sniff_format
 
     if isinstance(source, tuple) and len(source) == 2 and isinstance(source[1], bytes | bytearray):
         return str(source[0]), bytes(source[1])
@@ -645,7 +653,7 @@ class Client:
     ) -> list[Path]:
         """Stream the job's artifacts (all, or ``names``) into files under ``out_dir``; returns their
         paths. Each file appears whole or not at all (written beside, then renamed)."""
-        from synth.io.atomic import atomic_writer  # deferred: synth.io loads Pillow
+        from texsynth.synth.io.atomic import atomic_writer  # deferred: texsynth.synth.io loads Pillow
 
         out = Path(out_dir)
         artifacts = _artifacts(job)
@@ -742,7 +750,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _submit(args: argparse.Namespace) -> int:
-    from synth.params import parse_assignments  # deferred: ``texsynth --help`` needs no pydantic
+    from texsynth.synth.params import parse_assignments  # deferred: ``texsynth --help`` needs no pydantic
 
     params = parse_assignments(args.sets)
     sources = input_sources(args)

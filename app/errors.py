@@ -25,10 +25,10 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException
 
-from app.admission import QuotaExceeded
-from app.service import BrokerUnavailable
-from jobs.storage import StorageUnavailable
-from synth.errors import (
+from texsynth.app.admission import QuotaExceeded
+from texsynth.app.service import BrokerUnavailable
+from texsynth.jobs.storage import StorageUnavailable
+from texsynth.synth.errors import (
     InputTooLarge,
     InvalidInput,
     InvalidParameter,

@@ -6,7 +6,7 @@ Large"; a person (or the browser page) then gets no actionable message. This mid
 declared oversize body before reading it and counts the bytes of a streamed (chunked) one.
 
 A body that stops arriving would hold its connection and a worker thread for ever (the server times
-request heads only, :mod:`app.server`): with ``client_timeout`` set, the body may pause at most that
+request heads only, :mod:`texsynth.app.server`): with ``client_timeout`` set, the body may pause at most that
 long, and must be complete within :data:`BODY_TIMEOUTS` times it; else ``408`` and the connection closes.
 """
 

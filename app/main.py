@@ -1,8 +1,8 @@
 """The FastAPI application: REST API under ``/api`` (OpenAPI at ``/docs``) and the browser page at ``/``.
 
-``create_app(settings)`` builds it; ``uvicorn --factory app.main:create_app`` serves it with the
-environment's :class:`~jobs.config.Settings`. The API never runs synthesis: it validates, stores,
-queues and reports. Its :class:`~jobs.reaper.Reaper` settles jobs whose worker vanished and deletes
+``create_app(settings)`` builds it; ``uvicorn --factory texsynth.app.main:create_app`` serves it with the
+environment's :class:`~texsynth.jobs.config.Settings`. The API never runs synthesis: it validates, stores,
+queues and reports. Its :class:`~texsynth.jobs.reaper.Reaper` settles jobs whose worker vanished and deletes
 finished jobs after the retention period.
 
 ``/docs`` is Swagger UI served from the installed ``swagger-ui-py`` package's static files (no CDN:
@@ -21,21 +21,21 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api.routes import examples, health, jobs, methods, metrics, sweeps
-from app.errors import install_error_handlers
-from app.limits import BodyLimitMiddleware
-from app.openapi import install_openapi
-from app.schemas import ErrorPublic
-from app.security import (
+from texsynth.app.api.routes import examples, health, jobs, methods, metrics, sweeps
+from texsynth.app.errors import install_error_handlers
+from texsynth.app.limits import BodyLimitMiddleware
+from texsynth.app.openapi import install_openapi
+from texsynth.app.schemas import ErrorPublic
+from texsynth.app.security import (
     AllowedHostsMiddleware,
     AuthMiddleware,
     SameOriginMiddleware,
     SecurityHeadersMiddleware,
     served_hosts,
 )
-from app.service import Service
-from jobs.config import Settings
-from synth import __version__
+from texsynth.app.service import Service
+from texsynth.jobs.config import Settings
+from texsynth.synth import __version__
 
 __all__ = ["SWAGGER_UI", "create_app"]
 

@@ -25,7 +25,7 @@ from typing import Any
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 
-from synth.api import MethodSpec
+from texsynth.synth.api import MethodSpec
 
 __all__ = ["build_openapi", "install_openapi", "params_schema_name"]
 

@@ -7,7 +7,7 @@ from typing import Any
 
 from pydantic import BaseModel, Field
 
-from jobs.store import STATES
+from texsynth.jobs.store import STATES
 
 __all__ = [
     "DeletedPublic",
@@ -55,13 +55,14 @@ class ExamplePublic(BaseModel):
     thumbnail: str = Field(description="a small PNG for a gallery")
     suggested_method: str
     has_fringes: bool = Field(
-        description="whether the image has lattice fringes (synth.evaluate.glossary.fringes_shown): a job "
+        description="whether the image has lattice fringes (texsynth.synth.evaluate.glossary.fringes_shown): "
+        "a job "
         "on it reports fringe statistics"
     )
 
 
 class JobState(StrEnum):
-    """A job's state (jobs.store.STATES): queued -> running -> succeeded, failed or cancelled."""
+    """A job's state (texsynth.jobs.store.STATES): queued -> running -> succeeded, failed or cancelled."""
 
     queued = "queued"
     running = "running"
@@ -70,7 +71,7 @@ class JobState(StrEnum):
     cancelled = "cancelled"
 
 
-assert tuple(state.value for state in JobState) == STATES, "JobState must list jobs.store.STATES"
+assert tuple(state.value for state in JobState) == STATES, "JobState must list texsynth.jobs.store.STATES"
 
 
 class JobPublic(BaseModel):

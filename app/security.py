@@ -12,9 +12,9 @@
 - :class:`SameOriginMiddleware` (CSRF): a state-changing request (POST, PUT, PATCH, DELETE) that a
   browser sent from another origin is refused with 403, judged from ``Sec-Fetch-Site`` and
   ``Origin``; clients that are not browsers send neither and pass.
-- :class:`AuthMiddleware`: when tokens are configured (:mod:`app.auth`), every ``/api`` request
+- :class:`AuthMiddleware`: when tokens are configured (:mod:`texsynth.app.auth`), every ``/api`` request
   but ``/api/health`` needs ``Authorization: Bearer <token>`` (401 otherwise), or, for a GET of one
-  job's files, a valid signed ``access`` query. The request's :class:`~app.auth.Principal` is left
+  job's files, a valid signed ``access`` query. The request's :class:`~texsynth.app.auth.Principal` is left
   in ``request.state.principal`` for the routes, which show each owner only their own jobs.
   One middleware for the whole prefix means no route can be forgotten.
 """
@@ -30,7 +30,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.auth import ANONYMOUS, Principal, Tokens
+from texsynth.app.auth import ANONYMOUS, Principal, Tokens
 
 __all__ = [
     "CONTENT_SECURITY_POLICY",

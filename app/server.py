@@ -10,7 +10,7 @@ connections stayed open in the hostile probe. So ``texsynth serve`` runs uvicorn
   arrive within ``TEXSYNTH_CLIENT_TIMEOUT`` seconds, else ``408`` and the connection is closed. h11
   always (never httptools, which sets no limit on a head's size): a head above
   :data:`MAX_HEAD_BYTES` is a 400;
-- the request body's pauses and total time bounded by :class:`app.limits.BodyLimitMiddleware`;
+- the request body's pauses and total time bounded by :class:`texsynth.app.limits.BodyLimitMiddleware`;
 - ``timeout_keep_alive`` (:data:`KEEP_ALIVE_SECONDS`) between requests and ``limit_concurrency``
   (``TEXSYNTH_MAX_CONNECTIONS``): above it a new request gets 503 until connections close.
 """
@@ -24,7 +24,7 @@ import h11
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from jobs.config import Settings
+from texsynth.jobs.config import Settings
 
 __all__ = ["KEEP_ALIVE_SECONDS", "MAX_HEAD_BYTES", "GuardedH11Protocol", "uvicorn_config"]
 

@@ -2,7 +2,7 @@
 
 Routes stay thin: they parse the request and call a :class:`Service` method. Everything a request
 can get wrong is checked here *before* anything is stored or queued, and raised as an engine error
-(:mod:`synth.errors`) that the API maps to 413/415/422.
+(:mod:`texsynth.synth.errors`) that the API maps to 413/415/422.
 """
 
 from __future__ import annotations
@@ -23,20 +23,20 @@ from typing import Any
 
 from celery import group
 
-from app.admission import Admission
-from app.auth import ANONYMOUS, Principal, Tokens
-from jobs.config import Settings
-from jobs.methods import methods
-from jobs.queue import QUEUE, TASK_NAME, create_celery
-from jobs.reaper import Reaper
-from jobs.store import SIZE_FIELDS, TERMINAL, JobRecord
-from synth import __version__ as synth_version
-from synth.api import MethodSpec, check_inputs
-from synth.errors import InvalidParameter
-from synth.io import FORMAT_FILES, sniff_format
-from synth.io.limits import MAX_SIDE, MIN_SIDE, check_output_size
-from synth.params import validate_params
-from synth.pipeline import load_inputs
+from texsynth.app.admission import Admission
+from texsynth.app.auth import ANONYMOUS, Principal, Tokens
+from texsynth.jobs.config import Settings
+from texsynth.jobs.methods import methods
+from texsynth.jobs.queue import QUEUE, TASK_NAME, create_celery
+from texsynth.jobs.reaper import Reaper
+from texsynth.jobs.store import SIZE_FIELDS, TERMINAL, JobRecord
+from texsynth.synth import __version__ as synth_version
+from texsynth.synth.api import MethodSpec, check_inputs
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.io import FORMAT_FILES, sniff_format
+from texsynth.synth.io.limits import MAX_SIDE, MIN_SIDE, check_output_size
+from texsynth.synth.params import validate_params
+from texsynth.synth.pipeline import load_inputs
 
 __all__ = ["SIZE_FIELDS", "VOXEL_UNITS", "JobRequest", "Service", "Upload"]
 
@@ -67,7 +67,7 @@ class JobRequest:
     seed: int
     inputs: dict[str, tuple[str, bytes]]
     shapes: dict[str, tuple[int, ...]]  # the decoded inputs' array shapes, for admission control
-    extras: dict[str, Any] = field(default_factory=dict)  # jobs.store.EXTRA_FIELDS
+    extras: dict[str, Any] = field(default_factory=dict)  # texsynth.jobs.store.EXTRA_FIELDS
 
 
 class Service:
@@ -127,7 +127,8 @@ class Service:
 
     def size_schema(self, spec: MethodSpec) -> dict[str, Any]:
         """The output's size fields (sent as form fields), with the form hints of the parameters'
-        schemas (:func:`synth.params.ui`); a volume's also says its voxel size (ImageJ calibration)."""
+        schemas (:func:`texsynth.synth.params.ui`); a volume's also says its voxel size (ImageJ
+        calibration)."""
         unit = "px" if spec.output_ndim == 2 else "voxels"
         side = {"type": "integer", "minimum": MIN_SIDE, "maximum": MAX_SIDE, "default": 128, "x-basic": True}
         props: dict[str, Any] = {

@@ -18,16 +18,23 @@ import numpy as np
 
 from benchmarks._report import DATA as SHARED_DATA
 from benchmarks._report import median_time, write_section
-from synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
-from synth.analysis.tensor import dominant_orientation, orientation, structure_tensor
-from synth.api import synthesize
-from synth.evaluate import evaluate_pair, grey_histogram, kl_divergence
-from synth.evaluate.strands import exemplar_strand_grey, strand_grey
-from synth.io import load_image
-from synth.io.patterns import concentric_rings, grating, spiral, undulating_laminae, waves, wood_grain
-from synth.methods.arbitrary_shape import PAPER_HINTS as _PAPER_HINTS
-from synth.methods.arbitrary_shape import RECIPES, ArbitraryShapeParams, orientation_agreement
-from synth.methods.arbitrary_shape import STRAND_HINTS as _STRAND_HINTS
+from texsynth.synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
+from texsynth.synth.analysis.tensor import dominant_orientation, orientation, structure_tensor
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import evaluate_pair, grey_histogram, kl_divergence
+from texsynth.synth.evaluate.strands import exemplar_strand_grey, strand_grey
+from texsynth.synth.io import load_image
+from texsynth.synth.io.patterns import (
+    concentric_rings,
+    grating,
+    spiral,
+    undulating_laminae,
+    waves,
+    wood_grain,
+)
+from texsynth.synth.methods.arbitrary_shape import PAPER_HINTS as _PAPER_HINTS
+from texsynth.synth.methods.arbitrary_shape import RECIPES, ArbitraryShapeParams, orientation_agreement
+from texsynth.synth.methods.arbitrary_shape import STRAND_HINTS as _STRAND_HINTS
 
 SIZE = 256
 RUNS = 3
@@ -189,7 +196,8 @@ def main() -> None:
             "",
             "Constraint following: `orientation_agreement` = mean `|sin(O_out - O_con)|` weighted by both "
             "coherences (structure tensor sigma_d = 1, sigma_w = 4; random: 0.64); KL = grey-level histogram "
-            "divergence to the exemplar (`synth.evaluate`); in-window = share of pixels copied from a copy "
+            "divergence to the exemplar (`texsynth.synth.evaluate`); in-window = share of pixels copied from "
+            "a copy "
             "turned by the local angle (+-2.5 degrees). Targets: agreement < 0.15 and KL < 0.05.",
             "",
             "| exemplar | constraint | variant | agreement | KL | in-window | meets |",
@@ -230,8 +238,8 @@ def figure(exemplar_name: str, path: Path) -> None:
     """Side-by-side figure: exemplar, constraint, O_con, S_con's orientation, naive result, ours."""
     from PIL import Image, ImageDraw
 
-    from synth.analysis.tensor import coherence, structure_direction
-    from synth.output.render import orientation_image
+    from texsynth.synth.analysis.tensor import coherence, structure_direction
+    from texsynth.synth.output.render import orientation_image
 
     ex = exemplars()[exemplar_name]
     rows = []
@@ -319,14 +327,16 @@ def strand_exemplars() -> dict[str, np.ndarray]:
 
 
 def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndarray) -> dict[str, float]:
-    """Strand-length ratio, grey KL (both :func:`synth.evaluate.evaluate_pair`, as benchmarks/bench_quality),
+    """Strand-length ratio, grey KL (both :func:`texsynth.synth.evaluate.evaluate_pair`, as
+    benchmarks/bench_quality),
     the orientation agreement with the constraint, and ``grey``: the grey-level variance along the
-    constraint's strands over across them (:func:`synth.evaluate.strands.strand_grey`, the constraint's
+    constraint's strands over across them (:func:`texsynth.synth.evaluate.strands.strand_grey`, the
+    constraint's
     strand direction at the methods' scale, sigma_d = 1, sigma_w = 3; the exemplar's own along its
-    fibres is :func:`synth.evaluate.strands.exemplar_strand_grey`).
+    fibres is :func:`texsynth.synth.evaluate.strands.exemplar_strand_grey`).
 
     The strand ratio is the output's mean fringe length over the exemplar's, fringes extracted by
-    :func:`synth.analysis.fringes.extract_fringes` with its defaults on each whole image (bottom-hat
+    :func:`texsynth.synth.analysis.fringes.extract_fringes` with its defaults on each whole image (bottom-hat
     band-pass, Otsu threshold, skeleton, branches and fringes under 9 px dropped; closed loops left
     out): a fringe is a dark line followed along its skeleton wherever it turns, so in the output it is
     measured along the constraint's curves, in the exemplar along its own fibres.
@@ -407,10 +417,12 @@ def strands(seeds: tuple[int, ...] = STRAND_SEEDS, previous: bool = False) -> No
             "exemplar; agreement = `orientation_agreement` with the constraint (sigma_w = 4). Targets "
             f"(strongly oriented exemplars): strand > {TARGET_STRAND}, KL < {TARGET_KL}, agreement < "
             f"{TARGET_AGREEMENT}. Grey = the grey-level variance along the constraint's strands over across "
-            "them (`synth.evaluate.strands.strand_grey`; lower: each strand keeps its grey level); the "
+            "them (`texsynth.synth.evaluate.strands.strand_grey`; lower: each strand keeps its grey level); "
+            "the "
             "exemplars' own, along their fibres: "
             + ", ".join(f"{n} {exemplar_strand_grey(e)['ratio']:.3f}" for n, e in strand_exemplars().items())
-            + ". Fibre grey spread (`synth.analysis.fibre_grey.fibre_grey_spread`; the defaults take the "
+            + ". Fibre grey spread (`texsynth.synth.analysis.fibre_grey.fibre_grey_spread`; the defaults "
+            "take the "
             f"strand hints with the `fibres` recipe at >= {OWN_GREY_FIBRES}): "
             + ", ".join(f"{n} {fibre_grey_spread(e):.3f}" for n, e in strand_exemplars().items())
             + ". Strand hints = `"
@@ -482,7 +494,7 @@ def default_timing(runs: int = RUNS) -> None:
 
 def strand_figure(exemplar: np.ndarray, panels: dict[str, list[np.ndarray]], path: Path) -> None:
     """One row per constraint: exemplar, constraint, then each variant's output (seed 1)."""
-    from synth.io import save_image
+    from texsynth.synth.io import save_image
 
     ex_tile = np.ones((SIZE, SIZE), np.float32)
     ex_tile[: exemplar.shape[0], : exemplar.shape[1]] = exemplar

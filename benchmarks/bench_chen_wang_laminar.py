@@ -7,10 +7,11 @@ mid-slices and cube to docs/img/laminar-cw-*.png.
 Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbostratic stack, one exemplar,
 128^2 mid-slice of the 128^3 truth) at 64^3 and 128^3, the defaults and the paper's literal settings
 (:data:`CHEN_WANG_PAPER`), measured against the truth's slices of the same size
-(:func:`synth.evaluate.truth.evaluate_against_truth`); the real crops ``benchmarks/data/hrtem-onion*-128.png``
-against the exemplar (:func:`synth.evaluate.evaluate_volume`, every second slice). Cells as in
+(:func:`texsynth.synth.evaluate.truth.evaluate_against_truth`); the real crops
+``benchmarks/data/hrtem-onion*-128.png``
+against the exemplar (:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice). Cells as in
 docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it
-misses its target; CPU s the median process CPU time of :func:`synth.api.synthesize` (both cores).
+misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
 """
 
 from __future__ import annotations
@@ -25,10 +26,10 @@ from typing import Any
 import numpy as np
 
 from benchmarks.bench_laminar import AXES, _cells, _head, _save, exemplars, truths
-from synth.api import synthesize
-from synth.evaluate import evaluate_volume
-from synth.evaluate.truth import evaluate_against_truth, truth_slices
-from synth.io import load_image
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import evaluate_volume
+from texsynth.synth.evaluate.truth import evaluate_against_truth, truth_slices
+from texsynth.synth.io import load_image
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 DATA = Path(__file__).resolve().parent / "data"

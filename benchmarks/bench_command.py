@@ -5,16 +5,16 @@ Targets (issue 13): the whole process at most the best open peer's 3.8-4.3 s on 
 texture-synthesis 0.8, ``generate --out-size 256``, 2 threads; the issue's figure), 3 s aimed at, with
 the metrics and the plots still written; the synthesis alone at most 2 s.
 
-Each case is a fresh ``python -m synth.cli synthesize`` process (what the ``texsynth`` script runs),
+Each case is a fresh ``python -m texsynth.synth.cli synthesize`` process (what the ``texsynth`` script runs),
 timed from start to exit, median of 5 after one untimed run (which leaves numba's kernel cache and
 Python's bytecode on disk, as any earlier run of the user's would). ``PYTHONDONTWRITEBYTECODE`` is
 removed from the children's environment for the same reason. One more, instrumented process splits
 the time into stages: interpreter start, imports, the first kernel call's cache load (a first
 minus a second 32 x 32 synthesis in one process), synthesis, evaluation, plots and the other files.
-Another measures the synthesis alone, warm (``synth.api.synthesize`` after a 32 x 32 run in the same
+Another measures the synthesis alone, warm (``texsynth.synth.api.synthesize`` after a 32 x 32 run in the same
 process), median of 3 runs, in wall-clock and CPU time (CPU time says what the work costs when other
 jobs share the two cores; the wall time, what a user waits). These children run OpenBLAS as the
-tree's command does (single-threaded when its ``synth.cli`` sets ``OPENBLAS_NUM_THREADS``).
+tree's command does (single-threaded when its ``texsynth.synth.cli`` sets ``OPENBLAS_NUM_THREADS``).
 
 ``--baseline DIR`` also times an earlier checkout (``git archive REV | tar -x -C DIR``), alternating
 its runs with the current tree's so that both see the same load: the "before" column.
@@ -47,19 +47,19 @@ _STAGES = r"""
 import json, sys, time
 from pathlib import Path
 t0 = time.perf_counter()
-import synth.cli
-from synth.api import synthesize
-from synth.pipeline import load_inputs
+import texsynth.synth.cli
+from texsynth.synth.api import synthesize
+from texsynth.synth.pipeline import load_inputs
 try:
-    synth.cli.build_parser("synthesize")
-    from synth.api import find_method
+    texsynth.synth.cli.build_parser("synthesize")
+    from texsynth.synth.api import find_method
     find_method(sys.argv[1])
 except (TypeError, ImportError):  # an older tree: the whole parser, every method
-    synth.cli.build_parser()
-    from synth.api import available_methods
+    texsynth.synth.cli.build_parser()
+    from texsynth.synth.api import available_methods
     available_methods()
 t_methods = time.perf_counter()
-from synth.output import artifacts, plots
+from texsynth.synth.output import artifacts, plots
 t_writer = time.perf_counter()
 images = load_inputs({"exemplar": Path(sys.argv[2])})
 ex = images["exemplar"]
@@ -71,10 +71,10 @@ _, again = run((32, 32))
 r, warm = run((256, 256))
 out = Path(sys.argv[3])
 try:
-    from synth.evaluate.measures import evaluate_pair_fringes
+    from texsynth.synth.evaluate.measures import evaluate_pair_fringes
 except ImportError:  # an older tree
     evaluate_pair_fringes = None
-from synth.evaluate import evaluate_pair
+from texsynth.synth.evaluate import evaluate_pair
 s = time.perf_counter()
 if evaluate_pair_fringes is not None:
     metrics, fringes = evaluate_pair_fringes(ex, r.image)
@@ -100,8 +100,8 @@ print(json.dumps({"imports (cli, method, kernels)": t_methods - t0, "imports (wr
 _WARM = r"""
 import json, statistics, sys, time
 from pathlib import Path
-from synth.api import synthesize
-from synth.pipeline import load_inputs
+from texsynth.synth.api import synthesize
+from texsynth.synth.pipeline import load_inputs
 ex = load_inputs({"exemplar": Path(sys.argv[2])})["exemplar"]
 synthesize(sys.argv[1], ex, size=(32, 32), seed=1)  # numba's start-up and the cache load
 walls, cpus = [], []
@@ -118,7 +118,7 @@ def _env(tree: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(tree)
     # What the tree's own command does before NumPy loads (the instrumented children do not go
-    # through synth.cli.main): single-threaded OpenBLAS where it sets that.
+    # through texsynth.synth.cli.main): single-threaded OpenBLAS where it sets that.
     cli = tree / "synth" / "cli" / "__init__.py"
     if (tree / "synth" / "threads.py").exists() or "OPENBLAS_NUM_THREADS" in cli.read_text():
         env.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -147,7 +147,7 @@ def _grass(folder: Path) -> Path:
 
 def _run(tree: Path, method: str, exemplar: Path, out: Path) -> tuple[float, float]:
     """One whole process: (wall seconds, the synthesis' own seconds from manifest.json)."""
-    cmd = [sys.executable, "-m", "synth.cli", "synthesize", method, "--exemplar", str(exemplar)]
+    cmd = [sys.executable, "-m", "texsynth.synth.cli", "synthesize", method, "--exemplar", str(exemplar)]
     cmd += ["--size", SIZE, "--seed", "1", "--out", str(out)]
     start = time.perf_counter()
     subprocess.run(cmd, cwd=tree, env=_env(tree), check=True, capture_output=True)
@@ -285,7 +285,7 @@ def overhead_report(rows: list[dict]) -> str:
 def _quality_exemplars(folder: Path) -> dict[str, Path]:
     """docs/quality.md's six exemplars as PNGs in ``folder``, and laminar HRTEM."""
     from benchmarks.bench_quality import exemplars
-    from synth.io import save_image
+    from texsynth.synth.io import save_image
 
     out = {}
     for name, image in exemplars().items():
@@ -307,7 +307,8 @@ def _warm_table(after: dict, before: dict | None) -> list[str]:
     old = {(w["method"], w["exemplar"]): w for w in (before or {}).get("warm", [])}
     lines = [
         "",
-        "The synthesis alone, warm (`synth.api.synthesize` 128 -> 256 in one process after a 32 x 32 "
+        "The synthesis alone, warm (`texsynth.synth.api.synthesize` 128 -> 256 in one process after a 32 x "
+        "32 "
         "run, median of 3; CPU = the process's CPU time, every thread; load = 1-minute load average "
         "when measured):",
         "",
@@ -335,7 +336,8 @@ def report(results: dict) -> str:
     lines = [
         "## The whole command (`texsynth synthesize`, 128 -> 256)",
         "",
-        f"A fresh `python -m synth.cli synthesize METHOD --exemplar X --size {SIZE} --seed 1 --out DIR` "
+        f"A fresh `python -m texsynth.synth.cli synthesize METHOD --exemplar X --size {SIZE} --seed 1 --out "
+        f"DIR` "
         "process (what the `texsynth` script runs), start to exit, writing every artifact (output PNG and "
         "TIFF, tensor images, `metrics.json` with fringes, the five plots, manifest); median of "
         f"{RUNS} runs after one untimed run that leaves numba's kernel cache and the bytecode on disk "
@@ -432,10 +434,12 @@ def report(results: dict) -> str:
         "",
         "Earlier (issue 13, 'a fast command'): building the parser (`texsynth --help`) imports no "
         "numpy, numba, scipy or pydantic, and an engine command builds only its own parser; "
-        "`synthesize` imports only its method's module (`synth.api.find_method`), not all of them (the "
+        "`synthesize` imports only its method's module (`texsynth.synth.api.find_method`), not all of them "
+        "(the "
         "patch family brought `scipy.signal` and `scipy.spatial`); the evaluation computes its moments and "
         "its exact two-sample KS test without importing `scipy.stats` (the same bits, tested against "
-        "scipy); the plots are painted with Pillow (`synth.output.chart`) instead of matplotlib, whose "
+        "scipy); the plots are painted with Pillow (`texsynth.synth.output.chart`) instead of matplotlib, "
+        "whose "
         "import and five figures took 1.5-2.5 s; the fringe overlays reuse the fringes the evaluation "
         "extracted. The worker imports the methods, the writer, the evaluation and the "
         "plots once per child process, and a second job in a process imports and compiles nothing "

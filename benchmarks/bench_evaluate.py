@@ -16,9 +16,9 @@ import tempfile
 import numpy as np
 
 from benchmarks._report import DATA, median_time, write_section
-from synth.evaluate import evaluate_pair, evaluate_volume
-from synth.io import load_image
-from synth.output.plots import write_plots
+from texsynth.synth.evaluate import evaluate_pair, evaluate_volume
+from texsynth.synth.io import load_image
+from texsynth.synth.output.plots import write_plots
 
 SOOT = DATA / "hrtem-soot-256.png"
 RUNS = 5
@@ -48,7 +48,7 @@ def main() -> None:
     n_ex = metrics["fringes"]["exemplar"]["count"]
     markdown = "\n".join(
         [
-            "## Evaluation (`synth.evaluate`)",
+            "## Evaluation (`texsynth.synth.evaluate`)",
             "",
             "`evaluate_pair` of a 512 x 512 pair of HRTEM content (`hrtem-soot-256.png` tiled 2 x 2, "
             f"{n_ex} fringes; the output is the same tiling transposed and mirrored), all measures "

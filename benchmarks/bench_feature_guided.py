@@ -4,7 +4,8 @@ Run ``python -m benchmarks.bench_feature_guided``; writes docs/feature-guided.md
 Figure 4 in docs/img/feature-guided-*.png) and the ``feature-guided`` section of docs/benchmarks.md.
 
 The claim: fewer broken features at patch boundaries than plain image quilting. Measured by
-:func:`synth.evaluate.broken_features` (feature endpoints within 2 px of a seam and kinks where features
+:func:`texsynth.synth.evaluate.broken_features` (feature endpoints within 2 px of a seam and kinks where
+features
 cross a seam, against the exemplar's rates of both; seams from each output's source map and patch labels,
 so that every method is judged by one rule) for quilting (the paper's boundary cut, and the graph cut
 that feature-guided uses) and ``feature-guided`` without deformation, with the paper's warp and with
@@ -17,7 +18,7 @@ exemplars with the same feature detector settings for every method.
 
 from __future__ import annotations
 
-from synth.threads import single_threaded_blas
+from texsynth.synth.threads import single_threaded_blas
 
 single_threaded_blas()  # before NumPy loads OpenBLAS
 
@@ -35,13 +36,13 @@ import skimage.data
 from PIL import Image, ImageDraw
 
 from benchmarks._report import DATA, median_time, write_section
-from synth.analysis.features import feature_map, feature_overlay
-from synth.analysis.fringes import extract_fringes
-from synth.api import synthesize
-from synth.evaluate import broken_features_from_masks, seams_from_sources
-from synth.io import load_image
-from synth.io.patterns import undulating_laminae, voronoi_cells
-from synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
+from texsynth.synth.analysis.features import feature_map, feature_overlay
+from texsynth.synth.analysis.fringes import extract_fringes
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import broken_features_from_masks, seams_from_sources
+from texsynth.synth.io import load_image
+from texsynth.synth.io.patterns import undulating_laminae, voronoi_cells
+from texsynth.synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "feature-guided.md"
@@ -366,7 +367,8 @@ def write(table, fringes, figures, times, wall: float) -> None:
         "(`benchmarks.bench_feature_guided.PAPER_WARP`). "
         f"`reverse term` adds the candidate-to-context chamfer term to eq 2 (`reverse_weight={REVERSE:g}`, "
         "the default for weakly oriented exemplars such as soot, 0 for strongly oriented ones (mean "
-        "coherence >= 0.7: the laminae, brick); `synth.analysis.feature_matching`, see the notes at the "
+        "coherence >= 0.7: the laminae, brick); `texsynth.synth.analysis.feature_matching`, see the notes at "
+        "the "
         "end); the rows marked `eq 2` run with `reverse_weight=0`, the paper's matching cost, as does "
         "`the paper's warp`. Every run here uses the papers' candidate search (`error='ssd'`, "
         "`usage_weight=0`: `SEARCH`); the defaults' search on weakly oriented exemplars (issue 24) is "
@@ -383,7 +385,8 @@ def write(table, fringes, figures, times, wall: float) -> None:
         "",
         "## The measure",
         "",
-        "`synth.evaluate.broken_features` (module `synth.evaluate.breaks`), on the one-pixel-wide feature "
+        "`texsynth.synth.evaluate.broken_features` (module `texsynth.synth.evaluate.breaks`), on the "
+        "one-pixel-wide feature "
         "map re-detected on each output with the exemplar's detector settings (a 3 px frame is left out). "
         "Two kinds of breaks near the seams: **ends** (feature endpoints within 2 px of a seam) and "
         "**kinks** (a feature that crosses a seam and continues, but whose directions over 3 px on either "
@@ -498,7 +501,7 @@ def write(table, fringes, figures, times, wall: float) -> None:
             return np.array([r[key] for r in f[label][:stop]])
 
         lines += [
-            "## (b) Fringes on soot (`synth.analysis.fringes.extract_fringes`, defaults)",
+            "## (b) Fringes on soot (`texsynth.synth.analysis.fringes.extract_fringes`, defaults)",
             "",
             f"Mean fringe length (px) and mean tortuosity per image over seeds 0-{n_seeds - 1} (mean ± "
             "standard deviation, then the standard error of the mean); the exemplar's in the first row, "
@@ -608,8 +611,8 @@ NOTES = """
   keeping parts of both, is the likely origin of the doubled lines. A quarter to a third of the warps
   folded on soot and cells. Bilinear resampling at sub-pixel offsets (a [1/2, 1/2] blur at half a
   pixel) softened fine fringes.
-- **The warp now** (`synth.patch.feature_guided`, `synth.analysis.warp`,
-  `synth.analysis.feature_matching`): pairs whose tangents differ by more than 30 degrees are dropped
+- **The warp now** (`texsynth.synth.patch.feature_guided`, `texsynth.synth.analysis.warp`,
+  `texsynth.synth.analysis.feature_matching`): pairs whose tangents differ by more than 30 degrees are dropped
   (`warp_angle`); each pair keeps only its displacement across the context feature (two pieces of one
   curve meet when they lie on one curve); control points are at least 3 px apart, each with the median
   displacement of the pairs around it (`thin_correspondences`); the spline's displacement is applied in
@@ -646,7 +649,8 @@ NOTES = """
   registration of the two feature maps (meant for the parallel double edges of brick joints; it
   aligned the overlap's features less well than the gated pairs, mean distance 0.42 vs 0.39 px on
   brick, and broke more).
-- **The measure was blind, in two ways, and is changed** (`synth.evaluate.breaks`, known-answer tests).
+- **The measure was blind, in two ways, and is changed** (`texsynth.synth.evaluate.breaks`, known-answer
+tests).
   (1) It counted ends only: a feature that continues across a seam with a tangent jump is broken too,
   and on laminae a misaligned lamina meets its neighbour with a kink, not an end. Kinks are now counted
   (a crossing whose directions over 3 px on either side differ by more than 30 degrees), against the
@@ -679,7 +683,7 @@ NOTES = """
   about two standard errors, but shorter (19.14 px, 18.94 without deformation, against quilting's
   19.81 and the exemplar's 19.99), by about four. So with eq 2 alone the fringe claim holds for
   tortuosity and fails for length, on seeds 0-29 as on seeds 0-9.
-- **The reverse chamfer term** (`reverse_weight`, `synth.analysis.feature_matching.reverse_costs`;
+- **The reverse chamfer term** (`reverse_weight`, `texsynth.synth.analysis.feature_matching.reverse_costs`;
   row "reverse term", weight 4). Eq 2 is a directed chamfer distance: the mean distance from each
   *context* feature to the nearest candidate feature. It never asks whether the candidate's own
   features in the overlap have a partner in the context, and it falls as the candidate holds more

@@ -29,12 +29,12 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from app.client import Client, Retry, ServiceError
 from benchmarks._report import write_section
 from benchmarks.bench_service_load import exemplar_png
-from jobs.store import JobStore
 from tests.servers import Postgres, SeaweedS3
 from tests.service.conftest import REPO, Service, free_port, start_redis, wait_until
+from texsynth.app.client import Client, Retry, ServiceError
+from texsynth.jobs.store import JobStore
 
 JOB = {"method": "random-phase", "params": {"width": 64, "height": 64}}
 ENDED = ("succeeded", "failed", "cancelled")
@@ -48,7 +48,8 @@ class Worker:
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> None:
-        args = [sys.executable, "-c", "import sys; from synth.cli import main; sys.exit(main())", "worker"]
+        code = "import sys; from texsynth.synth.cli import main; sys.exit(main())"
+        args = [sys.executable, "-c", code, "worker"]
         args += ["--data-dir", str(self.data_dir), "--concurrency", "1", "--name", f"{self.name}@bench"]
         log = open(self.data_dir.parent / f"{self.name}.log", "ab")  # noqa: SIM115 (the child keeps it)
         self.proc = subprocess.Popen(

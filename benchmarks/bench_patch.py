@@ -6,7 +6,7 @@ runs use the overlap search of the papers (``error='ssd'``, ``usage_weight=0``: 
 ``python -m benchmarks.bench_patch --laminar`` writes (only) the ``laminar`` section of docs/patch.md: the
 three patch methods on laminar HRTEM crops that mix ordered shells and a disordered core, the papers'
 search against the defaults (variance-normalised error, usage penalty), seeds 1-3, with exemplar coverage
-(:func:`synth.evaluate.coverage.exemplar_coverage`), and the same on brick, grass, gravel and soot.
+(:func:`texsynth.synth.evaluate.coverage.exemplar_coverage`), and the same on brick, grass, gravel and soot.
 Exemplars: 128 x 128 crops of scikit-image's ``brick`` (periodic), ``grass`` (pseudo-periodic), ``gravel``
 (macro-texture) and the shared HRTEM soot image; outputs 256 x 256, (w, N) = (30, 20) (the paper's
 first pair), seed 0. OpenBLAS runs single-threaded here (set before NumPy loads): on the shared 2-core
@@ -15,7 +15,7 @@ machine its threads spin against the other jobs and make small matrix products s
 
 from __future__ import annotations
 
-from synth.threads import single_threaded_blas
+from texsynth.synth.threads import single_threaded_blas
 
 single_threaded_blas()  # before NumPy loads OpenBLAS
 
@@ -32,10 +32,10 @@ import skimage.data
 from PIL import Image, ImageDraw
 
 from benchmarks._report import DATA, median_time, write_section
-from synth.analysis.tensor import mean_coherence
-from synth.api import synthesize
-from synth.evaluate import COPY_THRESHOLD, evaluate_pair, seam_visibility
-from synth.io import load_image
+from texsynth.synth.analysis.tensor import mean_coherence
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import COPY_THRESHOLD, evaluate_pair, seam_visibility
+from texsynth.synth.io import load_image
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "patch.md"
@@ -85,12 +85,12 @@ RUNS: dict[str, tuple[str, dict[str, Any]]] = {
         "gaussian-patch",
         {**PAPER, "model": "rclg", "blending": "boundary-cut", "scales": 2},
     ),
-    # the default: contrast restored (a departure, synth.patch.gaussian.restore_contrast)
+    # the default: contrast restored (a departure, texsynth.synth.patch.gaussian.restore_contrast)
     "CLG, restored": ("gaussian-patch", {**GAUSS, "model": "clg"}),
     "RCLG, restored": ("gaussian-patch", {**GAUSS, "model": "rclg"}),
     "RCLG + cut, restored": ("gaussian-patch", {**GAUSS, "model": "rclg", "blending": "boundary-cut"}),
     # the method's defaults: contrast restored, N = 5 nearest patches and the corrected-neighbour estimate
-    # (departures, synth.methods.gaussian_patch)
+    # (departures, texsynth.synth.methods.gaussian_patch)
     "RCLG + cut, defaults (N = 5, neighbour)": (
         "gaussian-patch",
         {"model": "rclg", "blending": "boundary-cut", **LITERAL},
@@ -215,7 +215,8 @@ OBSERVATIONS_LAMINAR = """### Why the papers' search repeats one region, and wha
   paper's search shows that attractor already (onion crop orientation KL 1.22, share used 0.54, one seed
   0.30).
 - **Fix**: the normalised error times a usage penalty on over-used exemplar regions (Chen & Wang's position
-  histogram over each candidate's footprint, against the use uniform draws would give, `synth.patch.usage`),
+  histogram over each candidate's footprint, against the use uniform draws would give,
+  `texsynth.synth.patch.usage`),
   gain 1; for `gaussian-patch` also the boundary cut (the paper's Fig. 3) instead of pasting (contrast 0.83
   -> 0.88 on the onion-core crop). Quilting with the usage penalty alone (gain 4, plain SSD) reached
   coherence ratio 0.93 (`evaluate_pair`'s coherence) and contrast 0.93 on the onion crop, against 0.96 and
@@ -313,7 +314,8 @@ def main() -> None:
     md += ["", "## (a) Seam visibility without blending", ""]
     md += [
         "Mean squared grey difference across the patch boundaries (overlap strips) over the interior's; "
-        "1 = no visible seam (`synth.evaluate.seam_visibility`). The paper: CLG and RCLG show weaker seams "
+        "1 = no visible seam (`texsynth.synth.evaluate.seam_visibility`). The paper: CLG and RCLG show "
+        "weaker seams "
         "than LG.",
         "",
         head,
@@ -355,7 +357,7 @@ def main() -> None:
     md += ["", "## (c) Verbatim copies: RCLG vs quilting at the same patch size", ""]
     md += [
         f"Share of output pixels whose 7 x 7 patch is within RMS {COPY_THRESHOLD} of an exemplar patch "
-        "(`synth.evaluate.copy_map`).",
+        "(`texsynth.synth.evaluate.copy_map`).",
         "",
         head,
         sep,
@@ -496,8 +498,10 @@ def laminar(others: bool = True) -> str:
         "(`error='ssd'`, `usage_weight=0`; for gaussian-patch also `blending='none'`: its defaults before "
         "issue 24). Cells: mean over seeds (worst seed: the largest KL, the ratio farthest from 1, the "
         "smallest share). Coherence ratio: mean structure-tensor coherence of the output over the "
-        "exemplar's (`synth.analysis.tensor.mean_coherence`); contrast: grey-level std over the exemplar's; "
-        "KLs: `synth.evaluate.evaluate_pair`; share used and spread: `synth.evaluate.coverage` of the "
+        "exemplar's (`texsynth.synth.analysis.tensor.mean_coherence`); contrast: grey-level std over the "
+        "exemplar's; "
+        "KLs: `texsynth.synth.evaluate.evaluate_pair`; share used and spread: "
+        "`texsynth.synth.evaluate.coverage` of the "
         "patches' exemplar positions (share of exemplar pixels inside a used patch; RMS distance of the "
         "positions from their mean over that of all positions). Targets on the laminar crops: coherence "
         "ratio and contrast >= 0.85, grey KL < 0.05. The crops (benchmarks/data/README.md) are an "

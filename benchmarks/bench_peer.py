@@ -4,7 +4,7 @@ Run ``python -m benchmarks.bench_peer`` (``--pairs N``, ``--cases tc-256,tc-1024
 ``--threads 2``, ``--peer PATH``, ``--no-write``); writes the ``peer`` section of docs/benchmarks.md. The
 peer is the ``texture-synthesis`` command found by ``--peer``, else ``$TEXSYNTH_PEER``, else on
 ``PATH``: build it offline with ``../shared/tools/build_peer_embark.sh`` (it needs no network). Each
-pair runs, one after the other, a fresh ``python -m synth.cli synthesize METHOD --exemplar X --size
+pair runs, one after the other, a fresh ``python -m texsynth.synth.cli synthesize METHOD --exemplar X --size
 NxN --seed 1 --threads T --out DIR`` (the method's defaults, plots included unless ``--no-plots``) and
 the peer's ``texture-synthesis --out-size N --threads T --seed 1 --no-progress --out F generate X``
 (``--no-progress``: without it the peer busy-polls its bar on an extra thread), on the same exemplar
@@ -81,7 +81,7 @@ def commands(case: str, peer: str, threads: int, plots: bool, folder: Path) -> t
     ours = [
         sys.executable,
         "-m",
-        "synth.cli",
+        "texsynth.synth.cli",
         "synthesize",
         method,
         "--exemplar",

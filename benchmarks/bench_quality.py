@@ -8,7 +8,8 @@ replaces only their rows in docs/quality.md (the pictures and the other rows sta
 Every 2D method with its defaults, 128 x 128 exemplars -> 256 x 256, seeds 1-3, on the public crops
 (``skimage.data`` grass, gravel, brick: ``[:128, :128]``, grey), HRTEM soot (``hrtem-soot-128.png``), a
 generated bent-laminae exemplar and a generated wood-grain exemplar (long wavy fibres with their own grey
-levels, :func:`synth.io.patterns.wood_grain`). Measures (:func:`synth.evaluate.evaluate_pair` unless said):
+levels, :func:`texsynth.synth.io.patterns.wood_grain`). Measures
+(:func:`texsynth.synth.evaluate.evaluate_pair` unless said):
 
 - grey-level KL and orientation KL against the exemplar (lower is better);
 - coherence ratio: the output's mean structure-tensor coherence over the exemplar's (1 = as oriented);
@@ -18,9 +19,11 @@ levels, :func:`synth.io.patterns.wood_grain`). Measures (:func:`synth.evaluate.e
   mortar joints (:data:`STRAND_POLARITY`; the dark polarity finds 3 strands in the brick exemplar, a ratio
   of means over 3 samples, the bright one 16);
 - seam: for methods that report where each pixel came from (``source_map``: the pixel methods and
-  quilting), :func:`synth.evaluate.patches.seam_contrast` (gradient energy across source seams over that
+  quilting), :func:`texsynth.synth.evaluate.patches.seam_contrast` (gradient energy across source seams over
+  that
   across coherent edges; 1 = seams as the texture itself); for the Gaussian patch models and
-  feature-guided, :func:`synth.evaluate.seam_visibility` of their patch layout; none for random phase.
+  feature-guided, :func:`texsynth.synth.evaluate.seam_visibility` of their patch layout; none for random
+  phase.
 
 The peer column is Embark's texture-synthesis 0.8 (``generate --out-size 256``) on the same crops, its
 outputs in ../shared/data/peers/ (grass, gravel, brick, soot); the same measures are computed on them.
@@ -42,11 +45,11 @@ import numpy as np
 from skimage import data as skdata
 
 from benchmarks._report import DATA
-from synth.api import synthesize
-from synth.evaluate import evaluate_pair, seam_contrast, seam_visibility
-from synth.evaluate.breaks import seams_from_sources
-from synth.io import load_image, save_image
-from synth.io.patterns import undulating_laminae, wood_grain
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import evaluate_pair, seam_contrast, seam_visibility
+from texsynth.synth.evaluate.breaks import seams_from_sources
+from texsynth.synth.io import load_image, save_image
+from texsynth.synth.io.patterns import undulating_laminae, wood_grain
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 PEERS = DATA / "peers"
@@ -90,7 +93,7 @@ def peer_output(name: str) -> np.ndarray | None:
 def measures(
     exemplar: np.ndarray, image: np.ndarray, result: Any = None, *, polarity: str = "dark"
 ) -> dict[str, float | None]:
-    """The five measures of one output (``result``: its :class:`synth.api.Result`, for the seams;
+    """The five measures of one output (``result``: its :class:`texsynth.synth.api.Result`, for the seams;
     ``polarity``: the strands' polarity, :data:`STRAND_POLARITY`)."""
     m = evaluate_pair(exemplar, image, fringe_options={"polarity": polarity})
     coh = m["structure"]["coherence_mean"]

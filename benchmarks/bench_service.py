@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from app.client import Client, ServiceError
 from benchmarks._report import write_section
+from texsynth.app.client import Client, ServiceError
 
 JOB = {"method": "wei-levoy", "params": {"width": 48, "height": 48, "levels": 2, "neighbourhood_size": 7}}
 
@@ -104,7 +104,7 @@ def main() -> int:
                 [
                     sys.executable,
                     "-c",
-                    "import sys; from synth.cli import main; sys.exit(main())",
+                    "import sys; from texsynth.synth.cli import main; sys.exit(main())",
                     "serve",
                     "--port",
                     str(port),

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from app.client import Client, Retry, ServiceError
 from benchmarks._report import write_section
 from tests.service.conftest import Service, free_port, start_redis
+from texsynth.app.client import Client, Retry, ServiceError
 
 JOB = {"method": "random-phase", "params": {"width": 64, "height": 64}}
 ENDED = ("succeeded", "failed", "cancelled")

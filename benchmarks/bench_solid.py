@@ -6,7 +6,7 @@ of docs/benchmarks.md). ``--quick`` runs one seed of the 12-row table only.
 1. **The study's table** (methods x scan orders = 12 rows) on HRTEM soot (``hrtem-soot-128.png``) and on a
    generated bent-laminae exemplar (128 x 128), 64^3 each at the methods' default (the papers') settings:
    time, and per axis (the slices normal to z, y and x, i.e. the xy, xz and yz planes) the multi-2D
-   measures of :func:`synth.evaluate.evaluate_volume`: grey-level KL, std and skewness differences,
+   measures of :func:`texsynth.synth.evaluate.evaluate_volume`: grey-level KL, std and skewness differences,
    orientation KL, fringe length and tortuosity distances (Kolmogorov-Smirnov), and the two-point
    correlation's relative error.
 2. **Fidelity targets** (issue 10): ``solid-kopf`` grey KL < 0.05 and orientation KL < 0.10 on every axis
@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks._report import DATA, median_time, write_section
-from synth.api import synthesize
-from synth.evaluate import evaluate_volume
-from synth.evaluate.correlation import compare_s2, volume_s2
-from synth.io import load_image, save_image
-from synth.io.patterns import gaussian_random_field, laminae_volume, undulating_laminae
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import evaluate_volume
+from texsynth.synth.evaluate.correlation import compare_s2, volume_s2
+from texsynth.synth.io import load_image, save_image
+from texsynth.synth.io.patterns import gaussian_random_field, laminae_volume, undulating_laminae
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 METHODS = ("solid-wei-levoy", "solid-kopf", "solid-chen-wang")
@@ -246,12 +246,12 @@ def known_answer(seeds: tuple[int, ...] = (1, 2, 3)) -> str:
 
 _MEMORY_SCRIPT = """
 import resource, sys, time, numpy as np
-from synth.api import synthesize
-from synth.io import load_image
+from texsynth.synth.api import synthesize
+from texsynth.synth.io import load_image
 n, method = int(sys.argv[1]), sys.argv[2]
 ex = load_image(sys.argv[3])[:n, :n].copy() if sys.argv[3] != "-" else None
 if ex is None:
-    from synth.io.patterns import undulating_laminae
+    from texsynth.synth.io.patterns import undulating_laminae
     ex = undulating_laminae((n, n), 7, 16, 128, noise=0.3)
 marks = []
 def progress(stage, fraction):
@@ -315,7 +315,7 @@ GEOMETRY = """## Laminae and one exemplar for three planes: when a volume exists
 
 Slices of sheets whose normal is ``n = (n_z, n_y, n_x)`` show laminae whose gradient, in each plane's
 (row, column) axes, is ``(n_y, n_x)`` in xy, ``(n_z, n_x)`` in xz and ``(n_z, n_y)`` in yz
-(`synth.api.PLANES`). One exemplar for the three planes asks the three gradients to make the same
+(`texsynth.synth.api.PLANES`). One exemplar for the three planes asks the three gradients to make the same
 angle: ``n_y / n_x = n_z / n_x = n_z / n_y = t``. The first two give ``n_z = n_y``, so the third gives
 ``t = 1``: **only laminae whose gradient points along the image diagonal (fringes running from bottom
 left to top right, sheets normal to (1, 1, 1)) can appear on all three planes**; any other uniaxial
@@ -332,7 +332,7 @@ LAMINAR_START = """## Laminar HRTEM: the structure first (issue 24)
 Why the sheets did not form: a 6-7 px period survives one pyramid level (3 px) and is gone by the third, so
 with the paper's 5 levels the coarse levels hold blobs, the volume is a labyrinth before the fringes can
 appear, and 7x7 windows (about one period) only repair it locally. The fix is the ICIP 2014 order carried to
-3D (ALGORITHMS.md section 8; `synth.pixel.laminar`): the structure first, a volume of curved sheets
+3D (ALGORITHMS.md section 8; `texsynth.synth.pixel.laminar`): the structure first, a volume of curved sheets
 `cos(2 pi phi / lambda)` at the exemplar's spectral period `lambda` (`phi` the signed distance to the zero level
 of a smooth random field of correlation length 4 periods, `|grad phi| = 1`: nested shells and bent stacks),
 remapped onto the exemplar's grey levels, from which the texture optimisation starts at the finest levels that
@@ -345,7 +345,7 @@ period is the peak of the spectral shells' power between 3 px and a quarter of t
 
 Measures (scratch scripts, /work/notes/sheets): per axis `xy / xz / yz`, the synthesized slices (every second)
 against the truth's slices cut into tiles of the synthesized slices' size (known answer), or against the
-exemplar's tiles (real crop), with `synth.evaluate`'s per-image statistics pooled: mean coherence ratio,
+exemplar's tiles (real crop), with `texsynth.synth.evaluate`'s per-image statistics pooled: mean coherence ratio,
 orientation KL, grey KL, KS of fringe length and tortuosity. 64^3 from 128^2. Known answer: a 128^3 onion
 (nested spherical shells around 10 random centres, period 6 px, blur 0.8, noise 0.15), its z mid-slice the one
 exemplar (apparent period 7.1 px, coherence 0.82). Caution: a 64^3 sub-cube of the truth itself scores
@@ -417,8 +417,8 @@ The real onion crop (`benchmarks/data/hrtem-onion-128.png` of the patch-laminar 
 
 ### On the laminar-truth benchmark (`benchmarks/bench_laminar.py`, its onion, 64^3, one exemplar)
 
-The known answer of `synth.io.laminar` (onions, 128^3, seed 11, noise 0.3: exemplar coherence 0.68), measured by
-`synth.evaluate.truth` (slices against the truth's slices of the same size), seeds 1-3: per-axis means
+The known answer of `texsynth.synth.io.laminar` (onions, 128^3, seed 11, noise 0.3: exemplar coherence 0.68), measured by
+`texsynth.synth.evaluate.truth` (slices against the truth's slices of the same size), seeds 1-3: per-axis means
 `xy / xz / yz` (worst seed-axis value); the random start's rows are seed 1 only, CPU per synthesis at load 1-4.
 
 | method | start | coherence ratio | orientation KL | length KS | tortuosity KS | grey KL | CPU (s) |
@@ -453,7 +453,7 @@ The real onion-particle crops of `benchmarks/data` (mean coherence 0.52 and 0.47
 `START_COHERENCE`, beside soot crops (0.39-0.50), and no single measure of the exemplar told them apart
 (coherence at several windows, fringe lengths, the orientation correlation length: soot-256 crops 13-16 px,
 onion crops 16-20 px). So between `PILOT_COHERENCE` (0.45) and 0.6, `structure='auto'` asks a pilot
-(`synth.methods.solid_kopf.laminar_pilot`, both solids): two 32^3 `solid-kopf` volumes, one from each
+(`texsynth.synth.methods.solid_kopf.laminar_pilot`, both solids): two 32^3 `solid-kopf` volumes, one from each
 start, seed 0, and the start whose slices keep the exemplar's mean coherence better (log ratio) wins. On
 32^3 the pilot points the same way as 64^3 on every crop tried (onion 0.64 / 0.83 at 32^3 against 0.63 /
 1.01 at 64^3, random / laminar; onion-core 0.74 / 0.88 against 0.71 / 1.23; soot-128 0.95 / 1.54 against
@@ -461,7 +461,7 @@ start, seed 0, and the start whose slices keep the exemplar's mean coherence bet
 the output fingerprints keep their bytes; soot-256's crops are not isotropic (mean tensor coherence 0.30-0.37
 on two of four) or below 0.45.
 
-64^3 from the real crops, defaults, seed 1, against the exemplar (`synth.evaluate.evaluate_volume`, every
+64^3 from the real crops, defaults, seed 1, against the exemplar (`texsynth.synth.evaluate.evaluate_volume`, every
 second slice of each axis, mean of the axes); the 2D reference line is `tensor-constrained` 256^2 of the
 same crop, seed 1:
 
@@ -478,7 +478,7 @@ same crop, seed 1:
 | onion-core | `solid-chen-wang` | auto: pilot -> laminar | **0.99** | **0.033** | 0.117 | **0.214** | **0.044** | 7.7 |
 | onion-core | `tensor-constrained` 2D | | 0.89 | 0.023 | 0.094 | 0.206 | 0.005 | |
 
-CPU times are of `synth.api.synthesize` at load 2-5 and include the pilot. The pictures (xy, xz, yz
+CPU times are of `texsynth.synth.api.synthesize` at load 2-5 and include the pilot. The pictures (xy, xz, yz
 mid-slices; top row the random start, bottom row the default now): the blobs (Kopf) and grainy noise
 (Chen-Wang) become continuous fringes that curve and nest. Left as they are: Kopf on the onion-core crop
 over-orders the fringes (coherence 1.23, longer fringes than the crop: length KS 0.23); Chen-Wang's shells
@@ -495,7 +495,8 @@ DEPARTURES = """## Departures from the papers, and their history
 
 What each method changes from its paper, why, and the measurements behind each choice (moved here from
 the modules' docstrings, which keep one line per departure). Unless said otherwise: soot =
-`hrtem-soot-128.png`, per-axis means of `synth.evaluate.evaluate_volume`, "KL g/o" = grey / orientation KL;
+`hrtem-soot-128.png`, per-axis means of `texsynth.synth.evaluate.evaluate_volume`, "KL g/o" = grey /
+orientation KL;
 "session N" names the work session that measured it.
 
 ### `solid-kopf` (Kopf et al. 2007)
@@ -523,7 +524,8 @@ the modules' docstrings, which keep one line per departure). Unless said otherwi
   0.08/0.03/0.02 and 0.13/0.10/0.03 without; 0.04/0.06/0.02 and 0.03/0.05/0.02 with gain 1 (the
   default). Gain 4 (measured with an earlier search setting) gave 0.09/0.07/0.06 and 0.06/0.05/0.05
   against 0.05/0.06/0.02 and 0.05/0.07/0.04 for gain 1.
-- **One rank remap at the very end** (`synth.pixel.solid.match_histogram`, when `histogram_matching`):
+- **One rank remap at the very end** (`texsynth.synth.pixel.solid.match_histogram`, when
+`histogram_matching`):
   the remaining contrast deficit (the optimisation keeps about 0.6-0.7 of the exemplar's std at 64^3) is
   removed by a monotone remap of the finished volume, which keeps its structure (orientation KL
   unchanged) and makes grey KL ~0. It does not feed back into the iterations;
@@ -546,13 +548,14 @@ the modules' docstrings, which keep one line per departure). Unless said otherwi
   axes of each slice plane (every voxel is still covered by ~(n/stride)^2 neighbourhoods per plane,
   tested); the grid's phase is drawn afresh every iteration so no voxel is always a centre.
 - **Histogram in blocks**: the optimisation step takes the voxels in scan order in blocks of
-  `max(UPDATE_BLOCK, N / 16)` voxels (`synth.kernels.solid_search.UPDATE_BLOCK` = 4096,
+  `max(UPDATE_BLOCK, N / 16)` voxels (`texsynth.synth.kernels.solid_search.UPDATE_BLOCK` = 4096,
   `UPDATE_BLOCKS_PER_SWEEP`; also cut at the progress steps), computes a block in parallel from the
   histogram as it was at the block's start, then updates the histogram (Kopf: after every voxel). A
   voxel's new value depends on no other voxel, so this is what makes the step parallel and, with the
   block's voxels taken in memory order, cache-friendly: at 128^3 an update sweep took 5.6 s with blocks
   of 4096 and 3.0 s with N / 16 (one thread). The histogram lags by at most 1/16 of a sweep.
-- **The schedule follows the structure** (`adapt_to_structure`, on; `synth.pixel.solid.structure_schedule`):
+- **The schedule follows the structure** (`adapt_to_structure`, on;
+`texsynth.synth.pixel.solid.structure_schedule`):
   a weakly oriented exemplar (mean coherence < 0.75: soot, grains, pores) is synthesized over at most 2
   levels, laminae over `levels` with at least 10 iterations per level (the paper's 10; per-plane laminae,
   mean orientation KL on the xz/yz axes 0.16/0.13 with 4 -> 0.08/0.07 with 10). The coarse levels of a
@@ -562,7 +565,8 @@ the modules' docstrings, which keep one line per departure). Unless said otherwi
   levels: 0.11 along z). Soot: orientation KL 0.04/0.05/0.04 with 2 levels against 0.04/0.06/0.02 with
   5, S2 error 0.03-0.04 against 0.06-0.08, so soot loses nothing.
 - **Orientation-usage re-weighting** (`orientation_gain`, default `ORIENTATION_GAIN` = 32; 0 = off, the
-  paper): eq 4 applied to each plane's orientation histogram (`synth.analysis.orientation_histogram`: 12
+  paper): eq 4 applied to each plane's orientation histogram (`texsynth.synth.analysis.orientation_histogram`:
+  12
   bins, coherence-weighted exemplar shares). Eq 4 on grey levels and the usage re-weighting leave the
   volume free to fall into an orientation attractor. Bent horizontal laminae given for the two views that
   admit a volume (`planes=('xz', 'yz')`) came out as straight laminae tilted about 30 degrees on both
@@ -582,7 +586,7 @@ the modules' docstrings, which keep one line per departure). Unless said otherwi
 - **Histogram matching** on grey levels only (the exemplars are grey), 16 bins on [0, 1]; `H_e` pools the
   active planes' exemplars. Kopf also matches other histograms in some results.
 - **Neighbourhood size**: 7x7 (ALGORITHMS.md) rather than Kopf's 8x8 (an odd size has a centre); at coarse
-  levels it shrinks to a quarter of the exemplar's shorter side (`synth.pixel.solid.plan_levels`). 3
+  levels it shrinks to a quarter of the exemplar's shorter side (`texsynth.synth.pixel.solid.plan_levels`). 3
   levels instead of 5 gave the same quality on soot (orientation KL 0.03/0.08/0.10 against
   0.04/0.12/0.05 at 10 iterations): the 3x3 coarse levels cost little and are kept as the study's
   setting.
@@ -596,7 +600,8 @@ the modules' docstrings, which keep one line per departure). Unless said otherwi
   `planes=('xz', 'yz')`: horizontal bent laminae on both planes, orientation KL about 0.14 / 0.11 (the
   paper's settings: 2.3 / 1.6, a tilted planar stack); with one exemplar on all three planes no volume
   exists (above).
-- **Laminar start** (`structure`, default `'auto'`; issue 24; `synth.pixel.laminar`): when one laminar,
+- **Laminar start** (`structure`, default `'auto'`; issue 24; `texsynth.synth.pixel.laminar`): when one
+laminar,
   isotropic exemplar serves the three planes, the structure comes first (Akl 2014's two stages carried to
   3D): a volume of curved sheets at the exemplar's spectral period (signed distance to the zero level of a
   smooth random field, `structure_length` = 4 periods) starts the optimisation at the finest levels that
@@ -653,10 +658,11 @@ Measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL,
   `planes=('xz', 'yz')`, orientation KL 0.29 / 0.80 -> 0.27 / 0.38; soot worst axis 0.092 -> 0.065).
 - **Levels**: coarse levels use smaller neighbourhoods (at most a quarter of the exemplar's shorter side)
   and the number of levels shrinks so that the coarsest exemplar keeps 8 pixels and the volume 4 voxels
-  a side (`synth.pixel.solid.plan_levels`).
+  a side (`texsynth.synth.pixel.solid.plan_levels`).
 - **3 iterations per level** (the study ran 10): on soot the energy stops falling after 2-3 iterations
   (`stats['mean_match_distance']`). Laminae get 10 (`adapt_to_structure`, as `solid-kopf`;
-  `synth.pixel.solid.structure_schedule`): per-plane laminae, seeds 1-3, mean orientation KL 0.09 / 0.26
+  `texsynth.synth.pixel.solid.structure_schedule`): per-plane laminae, seeds 1-3, mean orientation KL 0.09 /
+  0.26
   / 0.30 with 3 -> 0.04 / 0.18 / 0.14 with 10. Kopf's other half of that schedule, 2 levels for
   micro-structures, is not taken: it doubled the known answer's S2 error here (0.13 against 0.06) and
   saved little time (the finest level is 85-90% of a run).
@@ -682,7 +688,8 @@ Measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL,
 - **Orientation re-weighting for laminae** (session 6; `orientation_gain`, `LAMINAR_ORIENTATION_GAIN` when
   the constrained exemplars are laminar and `adapt_to_structure` is on, else off): each search pass
   multiplies a candidate's distance by `1 + gain * excess` of its orientation bin in the plane's current
-  matches (`synth.analysis.orientation_histogram`, as `solid-kopf`'s default). Bent laminae on the two views
+  matches (`texsynth.synth.analysis.orientation_histogram`, as `solid-kopf`'s default). Bent laminae on the
+  two views
   that admit a volume (`planes=('xz', 'yz')`, 64^3 from 128^2, seeds 1-3, orientation KL xz / yz): 0.52 /
   0.43 without, 0.20 / 0.17 with gain 32, 0.21 / 0.18 with 64 (the tilted planar stack is gone; more
   dislocations than Kopf's remain). Per-plane laminae barely move (0.04 / 0.17 / 0.16 against 0.04 / 0.17
@@ -884,7 +891,8 @@ def main(argv: list[str] | None = None) -> int:
         "# Solid textures from 2D exemplars\n\n"
         "Generated by `python -m benchmarks.bench_solid` (see its docstring for what each table measures). "
         "Per-axis cells read `xy / xz / yz`: the slices normal to z, y and x, each compared with the "
-        "exemplar by the study's multi-2D measures (`synth.evaluate.evaluate_volume`; grey and orientation "
+        "exemplar by the study's multi-2D measures (`texsynth.synth.evaluate.evaluate_volume`; grey and "
+        "orientation "
         "KL of the pooled histograms, differences of std and skewness, Kolmogorov-Smirnov distances of "
         "fringe length and tortuosity, relative error of the two-point correlation S2 up to the exemplar's "
         "correlation length). Every volume is 64^3 from a 128^2 exemplar, seed 1, default parameters "

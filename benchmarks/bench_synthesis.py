@@ -9,13 +9,13 @@ the k-coherence search is compared with that of the exhaustive search over every
 (1.00 = as good as exact) and the share of positions where the fast search found the exact optimum.
 
 OpenBLAS runs single-threaded here, as in the ``texsynth`` command (set before NumPy loads; see
-:mod:`synth.cli`): on the shared 2-core machine its threads spin against the other jobs and make the
+:mod:`texsynth.synth.cli`): on the shared 2-core machine its threads spin against the other jobs and make the
 k-coherence PCA's small matrix products slower, never faster.
 """
 
 from __future__ import annotations
 
-from synth.threads import single_threaded_blas
+from texsynth.synth.threads import single_threaded_blas
 
 single_threaded_blas()  # before NumPy loads OpenBLAS
 
@@ -29,12 +29,12 @@ from typing import Any
 
 import numpy as np
 
-import synth.methods.tensor_constrained as tc
-import synth.methods.wei_levoy as wl
+import texsynth.synth.methods.tensor_constrained as tc
+import texsynth.synth.methods.wei_levoy as wl
 from benchmarks._report import DATA, median_time, write_section
-from synth.api import synthesize
-from synth.io import load_image
-from synth.kernels.pixel_search import SearchState, synthesize_chunk
+from texsynth.synth.api import synthesize
+from texsynth.synth.io import load_image
+from texsynth.synth.kernels.pixel_search import SearchState, synthesize_chunk
 
 # Akl 2014, Table 1: (figure, exemplar, output side, params)
 TABLE1: list[tuple[str, str, int, dict[str, Any]]] = [

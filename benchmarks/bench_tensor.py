@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks._report import median_time, write_section
-from synth.analysis.tensor import coherence, orientation, structure_tensor
+from texsynth.synth.analysis.tensor import coherence, orientation, structure_tensor
 
 SIZE = 1024
 RUNS = 5

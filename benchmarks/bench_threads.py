@@ -1,10 +1,10 @@
 """Speed-up from 1 to 2 threads (issue 25): whole ``texsynth synthesize`` processes and the synthesis alone.
 
 Run ``python -m benchmarks.bench_threads`` (``--runs N``, ``--cases kopf-64,kopf-128,chen-wang-64``);
-writes the ``threads`` section of docs/benchmarks.md. Each run is a fresh ``python -m synth.cli
+writes the ``threads`` section of docs/benchmarks.md. Each run is a fresh ``python -m texsynth.synth.cli
 synthesize METHOD --threads N`` process on the real HRTEM soot crop (``hrtem-soot-128.png``; a
 generated laminae pattern when ``../shared/data`` is absent), plots off, every other artifact written
-(the volume's evaluation included). The child wraps :func:`synth.pipeline.synthesize` to time the
+(the volume's evaluation included). The child wraps :func:`texsynth.synth.pipeline.synthesize` to time the
 synthesis alone (wall and CPU of the process, the only threads then at work being the job's); the
 parent times the whole process (wall from start to exit, CPU from ``os.wait4``: all threads, user +
 system). One untimed run first (numba's cache on disk, as after any earlier run of the user's), then
@@ -42,8 +42,8 @@ CASES = {
 
 _CHILD = """
 import json, os, sys, time
-import synth.pipeline as pipeline
-from synth.cli import main
+import texsynth.synth.pipeline as pipeline
+from texsynth.synth.cli import main
 
 inner = pipeline.synthesize
 spent = {}
@@ -79,8 +79,8 @@ def _exemplar(folder: Path) -> Path:
     soot = DATA / "hrtem-soot-128.png"
     if soot.is_file():
         return soot
-    from synth.io import save_image
-    from synth.io.patterns import undulating_laminae
+    from texsynth.synth.io import save_image
+    from texsynth.synth.io.patterns import undulating_laminae
 
     path = folder / "laminae-128.png"
     save_image(path, undulating_laminae((128, 128)))
@@ -157,7 +157,7 @@ def report(results: list[dict[str, object]]) -> str:
         "",
         "Whole `texsynth synthesize METHOD --threads N --no-plots` processes on `hrtem-soot-128.png`"
         " (seed 1), 1 and 2 threads alternated, medians; CPU = user + system of all the process's"
-        " threads. 'Synthesis' is `synth.api.synthesize` alone inside the same process. Speed-up ="
+        " threads. 'Synthesis' is `texsynth.synth.api.synthesize` alone inside the same process. Speed-up ="
         " wall(1) / wall(2). Load = 1-minute load average (min / median / max over the runs) on this"
         " 2-core machine: above about 1, the 2-thread runs could not have both cores, so their speed-up"
         " is a floor. 'Busiest thread' is the CPU time of the synthesis' busiest thread (from"

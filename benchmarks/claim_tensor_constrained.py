@@ -3,7 +3,8 @@
 For each exemplar (HRTEM soot, and generated laminae bent over long range), synthesize 128 -> 256
 with ``wei-levoy`` (1 level = the texture levels of Table 1, and 4 levels) and ``tensor-constrained``
 (Table 1 settings with its measured departures), over several seeds, and compare with the exemplar:
-energy-weighted orientation-histogram KL (:func:`synth.evaluate.evaluate_pair`) and mean coherence. Writes
+energy-weighted orientation-histogram KL (:func:`texsynth.synth.evaluate.evaluate_pair`) and mean coherence.
+Writes
 ``docs/tensor-constrained.md`` and one figure per exemplar laid out like the paper's figures:
 input, its coherence and orientation; the synthesized tensor field's coherence and orientation;
 the Wei-Levoy output and ours.
@@ -20,12 +21,12 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from benchmarks._report import DATA
-from synth.analysis.tensor import coherence, structure_direction, structure_tensor
-from synth.api import synthesize
-from synth.evaluate import evaluate_pair
-from synth.io import load_image, save_image
-from synth.io.patterns import undulating_laminae
-from synth.output.render import coherence_image, orientation_image
+from texsynth.synth.analysis.tensor import coherence, structure_direction, structure_tensor
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate import evaluate_pair
+from texsynth.synth.io import load_image, save_image
+from texsynth.synth.io.patterns import undulating_laminae
+from texsynth.synth.output.render import coherence_image, orientation_image
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 SEEDS = (1, 2, 3, 4, 5, 6, 7, 8)
@@ -189,7 +190,8 @@ def write_doc(rows: list) -> None:
         "median over the seeds.",
         "",
         "Orientation KL: Kullback-Leibler divergence of the energy-weighted orientation histograms of "
-        "exemplar and output (36 bins, structure tensor on a 7x7-equivalent window; `synth.evaluate`). "
+        "exemplar and output (36 bins, structure tensor on a 7x7-equivalent window; "
+        "`texsynth.synth.evaluate`). "
         "Lower is closer. "
         "Coherence: mean coherence of the output (the exemplar's in brackets).",
         "",

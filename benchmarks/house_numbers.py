@@ -164,7 +164,7 @@ def arrows_back_up() -> list[str]:
             elif isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
             for name in names:
-                bits = name.split(".")
+                bits = name.removeprefix("texsynth.").split(".")
                 if bits[0] != "synth" or len(bits) < 2 or bits[1] == here:
                     continue
                 if FLOORS.get(bits[1], -1) > FLOORS.get(here, 99):
@@ -221,10 +221,10 @@ def main() -> None:
     print(f"files that set OPENBLAS_NUM_THREADS: {len(blas)} ({', '.join(blas)})")
     print(f"arrows back up: {len(arrows)}")
     print(
-        f"luma constants (besides synth.colour): {len([f for f in luma if f != 'synth/colour.py'])}"
+        f"luma constants (besides texsynth.synth.colour): {len([f for f in luma if f != 'synth/colour.py'])}"
         f" ({', '.join(luma)})"
     )
-    print(f"atomic writers besides synth.io.atomic: {len(writers)} ({', '.join(writers)})")
+    print(f"atomic writers besides texsynth.synth.io.atomic: {len(writers)} ({', '.join(writers)})")
     solid = ("solid_", "pixel/solid.py")
     mine_doc = [r for r in long_docs if not any(k in r for k in solid)]
     mine_pos = [r for r in many if not any(k in r for k in solid)]

@@ -6,7 +6,7 @@ nothing by comparing these before and after.
 
 Each method runs with its default parameters and a fixed seed on a small input (the real HRTEM soot
 crop when ``../shared/data`` is there, else a generated laminae pattern), through
-:func:`synth.api.synthesize` only, so the script does not depend on where the machinery lives. The
+:func:`texsynth.synth.api.synthesize` only, so the script does not depend on where the machinery lives. The
 hashes are of the float32 output bytes and of the tensor field when the method returns one. They are
 machine-specific (BLAS and the CPU's vector width may move the last bit), so compare hashes taken on
 the same machine.
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.api import available_methods, synthesize
+from texsynth.synth.api import available_methods, synthesize
 
 # Small but real: each case runs in seconds with the method's default parameters.
 _SIZE_2D = (96, 96)
@@ -34,10 +34,10 @@ def _exemplar() -> np.ndarray:
 
     path = DATA / "hrtem-soot-128.png"
     if path.is_file():
-        from synth.io import load_image
+        from texsynth.synth.io import load_image
 
         return load_image(path)[:64, :64].copy()
-    from synth.io.patterns import undulating_laminae
+    from texsynth.synth.io.patterns import undulating_laminae
 
     return undulating_laminae((64, 64))
 

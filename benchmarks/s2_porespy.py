@@ -1,4 +1,4 @@
-"""Per-axis ``S2`` (synth.evaluate.correlation) versus PoreSpy's direction-averaged default.
+"""Per-axis ``S2`` (texsynth.synth.evaluate.correlation) versus PoreSpy's direction-averaged default.
 
 PoreSpy's ``porespy.metrics.two_point_correlation(im)`` (2.x) takes the periodic autocorrelation of the
 whole image by FFT (``fftshift``, ``rfftn``, ``|F|^2``, ``irfftn``), averages it over rings
@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 from scipy import fft, ndimage
 
-from synth.evaluate.correlation import binarize, two_point_correlation
-from synth.io import load_image
+from texsynth.synth.evaluate.correlation import binarize, two_point_correlation
+from texsynth.synth.io import load_image
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 

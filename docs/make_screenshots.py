@@ -26,7 +26,7 @@ from PIL import Image
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from app.client import Client  # noqa: E402
+from texsynth.app.client import Client  # noqa: E402
 
 OUT = REPO / "docs" / "img"
 CHROMIUM = "/usr/bin/chromium"
@@ -56,7 +56,7 @@ def _serve(data_dir: Path) -> tuple[subprocess.Popen, str]:
         # of the real methods is now refused at submission with a 422)
         "TEXSYNTH_EXTRA_METHODS": "tests.service.methods_for_tests",
     }
-    command = [sys.executable, "-c", "import sys; from synth.cli import main; sys.exit(main())", "serve"]
+    command = [sys.executable, "-c", "import sys; from texsynth.synth.cli import main; sys.exit(main())", "serve"]
     command += ["--host", "127.0.0.1", "--port", str(port), "--data-dir", str(data_dir)]
     with open(data_dir.parent / "serve.log", "wb") as log:
         proc = subprocess.Popen(
@@ -77,7 +77,7 @@ def _serve(data_dir: Path) -> tuple[subprocess.Popen, str]:
 
 def _stop(proc: subprocess.Popen, data_dir: Path) -> None:
     """Stop ``serve`` and the worker it started (the worker runs in its own process group)."""
-    from jobs.store import JobStore
+    from texsynth.jobs.store import JobStore
 
     workers = JobStore(data_dir / "jobs.sqlite", data_dir / "jobs").workers(fresh_within=3600)
     os.killpg(proc.pid, signal.SIGTERM)

@@ -14,9 +14,9 @@ have run stayed queued (issue 14). Here
   and deletes their messages: the filesystem transport writes every broadcast (a cancel's revoke)
   into every mailbox ever bound, and a dead worker's ``*.pidbox.msg`` files piled up for ever.
 
-The reaper (:mod:`jobs.reaper`) re-sends a job whose message no worker received in time, so a job
+The reaper (:mod:`texsynth.jobs.reaper`) re-sends a job whose message no worker received in time, so a job
 whose message was quarantined or lost still runs. Selected by the broker URL ``texsynth-fs://``
-(:func:`jobs.queue.create_celery`).
+(:func:`texsynth.jobs.queue.create_celery`).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ from kombu.transport import TRANSPORT_ALIASES, filesystem
 from kombu.utils.encoding import bytes_to_str, str_to_bytes
 from kombu.utils.json import dumps, loads
 
-from synth.errors import StorageError
-from synth.io.atomic import atomic_write_bytes
+from texsynth.synth.errors import StorageError
+from texsynth.synth.io.atomic import atomic_write_bytes
 
 __all__ = [
     "SCHEME",

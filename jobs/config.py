@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from synth.io.limits import LIMITS, limit_from_env
-from synth.threads import THREADS_ENV, service_threads
+from texsynth.synth.io.limits import LIMITS, limit_from_env
+from texsynth.synth.threads import THREADS_ENV, service_threads
 
 if TYPE_CHECKING:
-    from jobs.store import JobStore
+    from texsynth.jobs.store import JobStore
 
 __all__ = ["Settings"]
 
@@ -43,7 +43,7 @@ class Settings(BaseModel):
         None, description="s3://bucket/prefix for inputs and artifacts; unset = the data directory"
     )
     # Input limits: checked by the API before anything is stored or queued, and by the worker again.
-    # The image limits are synth.io.limits': their defaults and their variables are written there.
+    # The image limits are texsynth.synth.io.limits': their defaults and their variables are written there.
     max_body_bytes: int = Field(32 * 2**20, description="largest accepted request body (HTTP 413 above)")
     max_input_pixels: int = Field(
         LIMITS["max_input_pixels"].default, description="largest accepted exemplar/constraint (413 above)"
@@ -131,9 +131,10 @@ class Settings(BaseModel):
     @classmethod
     def from_env(cls, environ: dict[str, str] | None = None, **overrides: Any) -> Settings:
         """Build from ``TEXSYNTH_<NAME>`` variables (``TEXSYNTH_DATA_DIR``, ...) and ``REDIS_URL``; the
-        size limits from their variables in :data:`synth.io.limits.LIMITS`. ``threads`` always comes out a
-        number (:func:`synth.threads.service_threads`); a bad ``TEXSYNTH_THREADS`` raises
-        :class:`synth.errors.InvalidParameter`."""
+        size limits from their variables in :data:`texsynth.synth.io.limits.LIMITS`. ``threads`` always comes
+        out a
+        number (:func:`texsynth.synth.threads.service_threads`); a bad ``TEXSYNTH_THREADS`` raises
+        :class:`texsynth.synth.errors.InvalidParameter`."""
         env = os.environ if environ is None else environ
         values: dict[str, Any] = {}
         threads = overrides.pop("threads", None) or env.get(THREADS_ENV)
@@ -190,7 +191,8 @@ class Settings(BaseModel):
 
     @property
     def database(self) -> Path | str:
-        """What :class:`jobs.store.JobStore` opens: the URL, or the SQLite file of the data directory."""
+        """What :class:`texsynth.jobs.store.JobStore` opens: the URL, or the SQLite file of the data
+        directory."""
         return self.database_url or self.db_path
 
     def where(self) -> str:
@@ -211,8 +213,8 @@ class Settings(BaseModel):
 
     def open_store(self, *, keep_open: bool = False) -> JobStore:
         """The job store these settings name (records and files); imported here to keep config light."""
-        from jobs.storage import open_storage
-        from jobs.store import JobStore
+        from texsynth.jobs.storage import open_storage
+        from texsynth.jobs.store import JobStore
 
         storage = open_storage(self.storage_url, self.jobs_dir, self.scratch_dir)
         return JobStore(self.database, self.jobs_dir, storage, keep_open=keep_open)

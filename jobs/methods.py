@@ -1,7 +1,7 @@
 """The methods this service offers: the engine's registry plus any ``TEXSYNTH_EXTRA_METHODS`` modules.
 
 ``TEXSYNTH_EXTRA_METHODS`` (comma-separated module names) lets a deployment - or the test suite, with
-its small ``tests.service.methods_for_tests`` - register more methods through ``synth.api.register``.
+its small ``tests.service.methods_for_tests`` - register more methods through ``texsynth.synth.api.register``.
 The API and every worker import the same list, so a method is offered only where it can run.
 """
 
@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import importlib
 
-from jobs.config import Settings
-from synth.api import MethodSpec, available_methods
+from texsynth.jobs.config import Settings
+from texsynth.synth.api import MethodSpec, available_methods
 
 __all__ = ["methods"]
 

@@ -2,7 +2,7 @@
 
 With ``REDIS_URL`` the broker and result backend are Redis; without, the embedded default needs no
 server: Celery's filesystem transport (with atomic messages and a reader that sets malformed ones
-aside, :mod:`jobs.broker`) and an SQLite result backend, both under the data directory (DESIGN.md,
+aside, :mod:`texsynth.jobs.broker`) and an SQLite result backend, both under the data directory (DESIGN.md,
 "Queue and storage", measured facts).
 """
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from celery import Celery
 
-from jobs.broker import SCHEME
-from jobs.config import Settings
+from texsynth.jobs.broker import SCHEME
+from texsynth.jobs.config import Settings
 
 __all__ = ["QUEUE", "TASK_NAME", "create_celery"]
 
@@ -29,7 +29,7 @@ def create_celery(settings: Settings) -> Celery:
         transport = {"visibility_timeout": settings.hard_time_limit + 600}
     else:
         broker, backend = (
-            f"{SCHEME}://localhost/",  # kombu's filesystem transport, made safe (jobs.broker)
+            f"{SCHEME}://localhost/",  # kombu's filesystem transport, made safe (texsynth.jobs.broker)
             f"db+sqlite:///{settings.data_dir / 'celery-results.sqlite'}",
         )
         queue = str(settings.broker_dir / "queue")
@@ -41,7 +41,7 @@ def create_celery(settings: Settings) -> Celery:
             "store_processed": False,
             "polling_interval": 0.1,
         }
-    app = Celery("texsynth", broker=broker, backend=backend, include=["worker.tasks"])
+    app = Celery("texsynth", broker=broker, backend=backend, include=["texsynth.worker.tasks"])
     app.conf.update(
         broker_transport_options=transport,
         broker_connection_retry_on_startup=True,

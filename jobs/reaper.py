@@ -11,7 +11,7 @@ that time while workers have room (its message was lost with a broker connection
 work. A cancel that the engine did not honour within ``cancel_grace_seconds`` kills the worker child.
 
 On the embedded queue it also removes the control mailboxes of workers that stopped
-(:func:`jobs.broker.prune_mailboxes`): messages no worker read within ``resend_seconds``.
+(:func:`texsynth.jobs.broker.prune_mailboxes`): messages no worker read within ``resend_seconds``.
 
 Every minute it also applies the retention period (:func:`purge_expired`): a job that ended more than
 ``retention_days`` ago is deleted, files (or objects) and record, like ``DELETE /api/jobs/{id}``; and
@@ -26,9 +26,9 @@ import threading
 import time
 from collections.abc import Callable
 
-from jobs.broker import prune_mailboxes
-from jobs.config import Settings
-from jobs.store import JobRecord, JobStore, pid_alive
+from texsynth.jobs.broker import prune_mailboxes
+from texsynth.jobs.config import Settings
+from texsynth.jobs.store import JobRecord, JobStore, pid_alive
 
 __all__ = ["Reaper", "prune_dead_mailboxes", "purge_expired", "reap_once", "stranded"]
 
@@ -48,7 +48,7 @@ def stranded(store: JobStore, settings: Settings, now: float | None = None) -> l
     is overdue. A job waiting behind busy workers is not stranded; one waiting while workers idle is.
     At most as many as there is room for, oldest first, so a worker between two jobs causes at most
     one duplicate message, and a held message that does arrive late is a duplicate too: harmless, a
-    run claims its job once (:meth:`jobs.store.JobStore.claim`).
+    run claims its job once (:meth:`texsynth.jobs.store.JobStore.claim`).
     """
     now = time.time() if now is None else now
     workers = store.workers(fresh_within=max(10.0, settings.stale_seconds))

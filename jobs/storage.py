@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from synth.io.atomic import atomic_write_bytes, atomic_write_json
+from texsynth.synth.io.atomic import atomic_write_bytes, atomic_write_json
 
 __all__ = ["LocalStorage", "S3Storage", "Storage", "StorageUnavailable", "open_storage"]
 
@@ -107,7 +107,7 @@ class Storage(ABC):
 
 
 class LocalStorage(Storage):
-    """The job folders under ``jobs_dir`` (see the module docstring and :mod:`jobs.store`)."""
+    """The job folders under ``jobs_dir`` (see the module docstring and :mod:`texsynth.jobs.store`)."""
 
     local = True
 

@@ -13,8 +13,8 @@ A run owns a job through its ``run_token``: progress, heartbeats and the final c
 while the token is the job's current one, so a run that was superseded (worker presumed dead, job
 cancelled) can never overwrite the state or the artifacts of another.
 
-The records live in :class:`jobs.db.Database` (schema: Alembic, ``jobs/migrations``); the files in a
-:class:`jobs.storage.Storage`: by default each job's folder in the data directory::
+The records live in :class:`texsynth.jobs.db.Database` (schema: Alembic, ``jobs/migrations``); the files in a
+:class:`texsynth.jobs.storage.Storage`: by default each job's folder in the data directory::
 
     jobs/<id>/inputs/exemplar.<ext>   the uploaded bytes, unchanged (a sweep's runs share one file:
                                       hard links)
@@ -23,7 +23,7 @@ The records live in :class:`jobs.db.Database` (schema: Alembic, ``jobs/migration
     jobs/<id>/.run-<token>/           one run's artifacts while it writes them
     jobs/<id>/out/                    the committed artifacts of the run that succeeded
 
-or, with ``TEXSYNTH_STORAGE_URL=s3://...``, the same under object keys (:mod:`jobs.storage`).
+or, with ``TEXSYNTH_STORAGE_URL=s3://...``, the same under object keys (:mod:`texsynth.jobs.storage`).
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-from jobs.db import Database
-from jobs.storage import LocalStorage, Storage
+from texsynth.jobs.db import Database
+from texsynth.jobs.storage import LocalStorage, Storage
 
 __all__ = ["STATES", "TERMINAL", "JobRecord", "JobStore", "pid_alive"]
 

@@ -1,10 +1,10 @@
 """texsynth: exemplar-based texture synthesis for virtual-material design.
 
-The engine is a library first: :func:`synth.api.synthesize` does everything the service and the
+The engine is a library first: :func:`texsynth.synth.api.synthesize` does everything the service and the
 ``texsynth`` command line do, with the same parameters and the same results.
 """
 
-from synth.errors import (
+from texsynth.synth.errors import (
     Cancelled,
     InputTooLarge,
     InvalidInput,

@@ -15,11 +15,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from synth.errors import InvalidInput, InvalidParameter
-from synth.io.depth import InputBits, array_to_unit
-from synth.io.limits import check_output_size
-from synth.params import MethodParams, validate_params
-from synth.threads import check_threads, use_threads
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.io.depth import InputBits, array_to_unit
+from texsynth.synth.io.limits import check_output_size
+from texsynth.synth.params import MethodParams, validate_params
+from texsynth.synth.threads import check_threads, use_threads
 
 __all__ = [
     "METHODS",
@@ -54,7 +54,7 @@ class Result:
     ``tensor_field`` is the synthesized (or constraint) structure tensor field ``(H, W, 3)`` when the
     method has one. ``extras`` holds further named float images (e.g. ``constraint_orientation``),
     ``stats`` numbers measured during the run (e.g. mean best-match distance per level).
-    ``input_bits`` is the exemplar's bit depth (:class:`synth.io.InputBits`), which writers keep.
+    ``input_bits`` is the exemplar's bit depth (:class:`texsynth.synth.io.InputBits`), which writers keep.
     """
 
     method: str
@@ -124,16 +124,16 @@ METHODS: dict[str, MethodSpec] = {}
 
 # Method modules register on import; importing them here keeps the registry complete.
 _METHOD_MODULES: Sequence[str] = (
-    "synth.methods.wei_levoy",
-    "synth.methods.tensor_constrained",
-    "synth.methods.arbitrary_shape",
-    "synth.methods.solid_wei_levoy",
-    "synth.methods.solid_kopf",
-    "synth.methods.solid_chen_wang",
-    "synth.methods.quilting",
-    "synth.methods.gaussian_patch",
-    "synth.methods.random_phase",
-    "synth.methods.feature_guided",
+    "texsynth.synth.methods.wei_levoy",
+    "texsynth.synth.methods.tensor_constrained",
+    "texsynth.synth.methods.arbitrary_shape",
+    "texsynth.synth.methods.solid_wei_levoy",
+    "texsynth.synth.methods.solid_kopf",
+    "texsynth.synth.methods.solid_chen_wang",
+    "texsynth.synth.methods.quilting",
+    "texsynth.synth.methods.gaussian_patch",
+    "texsynth.synth.methods.random_phase",
+    "texsynth.synth.methods.feature_guided",
 )
 
 
@@ -161,11 +161,11 @@ def find_method(name: str) -> MethodSpec | None:
     """The method ``name``, or ``None`` when no module registers it.
 
     Imports only the module that, by the naming rule of :data:`_METHOD_MODULES`
-    (``'wei-levoy'`` -> ``synth.methods.wei_levoy``), should register it, so that one synthesis does
+    (``'wei-levoy'`` -> ``texsynth.synth.methods.wei_levoy``), should register it, so that one synthesis does
     not import every method's dependencies; falls back to all of them.
     """
     if name not in METHODS:
-        module = f"synth.methods.{name.replace('-', '_')}"
+        module = f"texsynth.synth.methods.{name.replace('-', '_')}"
         if module in _METHOD_MODULES:
             try:
                 importlib.import_module(module)
@@ -183,7 +183,7 @@ def check_inputs(spec: MethodSpec, roles: Sequence[str] | set[str]) -> None:
     One rule for the API, the CLI and the service, checked before anything is decoded or queued: the
     exemplar (or, for solid methods, all three per-plane exemplars instead), the constraint when the
     method requires one and not when it takes none, and nothing else. Raises
-    :class:`~synth.errors.InvalidInput` naming the input.
+    :class:`~texsynth.synth.errors.InvalidInput` naming the input.
     """
     given = set(roles)
     declared = spec.inputs
@@ -237,7 +237,8 @@ def synthesize(
         A name in :func:`available_methods` (``'wei-levoy'``, ``'tensor-constrained'``, ...).
     exemplar : ndarray
         ``(h, w)`` or ``(h, w, 3)``: uint8, uint16 (scaled by the bit depth they use: 12-bit data in
-        16 bits by 4095), bool, or float in [0, 1] (:mod:`synth.io.depth`; other floats are an error).
+        16 bits by 4095), bool, or float in [0, 1] (:mod:`texsynth.synth.io.depth`; other floats are an
+        error).
     size : tuple of int, optional
         Output array shape ``(H, W)`` (or ``(D, H, W)`` for volumes). Defaults to the constraint's
         shape when there is one, else twice the exemplar's.
@@ -253,11 +254,11 @@ def synthesize(
         One grey exemplar per orthogonal plane (:data:`PLANES`), for the solid methods, instead of
         ``exemplar``: each plane's slices of the volume must look like its own exemplar.
     max_output : int, optional
-        Largest ``size`` (pixels or voxels) accepted; default: :mod:`synth.io.limits`' ``max_output``
+        Largest ``size`` (pixels or voxels) accepted; default: :mod:`texsynth.synth.io.limits`' ``max_output``
         (the service passes its own, lower one).
     threads : int, optional
         numba threads the synthesis runs on, 1 to ``NUMBA_NUM_THREADS``; default: all of them (every
-        core). The bytes are the same whatever the count (:mod:`synth.threads`).
+        core). The bytes are the same whatever the count (:mod:`texsynth.synth.threads`).
     """
     spec = find_method(method)
     if spec is None:
@@ -294,7 +295,8 @@ def synthesize(
 
 
 def _checked_image(role: str, image: np.ndarray | None) -> tuple[np.ndarray, InputBits]:
-    """``image`` as float32 in [0, 1] by the one dtype policy (:mod:`synth.io.depth`), and its depth."""
+    """``image`` as float32 in [0, 1] by the one dtype policy (:mod:`texsynth.synth.io.depth`), and its
+    depth."""
     if image is None:
         raise InvalidInput(role, "missing")
     arr = np.asarray(image)

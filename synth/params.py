@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from synth.errors import InvalidParameter, InvalidParameters
+from texsynth.synth.errors import InvalidParameter, InvalidParameters
 
 __all__ = ["BOUNDS", "MethodParams", "parse_assignments", "ui", "validate_params"]
 

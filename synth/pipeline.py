@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from synth.api import PLANES, Progress, Result, synthesize
-from synth.errors import InvalidInput
-from synth.io import ImageSource, InputBits, load_image_bits, sample_bits
-from synth.threads import use_threads
+from texsynth.synth.api import PLANES, Progress, Result, synthesize
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.io import ImageSource, InputBits, load_image_bits, sample_bits
+from texsynth.synth.threads import use_threads
 
 __all__ = ["INPUT_ROLES", "Inputs", "Outcome", "load_inputs", "synthesize_to_folder"]
 
@@ -52,7 +52,7 @@ def load_inputs(sources: Mapping[str, ImageSource], *, max_pixels: int | None = 
     Per-plane exemplars must share one bit depth (an 8-bit and a 16-bit micrograph of one material
     rarely share a grey scale).
 
-    Raises :class:`~synth.errors.InvalidInput` (or its 413/415 kinds) naming the role or the file.
+    Raises :class:`~texsynth.synth.errors.InvalidInput` (or its 413/415 kinds) naming the role or the file.
     """
     unknown = sorted(set(sources) - set(INPUT_ROLES))
     if unknown:
@@ -91,10 +91,11 @@ def synthesize_to_folder(
 ) -> Outcome:
     """Run ``method`` on decoded ``images`` (by role) and write all artifacts into ``folder``.
 
-    See :func:`synth.api.synthesize` for the arguments (``max_output`` too) and
-    :func:`synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
+    See :func:`texsynth.synth.api.synthesize` for the arguments (``max_output`` too) and
+    :func:`texsynth.synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
     the synthesis started and finished (Unix time). ``threads``: numba threads of the synthesis and the
-    evaluation (:mod:`synth.threads`; default every core). A volume is evaluated plane by plane against its
+    evaluation (:mod:`texsynth.synth.threads`; default every core). A volume is evaluated plane by plane
+    against its
     per-plane exemplars when given; ``voxel_size`` (in ``voxel_unit``, nm by default) calibrates its TIFF
     stack (ImageJ spacing and unit) and, in nm, its fringe lengths.
     The exemplar's bit depth (from :func:`load_inputs`' ``bits``, else that of the arrays given) is kept
@@ -133,7 +134,9 @@ def _synthesize_to_folder(
     max_output: int | None,
     voxel_unit: str = "nm",
 ) -> Outcome:
-    from synth.output.artifacts import write_artifacts  # deferred: evaluation and plots only when writing
+    from texsynth.synth.output.artifacts import (
+        write_artifacts,  # deferred: evaluation and plots only when writing
+    )
 
     planes = {plane: images[f"exemplar_{plane}"] for plane in PLANES if f"exemplar_{plane}" in images}
     started = time.time()

@@ -1,11 +1,12 @@
 """The one place that sets thread counts: numba's per job (the ``threads`` knob), OpenBLAS's to one.
 
 **numba.** A job runs its parallel kernels (``prange``) on ``threads`` threads: ``--threads N`` on
-``texsynth synthesize``/``evaluate``, ``threads=`` in :func:`synth.api.synthesize` and the evaluation
+``texsynth synthesize``/``evaluate``, ``threads=`` in :func:`texsynth.synth.api.synthesize` and the evaluation
 entry points, ``TEXSYNTH_THREADS`` in the service. The default is every core this process may use
 (CLI, API); the service divides the cores between its worker processes (:func:`service_threads`).
 The bytes never depend on the count (DESIGN.md, "Parallel and deterministic"): parallel loops write
-only their own slots, draw random numbers from counter-based hashes (:func:`synth.kernels.common.splitmix`)
+only their own slots, draw random numbers from counter-based hashes
+(:func:`texsynth.synth.kernels.common.splitmix`)
 and reduce in a fixed order; ``tests/synth/test_threads.py`` checks every method with 1, 2 and 4.
 numba's count is per calling thread and capped by its pool (``NUMBA_NUM_THREADS``, cores by default),
 so :func:`use_threads` is entered in the thread that runs the work.
@@ -26,7 +27,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = [
     "BLAS_THREADS",

@@ -1,8 +1,8 @@
-"""The workers' Celery application: ``celery -A worker.celery_app worker`` (or ``texsynth worker``).
+"""The workers' Celery application: ``celery -A texsynth.worker.celery_app worker`` (or ``texsynth worker``).
 
-Configuration comes from :func:`jobs.queue.create_celery` with the environment's :class:`Settings`;
+Configuration comes from :func:`texsynth.jobs.queue.create_celery` with the environment's :class:`Settings`;
 the signal handlers below keep the service's job records honest about which process holds a job, and
-:func:`last_heartbeat` is the worker's last word before :mod:`worker.lifeline` ends it.
+:func:`last_heartbeat` is the worker's last word before :mod:`texsynth.worker.lifeline` ends it.
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ import time
 
 from celery import signals
 
-from jobs.config import Settings
-from jobs.queue import TASK_NAME, create_celery
-from jobs.store import JobStore
-from worker.lifeline import ShutdownGuard
+from texsynth.jobs.config import Settings
+from texsynth.jobs.queue import TASK_NAME, create_celery
+from texsynth.jobs.store import JobStore
+from texsynth.worker.lifeline import ShutdownGuard
 
 __all__ = ["app", "last_heartbeat", "settings", "store"]
 
@@ -80,10 +80,10 @@ def _on_child_start(**_):
         os.nice(settings.worker_nice)  # the API stays responsive on a machine busy with jobs
     import importlib
 
-    from jobs.methods import methods
+    from texsynth.jobs.methods import methods
 
     # Everything a job imports, once per child process rather than in its first job: the methods
     # (their numba kernels load from the on-disk cache at their first call, then stay compiled in the
     # process), the artifact writer with the evaluation and the plots.
     methods(settings)
-    importlib.import_module("synth.output.artifacts")
+    importlib.import_module("texsynth.synth.output.artifacts")

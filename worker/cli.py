@@ -3,7 +3,7 @@
 Run as many as you like, on as many machines as share the broker (``REDIS_URL``) and the data
 directory. ``python -m worker`` does the same (``texsynth serve`` starts one that way, with
 ``--parent-fd``). A stop signal gives the running jobs ``TEXSYNTH_SHUTDOWN_GRACE`` seconds; a second
-one, or the end of the grace, ends the worker for certain (:mod:`worker.lifeline`).
+one, or the end of the grace, ends the worker for certain (:mod:`texsynth.worker.lifeline`).
 """
 
 from __future__ import annotations
@@ -46,9 +46,9 @@ def run(args: argparse.Namespace) -> int:
         os.environ["TEXSYNTH_DATA_DIR"] = os.path.abspath(args.data_dir)
     if args.concurrency:
         os.environ["TEXSYNTH_CONCURRENCY"] = str(args.concurrency)
-    from synth.threads import available_cores
-    from worker.celery_app import app, last_heartbeat, settings
-    from worker.lifeline import ShutdownGuard
+    from texsynth.synth.threads import available_cores
+    from texsynth.worker.celery_app import app, last_heartbeat, settings
+    from texsynth.worker.lifeline import ShutdownGuard
 
     name = args.name or f"texsynth-{os.getpid()}@{socket.gethostname()}"
     if not args.quiet:

@@ -1,5 +1,6 @@
-"""A worker container's health check: ``python -m worker.health`` exits 0 when a worker main process of
-this host has reported its heartbeat (every 2 s, :mod:`worker.celery_app`) within the last 30 s, else
+"""A worker container's health check: ``python -m texsynth.worker.health`` exits 0 when a worker main process
+of
+this host has reported its heartbeat (every 2 s, :mod:`texsynth.worker.celery_app`) within the last 30 s, else
 1 with a one-line reason. docker-compose runs it; the API's own health check cannot see a dead worker
 container, only count the live ones."""
 
@@ -7,7 +8,7 @@ from __future__ import annotations
 
 import sys
 
-from jobs.config import Settings
+from texsynth.jobs.config import Settings
 
 #: A worker that has not reported for this long is unhealthy (15 missed heartbeats).
 FRESH_SECONDS = 30.0

@@ -8,11 +8,11 @@ main process never depends on it. :class:`ShutdownGuard` runs two daemon threads
   (:func:`signal.set_wakeup_fd`), at delivery, whatever the main thread is blocked in. The first
   SIGTERM, SIGINT or SIGQUIT lets Celery's shutdown run for ``grace`` seconds (a warm one waits for
   the running jobs); a second one, or the end of the grace, ends the process: a last heartbeat, SIGKILL
-  to the pool children, ``os._exit``. The jobs it held are re-run by the reaper (:mod:`jobs.reaper`).
+  to the pool children, ``os._exit``. The jobs it held are re-run by the reaper (:mod:`texsynth.jobs.reaper`).
 - parent: with ``--parent-fd`` (``texsynth serve`` passes the read end of a pipe whose write end only
   it holds), the end of that pipe means the parent is gone, however it died: the same hard exit.
 
-:class:`app.cli.WorkerSupervisor` adds the kernel's side of the second: SIGKILL at the parent's death
+:class:`texsynth.app.cli.WorkerSupervisor` adds the kernel's side of the second: SIGKILL at the parent's death
 (Linux ``PR_SET_PDEATHSIG``, set between fork and exec), and Celery gives its pool children the same
 towards the worker's main process. docs/service.md, "Stopping", has the signals and their bounds.
 """

@@ -15,13 +15,13 @@ import threading
 import time
 from typing import Any
 
-from jobs.config import Settings
-from jobs.methods import methods
-from jobs.storage import StorageUnavailable
-from jobs.store import JobStore
-from synth.errors import Cancelled, SynthError
-from synth.output.preview import preview_png
-from synth.pipeline import load_inputs, synthesize_to_folder
+from texsynth.jobs.config import Settings
+from texsynth.jobs.methods import methods
+from texsynth.jobs.storage import StorageUnavailable
+from texsynth.jobs.store import JobStore
+from texsynth.synth.errors import Cancelled, SynthError
+from texsynth.synth.output.preview import preview_png
+from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
 
 __all__ = ["JobProgress", "run_job"]
 

@@ -1,1 +1,1 @@
-"""The REST API under ``/api``: one router per resource in :mod:`app.api.routes`."""
+"""The REST API under ``/api``: one router per resource in :mod:`texsynth.app.api.routes`."""

@@ -6,8 +6,8 @@ from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 
-from app.auth import Principal
-from app.service import Service
+from texsynth.app.auth import Principal
+from texsynth.app.service import Service
 
 __all__ = ["PrincipalDep", "ServiceDep"]
 
@@ -17,7 +17,7 @@ def get_service(request: Request) -> Service:
 
 
 def get_principal(request: Request) -> Principal:
-    """Who makes the request, as :class:`app.security.AuthMiddleware` found it."""
+    """Who makes the request, as :class:`texsynth.app.security.AuthMiddleware` found it."""
     principal = getattr(request.state, "principal", None)
     if principal is None:  # only a route outside /api could get here
         raise HTTPException(401, "this request needs a token")

@@ -2,10 +2,12 @@
 
 Six small images, each credited with its licence in ``README.md`` beside them (CC0 or MIT, or made by
 texsynth's own generators): a real HRTEM micrograph of soot fringes, brick, grass and gravel from
-scikit-image's data (CC0), a generated laminar exemplar (:mod:`synth.io.laminar`) and a generated
-constraint image for ``arbitrary-shape`` (:mod:`synth.io.patterns`). ``python -m app.examples.build``
+scikit-image's data (CC0), a generated laminar exemplar (:mod:`texsynth.synth.io.laminar`) and a generated
+constraint image for ``arbitrary-shape`` (:mod:`texsynth.synth.io.patterns`). ``python -m
+texsynth.app.examples.build``
 makes the PNGs again from those sources (same bytes). Whether an example shows lattice fringes is not
-written down here but measured by the engine's own rule (:func:`synth.evaluate.glossary.fringes_shown`),
+written down here but measured by the engine's own rule
+(:func:`texsynth.synth.evaluate.glossary.fringes_shown`),
 the one the job's metrics use.
 """
 
@@ -81,17 +83,17 @@ EXAMPLES: dict[str, Example] = {
         ),
         Example(
             "laminar",
-            "Generated laminar carbon: a slice of crumpled sheets 6 px apart (synth.io.laminar)",
+            "Generated laminar carbon: a slice of crumpled sheets 6 px apart (texsynth.synth.io.laminar)",
             "2d",
-            "made by texsynth (synth.io.laminar.turbostratic_volume, seed 27)",
+            "made by texsynth (texsynth.synth.io.laminar.turbostratic_volume, seed 27)",
             "MIT",
             "solid-kopf",
         ),
         Example(
             "constraint-waves",
-            "Generated constraint: waves for arbitrary-shape synthesis (synth.io.patterns)",
+            "Generated constraint: waves for arbitrary-shape synthesis (texsynth.synth.io.patterns)",
             "constraint",
-            "made by texsynth (synth.io.patterns.waves)",
+            "made by texsynth (texsynth.synth.io.patterns.waves)",
             "MIT",
             "arbitrary-shape",
         ),
@@ -102,8 +104,8 @@ EXAMPLES: dict[str, Example] = {
 @lru_cache(maxsize=len(EXAMPLES))
 def has_fringes(name: str) -> bool:
     """Whether example ``name`` shows lattice fringes, by the rule the job metrics use."""
-    from synth.evaluate.glossary import fringes_shown
-    from synth.io import load_image
+    from texsynth.synth.evaluate.glossary import fringes_shown
+    from texsynth.synth.io import load_image
 
     example = EXAMPLES[name]
     if example.kind != "2d":

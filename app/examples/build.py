@@ -1,4 +1,5 @@
-"""Make the bundled examples' PNGs again from their sources: ``python -m app.examples.build [--check]``.
+"""Make the bundled examples' PNGs again from their sources: ``python -m texsynth.app.examples.build
+[--check]``.
 
 Sources: the soot crop of ``benchmarks/data`` (MIT; kept in the repository, not in the wheel), the
 scikit-image wheel's brick, grass and gravel (CC0), and texsynth's own generators with fixed seeds.
@@ -14,7 +15,7 @@ import sys
 import numpy as np
 from PIL import Image
 
-from app.examples import EXAMPLES, FOLDER, _as_uint8
+from texsynth.app.examples import EXAMPLES, FOLDER, _as_uint8
 
 SIDE = 128
 _REPO = FOLDER.parent.parent
@@ -30,9 +31,9 @@ def _skimage(name: str) -> np.ndarray:
 
 def images() -> dict[str, np.ndarray]:
     """Every example as float grey in [0, 1], by name."""
-    from synth.io import load_image
-    from synth.io.laminar import turbostratic_volume
-    from synth.io.patterns import waves
+    from texsynth.synth.io import load_image
+    from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.io.patterns import waves
 
     soot = load_image(_REPO / "benchmarks" / "data" / "hrtem-onion-128.png")
     laminar = turbostratic_volume((16, SIDE, SIDE), period=6.0, seed=27)[8]

@@ -3,7 +3,7 @@
 Feature-guided patch synthesis compares the feature pixels of the output's L-shaped context region
 (``f_out``, ``m`` of them) with those of the input feature map under the same region translated to a
 candidate position (``f_in``, ``n`` of them), and later aligns them by deformation
-(:mod:`synth.analysis.warp`). This module holds the matching cost and the correspondences:
+(:mod:`texsynth.synth.analysis.warp`). This module holds the matching cost and the correspondences:
 
 - **eq 1**: ``gdist(f_out, f_in) = |f_out - f_in|_2 + tau |v_out - v_in|_2`` with unit tangents taken
   as orientations (:func:`tangent_difference`: ``2 sin(d / 2)``); ``tau = 0.1`` for matching, ``10``
@@ -36,9 +36,9 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.signal import correlate
 
-from synth.analysis.tensor import wrap_angle
-from synth.errors import InvalidInput, InvalidParameter
-from synth.kernels.options import kernel
+from texsynth.synth.analysis.tensor import wrap_angle
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.kernels.options import kernel
 
 __all__ = [
     "BETA",
@@ -195,7 +195,7 @@ def build_feature_index(mask: np.ndarray, tangent: np.ndarray) -> FeatureIndex:
     Parameters
     ----------
     mask : ndarray of bool, shape (H, W)
-        Feature pixels (e.g. :attr:`synth.analysis.features.FeatureMap.mask`).
+        Feature pixels (e.g. :attr:`texsynth.synth.analysis.features.FeatureMap.mask`).
     tangent : ndarray of float, shape (H, W)
         Tangent orientations, finite at feature pixels.
 

@@ -1,8 +1,8 @@
 """Curvilinear feature maps (edges or ridges) with a tangent per feature pixel (Wu & Yu 2004, section 2.3).
 
 A feature map is the binary image of a texture's thin curvilinear features, one pixel wide, that
-feature-guided patch synthesis matches and aligns (:mod:`synth.analysis.feature_matching`,
-:mod:`synth.analysis.warp`). :func:`feature_map` follows the paper's section 2.3 step by step:
+feature-guided patch synthesis matches and aligns (:mod:`texsynth.synth.analysis.feature_matching`,
+:mod:`texsynth.synth.analysis.warp`). :func:`feature_map` follows the paper's section 2.3 step by step:
 
 1. **bilateral filter** (Tomasi & Manduchi 1998), ``sigma_d = 2`` px, ``sigma_r = 10/256``;
 2. **response**: the gradient magnitude of central differences (``features='edges'``), or the 5-point
@@ -40,9 +40,9 @@ from skimage.color import hsv2rgb
 from skimage.morphology import disk, thin
 from skimage.restoration import denoise_bilateral
 
-from synth.analysis.tensor import orientation, structure_direction, structure_tensor
-from synth.colour import to_grey
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.tensor import orientation, structure_direction, structure_tensor
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = [
     "FEATURE_KINDS",
@@ -136,7 +136,7 @@ def feature_response(
     Parameters
     ----------
     image : ndarray, shape (H, W) or (H, W, 3)
-        Image in [0, 1]; RGB becomes grey by :func:`synth.colour.to_grey`.
+        Image in [0, 1]; RGB becomes grey by :func:`texsynth.synth.colour.to_grey`.
     features : {'edges', 'ridges'}
         ``'edges'``: gradient magnitude of central finite differences; ``'ridges'``: the Laplacian.
     sigma_d : float
@@ -234,7 +234,7 @@ def feature_map(
     Parameters
     ----------
     image : ndarray, shape (H, W) or (H, W, 3)
-        Image in [0, 1]; RGB becomes grey by :func:`synth.colour.to_grey`.
+        Image in [0, 1]; RGB becomes grey by :func:`texsynth.synth.colour.to_grey`.
     features : {'edges', 'ridges'}
         Edges (gradient magnitude) or ridges (Laplacian, see ``polarity``).
     sigma_d : float
@@ -343,7 +343,7 @@ def feature_overlay(image: np.ndarray, fmap: FeatureMap, *, dim: float = 0.6) ->
     -------
     ndarray of uint8, shape (H, W, 3)
         Feature pixels take the project's cyclic orientation hue ``hue = (theta + pi/2) / pi``
-        (ALGORITHMS.md, "Rendering"; the palette of :func:`synth.output.render.orientation_hue`:
+        (ALGORITHMS.md, "Rendering"; the palette of :func:`texsynth.synth.output.render.orientation_hue`:
         0 degrees cyan, +45 violet, -45 yellow-green, +-90 red), at full saturation and value.
     """
     grey = _grey(image)

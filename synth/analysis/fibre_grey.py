@@ -1,18 +1,18 @@
 """Do an exemplar's fibres carry their own grey levels? The fibre grey spread.
 
-Why: arbitrary-shape synthesis's strand hints (:mod:`synth.methods.strand_hints`) lay the exemplar's
+Why: arbitrary-shape synthesis's strand hints (:mod:`texsynth.synth.methods.strand_hints`) lay the exemplar's
 fibres along the constraint's strands so that each output strand keeps one fibre's grey level. That is
 what a wood grain needs (fibres each with its own grey level between dark boundaries: without the
 hints a strand's grey switches from fibre to fibre along its length), and what uniform periodic
 stripes (HRTEM fringes, laminae: every light band the same grey) do not: there the hints close the
 rings into loops and gain nothing (docs/arbitrary-shape.md, "Continuous strands"). The automatic
-choice (:meth:`synth.methods.arbitrary_shape.ArbitraryShapeParams.resolved`) reads this measure.
+choice (:meth:`texsynth.synth.methods.arbitrary_shape.ArbitraryShapeParams.resolved`) reads this measure.
 
 How (:func:`fibre_grey_spread`):
 
 1. The exemplar's grey levels are averaged along its fibres: at every pixel, the mean of the
    ``2 length + 1`` samples (bilinear) of the streamline of its structure direction through it
-   (:func:`synth.analysis.streamlines.trace`, which turns with bent fibres), ``length`` pixels each
+   (:func:`texsynth.synth.analysis.streamlines.trace`, which turns with bent fibres), ``length`` pixels each
    way. Noise and grey changes along a fibre average out; a fibre's own grey level stays.
 2. The fibres' *crests*: pixels at least as bright as the averaged image one pixel to either side
    across the fibres (along the normal of the structure direction), away from a ``margin`` at the
@@ -32,9 +32,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage as ndi
 
-from synth.analysis.streamlines import sample_along
-from synth.analysis.tensor import structure_direction, structure_tensor
-from synth.colour import to_grey
+from texsynth.synth.analysis.streamlines import sample_along
+from texsynth.synth.analysis.tensor import structure_direction, structure_tensor
+from texsynth.synth.colour import to_grey
 
 __all__ = ["FIBRE_GREY_LENGTH", "OWN_GREY_FIBRES", "fibre_grey_spread", "fibre_means"]
 

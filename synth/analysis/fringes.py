@@ -42,8 +42,8 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from skimage.filters import threshold_otsu
 from skimage.morphology import black_tophat, disk, skeletonize, white_tophat
 
-from synth.analysis.tensor import wrap_angle
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.tensor import wrap_angle
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = [
     "MIN_LENGTH",

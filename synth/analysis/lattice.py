@@ -4,14 +4,15 @@ they mean something (issue 27: brick's "fringe length KS 0.667" came from its 3 
 HRTEM lattice fringes of carbon are many short dark lines, nearly parallel to their neighbours at an
 almost constant spacing (0.34 nm: about 6 px at 18 px/nm). Two numbers say it:
 
-- ``density_per_10k_px``: fringes per 10 000 pixels that :func:`synth.analysis.fringes.extract_fringes`
+- ``density_per_10k_px``: fringes per 10 000 pixels that
+:func:`texsynth.synth.analysis.fringes.extract_fringes`
   finds with its defaults (a few mortar joints or straw edges are not a lattice);
 - ``peak_ratio``: the radially averaged power spectrum's highest point between periods of
   :data:`PERIOD_RANGE` pixels over a power law fitted to the whole spectrum (``P(k) ~ a k^b``, least
   squares in log-log, radii 2 to N/2), with the period where it lies: a near-periodic stack of fringes
   rises far above the smooth decay of natural textures (grass, gravel: 2-4; soot: 13-30).
 
-:func:`synth.evaluate.glossary.fringes_shown` turns them into a yes or no with the thresholds it
+:func:`texsynth.synth.evaluate.glossary.fringes_shown` turns them into a yes or no with the thresholds it
 documents; the measurements behind them are in docs/evaluation.md ("Which exemplars have fringes").
 """
 
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.analysis.fringes import extract_fringes
+from texsynth.synth.analysis.fringes import extract_fringes
 
 __all__ = ["PERIOD_RANGE", "fringe_presence", "spectral_peak"]
 

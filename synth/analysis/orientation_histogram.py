@@ -2,7 +2,8 @@
 
 Kopf et al.'s histogram matching (eq 4) re-weights the proposals whose grey level is over-represented
 in the volume; the solid methods apply the same rule to orientations (a departure, measured in
-:mod:`synth.methods.solid_kopf` and :mod:`synth.methods.solid_chen_wang`): each exemplar pixel carries
+:mod:`texsynth.synth.methods.solid_kopf` and :mod:`texsynth.synth.methods.solid_chen_wang`): each exemplar
+pixel carries
 the gradient orientation of its structure tensor, the exemplar's coherence-weighted histogram is the
 target, and a plane's matches are counted by the orientation of the exemplar pixels they are centred
 on. Orientations are binned linearly between the two nearest bin centres, so an orientation on a bin
@@ -18,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from synth.analysis.tensor import coherence, orientation, structure_tensor
+from texsynth.synth.analysis.tensor import coherence, orientation, structure_tensor
 
 __all__ = [
     "ORIENTATION_BINS",
@@ -48,7 +49,7 @@ class OrientationLabels(NamedTuple):
 def orientation_labels(image: np.ndarray, bins: int = ORIENTATION_BINS) -> OrientationLabels:
     """Each exemplar pixel's orientation between two bins, and the exemplar's share of each bin.
 
-    The gradient orientation of the structure tensor (:func:`synth.analysis.tensor.orientation`, the
+    The gradient orientation of the structure tensor (:func:`texsynth.synth.analysis.tensor.orientation`, the
     evaluation's 7x7-window tensor), over ``bins`` circular bins of ``[-pi/2, pi/2)`` whose centres are
     ``-pi/2 + (i + 1/2) pi / bins``. A pixel counts ``1 - t`` in its ``lower`` bin and ``t`` in the next
     one (linear binning): with hard bins an orientation on a bin edge (a 45-degree grating with 12 bins)

@@ -4,7 +4,7 @@ Akl et al. (GRETSI, section 2.2) search neighbourhoods (intensity + structure te
 exemplar rotated by ``phi_m = 2 pi m / M``, ``m = 0..M-1``, each with its own tensor field, keeping
 only neighbourhoods that lie fully inside the rotated (non-padded) image. Here the M rotated copies
 are laid side by side in one canvas (a grid of equal tiles) so that the shared search
-(:func:`synth.pixel.synthesis.synthesize_source_map`) sees one exemplar; per-level masks mark the
+(:func:`texsynth.synth.pixel.synthesis.synthesize_source_map`) sees one exemplar; per-level masks mark the
 positions whose neighbourhoods (and parent neighbourhoods) are fully inside a rotated copy.
 
 Geometry (ALGORITHMS.md conventions: ``x`` right, ``y`` up, angles counter-clockwise): copy ``m``
@@ -14,7 +14,8 @@ exemplar is filled by mirroring it (never copied: masked out) so that filters se
 step, near the copies' borders.
 
 Tensor field of a copy: the exemplar's field ``S_en`` rotated in place and in value,
-``S_m(T_m p) = R(phi_m) S_en(p) R(phi_m)^T`` (:func:`synth.analysis.tensor.rotate_tensors`), which equals the
+``S_m(T_m p) = R(phi_m) S_en(p) R(phi_m)^T`` (:func:`texsynth.synth.analysis.tensor.rotate_tensors`), which
+equals the
 structure tensor of the rotated image in the continuous limit, without the mirror seams that a tensor
 computed on the padded copy would pick up, and in exactly the frame of the constraint field built
 from ``S_en`` (so that the right rotation matches it exactly).
@@ -27,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage as ndi
 
-from synth.analysis.tensor import rotate_tensors, structure_tensor, wrap_angle
-from synth.errors import InvalidParameter
-from synth.grid.pyramid import level_shapes
+from texsynth.synth.analysis.tensor import rotate_tensors, structure_tensor, wrap_angle
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.grid.pyramid import level_shapes
 
 __all__ = [
     "RotatedDictionary",
@@ -131,7 +132,8 @@ class RotatedDictionary:
 
         A position counts when its ``radii[l]`` neighbourhood lies inside the copy at level ``l``
         and, below the top level, its parent's ``parent_radii[l]`` neighbourhood lies inside the
-        copy at level ``l + 1`` (levels are subsampled 2:1 like :func:`synth.grid.pyramid.level_shapes`).
+        copy at level ``l + 1`` (levels are subsampled 2:1 like
+        :func:`texsynth.synth.grid.pyramid.level_shapes`).
         """
         levels = len(radii)
         shapes = level_shapes(self.area.shape, levels)

@@ -7,14 +7,14 @@ per unit of ``|k|``, which does not favour the few lowest frequencies as a ring 
 as the power-weighted mean ``|k|`` of the frequencies within a factor 1.4 of the peak's (a broad
 ring, as crumpled sheets give, is read at its centre of mass rather than at its noisiest bin);
 frequencies below three cycles per sample are ignored (the mean and slow shading). A known answer for
-the generators of :mod:`synth.io.laminar`, and a scale to express neighbourhoods in periods.
+the generators of :mod:`texsynth.synth.io.laminar`, and a scale to express neighbourhoods in periods.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from synth.errors import InvalidInput
+from texsynth.synth.errors import InvalidInput
 
 __all__ = ["dominant_period", "radial_power_spectrum"]
 
@@ -80,7 +80,7 @@ def dominant_period(array: np.ndarray) -> float:
 
     Examples
     --------
-    >>> from synth.io.patterns import grating
+    >>> from texsynth.synth.io.patterns import grating
     >>> round(dominant_period(grating((64, 64), 0.3, period=6.0)), 1)
     6.0
     """

@@ -4,7 +4,7 @@ Exemplar-based synthesis assumes a stationary exemplar: every region a sample of
 that mixes an ordered shell with a disordered core (as real HRTEM micrographs do) breaks that, and the
 methods then copy one region or average the two (issue 24). The exemplar is cut into a grid of windows
 about :data:`PERIODS` fringe periods wide (the period from the power spectrum,
-:func:`synth.analysis.spectrum.dominant_period`; between :data:`MIN_WINDOW` px and a third of the
+:func:`texsynth.synth.analysis.spectrum.dominant_period`; between :data:`MIN_WINDOW` px and a third of the
 shorter side, half-overlapping), and four local statistics are compared across them:
 
 - ``mean``: the standard deviation of the windows' mean grey, over the image's grey standard deviation
@@ -30,10 +30,10 @@ from typing import Any
 
 import numpy as np
 
-from synth.analysis.spectrum import dominant_period
-from synth.analysis.tensor import coherence, structure_tensor
-from synth.colour import to_grey
-from synth.errors import InvalidInput
+from texsynth.synth.analysis.spectrum import dominant_period
+from texsynth.synth.analysis.tensor import coherence, structure_tensor
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidInput
 
 __all__ = [
     "MIN_WINDOW",
@@ -137,7 +137,7 @@ def stationarity(image: np.ndarray, *, window: int | None = None) -> Stationarit
 
     Examples
     --------
-    >>> from synth.io.patterns import grating
+    >>> from texsynth.synth.io.patterns import grating
     >>> stationarity(grating((96, 96), 0.3, period=6.0, noise=0.2)).stationary
     True
     """

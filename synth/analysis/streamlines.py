@@ -1,7 +1,7 @@
 """Streamlines of an orientation field: curves that follow a line field (an angle mod pi) wherever it turns.
 
-Used to measure grey levels along a texture's strands (:mod:`synth.evaluate.strands`) and to lay
-arbitrary-shape synthesis's hints along the constraint's strands (:mod:`synth.methods.strand_hints`).
+Used to measure grey levels along a texture's strands (:mod:`texsynth.synth.evaluate.strands`) and to lay
+arbitrary-shape synthesis's hints along the constraint's strands (:mod:`texsynth.synth.methods.strand_hints`).
 
 How: every start point moves by ``step`` pixels per step along the field's direction at its position,
 second-order (midpoint) Runge-Kutta. The field is an *orientation* (defined modulo pi), so it is

@@ -24,8 +24,8 @@ from typing import Literal
 import numpy as np
 from scipy import ndimage as ndi
 
-from synth.colour import to_grey
-from synth.errors import InvalidParameter
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = [
     "METRICS",

@@ -1,7 +1,7 @@
 """Feature alignment by deformation: warp a patch so its features meet the context's (Wu & Yu 2004, 2.2).
 
 Given one-to-one feature correspondences ``(x_i, x'_i)`` (context feature ``x_i``, patch feature
-``x'_i``; :func:`synth.analysis.feature_matching.feature_correspondences`), the chosen patch is
+``x'_i``; :func:`texsynth.synth.analysis.feature_matching.feature_correspondences`), the chosen patch is
 deformed by a smooth warp that moves each ``x'_i`` onto ``x_i`` while the pixels of its bottom and
 right borders stay where they are ("to prevent the accumulation of deformations").
 
@@ -36,7 +36,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.interpolate import RBFInterpolator
 
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = [
     "SIDES",

@@ -1,6 +1,6 @@
 """``texsynth``: the command line, a thin shell over the engine (parse -> build -> run -> report).
 
-Each subcommand lives in its own module under :mod:`synth.cli` and exposes
+Each subcommand lives in its own module under :mod:`texsynth.synth.cli` and exposes
 ``register(subparsers)``; commands that belong above the engine (``serve``, ``worker``,
 ``submit``) are contributed by ``app``/``worker`` through the ``texsynth.commands`` entry-point
 group, so that ``synth`` never imports them. Errors from the engine print as one line and exit 2.
@@ -10,7 +10,7 @@ command imports what it needs when it runs), and when the command line names an 
 that command's parser is built (the entry points are not scanned).
 
 OpenBLAS runs single-threaded in every ``texsynth`` command and the processes it starts
-(:mod:`synth.threads`, the one place that sets it; docs/benchmarks.md measures why).
+(:mod:`texsynth.synth.threads`, the one place that sets it; docs/benchmarks.md measures why).
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from synth import __version__
-from synth.errors import StorageError, SynthError
-from synth.threads import single_threaded_blas
+from texsynth.synth import __version__
+from texsynth.synth.errors import StorageError, SynthError
+from texsynth.synth.threads import single_threaded_blas
 
 __all__ = ["build_parser", "main"]
 
@@ -39,9 +39,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in (only,) if only in _ENGINE_COMMANDS else _ENGINE_COMMANDS:
         try:
-            module = importlib.import_module(f"synth.cli.{name}")
+            module = importlib.import_module(f"texsynth.synth.cli.{name}")
         except ModuleNotFoundError as exc:
-            if exc.name != f"synth.cli.{name}":
+            if exc.name != f"texsynth.synth.cli.{name}":
                 raise
             continue
         module.register(sub)

@@ -1,7 +1,7 @@
-"""``python -m synth.cli``: the same as the ``texsynth`` console script."""
+"""``python -m texsynth.synth.cli``: the same as the ``texsynth`` console script."""
 
 import sys
 
-from synth.cli import main
+from texsynth.synth.cli import main
 
 sys.exit(main())

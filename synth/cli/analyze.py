@@ -8,7 +8,7 @@ Writes into ``DIR``:
 - ``tensor.json``: mean coherence, the dominant orientation in degrees (gradient and fringe
   direction), energy-weighted orientation histograms of both with their bin edges in degrees, the
   image's shape and the two scales, and the image's stationarity as an exemplar
-  (:func:`synth.analysis.stationarity.stationarity`; a warning is printed when it is not stationary).
+  (:func:`texsynth.synth.analysis.stationarity.stationarity`; a warning is printed when it is not stationary).
 
 Angles follow ALGORITHMS.md: degrees counter-clockwise from +x with ``y`` up on screen, wrapped to
 ``(-90, 90]``. The gradient direction is across the fringes; the fringe direction, 90 degrees away,
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 if TYPE_CHECKING:  # numpy, scipy and the renderers load when the command runs, not for ``--help``
     import numpy as np
@@ -73,7 +73,7 @@ class TensorAnalysis:
 
 
 def _degrees(angle: float) -> float:
-    from synth.analysis import tensor
+    from texsynth.synth.analysis import tensor
 
     return round(math.degrees(float(tensor.wrap_angle(angle))), 6)
 
@@ -100,7 +100,7 @@ def analyze_image(
     Parameters
     ----------
     image : ndarray, shape (H, W) or (H, W, 3)
-        float image in [0, 1] (:func:`synth.io.load_image`); RGB channels are combined by Di Zenzo.
+        float image in [0, 1] (:func:`texsynth.synth.io.load_image`); RGB channels are combined by Di Zenzo.
     sigma_d, sigma_w : float
         Derivative and window scales in pixels, each positive and at most the image's largest side.
     bins : int
@@ -115,7 +115,7 @@ def analyze_image(
     """
     import numpy as np
 
-    from synth.analysis import tensor
+    from texsynth.synth.analysis import tensor
 
     _check_parameters(sigma_d, sigma_w, bins)
     largest = int(max(image.shape[:2]))
@@ -148,14 +148,14 @@ def analyze_image(
             "fringe": [float(h) for h in fringe_hist],
         },
     }
-    from synth.analysis.stationarity import exemplar_diagnostics
+    from texsynth.synth.analysis.stationarity import exemplar_diagnostics
 
     summary["stationarity"] = exemplar_diagnostics({"image": image})["stationarity"]["image"]
     return TensorAnalysis(S, coh, tensor.structure_direction(S), summary)
 
 
 def _as_float(rendering: np.ndarray) -> np.ndarray:
-    """uint8 rendering -> float32 in [0, 1] for :func:`synth.io.save_image` (exact at 8 bits)."""
+    """uint8 rendering -> float32 in [0, 1] for :func:`texsynth.synth.io.save_image` (exact at 8 bits)."""
     import numpy as np
 
     return rendering.astype(np.float32) / np.float32(255)
@@ -163,12 +163,12 @@ def _as_float(rendering: np.ndarray) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``texsynth analyze``: validate, load, analyse, write four files, print one line."""
-    from synth.io import (  # deferred: ``--help`` needs no image codecs
+    from texsynth.synth.io import (  # deferred: ``--help`` needs no image codecs
         atomic_write_json,
         load_image,
         save_image,
     )
-    from synth.output import render
+    from texsynth.synth.output import render
 
     _check_parameters(args.sigma_d, args.sigma_w, args.bins)
     image = load_image(args.image)

@@ -4,13 +4,13 @@
 ``texsynth evaluate --exemplar-xy XY --exemplar-xz XZ --exemplar-yz YZ --output VOLUME.tif ...``
 
 ``OUT`` is a 2-D image, or a volume: a TIFF with more than one page is read with
-:func:`synth.io.load_volume` and evaluated slice by slice along each axis, with the two-point
-correlation ``S2(r)`` along ``x``, ``y`` and ``z`` (:func:`synth.evaluate.evaluate_volume`). A volume
+:func:`texsynth.synth.io.load_volume` and evaluated slice by slice along each axis, with the two-point
+correlation ``S2(r)`` along ``x``, ``y`` and ``z`` (:func:`texsynth.synth.evaluate.evaluate_volume`). A volume
 of an anisotropic material is compared plane by plane with three exemplars (``--exemplar-xy``,
 ``--exemplar-xz``, ``--exemplar-yz``) instead of one. Prints a table (per axis for a volume), or the
 full metrics as JSON with ``--json``; ``--plots DIR`` also writes the comparison PNGs
-(:func:`synth.output.plots.write_plots`, and ``s2.png`` for volumes). Bad input is one line on stderr
-and exit status 2 (handled by :func:`synth.cli.main`).
+(:func:`texsynth.synth.output.plots.write_plots`, and ``s2.png`` for volumes). Bad input is one line on stderr
+and exit status 2 (handled by :func:`texsynth.synth.cli.main`).
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from synth.cli.inputs import add_threads_argument, threads_from
-from synth.errors import InvalidInput
+from texsynth.synth.cli.inputs import add_threads_argument, threads_from
+from texsynth.synth.errors import InvalidInput
 
 __all__ = ["format_table", "register", "run"]
 
@@ -250,8 +250,8 @@ def format_table(metrics: Mapping[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Load, evaluate, print; write plots on request."""
-    from synth.evaluate import evaluate_pair, evaluate_volume
-    from synth.io import load_image, load_volume
+    from texsynth.synth.evaluate import evaluate_pair, evaluate_volume
+    from texsynth.synth.io import load_image, load_volume
 
     planes = {p: getattr(args, f"exemplar_{p}") for p in ("xy", "xz", "yz")}
     given = [p for p, path in planes.items() if path is not None]
@@ -284,14 +284,14 @@ def run(args: argparse.Namespace) -> int:
         output = load_image(args.output)
         metrics = evaluate_pair(exemplar, output, **options)
     if args.plots is not None:
-        from synth.output.plots import write_plots  # deferred: only when plots are asked for
+        from texsynth.synth.output.plots import write_plots  # deferred: only when plots are asked for
 
         try:
             written = write_plots(
                 exemplars if exemplars is not None else exemplar, output, metrics, args.plots
             )
             if metrics["kind"] == "volume":
-                from synth.output.plots import write_s2_plot
+                from texsynth.synth.output.plots import write_s2_plot
 
                 s2_plot = write_s2_plot(metrics, args.plots)
                 written += [s2_plot] if s2_plot is not None else []

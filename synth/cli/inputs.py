@@ -26,7 +26,8 @@ PLANE_HELP = {
     "xz": "what the xz slices (fixed y: x right, z down) look like",
     "yz": "what the yz slices (fixed x: y right, z down) look like",
 }
-#: :data:`synth.api.PLANES`, in its order (a test pins the two together): spelled here so that building
+#: :data:`texsynth.synth.api.PLANES`, in its order (a test pins the two together): spelled here so that
+# building
 #: the parser (``--help``) does not import the engine.
 PLANES: tuple[str, ...] = tuple(PLANE_HELP)
 
@@ -59,7 +60,8 @@ def add_threads_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def threads_from(args: argparse.Namespace) -> int | None:
-    """``--threads`` checked (:func:`synth.threads.check_threads`): a bad value is one line and exit 2."""
-    from synth.threads import check_threads
+    """``--threads`` checked (:func:`texsynth.synth.threads.check_threads`): a bad value is one line and exit
+    2."""
+    from texsynth.synth.threads import check_threads
 
     return check_threads(args.threads, "--threads")

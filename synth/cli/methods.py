@@ -1,7 +1,7 @@
 """``texsynth methods [--json]``: the synthesis methods this engine knows, with their parameters.
 
-The list comes from :func:`synth.api.available_methods`; each method's parameters are its pydantic
-model's JSON schema (:meth:`synth.api.MethodSpec.schema`), the same schema the service publishes, so
+The list comes from :func:`texsynth.synth.api.available_methods`; each method's parameters are its pydantic
+model's JSON schema (:meth:`texsynth.synth.api.MethodSpec.schema`), the same schema the service publishes, so
 the command line never describes a parameter a second time.
 """
 
@@ -13,14 +13,15 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from synth.api import MethodSpec
+    from texsynth.synth.api import MethodSpec
 
 __all__ = ["describe", "register", "run"]
 
 
 def available_methods() -> dict[str, MethodSpec]:
-    """:func:`synth.api.available_methods`, imported when the command runs (``--help`` imports no method)."""
-    from synth.api import available_methods as registered
+    """:func:`texsynth.synth.api.available_methods`, imported when the command runs (``--help`` imports no
+    method)."""
+    from texsynth.synth.api import available_methods as registered
 
     return registered()
 

@@ -2,7 +2,8 @@
 
 Writes ``output.png`` (16-bit with ``--bit-depth 16``), ``output.tiff``, ``manifest.json``,
 ``metrics.json``, the tensor field's ``coherence.png``/``orientation.png`` and comparison plots (see
-:mod:`synth.output.artifacts`). Parameters come from the method's model: ``--set name=value`` (values are
+:mod:`texsynth.synth.output.artifacts`). Parameters come from the method's model: ``--set name=value`` (values
+are
 read as JSON when they parse, e.g. ``--set levels=3 --set metric=ED``). A progress bar is drawn on
 stderr when it is a terminal.
 """
@@ -15,8 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from synth.cli.inputs import add_plane_arguments, add_threads_argument, input_sources, threads_from
-from synth.errors import InvalidParameter
+from texsynth.synth.cli.inputs import add_plane_arguments, add_threads_argument, input_sources, threads_from
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = ["parse_size", "register"]
 
@@ -60,9 +61,9 @@ class _ProgressBar:
 
 def _run(args: argparse.Namespace) -> int:
     # deferred: ``--help`` imports no engine; only the chosen method's module is imported
-    from synth.api import available_methods, check_inputs, find_method
-    from synth.params import parse_assignments
-    from synth.pipeline import load_inputs, synthesize_to_folder
+    from texsynth.synth.api import available_methods, check_inputs, find_method
+    from texsynth.synth.params import parse_assignments
+    from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
 
     spec = find_method(args.method)
     if spec is None:

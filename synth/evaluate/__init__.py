@@ -1,9 +1,9 @@
 """The quantitative benchmark: how faithful an output (image or volume) is to its exemplar.
 
 Grey-level, orientation and coherence histograms and their KL divergences, moments, HRTEM fringe
-morphology, and the multi-2D measures of volumes (:mod:`synth.evaluate.measures`); the two-point
-correlation ``S2(r)`` of two-phase images and volumes (:mod:`synth.evaluate.correlation`); broken
-curvilinear features at patch boundaries (:mod:`synth.evaluate.breaks`).
+morphology, and the multi-2D measures of volumes (:mod:`texsynth.synth.evaluate.measures`); the two-point
+correlation ``S2(r)`` of two-phase images and volumes (:mod:`texsynth.synth.evaluate.correlation`); broken
+curvilinear features at patch boundaries (:mod:`texsynth.synth.evaluate.breaks`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from synth.evaluate.breaks import (
+    from texsynth.synth.evaluate.breaks import (
         SEAM_RADIUS,
         Seams,
         broken_features,
@@ -21,7 +21,7 @@ if TYPE_CHECKING:
         seams_from_labels,
         seams_from_sources,
     )
-    from synth.evaluate.correlation import (
+    from texsynth.synth.evaluate.correlation import (
         compare_s2,
         correlation_length,
         image_s2,
@@ -30,7 +30,7 @@ if TYPE_CHECKING:
         two_point_correlation,
         volume_s2,
     )
-    from synth.evaluate.measures import (
+    from texsynth.synth.evaluate.measures import (
         COHERENCE_BINS,
         GREY_BINS,
         HIST_EPSILON,
@@ -47,7 +47,7 @@ if TYPE_CHECKING:
         to_json_types,
         window_sigma,
     )
-    from synth.evaluate.patches import (
+    from texsynth.synth.evaluate.patches import (
         COPY_PATCH,
         COPY_THRESHOLD,
         copy_map,
@@ -58,7 +58,7 @@ if TYPE_CHECKING:
     )
 
 #: Where each public name lives. The submodules load on first use (PEP 562), so that importing one
-#: of them (``synth.evaluate.patches`` for a method's copy map, ``measures`` for the metrics of a
+#: of them (``texsynth.synth.evaluate.patches`` for a method's copy map, ``measures`` for the metrics of a
 #: synthesis) does not import the others' scipy modules (``scipy.stats``, ``scipy.spatial``, ...).
 _SOURCES: dict[str, str] = {
     **dict.fromkeys(
@@ -122,8 +122,8 @@ _SOURCES: dict[str, str] = {
 
 def __getattr__(name: str) -> Any:
     if name not in _SOURCES:
-        raise AttributeError(f"module 'synth.evaluate' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"synth.evaluate.{_SOURCES[name]}"), name)
+        raise AttributeError(f"module 'texsynth.synth.evaluate' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"texsynth.synth.evaluate.{_SOURCES[name]}"), name)
     globals()[name] = value
     return value
 

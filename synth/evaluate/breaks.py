@@ -37,8 +37,8 @@ from scipy import ndimage as ndi
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from synth.analysis.features import feature_map
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.features import feature_map
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = [
     "KINK_ANGLE",
@@ -430,7 +430,7 @@ def broken_features(
     radius : float
         Endpoints within this many pixels of a seam count (default :data:`SEAM_RADIUS` = 2).
     **feature_options
-        Options of :func:`synth.analysis.features.feature_map` (``features``, ``polarity``,
+        Options of :func:`texsynth.synth.analysis.features.feature_map` (``features``, ``polarity``,
         ``presmooth``, ...), the same for both images.
 
     Returns

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy import fft, integrate, special
 
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = [
     "IMAGE_DIRECTIONS",
@@ -335,7 +335,7 @@ def level_cut_s2(lags: np.ndarray, correlation_length: float, volume_fraction: f
     lags : array_like
         Distances ``r`` (pixels), non-negative.
     correlation_length : float
-        ``l`` of the field's Gaussian correlation (:func:`synth.io.patterns.gaussian_random_field`).
+        ``l`` of the field's Gaussian correlation (:func:`texsynth.synth.io.patterns.gaussian_random_field`).
     volume_fraction : float
         ``phi`` in (0, 1).
 

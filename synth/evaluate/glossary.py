@@ -9,7 +9,7 @@ target), ``near-1`` (|value - 1| < target), ``higher`` (value > target). The ver
 inside the target, ``near`` within :data:`NEAR_FACTOR` times it, ``misses`` beyond.
 
 Fringe statistics are shown only for an exemplar that has lattice fringes (:func:`fringes_shown`, by
-the measures of :mod:`synth.analysis.lattice`): elsewhere the fringes that the extraction finds are
+the measures of :mod:`texsynth.synth.analysis.lattice`): elsewhere the fringes that the extraction finds are
 mortar joints or blades of grass, and their KS distances mislead.
 """
 
@@ -174,12 +174,12 @@ def headline(summary: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
 def fringes_shown(image: np.ndarray) -> tuple[bool, str, dict[str, Any]]:
     """Whether an exemplar's fringe statistics mean something: ``(shown, reason, measures)``.
 
-    Shown when :func:`synth.analysis.lattice.fringe_presence` finds at least
+    Shown when :func:`texsynth.synth.analysis.lattice.fringe_presence` finds at least
     :data:`FRINGE_MIN_DENSITY` fringes per 10 000 px and a spectral peak at a fringe period at least
-    :data:`FRINGE_MIN_PEAK` times the background (module docstring of :mod:`synth.analysis.lattice`).
+    :data:`FRINGE_MIN_PEAK` times the background (module docstring of :mod:`texsynth.synth.analysis.lattice`).
     """
-    from synth.analysis.lattice import fringe_presence  # deferred: only where fringes are judged
-    from synth.colour import to_grey
+    from texsynth.synth.analysis.lattice import fringe_presence  # deferred: only where fringes are judged
+    from texsynth.synth.colour import to_grey
 
     grey = np.asarray(image, dtype=np.float32)
     if grey.ndim == 3:

@@ -9,9 +9,9 @@ compared with the exemplar (:func:`evaluate_volume`):
 - **structure** (Figs 8-9): energy-weighted histograms of the structure-tensor orientation and their
   KL divergence; the coherence distribution; the Log-Euclidean distance of the mean tensors;
 - **fringe morphology** (Fig. 10): fringe length and tortuosity distributions
-  (:mod:`synth.analysis.fringes`), compared by Kolmogorov-Smirnov tests and KL divergences;
+  (:mod:`texsynth.synth.analysis.fringes`), compared by Kolmogorov-Smirnov tests and KL divergences;
 - for volumes, beyond the study: the two-point correlation ``S2(r)`` along each axis
-  (:mod:`synth.evaluate.correlation`).
+  (:mod:`texsynth.synth.evaluate.correlation`).
 
 The choices the paper leaves open (64 grey bins, ``D(exemplar || output)`` smoothed by ``eps = 1e-5``,
 the 7x7 window as ``sigma_w = 2``, energy-weighted orientation bins, BT.601 luma for RGB, pooled
@@ -38,18 +38,18 @@ from typing import Any
 
 import numpy as np
 
-from synth.analysis.fringes import MIN_LENGTH, Fringes, extract_fringes, fringe_summary
-from synth.analysis.tensor import (
+from texsynth.synth.analysis.fringes import MIN_LENGTH, Fringes, extract_fringes, fringe_summary
+from texsynth.synth.analysis.tensor import (
     coherence,
     orientation_histogram,
     structure_direction,
     structure_tensor,
     tensor_dissimilarity,
 )
-from synth.colour import to_grey
-from synth.errors import InvalidInput, InvalidParameter
-from synth.io import MIN_SIDE, array_to_unit
-from synth.threads import use_threads
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.io import MIN_SIDE, array_to_unit
+from texsynth.synth.threads import use_threads
 
 __all__ = [
     "COHERENCE_BINS",
@@ -99,10 +99,12 @@ def window_sigma(window: int = WINDOW) -> float:
 def as_grey(image: np.ndarray, name: str = "image") -> np.ndarray:
     """Validate an image and return it grey, float64, shape (H, W).
 
-    RGB ``(H, W, 3)`` becomes BT.601 luma (:data:`synth.colour.LUMA_WEIGHTS`, as ``load_image``). Raises
-    :class:`~synth.errors.InvalidInput` naming ``name`` for other shapes, NaN/inf, values outside
+    RGB ``(H, W, 3)`` becomes BT.601 luma (:data:`texsynth.synth.colour.LUMA_WEIGHTS`, as ``load_image``).
+    Raises
+    :class:`~texsynth.synth.errors.InvalidInput` naming ``name`` for other shapes, NaN/inf, values outside
     [0, 1] or images smaller than 8 px along a side. uint8, uint16 and bool arrays are scaled by the
-    one dtype policy (:mod:`synth.io.depth`: by the bit depth their values use), as ``load_image`` does.
+    one dtype policy (:mod:`texsynth.synth.io.depth`: by the bit depth their values use), as ``load_image``
+    does.
     """
     arr = np.asarray(image)
     if not np.issubdtype(arr.dtype, np.floating):
@@ -340,7 +342,8 @@ class MeasureSettings:
             "window": self.window,
             "sigma_w": self.sigma_w,
             "sigma_d": self.sigma_d,
-            "grey_conversion": "RGB -> BT.601 luma 0.299 R + 0.587 G + 0.114 B (as synth.io.load_image)",
+            "grey_conversion": "RGB -> BT.601 luma 0.299 R + 0.587 G + 0.114 B (as "
+            "texsynth.synth.io.load_image)",
             "fringes": self.fringes,
             "fringe_options": dict(self.fringe_options),
             "pixel_size_nm": self.pixel_size,
@@ -690,10 +693,12 @@ def evaluate_pair(
     epsilon : float
         Additive smoothing of normalised histograms before the KL divergences.
     fringe_options : mapping, optional
-        Keyword arguments of :func:`synth.analysis.fringes.extract_fringes` (``sigma``, ``background``,
+        Keyword arguments of :func:`texsynth.synth.analysis.fringes.extract_fringes` (``sigma``,
+        ``background``,
         ``min_length``, ...).
     threads : int, optional
-        Threads for the measures (:func:`synth.threads.use_threads`; default: as set, else every core).
+        Threads for the measures (:func:`texsynth.synth.threads.use_threads`; default: as set, else every
+        core).
 
     Returns
     -------
@@ -745,7 +750,7 @@ def evaluate_pair_fringes(
     """:func:`evaluate_pair` (the same keyword arguments), and the fringes it extracted.
 
     Returns ``(metrics, {'exemplar': Fringes, 'output': Fringes})`` (no fringes with
-    ``fringes=False``), so that the fringe overlays (:func:`synth.output.plots.write_plots`) reuse
+    ``fringes=False``), so that the fringe overlays (:func:`texsynth.synth.output.plots.write_plots`) reuse
     them instead of extracting them a second time.
     """
     threads = options.pop("threads", None)
@@ -783,7 +788,8 @@ def _spread(values: list[float | None]) -> dict[str, float | None]:
     }
 
 
-#: The plane each slicing axis of a ``(D, H, W) = (z, y, x)`` volume shows (as :data:`synth.api.PLANES`):
+#: The plane each slicing axis of a ``(D, H, W) = (z, y, x)`` volume shows (as
+# :data:`texsynth.synth.api.PLANES`):
 #: slices along axis 0 are ``xy`` planes, along axis 1 ``xz``, along axis 2 ``yz``.
 PLANES: tuple[str, ...] = ("xy", "xz", "yz")
 #: The physical axes down the rows and across the columns of each plane's images (ALGORITHMS.md).
@@ -839,7 +845,12 @@ def _s2_comparisons(
     Every exemplar is thresholded at its own Otsu level (or ``threshold``) and the volume at the same
     level for that comparison, so each plane's phase 1 is defined by its own exemplar.
     """
-    from synth.evaluate.correlation import compare_s2, image_s2, otsu_threshold, volume_s2  # volumes only
+    from texsynth.synth.evaluate.correlation import (  # volumes only
+        compare_s2,
+        image_s2,
+        otsu_threshold,
+        volume_s2,
+    )
 
     thresholds = {p: threshold if threshold is not None else otsu_threshold(ex) for p, ex in planes.items()}
     ex_curves = {p: image_s2(ex, threshold=thresholds[p], periodic=periodic) for p, ex in planes.items()}
@@ -924,7 +935,8 @@ def evaluate_volume(
         Take every ``slice_step``-th slice along each axis (1: all; larger for speed on big volumes).
         ``S2`` always uses every voxel.
     s2 : bool
-        Compare two-point correlations (:mod:`synth.evaluate.correlation`): ``S2`` of the volume along
+        Compare two-point correlations (:mod:`texsynth.synth.evaluate.correlation`): ``S2`` of the volume
+        along
         each physical axis ``x``, ``y``, ``z`` (averaged over all lines) against ``S2`` along the same
         physical axis of each evaluated plane's exemplar that contains it (``x``: columns of the ``xy``
         and ``xz`` exemplars; ``y``: rows of ``xy``, columns of ``yz``; ``z``: rows of ``xz`` and ``yz``).
@@ -959,7 +971,7 @@ def evaluate_volume(
              "summary": {..., "s2_relative_error", "per_axis": {"0": {..., "s2_relative_error"}, ...}}}
 
         where each ``"slices"`` entry is ``{"mean", "std", "min", "max"}`` over that axis's slices and
-        an S2 comparison is :func:`synth.evaluate.correlation.compare_s2` (volume fractions,
+        an S2 comparison is :func:`texsynth.synth.evaluate.correlation.compare_s2` (volume fractions,
         correlation lengths, the lag window and the relative and maximum errors).
 
     Notes

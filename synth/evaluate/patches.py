@@ -5,7 +5,7 @@
   vertical ones, the strip and the pixel pair just before it), divided by the same mean over the pixel pairs
   outside the strips. 1 = boundaries look like the interior; a visible seam raises it. The boundaries come
   from the layout a patch method reports in ``Result.stats['layout']``
-  (:meth:`synth.patch.layout.PatchLayout.describe`).
+  (:meth:`texsynth.synth.patch.layout.PatchLayout.describe`).
 - **Verbatim copies** (:func:`copy_map`): for each output pixel, the RMS grey-level distance (per pixel,
   [0, 1] units) from the ``p x p`` patch around it to the nearest exemplar patch; :func:`copy_share` is the
   share of pixels below a small threshold (:data:`COPY_THRESHOLD`). The nearest patch is found in the
@@ -15,7 +15,8 @@
   outputs are measured on a grid of stride ``s`` (at most :data:`MAX_QUERIES` patches) and each pixel takes
   its nearest grid value. Colour images are measured on their grey (BT.601) levels.
 - **Seam contrast** (:func:`seam_contrast`): for any method that knows where each pixel came from (the
-  pixel methods' and quilting's source maps, :func:`synth.evaluate.breaks.seams_from_sources`), the mean
+  pixel methods' and quilting's source maps, :func:`texsynth.synth.evaluate.breaks.seams_from_sources`), the
+  mean
   squared grey-level difference across the seam edges (neighbours whose sources are not neighbours the same
   way) over the mean across the other edges, and the share of coherent edges. A patchwork of copied
   regions whose borders show raises the ratio above 1; the exemplar's own, cut anywhere, is 1.
@@ -33,8 +34,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
-from synth.colour import to_grey
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 __all__ = [
     "CANDIDATES",
@@ -166,7 +167,7 @@ def seam_contrast(image: np.ndarray, seams: Any) -> dict[str, float]:
     Parameters
     ----------
     image : ndarray, shape (H, W) or (H, W, 3)
-    seams : :class:`synth.evaluate.breaks.Seams`
+    seams : :class:`texsynth.synth.evaluate.breaks.Seams`
         The cut 4-neighbour pairs (e.g. ``seams_from_sources(result.extras['source_map'])``).
 
     Returns
@@ -179,7 +180,7 @@ def seam_contrast(image: np.ndarray, seams: Any) -> dict[str, float]:
     Examples
     --------
     >>> import numpy as np
-    >>> from synth.evaluate.breaks import seams_from_labels
+    >>> from texsynth.synth.evaluate.breaks import seams_from_labels
     >>> img = np.tile(np.array([0.0, 0.1, 0.2, 0.9, 1.0, 1.1]), (4, 1))  # a jump between columns 2 and 3
     >>> out = seam_contrast(img, seams_from_labels(np.tile([0, 0, 0, 1, 1, 1], (4, 1))))
     >>> round(out["ratio"], 1), round(out["coherent_share"], 3)

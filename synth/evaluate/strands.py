@@ -3,11 +3,11 @@
 A fibrous texture (wood grain: fibres each with its own grey level between dark boundaries) changes
 grey level across its fibres and hardly along them. An output that switches from a light to a dark
 fibre every few tens of pixels along one strand (a patchwork of grey) still has continuous dark
-boundaries (the strand ratio of :mod:`synth.analysis.fringes` does not see it) and the exemplar's
+boundaries (the strand ratio of :mod:`texsynth.synth.analysis.fringes` does not see it) and the exemplar's
 grey-level histogram (the KL does not either); this measure does.
 
 :func:`strand_grey` follows, from points every ``stride`` pixels, the strand direction field for
-``length`` pixels each way (:func:`synth.analysis.streamlines.trace`: the curve turns with the field)
+``length`` pixels each way (:func:`texsynth.synth.analysis.streamlines.trace`: the curve turns with the field)
 and takes the grey-level variance of the ``2 length + 1`` samples (bilinear), and does the same along
 the perpendicular field (across the strands). ``ratio = along / across`` is 0 for strands of constant
 grey and about 1 for a texture with no preferred direction. For an output of arbitrary-shape synthesis
@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.analysis.streamlines import sample_along
-from synth.analysis.tensor import structure_direction, structure_tensor
-from synth.colour import to_grey
+from texsynth.synth.analysis.streamlines import sample_along
+from texsynth.synth.analysis.tensor import structure_direction, structure_tensor
+from texsynth.synth.colour import to_grey
 
 __all__ = ["STRAND_LENGTH", "exemplar_strand_grey", "strand_grey"]
 

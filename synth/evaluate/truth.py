@@ -1,13 +1,13 @@
 """A synthesized volume against a known answer: its slices against the truth volume's own slices.
 
-When the exemplars are slices of a known volume (:mod:`synth.io.laminar`), the targets of a solid
+When the exemplars are slices of a known volume (:mod:`texsynth.synth.io.laminar`), the targets of a solid
 synthesis are not the exemplar's statistics but those of the truth's slices along each axis: an oblique
 cut shows wider fringes than the exemplar, a slice near an onion's pole wider rings, and a volume
 consistent with the exemplar has exactly the truth's slice statistics. This compares, per axis, the
 slices of ``volume`` with the slices of the truth **at the same slice size** (the truth is cut into
 non-overlapping blocks of the volume's shape, all of whose slices are pooled), so that the fringe
 lengths of small slices are not compared with those of large ones. The measures are those of
-:func:`synth.evaluate.evaluate_volume` (the study's multi-2D benchmark: grey KL, energy-weighted
+:func:`texsynth.synth.evaluate.evaluate_volume` (the study's multi-2D benchmark: grey KL, energy-weighted
 orientation KL, coherence, fringe length and tortuosity by Kolmogorov-Smirnov); each axis's summary adds
 ``coherence_ratio`` (mean structure-tensor coherence of the volume's slices over the truth's) and
 ``contrast`` (standard deviation over the truth's), the quickest checks that sheets formed rather than
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate.measures import (
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.evaluate.measures import (
     PLANES,
     ImageStats,
     MeasureSettings,
@@ -89,7 +89,7 @@ def truth_slices(
         The shape of the volumes it will be compared with; the truth is cut into
         ``(D // d) * (H // h) * (W // w)`` non-overlapping blocks from its corner.
     axes, fringes, fringe_options
-        As :func:`synth.evaluate.evaluate_volume`.
+        As :func:`texsynth.synth.evaluate.evaluate_volume`.
     slice_step : int
         Take every ``slice_step``-th slice of each block (1: all).
     """

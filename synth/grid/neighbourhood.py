@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = ["Shape", "neighbourhood_offsets", "parent_offsets"]
 

@@ -17,7 +17,7 @@ from typing import Literal
 
 import numpy as np
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = ["SCAN_ORDERS", "ScanOrder", "hilbert_points", "morton_points", "scan_order"]
 

@@ -1,13 +1,15 @@
 """Inputs and outputs: load and validate images and volumes, save PNG and TIFF stacks, write files atomically.
 
-:mod:`synth.io.images` decodes and encodes; :mod:`synth.io.patterns` generates inputs with known orientation
-fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints; :mod:`synth.io.laminar`
+:mod:`texsynth.synth.io.images` decodes and encodes; :mod:`texsynth.synth.io.patterns` generates inputs with
+known orientation
+fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints;
+:mod:`texsynth.synth.io.laminar`
 known-answer volumes of HRTEM-like fringes (carbon onions, turbostratic stacks).
 """
 
-from synth.io.atomic import atomic_write_bytes, atomic_write_json
-from synth.io.depth import InputBits, array_to_unit, used_bits
-from synth.io.images import (
+from texsynth.synth.io.atomic import atomic_write_bytes, atomic_write_json
+from texsynth.synth.io.depth import InputBits, array_to_unit, used_bits
+from texsynth.synth.io.images import (
     FORMAT_FILES,
     SUPPORTED_FORMATS,
     ImageSource,
@@ -22,7 +24,7 @@ from synth.io.images import (
     sniff_format,
     to_uint,
 )
-from synth.io.limits import (
+from texsynth.synth.io.limits import (
     DEFAULT_MAX_OUTPUT,
     DEFAULT_MAX_PIXELS,
     DEFAULT_MAX_VOXELS,

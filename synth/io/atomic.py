@@ -4,7 +4,7 @@ Every file the engine, the CLI and the service write goes through :func:`atomic_
 JSON form; :func:`atomic_writer` for a file written in pieces, e.g. a streamed download): the data
 goes to a temporary file beside the target, is flushed to disk, then renamed over
 the target; on any failure the temporary file is removed. A failure to write (full disk, no
-permission) is the machine's problem, not the input's: it raises :class:`synth.errors.StorageError`
+permission) is the machine's problem, not the input's: it raises :class:`texsynth.synth.errors.StorageError`
 (an ``OSError``), whose message names the file but not the server's folders.
 """
 
@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from synth.errors import StorageError
+from texsynth.synth.errors import StorageError
 
 __all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_writer"]
 

@@ -1,7 +1,8 @@
 """The one dtype policy: how an image's samples become the engine's float32 in [0, 1], and its bit depth.
 
-Used by :func:`synth.io.load_image` (files), :func:`synth.api.synthesize` and
-:func:`synth.evaluate.evaluate_pair` (arrays), so that a picture gives the same numbers whichever way it
+Used by :func:`texsynth.synth.io.load_image` (files), :func:`texsynth.synth.api.synthesize` and
+:func:`texsynth.synth.evaluate.evaluate_pair` (arrays), so that a picture gives the same numbers whichever way
+it
 comes in:
 
 - ``bool``: ``False`` -> 0, ``True`` -> 1;
@@ -10,7 +11,7 @@ comes in:
   and microscopy cameras) are scaled by 4095, not 65535, so that grey histograms on [0, 1] mean
   something; 8-bit containers are always scaled by 255;
 - floats: must be finite and within [0, 1] (an array; files, where float counts are common, are
-  rescaled by :func:`synth.io.load_image` instead).
+  rescaled by :func:`texsynth.synth.io.load_image` instead).
 
 :class:`InputBits` records the container and used depths, so that outputs are written back at the
 depth the input had (``output.tiff`` 16-bit with values 0-4095 for 12-bit-in-16 data).
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.errors import InvalidInput
+from texsynth.synth.errors import InvalidInput
 
 __all__ = ["InputBits", "array_to_unit", "unsigned_to_unit", "used_bits"]
 

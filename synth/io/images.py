@@ -2,13 +2,13 @@
 
 Every loader returns the engine's one representation (ALGORITHMS.md, "Conventions"): a C-contiguous
 ``float32`` array in [0, 1], ``(H, W)`` grey or ``(H, W, 3)`` RGB for an image, ``(D, H, W)`` for a
-volume. Every failure is one :mod:`synth.errors` exception that names the file and the problem:
+volume. Every failure is one :mod:`texsynth.synth.errors` exception that names the file and the problem:
 
-- :class:`~synth.errors.UnsupportedFormat`: the bytes are not a PNG, TIFF or JPEG image (the bytes
+- :class:`~texsynth.synth.errors.UnsupportedFormat`: the bytes are not a PNG, TIFF or JPEG image (the bytes
   are judged, never the file name's extension);
-- :class:`~synth.errors.InputTooLarge`: more pixels than allowed, checked from the header before a
+- :class:`~texsynth.synth.errors.InputTooLarge`: more pixels than allowed, checked from the header before a
   single pixel is decoded; Pillow's decompression-bomb warning counts as this error too;
-- :class:`~synth.errors.InvalidInput`: missing, empty, truncated or corrupt file, zero-size, tiny or
+- :class:`~texsynth.synth.errors.InvalidInput`: missing, empty, truncated or corrupt file, zero-size, tiny or
   absurdly elongated image, NaN/inf in float data, or a shape that is not a 2-D image (or, for
   :func:`load_volume`, not a 3-D stack).
 
@@ -34,11 +34,11 @@ import numpy as np
 import tifffile
 from PIL import Image, UnidentifiedImageError
 
-from synth.colour import to_grey
-from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
-from synth.io.atomic import atomic_write_bytes, atomic_writer
-from synth.io.depth import FLOAT_BITS, InputBits, unsigned_to_unit
-from synth.io.limits import LIMITS, check_image_shape, resolve_limit
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InputTooLarge, InvalidInput, InvalidParameter, SynthError, UnsupportedFormat
+from texsynth.synth.io.atomic import atomic_write_bytes, atomic_writer
+from texsynth.synth.io.depth import FLOAT_BITS, InputBits, unsigned_to_unit
+from texsynth.synth.io.limits import LIMITS, check_image_shape, resolve_limit
 
 __all__ = [
     "FORMAT_FILES",
@@ -117,7 +117,7 @@ def load_image(
     max_pixels : int, optional
         Largest accepted ``width * height``, checked from the header before decoding. Defaults to
         ``TEXSYNTH_MAX_INPUT_PIXELS`` if set (``TEXSYNTH_MAX_PIXELS``, deprecated), else
-        :data:`synth.io.limits.DEFAULT_MAX_PIXELS`.
+        :data:`texsynth.synth.io.limits.DEFAULT_MAX_PIXELS`.
     mode : {'auto', 'grey', 'rgb'}
         ``'auto'`` keeps grey as grey and RGB as RGB, except that an RGB image whose three channels
         are identical becomes grey; ``'grey'`` converts colour to luma; ``'rgb'`` repeats a grey
@@ -157,14 +157,16 @@ def load_image(
       ``MinIsWhite`` is inverted so that 1 is white.
 
     Grey conversion (``mode='grey'``) uses the ITU-R BT.601 luma ``0.299 R + 0.587 G + 0.114 B``
-    (:data:`synth.colour.LUMA_WEIGHTS`), the weights of Pillow's ``convert("L")`` and ImageJ's weighted
+    (:data:`texsynth.synth.colour.LUMA_WEIGHTS`), the weights of Pillow's ``convert("L")`` and ImageJ's
+    weighted
     conversion, computed in floating point without rounding to 8 bits. (scikit-image's ``rgb2gray``
     uses the BT.709 weights instead; the difference is small for natural images.)
 
     A 16-bit-per-channel RGB PNG is read at 8 bits per channel (Pillow's limit); 16-bit grey PNG and
     every TIFF keep their full precision.
 
-    Unsigned integers are scaled by the depth their values use (:mod:`synth.io.depth`): 12-bit data in
+    Unsigned integers are scaled by the depth their values use (:mod:`texsynth.synth.io.depth`): 12-bit data
+    in
     a 16-bit TIFF (0-4095) by 4095; :func:`load_image_bits` also returns that depth.
     """
     return load_image_bits(source, name=name, max_pixels=max_pixels, mode=mode)[0]
@@ -209,7 +211,7 @@ def load_volume(source: ImageSource, *, name: str | None = None, max_voxels: int
     max_voxels : int, optional
         Largest accepted ``depth * height * width``, checked from the header before decoding.
         Defaults to the environment variable ``TEXSYNTH_MAX_VOXELS`` if set, else
-        :data:`synth.io.limits.DEFAULT_MAX_VOXELS`.
+        :data:`texsynth.synth.io.limits.DEFAULT_MAX_VOXELS`.
 
     Returns
     -------
@@ -304,7 +306,7 @@ def to_uint(image: np.ndarray, bit_depth: int = 8, *, used_bits: int | None = No
         8 gives ``uint8`` (0-255), 16 gives ``uint16`` (0-65535).
     used_bits : int, optional
         Scale to ``2**used_bits - 1`` within the container instead (12 in a 16-bit container: 0-4095,
-        as the 12-bit camera data it came from, :mod:`synth.io.depth`); at most ``bit_depth``.
+        as the 12-bit camera data it came from, :mod:`texsynth.synth.io.depth`); at most ``bit_depth``.
 
     Returns
     -------
@@ -722,7 +724,8 @@ def _pillow_to_float(im: Image.Image, label: str) -> tuple[np.ndarray, InputBits
 
 
 def _to_unit_float(arr: np.ndarray, label: str, *, bits: int | None = None) -> tuple[np.ndarray, InputBits]:
-    """Unsigned integers by the depth they use (:mod:`synth.io.depth`); floats and signed counts checked
+    """Unsigned integers by the depth they use (:mod:`texsynth.synth.io.depth`); floats and signed counts
+    checked
     and rescaled."""
     if arr.dtype == bool or np.issubdtype(arr.dtype, np.unsignedinteger):
         return unsigned_to_unit(arr, bits=bits)

@@ -15,7 +15,7 @@ Both are then blurred (a Gaussian of ``blur`` voxels: the microscope's transfer)
 sample's extremes, so that two sizes of one material have the same grey scale). The fringe period is
 ``period`` voxels (HRTEM of graphitic carbon: 0.34 nm at ~18 px/nm, about 6 px).
 
-Their mid-slices (:func:`synth.output.volume.mid_slices`) are exemplars for which a consistent volume
+Their mid-slices (:func:`texsynth.synth.output.volume.mid_slices`) are exemplars for which a consistent volume
 exists by construction, and the truth's own slices give the targets a solid synthesis must reach
 (benchmarks/bench_laminar.py). Onions are isotropic: one exemplar serves the three planes. A stack is
 isotropic across the planes only for ``normal = (1, 1, 1)`` (the default: each plane cuts the sheets at
@@ -34,7 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import ndimage
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = ["onion_volume", "turbostratic_volume"]
 

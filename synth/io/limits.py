@@ -7,7 +7,7 @@ before any work starts, naming the input or field.
 
 :data:`LIMITS` holds each limit's one environment variable and default, and :func:`limit_from_env`
 is the one place that reads them: the engine through :func:`resolve_limit` (an explicit argument
-wins), the service's :class:`jobs.config.Settings` through its ``from_env``. The service's own output
+wins), the service's :class:`texsynth.jobs.config.Settings` through its ``from_env``. The service's own output
 limits (``max_output_pixels`` for images, ``max_output_voxels`` for volumes) are passed in by the API
 and the worker.
 """
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.errors import InputTooLarge, InvalidInput, InvalidParameter
+from texsynth.synth.errors import InputTooLarge, InvalidInput, InvalidParameter
 
 __all__ = [
     "DEFAULT_MAX_OUTPUT",
@@ -48,7 +48,7 @@ DEFAULT_MAX_OUTPUT = 512**3
 #: Largest 2-D output one job of the service may ask for by default (width * height).
 DEFAULT_SERVICE_MAX_OUTPUT = 4096 * 4096
 #: Largest volume one job of the service may ask for by default (width * height * depth); whether it
-#: runs is then the admission's estimate of its memory and time (``app.admission``).
+#: runs is then the admission's estimate of its memory and time (``texsynth.app.admission``).
 DEFAULT_SERVICE_MAX_VOXELS = 512**3
 #: Longest side / shortest side above which an image is refused: a 1 x 64 strip holds no texture.
 MAX_ASPECT_RATIO = 64
@@ -67,7 +67,7 @@ class Limit:
     deprecated: tuple[str, ...] = ()
 
 
-#: Every size limit by name (the :class:`jobs.config.Settings` field of the same name, where the
+#: Every size limit by name (the :class:`texsynth.jobs.config.Settings` field of the same name, where the
 #: service has one): one environment variable each.
 LIMITS: dict[str, Limit] = {
     "max_input_pixels": Limit("TEXSYNTH_MAX_INPUT_PIXELS", DEFAULT_MAX_PIXELS, ("TEXSYNTH_MAX_PIXELS",)),

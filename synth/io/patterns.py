@@ -6,7 +6,8 @@ Each returns a float32 image in [0, 1] of laminae of period ``period`` pixels, w
 direction is known in closed form, so tests and benchmarks can vary them freely.
 
 :func:`gaussian_random_field` makes an anisotropic two-phase image or volume whose two-point
-correlation along each axis is known in closed form (:func:`synth.evaluate.correlation.level_cut_s2`):
+correlation along each axis is known in closed form
+(:func:`texsynth.synth.evaluate.correlation.level_cut_s2`):
 a known answer for the whole solid-synthesis path.
 """
 
@@ -17,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = [
     "concentric_rings",
@@ -212,7 +213,7 @@ def gaussian_random_field(
     -----
     The two-point correlation of phase 1 along axis ``k`` is then that of a level-cut Gaussian field
     (Berk 1987; Teubner 1991; Torquato 2002, section 2.5.4),
-    :func:`synth.evaluate.correlation.level_cut_s2` with ``correlation_length = l_k``, up to the
+    :func:`texsynth.synth.evaluate.correlation.level_cut_s2` with ``correlation_length = l_k``, up to the
     sampling error of a finite sample: the correlation lengths of ``S2`` per axis are in the ratios
     of ``l_k``.
 
@@ -279,7 +280,7 @@ def voronoi_cells(
     a Gaussian dip of standard deviation ``wall`` px in that distance, and each cell's interior a
     slightly different grey. The walls form a closed network with no free ends (every feature
     endpoint in a synthesized image of it is a break), the features that
-    :func:`synth.evaluate.breaks.broken_features` counts.
+    :func:`texsynth.synth.evaluate.breaks.broken_features` counts.
 
     Returns a float32 image in [0, 1] (walls dark).
 

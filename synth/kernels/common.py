@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.kernels.options import kernel
+from texsynth.synth.kernels.options import kernel
 
 __all__ = ["histogram_factor", "splitmix", "splitmix_reference"]
 

@@ -34,8 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from synth.kernels.common import histogram_factor, splitmix
-from synth.kernels.options import kernel
+from texsynth.synth.kernels.common import histogram_factor, splitmix
+from texsynth.synth.kernels.options import kernel
 
 __all__ = [
     "METRIC_NORM",
@@ -131,7 +131,7 @@ class Pass(NamedTuple):
 class SearchState:
     """Everything the search kernel reads and updates for one pyramid level, in named groups.
 
-    The driver (:func:`synth.pixel.synthesis.synthesize_source_map`) builds one per level and a new
+    The driver (:func:`texsynth.synth.pixel.synthesis.synthesize_source_map`) builds one per level and a new
     :class:`Pass` per pass; :func:`synthesize_chunk` and :func:`synthesize_chunk_reference` take it.
     """
 
@@ -531,7 +531,7 @@ def synthesize_chunk(state: SearchState, start: int, stop: int) -> None:
     """Run the kernel on ``state.run.order[start:stop]``: search, copy, update, in place.
 
     Every array must be C-contiguous, features float32, maps int64 (the caller,
-    :mod:`synth.pixel.synthesis`, prepares them once per level and pass).
+    :mod:`texsynth.synth.pixel.synthesis`, prepares them once per level and pass).
     """
     s = state
     arrays = (s.cur.ex, s.par.ex, s.gui.ex)

@@ -35,8 +35,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from synth.kernels.common import histogram_factor, splitmix
-from synth.kernels.options import kernel
+from texsynth.synth.kernels.common import histogram_factor, splitmix
+from texsynth.synth.kernels.options import kernel
 
 __all__ = [
     "PARALLEL_BLOCKS",
@@ -144,7 +144,8 @@ class SolidState(NamedTuple):
     orientation_factor : ndarray (3, N) float64
         Per plane, the factor multiplying the search distance of each exemplar neighbourhood: eq 4's
         re-weighting on the plane's orientation histogram
-        (:func:`synth.analysis.orientation_histogram.usage_factors`), frozen during a search pass; ones
+        (:func:`texsynth.synth.analysis.orientation_histogram.usage_factors`), frozen during a search pass;
+        ones
         switch it off.
     """
 

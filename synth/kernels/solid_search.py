@@ -1,7 +1,7 @@
 """The hot loops of solid (3D from 2D) synthesis: slice neighbourhoods, nearest neighbours, IRLS update.
 
 A voxel's neighbourhoods are the ``n x n`` squares around it in the three orthogonal slices through
-it (planes ``xy``, ``xz``, ``yz``; see :mod:`synth.pixel.solid`). Three loops do the work:
+it (planes ``xy``, ``xz``, ``yz``; see :mod:`texsynth.synth.pixel.solid`). Three loops do the work:
 
 - :func:`gather_slices`: the neighbourhood vectors of a batch of voxels in one plane (toroidal wrap
   when the volume is periodic, mirror reflection at its faces otherwise);
@@ -39,8 +39,8 @@ import numba
 import numpy as np
 from numba import prange
 
-from synth.kernels.common import splitmix, splitmix_reference
-from synth.kernels.options import kernel
+from texsynth.synth.kernels.common import splitmix, splitmix_reference
+from texsynth.synth.kernels.options import kernel
 
 __all__ = [
     "KCOHERENCE_BLOCKS",
@@ -132,7 +132,7 @@ def gather_slices(vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, per
         Voxel coordinates ``(z, y, x)``.
     offsets : ndarray (K, 3) int32
         The plane's offsets ``(dz, dy, dx)`` in the order of the exemplar vectors
-        (:func:`synth.pixel.solid.plane_offsets`).
+        (:func:`texsynth.synth.pixel.solid.plane_offsets`).
     periodic : bool
         Wrap around the volume's faces (toroidal volume) or mirror about them.
     """

@@ -1,13 +1,14 @@
 """From every pixel, follow a strand (an orientation field's streamline) both ways to the first marked pixel.
 
-The hot loop of :func:`synth.methods.strand_hints.strand_hints`: each output pixel is traced along
+The hot loop of :func:`texsynth.synth.methods.strand_hints.strand_hints`: each output pixel is traced along
 the constraint's strand direction, both ways, up to ``max_steps`` steps of ``step`` pixels, until its
 curve enters a pixel of a *cut* (``label >= 0``); the nearer hit wins. The tracing is
-:func:`synth.analysis.streamlines.trace`'s (midpoint Runge-Kutta on the doubled-angle field, each step
+:func:`texsynth.synth.analysis.streamlines.trace`'s (midpoint Runge-Kutta on the doubled-angle field, each
+step
 keeping the sign of the previous one; the first step of the "plus" curve goes rightwards, or down when
 vertical, the "minus" curve the other way), with the hit tested at the rounded position after every
 step (and at the pixel itself before the first). Outside the image a curve stops (``periodic``: wraps).
-Its plain reference, built on :func:`synth.analysis.streamlines.trace`, lives in the tests
+Its plain reference, built on :func:`texsynth.synth.analysis.streamlines.trace`, lives in the tests
 (``tests/synth/kernels/test_streamline_hits.py``): it ties the kernel to the analysis floor above.
 """
 
@@ -17,7 +18,7 @@ import math
 
 import numpy as np
 
-from synth.kernels.options import kernel
+from texsynth.synth.kernels.options import kernel
 
 __all__ = ["first_hits"]
 

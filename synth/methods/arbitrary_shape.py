@@ -4,11 +4,11 @@ Akl, Yaacoub, Donias, Da Costa, Germain (GRETSI), in three steps:
 
 1. **Constraint field** (section 2.1, eqs 1-3): the orientation field ``O_con`` of the constraint
    ``I_con`` (eq 1) turns every tensor of the exemplar's field ``S_en`` by the angle at the same
-   position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`synth.analysis.tensor.rotate_tensors`).
+   position, ``S_con = R S_en R^T`` (eqs 2-3, :func:`texsynth.synth.analysis.tensor.rotate_tensors`).
 2. **Rotated dictionary** ``D_M`` (section 2.2, eq 4): the exemplar turned by ``2 pi m / M`` (5 deg).
 3. **Synthesis** (section 3, eqs 5-6): each output neighbourhood (intensities and ``S_con``'s tensors)
    is matched in ``D_M`` with ``W SSD + (1 - W) STD`` and the best match's pixel copied: the shared
-   engine (:mod:`synth.pixel.synthesis`) on ``D_M``'s canvas, guided by ``S_con``.
+   engine (:mod:`texsynth.synth.pixel.synthesis`) on ``D_M``'s canvas, guided by ``S_con``.
 
 Choices the paper leaves open and departures, each measured in docs/arbitrary-shape.md ("How it works"):
 - ``rotation_reference='dominant'``: ``S_en`` turned by ``O_con - O_dom`` (``'absolute'``: the paper);
@@ -17,7 +17,7 @@ Choices the paper leaves open and departures, each measured in docs/arbitrary-sh
 - ``transfer_candidates``: a proposal from another copy moves to the copy at the local angle;
 - ``histogram_weight``: grey-level histogram matching (Kopf et al. 2007, eq 4); 0 is the paper;
 - ``hint_layout='strands'``, ``initial_sources='hints'``: the exemplar's fibres laid along the
-  constraint's strands (:mod:`synth.methods.strand_hints`), chosen by the fibre grey spread;
+  constraint's strands (:mod:`texsynth.synth.methods.strand_hints`), chosen by the fibre grey spread;
 - ``recipe='auto'``: settings by the exemplar's coherence (``'fibres'`` adds square refinement passes);
 - ``W`` weighs normalised parts; default 0.1, the measured best; ``k = 0`` (k-sets over ``D_M`` are large);
 - ``periodic=True``: the output tiles if the constraint does. Following it: :func:`orientation_agreement`.
@@ -40,9 +40,9 @@ from pydantic import Field, field_validator
 from scipy.spatial import cKDTree
 from skimage.transform import resize
 
-from synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
-from synth.analysis.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
-from synth.analysis.tensor import (
+from texsynth.synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
+from texsynth.synth.analysis.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
+from texsynth.synth.analysis.tensor import (
     ORIENTED_COHERENCE,
     Metric,
     coherence,
@@ -54,15 +54,15 @@ from synth.analysis.tensor import (
     structure_tensor,
     wrap_angle,
 )
-from synth.api import MethodSpec, Progress, Result, register
-from synth.colour import to_grey
-from synth.errors import InvalidInput, InvalidParameter
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.methods.strand_hints import StrandHints, fibre_table, strand_hints
-from synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
-from synth.params import ui
-from synth.pixel.synthesis import (
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.grid.pyramid import gaussian_pyramid, level_shapes
+from texsynth.synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from texsynth.synth.methods.strand_hints import StrandHints, fibre_table, strand_hints
+from texsynth.synth.methods.tensor_constrained import TensorConstrainedParams, run_tensor_constrained
+from texsynth.synth.params import ui
+from texsynth.synth.pixel.synthesis import (
     CandidateWindow,
     Guidance,
     level_neighbourhood_size,
@@ -121,7 +121,7 @@ RECIPES: dict[str, dict[str, object]] = {
     },
     "paper": {},
 }
-#: The strand hints (:mod:`synth.methods.strand_hints`, the output started from them) that
+#: The strand hints (:mod:`texsynth.synth.methods.strand_hints`, the output started from them) that
 #: :meth:`ArbitraryShapeParams.resolved` gives the 'fibres' recipe for fibres with their own grey levels.
 STRAND_HINTS: dict[str, object] = {"hint_layout": "strands", "initial_sources": "hints"}
 #: The paper's route, chosen otherwise: hints from an exemplar-like texture, a random start.
@@ -303,7 +303,8 @@ class ArbitraryShapeParams(NeighbourhoodParams):
                 "Where the hints (and S_en) come from: 'texture', an exemplar-like texture synthesized in "
                 "the exemplar's frame (the paper's route); 'strands', exemplar fibres laid along the "
                 "constraint's strands, so that each output strand is offered one fibre (one grey level) "
-                "along its length (synth.methods.strand_hints). Default: 'strands' with the 'fibres' "
+                "along its length (texsynth.synth.methods.strand_hints). Default: 'strands' with the "
+                "'fibres' "
                 "recipe when the exemplar's fibres carry their own grey levels (fibre grey spread at "
                 "least 0.35, e.g. a wood grain) and restrict_rotations is on, else 'texture'."
             )
@@ -388,7 +389,7 @@ class ArbitraryShapeParams(NeighbourhoodParams):
         ``hint_layout`` and ``initial_sources`` left unset (None) are chosen next: the strand hints
         (:data:`STRAND_HINTS`) with the 'fibres' recipe (auto or explicit) when the exemplar's fibres
         carry their own grey levels, i.e. its fibre grey spread
-        (:func:`synth.analysis.fibre_grey.fibre_grey_spread`, these scales) is at least
+        (:func:`texsynth.synth.analysis.fibre_grey.fibre_grey_spread`, these scales) is at least
         :data:`OWN_GREY_FIBRES`, and ``restrict_rotations`` is on (the hints come with the rotation
         window); else the paper's route ('texture', 'random'). Why: the strand hints keep each strand's
         grey level for a wood grain (grey along/across 0.51-0.70 -> 0.14-0.25) but close the rings of
@@ -431,7 +432,8 @@ def orientation_agreement(
 ) -> float:
     """How well ``output``'s structures follow ``constraint``'s: weighted mean ``|sin(O_out - O_con)|``.
 
-    Both images' structure orientations are measured (:func:`synth.analysis.tensor.structure_tensor`, scales
+    Both images' structure orientations are measured (:func:`texsynth.synth.analysis.tensor.structure_tensor`,
+    scales
     ``sigma_d``, ``sigma_w``); each pixel counts by the product of the two coherences, so that only
     places where both images have an orientation vote. 0 is perfect agreement; independent random
     orientations give ``2 / pi = 0.64``; perpendicular structures give 1. RGB images count by their
@@ -439,7 +441,7 @@ def orientation_agreement(
 
     Examples
     --------
-    >>> from synth.io.patterns import grating
+    >>> from texsynth.synth.io.patterns import grating
     >>> a = grating((64, 64), 0.3, noise=0.1)
     >>> round(orientation_agreement(a, grating((64, 64), 0.3)), 2)
     0.0
@@ -532,7 +534,7 @@ def _base_texture(exemplar, size, params, seed, report) -> tuple[np.ndarray, np.
 
 def _strand_layout(s_ex: np.ndarray, o_con: np.ndarray, params, radius: int, seed: int) -> StrandHints:
     """``hint_layout='strands'``: the exemplar's fibres laid along the constraint's strands
-    (:mod:`synth.methods.strand_hints`), fibres at least a neighbourhood's radius (+2) inside the
+    (:mod:`texsynth.synth.methods.strand_hints`), fibres at least a neighbourhood's radius (+2) inside the
     exemplar so that every rotated copy holds their neighbourhoods."""
     table = fibre_table(structure_direction(s_ex), float(dominant_orientation(s_ex)) + np.pi / 2, radius + 2)
     return strand_hints(

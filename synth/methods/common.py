@@ -7,12 +7,12 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from synth.api import Progress
-from synth.grid.neighbourhood import Shape
-from synth.grid.scan import ScanOrder
-from synth.params import MethodParams, ui
-from synth.pixel.solid import PLANES, checked_planes
-from synth.pixel.synthesis import SearchSettings
+from texsynth.synth.api import Progress
+from texsynth.synth.grid.neighbourhood import Shape
+from texsynth.synth.grid.scan import ScanOrder
+from texsynth.synth.params import MethodParams, ui
+from texsynth.synth.pixel.solid import PLANES, checked_planes
+from texsynth.synth.pixel.synthesis import SearchSettings
 
 __all__ = [
     "NeighbourhoodParams",
@@ -26,7 +26,7 @@ __all__ = [
 
 class PatchParams(MethodParams):
     """The overlap rule every patch method shares (below the patch size, by default a fraction of it) and
-    the tileable option ``periodic`` (:class:`synth.patch.layout.PatchLayout`).
+    the tileable option ``periodic`` (:class:`texsynth.synth.patch.layout.PatchLayout`).
 
     Subclasses declare their own ``patch_size`` and ``overlap`` fields (defaults and bounds are each
     paper's) and set :attr:`OVERLAP_DIVISOR` / :attr:`MIN_OVERLAP` for the default overlap.
@@ -312,7 +312,7 @@ def as_features(image: np.ndarray) -> np.ndarray:
 def checked_progress(progress: Progress):
     """Wrap a progress callback so that the fractions it sees lie in [0, 1].
 
-    The protocol (:class:`synth.api.Progress`): a callback stops the work by raising
+    The protocol (:class:`texsynth.synth.api.Progress`): a callback stops the work by raising
     :class:`Cancelled`, which passes through unchanged. Anything else it raises is a bug in the
     caller and propagates as it is, so that a broken callback fails loudly instead of looking like
     a cancelled job.

@@ -3,10 +3,11 @@
 Patches in raster order with overlap, as in image quilting; each new patch is chosen on a mix of the
 colour SSD over the overlap and the chamfer matching cost of the features (eq 2 with eq 1's ``gdist``),
 then, with ``deform``, warped by a thin-plate spline so that its features meet the context's, and
-merged along a graph-cut seam (Kwatra et al. 2003). The steps: :mod:`synth.patch.feature_guided`; the
-feature maps: :mod:`synth.analysis.features`; the matching: :mod:`synth.analysis.feature_matching`;
-the warp: :mod:`synth.analysis.warp`. ``Result.extras``: ``features_exemplar``, ``features_output``,
-``seams`` and ``copy_map``; ``stats['broken_features']`` (:func:`synth.evaluate.broken_features`).
+merged along a graph-cut seam (Kwatra et al. 2003). The steps: :mod:`texsynth.synth.patch.feature_guided`; the
+feature maps: :mod:`texsynth.synth.analysis.features`; the matching:
+:mod:`texsynth.synth.analysis.feature_matching`;
+the warp: :mod:`texsynth.synth.analysis.warp`. ``Result.extras``: ``features_exemplar``, ``features_output``,
+``seams`` and ``copy_map``; ``stats['broken_features']`` (:func:`texsynth.synth.evaluate.broken_features`).
 
 Departures, each measured in docs/feature-guided.md (full text: docs/design.md, "feature-guided"):
 - patch size 32 (the paper: 32-64), overlap a quarter of the patch;
@@ -32,17 +33,17 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.feature_matching import BETA, MATCH_TAU, REVERSE_WEIGHT, WARP_TAU
-from synth.analysis.features import feature_map, feature_overlay
-from synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
-from synth.api import MethodSpec, Progress, Result, register
-from synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
-from synth.evaluate.coverage import exemplar_coverage
-from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import PatchParams, checked_progress
-from synth.methods.quilting import precheck_patch_method
-from synth.params import ui
-from synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
+from texsynth.synth.analysis.feature_matching import BETA, MATCH_TAU, REVERSE_WEIGHT, WARP_TAU
+from texsynth.synth.analysis.features import feature_map, feature_overlay
+from texsynth.synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.evaluate.breaks import broken_features_from_masks, seams_from_sources
+from texsynth.synth.evaluate.coverage import exemplar_coverage
+from texsynth.synth.evaluate.patches import copy_map, copy_share
+from texsynth.synth.methods.common import PatchParams, checked_progress
+from texsynth.synth.methods.quilting import precheck_patch_method
+from texsynth.synth.params import ui
+from texsynth.synth.patch.feature_guided import FeatureGuidedSettings, seam_overlay, synthesize_feature_guided
 
 __all__ = ["FeatureGuidedParams", "run_feature_guided"]
 
@@ -271,7 +272,7 @@ class FeatureGuidedParams(PatchParams):
     )
 
     def feature_options(self) -> dict[str, object]:
-        """Keyword arguments of :func:`synth.analysis.features.feature_map`."""
+        """Keyword arguments of :func:`texsynth.synth.analysis.features.feature_map`."""
         return {
             "features": self.features,
             "polarity": self.polarity,
@@ -290,8 +291,8 @@ def reverse_weight_for(exemplar: np.ndarray) -> float:
     oriented ones a feature that starts inside the overlap is often real (a brick's horizontal joint
     meeting a vertical one): with weight 4 brick's orientation KL went 0.018 -> 0.098 (its horizontal
     joints thinned out) and its grey KL 0.023 -> 0.037 (docs/quality.md, seeds 1-3). So
-    :data:`~synth.analysis.feature_matching.REVERSE_WEIGHT` below
-    :data:`~synth.analysis.tensor.ORIENTED_COHERENCE`, 0 (the paper's eq 2) at or above it.
+    :data:`~texsynth.synth.analysis.feature_matching.REVERSE_WEIGHT` below
+    :data:`~texsynth.synth.analysis.tensor.ORIENTED_COHERENCE`, 0 (the paper's eq 2) at or above it.
     """
     return REVERSE_WEIGHT if mean_coherence(exemplar) < ORIENTED_COHERENCE else 0.0
 
@@ -299,7 +300,8 @@ def reverse_weight_for(exemplar: np.ndarray) -> float:
 def search_for(exemplar: np.ndarray) -> tuple[str, float]:
     """The candidate search ``error=None`` / ``usage_weight=None`` stand for, from the exemplar.
 
-    On weakly oriented exemplars (below :data:`~synth.analysis.tensor.ORIENTED_COHERENCE`) the paper's
+    On weakly oriented exemplars (below :data:`~texsynth.synth.analysis.tensor.ORIENTED_COHERENCE`) the
+    paper's
     colour SSD picks the flattest candidates where the overlap cannot be matched exactly, and on laminar
     HRTEM crops that mix ordered shells and a disordered core the output converges to one region (the
     core, or the straightest fringes: onion crop orientation KL 1.22, share of the exemplar used 0.54);

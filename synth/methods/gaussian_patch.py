@@ -1,12 +1,13 @@
 """Conditional locally Gaussian patch synthesis (Raad, Desolneux & Morel 2015): LG, CLG and RCLG.
 
 Patches of side ``w`` are synthesized in raster order with overlap (sec. 2, Fig. 1;
-:class:`synth.patch.layout.PatchLayout`). For each new patch, the ``N`` exemplar patches nearest to the
-output on the overlap (L2, eq. 1; FFT correlation, :class:`synth.patch.search.PatchSearcher`) give
+:class:`texsynth.synth.patch.layout.PatchLayout`). For each new patch, the ``N`` exemplar patches nearest to
+the
+output on the overlap (L2, eq. 1; FFT correlation, :class:`texsynth.synth.patch.search.PatchSearcher`) give
 ``mu`` and ``Sigma`` (eq. 1); the patch is then a draw from ``N(mu, Sigma)`` (``model='lg'``), the
 conditional mean given the overlap ``y0`` (``'clg'``, eq. 4), or the minimiser of eq. 5 (``'rclg'``,
 closed form eq. 7 with ``G = Sigma + sigma^2 I``), solved in the ``N``-dimensional span of the
-neighbours (:mod:`synth.patch.gaussian`). ``blending='boundary-cut'`` stitches it along the
+neighbours (:mod:`texsynth.synth.patch.gaussian`). ``blending='boundary-cut'`` stitches it along the
 Efros-Freeman minimum-error cut (Fig. 3); ``'none'`` pastes it (Fig. 2).
 
 Departures, each measured in docs/patch.md and docs/design.md ("gaussian-patch"):
@@ -39,15 +40,15 @@ import numpy as np
 from pydantic import Field
 from skimage.transform import rescale, resize
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.errors import InvalidParameter
-from synth.evaluate.coverage import exemplar_coverage
-from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import PatchParams, checked_progress
-from synth.methods.quilting import check_patch_geometry
-from synth.params import ui
-from synth.patch.cut import error_surface, strips_cut_mask
-from synth.patch.gaussian import (
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.evaluate.coverage import exemplar_coverage
+from texsynth.synth.evaluate.patches import copy_map, copy_share
+from texsynth.synth.methods.common import PatchParams, checked_progress
+from texsynth.synth.methods.quilting import check_patch_geometry
+from texsynth.synth.params import ui
+from texsynth.synth.patch.cut import error_surface, strips_cut_mask
+from texsynth.synth.patch.gaussian import (
     GaussianPatchModel,
     lg_patch,
     localisation_taper,
@@ -57,9 +58,9 @@ from synth.patch.gaussian import (
     rclg_patch,
     restore_contrast,
 )
-from synth.patch.layout import PatchLayout, Strips, check_periodic_size
-from synth.patch.search import PatchSearcher, k_nearest
-from synth.patch.usage import UsagePenalty
+from texsynth.synth.patch.layout import PatchLayout, Strips, check_periodic_size
+from texsynth.synth.patch.search import PatchSearcher, k_nearest
+from texsynth.synth.patch.usage import UsagePenalty
 
 __all__ = ["GaussianPatchParams", "run_gaussian_patch", "synthesize_gaussian_patches"]
 

@@ -1,13 +1,15 @@
 """Image quilting (Efros & Freeman 2001): patches in raster order, stitched by a minimum-error cut.
 
-For every patch position of the layout (:class:`synth.patch.layout.PatchLayout`: side ``w``, overlap a
+For every patch position of the layout (:class:`texsynth.synth.patch.layout.PatchLayout`: side ``w``, overlap
+a
 sixth of it), the masked SSD of the output's overlap (L-shaped, top or left) against every exemplar patch
-is computed by FFT correlation (:class:`synth.patch.search.PatchSearcher`); one patch is chosen uniformly
+is computed by FFT correlation (:class:`texsynth.synth.patch.search.PatchSearcher`); one patch is chosen
+uniformly
 at random among those whose error is within ``(1 + tolerance)`` of the best (sec. 2.1: "within 0.1 times
 the error of the best match"), and stitched along the minimum-error boundary cut of the overlap error
 surface (sec. 2.1, dynamic programming; the vertical and horizontal cuts of an L meet at their cheapest
-common point, :mod:`synth.patch.cut`) or, with ``blending='graph-cut'``, along the Kwatra et al. 2003
-graph-cut seam (:mod:`synth.patch.graphcut`).
+common point, :mod:`texsynth.synth.patch.cut`) or, with ``blending='graph-cut'``, along the Kwatra et al. 2003
+graph-cut seam (:mod:`texsynth.synth.patch.graphcut`).
 
 References
 ----------
@@ -20,13 +22,16 @@ Departures (docs/patch.md has the measurements)
 - The first patch is drawn uniformly among all exemplar patches; the output is grown to whole patches
   and cropped; the overlap error sums colour channels; only patches inside the exemplar are candidates.
 - ``periodic=True`` (not the paper): a torus layout, the last patch of a row (column) searched and cut
-  against both of its known strips (:func:`synth.patch.cut.strips_cut_mask`).
+  against both of its known strips (:func:`texsynth.synth.patch.cut.strips_cut_mask`).
 - ``error='normalised'``, ``usage_weight=1`` (the paper: ``'ssd'``, 0): the SSD divided by the overlap's
-  plus the candidate's variance (:meth:`synth.patch.search.PatchSearcher.normalised_ssd`) times a penalty
-  on over-used exemplar regions (:class:`synth.patch.usage.UsagePenalty`), so the output does not settle
+  plus the candidate's variance (:meth:`texsynth.synth.patch.search.PatchSearcher.normalised_ssd`) times a
+  penalty
+  on over-used exemplar regions (:class:`texsynth.synth.patch.usage.UsagePenalty`), so the output does not
+  settle
   in the exemplar's flattest region (docs/patch.md, section "Laminar HRTEM").
-- ``stats['patch_sources']`` and ``stats['coverage']`` (:func:`synth.evaluate.coverage.exemplar_coverage`);
-  extras ``copy_map`` (:func:`synth.evaluate.copy_map`) and ``source_map`` (row, column per pixel).
+- ``stats['patch_sources']`` and ``stats['coverage']``
+(:func:`texsynth.synth.evaluate.coverage.exemplar_coverage`);
+  extras ``copy_map`` (:func:`texsynth.synth.evaluate.copy_map`) and ``source_map`` (row, column per pixel).
 """
 
 from __future__ import annotations
@@ -38,17 +43,17 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.errors import InvalidParameter
-from synth.evaluate.coverage import exemplar_coverage
-from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import PatchParams, checked_progress
-from synth.params import ui
-from synth.patch.cut import error_surface, strips_cut_mask
-from synth.patch.graphcut import graph_cut_mask
-from synth.patch.layout import PatchLayout, check_periodic_size
-from synth.patch.search import PatchSearcher, candidates_within
-from synth.patch.usage import UsagePenalty
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.evaluate.coverage import exemplar_coverage
+from texsynth.synth.evaluate.patches import copy_map, copy_share
+from texsynth.synth.methods.common import PatchParams, checked_progress
+from texsynth.synth.params import ui
+from texsynth.synth.patch.cut import error_surface, strips_cut_mask
+from texsynth.synth.patch.graphcut import graph_cut_mask
+from texsynth.synth.patch.layout import PatchLayout, check_periodic_size
+from texsynth.synth.patch.search import PatchSearcher, candidates_within
+from texsynth.synth.patch.usage import UsagePenalty
 
 __all__ = ["QuiltingParams", "check_patch_geometry", "precheck_patch_method", "run_quilting"]
 

@@ -35,10 +35,10 @@ import numpy as np
 from pydantic import Field
 from scipy import fft as sfft
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.evaluate.patches import copy_map, copy_share
-from synth.methods.common import checked_progress
-from synth.params import MethodParams, ui
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.evaluate.patches import copy_map, copy_share
+from texsynth.synth.methods.common import checked_progress
+from texsynth.synth.params import MethodParams, ui
 
 __all__ = ["RandomPhaseParams", "periodic_component", "random_phase_noise", "run_random_phase"]
 

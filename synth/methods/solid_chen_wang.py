@@ -7,8 +7,10 @@ discrete solver (Han et al. 2006) and two histograms. It minimises Kopf's eq 1,
 a **search** pass (each ``e_{v,p}``: the best k-coherent candidate, its distance times the **index
 histogram** factor ``1 + w_idx max(0, H_idx / T_idx - 1)``) and a **discrete solver** pass (each voxel
 copies the candidate exemplar pixel of least ``fit + consensus * (e - mu)^2`` times the **position
-histogram** factor; every voxel is an exemplar pixel). Coarse to fine (:func:`synth.pixel.solid.run_levels`);
-:mod:`synth.kernels.solid_kcoherence` has the formulas. One exemplar per plane for anisotropic materials;
+histogram** factor; every voxel is an exemplar pixel). Coarse to fine
+(:func:`texsynth.synth.pixel.solid.run_levels`);
+:mod:`texsynth.synth.kernels.solid_kcoherence` has the formulas. One exemplar per plane for anisotropic
+materials;
 ``planes=('xz', 'yz')`` for laminae (ALGORITHMS.md, section 4).
 
 References: J. Chen, B. Wang, "High quality solid texture synthesis using position and index histogram
@@ -25,7 +27,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - a final rank remap onto the exemplars' grey levels (``grey_remap``, as Kopf): the solver loses the tails;
 - laminae only: orientation re-weighting (``orientation_gain`` 32) and an annealing schedule
   (60 ``coarse_iterations``, ``solve_radius`` 1);
-- the laminar start (``structure``, :mod:`synth.pixel.laminar`): one laminar isotropic exemplar starts from
+- the laminar start (``structure``, :mod:`texsynth.synth.pixel.laminar`): one laminar isotropic exemplar
+starts from
   curved sheets at its period, matched by the tree search, on the levels that keep the period; for
   short-fringed exemplars solid-kopf's pilot decides (docs/solid.md, "chosen by a pilot").
 """
@@ -40,16 +43,16 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.orientation_histogram import (
+from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
     orientation_labels,
     usage_factors,
 )
-from synth.api import PLANES, MethodSpec, Progress, Result, register
-from synth.errors import InvalidInput
-from synth.grid.scan import ScanOrder, scan_order
-from synth.kernels.solid_kcoherence import (
+from texsynth.synth.api import PLANES, MethodSpec, Progress, Result, register
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.grid.scan import ScanOrder, scan_order
+from texsynth.synth.kernels.solid_kcoherence import (
     ExemplarBank,
     SliceGeometry,
     SolidState,
@@ -58,11 +61,11 @@ from synth.kernels.solid_kcoherence import (
     search_pass,
     solve_pass,
 )
-from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
-from synth.methods.solid_kopf import laminar_pilot
-from synth.params import ui
-from synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
-from synth.pixel.solid import (
+from texsynth.synth.methods.common import SolidParams, checked_progress, laminar_start_fields
+from texsynth.synth.methods.solid_kopf import laminar_pilot
+from texsynth.synth.params import ui
+from texsynth.synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
+from texsynth.synth.pixel.solid import (
     PLANE_AXES,
     LevelStep,
     ProgressMeter,
@@ -77,7 +80,7 @@ from synth.pixel.solid import (
     run_levels,
     structure_schedule,
 )
-from synth.pixel.synthesis import k_coherence_sets
+from texsynth.synth.pixel.synthesis import k_coherence_sets
 
 __all__ = ["SolidChenWangParams", "run_solid_chen_wang", "synthesize_solid_chen_wang"]
 
@@ -336,7 +339,7 @@ def _geometry(
 
 def _bank_orientations(plan: SolidPlan, level: int, bank: ExemplarBank) -> list[OrientationLabels]:
     """Per plane, the orientation labels of its exemplar at ``level`` indexed by the bank's global
-    positions (:func:`synth.analysis.orientation_histogram.orientation_labels`)."""
+    positions (:func:`texsynth.synth.analysis.orientation_histogram.orientation_labels`)."""
     n = len(bank.values)
     lower = np.zeros(n, dtype=np.int64)
     fraction = np.zeros(n, dtype=np.float64)
@@ -378,7 +381,7 @@ def _tree_matches(
     plan: SolidPlan, level: int, bank: ExemplarBank, volume: np.ndarray, periodic: bool
 ) -> np.ndarray:
     """Each plane's best exemplar match of every voxel's slice neighbourhood in ``volume`` (PCA + k-d
-    tree, :meth:`synth.pixel.solid.ExemplarNeighbourhoods.search`), as global bank indices."""
+    tree, :meth:`texsynth.synth.pixel.solid.ExemplarNeighbourhoods.search`), as global bank indices."""
     shape = volume.shape
     vol = np.ascontiguousarray(volume, dtype=np.float32)
     centres = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), axis=-1).reshape(-1, 3)
@@ -471,7 +474,8 @@ class _Schedule:
 
     @classmethod
     def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
-        """Laminae (``adapt_to_structure``, :func:`synth.pixel.solid.is_laminar`) get at least 10 iterations
+        """Laminae (``adapt_to_structure``, :func:`texsynth.synth.pixel.solid.is_laminar`) get at least 10
+        iterations
         per level and the laminar settings of the parameters left ``None``; fewer levels hurt this method,
         so they stay."""
         iterations = params.iterations
@@ -510,7 +514,7 @@ class _Schedule:
 
 
 class _ChenWangLoop:
-    """Search and discrete-solver passes at each level (:func:`synth.pixel.solid.run_levels`)."""
+    """Search and discrete-solver passes at each level (:func:`texsynth.synth.pixel.solid.run_levels`)."""
 
     def __init__(
         self, params: SolidChenWangParams, plan: SolidPlan, run: SolidRun, schedule: _Schedule
@@ -696,7 +700,7 @@ def run_solid_chen_wang(
     constraint: np.ndarray | None = None,
     exemplars: Mapping[str, np.ndarray] | None = None,
 ) -> Result:
-    """The registered runner (see :class:`synth.api.MethodSpec`)."""
+    """The registered runner (see :class:`texsynth.synth.api.MethodSpec`)."""
     start = time.perf_counter()
     report = checked_progress(progress)
     planes = dict(exemplars) if exemplars is not None else dict.fromkeys(PLANES, exemplar)

@@ -6,7 +6,7 @@ neighbourhood of that plane's exemplar. Each iteration alternates the **search s
 and the **optimisation step**: every voxel becomes the weighted average of the values the matched
 neighbourhoods covering it propose (eq 2), IRLS weights ``||s_{v,i} - e_{v,i}||^(r-2)``, ``r = 0.8`` (eq 3),
 divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (eq 4: histogram matching). Coarse to fine over Gaussian
-pyramids (:func:`synth.pixel.solid.run_levels`); ``planes``: all three views, or two for laminae.
+pyramids (:func:`texsynth.synth.pixel.solid.run_levels`); ``planes``: all three views, or two for laminae.
 
 References: J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid texture
 synthesis from 2D exemplars", ACM Trans. Graph. 26(3) (SIGGRAPH 2007), article 2; eqs 1-4. V. Kwatra et
@@ -24,7 +24,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
 - neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
-- structured starts (``structure``, :mod:`synth.pixel.laminar`; Akl 2014's structure first, in 3D): curved
+- structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
+curved
   sheets for isotropic fringes (a pilot for short ones), a crumpled stack fitted to anisotropic ones;
 - after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
@@ -38,16 +39,16 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.orientation_histogram import (
+from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
     orientation_labels,
     usage_factors,
 )
-from synth.analysis.tensor import mean_coherence
-from synth.api import MethodSpec, Progress, Result, register
-from synth.grid.scan import ScanOrder, scan_order
-from synth.kernels.solid_search import (
+from texsynth.synth.analysis.tensor import mean_coherence
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.grid.scan import ScanOrder, scan_order
+from texsynth.synth.kernels.solid_search import (
     KCOHERENCE_BLOCKS,
     UPDATE_BLOCK,
     HistogramState,
@@ -56,9 +57,9 @@ from synth.kernels.solid_search import (
     best_vote,
     irls_update,
 )
-from synth.methods.common import SolidParams, checked_progress, laminar_start_fields
-from synth.params import ui
-from synth.pixel.laminar import (
+from texsynth.synth.methods.common import SolidParams, checked_progress, laminar_start_fields
+from texsynth.synth.params import ui
+from texsynth.synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
     level_phase,
@@ -70,7 +71,7 @@ from synth.pixel.laminar import (
     start_kind,
     structure_levels,
 )
-from synth.pixel.solid import (
+from texsynth.synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
     LevelStep,
@@ -269,7 +270,7 @@ def _orientation_factors(
 
     The excess of each bin is the (current, IRLS-weighted) over-use of the orientations of the exemplar
     pixels the plane's matches are centred on
-    (:func:`synth.analysis.orientation_histogram.orientation_excess`), interpolated between a match's
+    (:func:`texsynth.synth.analysis.orientation_histogram.orientation_excess`), interpolated between a match's
     two bins: eq 4's histogram matching applied to orientations instead of grey levels, so the slices
     of each plane are pulled toward their exemplar's orientation distribution (a departure; docs/solid.md).
     """
@@ -278,7 +279,7 @@ def _orientation_factors(
 
 
 class _KopfLoop:
-    """Kopf's search and optimisation steps at each level (:func:`synth.pixel.solid.run_levels`)."""
+    """Kopf's search and optimisation steps at each level (:func:`texsynth.synth.pixel.solid.run_levels`)."""
 
     def __init__(
         self,

@@ -6,7 +6,7 @@ in that plane's exemplar (SSD), and the voxel takes the **average of the matched
 repeat until the matches stop changing (the fraction of voxels whose match changed in any plane falls
 below ``tolerance``, the study's "same neighbourhoods after 2 consecutive iterations") or
 ``iterations`` passes. Multi-resolution over Gaussian pyramids, coarse to fine
-(:func:`synth.pixel.solid.run_levels`).
+(:func:`texsynth.synth.pixel.solid.run_levels`).
 
 References
 ----------
@@ -32,12 +32,12 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.grid.scan import ScanOrder, scan_order
-from synth.kernels.solid_search import KCOHERENCE_BLOCKS
-from synth.methods.common import SolidParams, checked_progress
-from synth.params import ui
-from synth.pixel.solid import (
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.grid.scan import ScanOrder, scan_order
+from texsynth.synth.kernels.solid_search import KCOHERENCE_BLOCKS
+from texsynth.synth.methods.common import SolidParams, checked_progress
+from texsynth.synth.params import ui
+from texsynth.synth.pixel.solid import (
     PLANES,
     LevelStep,
     ProgressMeter,
@@ -104,7 +104,7 @@ class SolidWeiLevoyParams(SolidParams):
 
 
 class _WeiLevoyLoop:
-    """Wei-Levoy passes at each level (:func:`synth.pixel.solid.run_levels`)."""
+    """Wei-Levoy passes at each level (:func:`texsynth.synth.pixel.solid.run_levels`)."""
 
     def __init__(self, params: SolidWeiLevoyParams, plan: SolidPlan, run: SolidRun) -> None:
         self.params, self.plan, self.run = params, plan, run

@@ -1,6 +1,6 @@
 """Hints laid along the constraint's strands: each output strand proposes one exemplar fibre along its length.
 
-Why: arbitrary-shape synthesis (:mod:`synth.methods.arbitrary_shape`) offers every output position a
+Why: arbitrary-shape synthesis (:mod:`texsynth.synth.methods.arbitrary_shape`) offers every output position a
 *hint*, an exemplar point in the rotated copy at the local angle. The paper's route takes it from an
 exemplar-like texture synthesized in the exemplar's own frame (section 2.1: "synthesize a texture of
 the constraint's size first"), so along a constraint strand that runs across the exemplar's fibres
@@ -18,7 +18,7 @@ How (a piecewise parametrisation of the output by the constraint's strands):
    strands (the streamline of the normal field), ``1.2 spacing`` long, rasterised 2 pixels thick, each
    of its pixels knowing its distance ``u`` along the cut; each cut gets a random fibre ``a0`` and
    offset ``s0``.
-3. **Parameters of every pixel** (:func:`synth.kernels.streamline_hits.first_hits`): its strand is
+3. **Parameters of every pixel** (:func:`texsynth.synth.kernels.streamline_hits.first_hits`): its strand is
    followed both ways until it meets a cut (the nearer one wins); the pixel's across coordinate is the
    ``u`` where it met the cut (constant along the strand), its along coordinate the signed number of
    steps. Its hint is the table's entry ``(a0 + u, s0 + s)``: along a strand the fibre stays the same
@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.analysis.streamlines import doubled_angle, trace
-from synth.kernels.streamline_hits import first_hits
+from texsynth.synth.analysis.streamlines import doubled_angle, trace
+from texsynth.synth.kernels.streamline_hits import first_hits
 
 __all__ = ["FibreTable", "StrandHints", "fibre_table", "strand_hints"]
 

@@ -7,7 +7,7 @@ Gaussian pyramids of the tensor fields, the best match's tensor being copied. St
 Wei-Levoy on pixels where every neighbourhood has a pixel part (SSD) and a tensor part (``S_out``
 around the output position against ``S_in`` around the candidate, STD): ``D = p SSD + (1 - p) STD``
 (eq 13). The paper leaves eq 13's normalisation open: each part is divided by its typical value
-(:mod:`synth.pixel.synthesis`), so ``p = 0.5`` weighs both equally. ``periodic=True`` closes the tile
+(:mod:`texsynth.synth.pixel.synthesis`), so ``p = 0.5`` weighs both equally. ``periodic=True`` closes the tile
 borders in both stages (``S_out``'s pyramid always wraps).
 
 Departures, each measured in docs/tensor-constrained.md ("Departures from the paper, measured"):
@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from synth.analysis.tensor import (
+from texsynth.synth.analysis.tensor import (
     ORIENTED_COHERENCE,
     Metric,
     coherence,
@@ -42,12 +42,12 @@ from synth.analysis.tensor import (
     orientation,
     structure_tensor,
 )
-from synth.api import MethodSpec, Progress, Result, register
-from synth.grid.neighbourhood import Shape
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.params import ui
-from synth.pixel.synthesis import (
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.grid.neighbourhood import Shape
+from texsynth.synth.grid.pyramid import gaussian_pyramid, level_shapes
+from texsynth.synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from texsynth.synth.params import ui
+from texsynth.synth.pixel.synthesis import (
     Guidance,
     check_neighbourhoods_fit,
     source_map_pyramid,
@@ -324,7 +324,8 @@ def refinement_size_for(s_in: np.ndarray, params: TensorConstrainedParams) -> in
 
 #: Falloff of every exemplar but the crossed oriented ones (``falloff=None``; issue 13's value).
 DEFAULT_FALLOFF = 0.156
-#: An oriented exemplar whose cross fraction (:func:`synth.analysis.tensor.cross_orientation_fraction`)
+#: An oriented exemplar whose cross fraction
+# (:func:`texsynth.synth.analysis.tensor.cross_orientation_fraction`)
 #: reaches this has structures in two directions (brick 0.14; bent laminae 0.001, wood grain 0.000).
 CROSSED_FRACTION = 0.05
 

@@ -3,7 +3,7 @@
 For every output pixel in scan order, its neighbourhood (causal L-shape or square, plus the parent
 level's square neighbourhood) is compared by SSD with exemplar neighbourhoods and the best match's
 centre is copied; multi-resolution over Gaussian pyramids, several passes per level, toroidal
-output, exemplar neighbourhoods fully inside the exemplar (:mod:`synth.pixel.synthesis`).
+output, exemplar neighbourhoods fully inside the exemplar (:mod:`texsynth.synth.pixel.synthesis`).
 
 Departures, each measured in docs/pixel.md ("wei-levoy's defaults"), each undone by a parameter:
 - unsynthesized pixels are ignored in the first pass rather than compared as noise;
@@ -29,11 +29,11 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from synth.api import MethodSpec, Progress, Result, register
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.methods.common import NeighbourhoodParams, as_features, checked_progress
-from synth.params import ui
-from synth.pixel.synthesis import check_neighbourhoods_fit, synthesize_source_map
+from texsynth.synth.api import MethodSpec, Progress, Result, register
+from texsynth.synth.grid.pyramid import gaussian_pyramid, level_shapes
+from texsynth.synth.methods.common import NeighbourhoodParams, as_features, checked_progress
+from texsynth.synth.params import ui
+from texsynth.synth.pixel.synthesis import check_neighbourhoods_fit, synthesize_source_map
 
 __all__ = ["WeiLevoyParams", "run_wei_levoy"]
 

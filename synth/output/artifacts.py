@@ -3,19 +3,21 @@
 A 2-D run gives ``output.png`` (8-bit, or 16-bit on request), ``output.tiff`` (16-bit),
 ``coherence.png`` and ``orientation.png`` of the synthesized structure tensor field (of the output
 when the method has none; ``constraint_*`` of the constraint when there is one), renderings of the
-method's extra maps, ``metrics.json`` (:func:`synth.evaluate.evaluate_pair`: exemplar vs output),
-``plots/*.png`` (:func:`synth.output.plots.write_plots`) and ``manifest.json`` (method, full parameters, seed,
+method's extra maps, ``metrics.json`` (:func:`texsynth.synth.evaluate.evaluate_pair`: exemplar vs output),
+``plots/*.png`` (:func:`texsynth.synth.output.plots.write_plots`) and ``manifest.json`` (method, full
+parameters, seed,
 versions, timings). A volume gives ``output.tiff`` as a multi-page stack (16-bit, with the ImageJ
 voxel size when one is given) and ``output.png`` as its middle ``xy`` slice; ``slices.png`` (the three
 orthogonal mid-slices beside their exemplars), ``cube.png`` (the block and its cut-away corner), the
 mid-slices' ``coherence_{xy,xz,yz}.png`` and ``orientation_{xy,xz,yz}.png``
-(:mod:`synth.output.volume`); its metrics are the multi-2D ones with per-plane exemplars and
-two-point correlations (:func:`synth.evaluate.evaluate_volume`), its plots per plane plus
+(:mod:`texsynth.synth.output.volume`); its metrics are the multi-2D ones with per-plane exemplars and
+two-point correlations (:func:`texsynth.synth.evaluate.evaluate_volume`), its plots per plane plus
 ``plots/s2.png``. The metrics also carry the exemplars' diagnostics under ``exemplar`` (their
-stationarity and any warning, :func:`synth.analysis.stationarity.exemplar_diagnostics`), which the
+stationarity and any warning, :func:`texsynth.synth.analysis.stationarity.exemplar_diagnostics`), which the
 manifest repeats in short (``exemplar_stationarity``); ``headline``, each headline measure with its
-target, direction and verdict (:func:`synth.evaluate.glossary.headline`); and ``fringes.shown``: fringe
-statistics only for an exemplar with lattice fringes (:func:`synth.evaluate.glossary.fringes_shown`),
+target, direction and verdict (:func:`texsynth.synth.evaluate.glossary.headline`); and ``fringes.shown``:
+fringe
+statistics only for an exemplar with lattice fringes (:func:`texsynth.synth.evaluate.glossary.fringes_shown`),
 else ``{"shown": false, "reason"}``. Every run also gets ``exemplar-coherence.png`` and
 ``exemplar-orientation.png``, the exemplar's own tensor images (the ``xy`` one's for per-plane
 exemplars). Every file is written atomically.
@@ -30,13 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from synth import __version__
-from synth.analysis.stationarity import exemplar_diagnostics
-from synth.analysis.tensor import coherence, structure_direction, structure_tensor
-from synth.api import Result
-from synth.evaluate.glossary import fringes_shown, headline
-from synth.evaluate.measures import as_grey, evaluate_pair_fringes, evaluate_volume, to_json_types
-from synth.io import (
+from texsynth.synth import __version__
+from texsynth.synth.analysis.stationarity import exemplar_diagnostics
+from texsynth.synth.analysis.tensor import coherence, structure_direction, structure_tensor
+from texsynth.synth.api import Result
+from texsynth.synth.evaluate.glossary import fringes_shown, headline
+from texsynth.synth.evaluate.measures import as_grey, evaluate_pair_fringes, evaluate_volume, to_json_types
+from texsynth.synth.io import (
     InputBits,
     array_to_unit,
     atomic_write_bytes,
@@ -45,9 +47,9 @@ from synth.io import (
     save_image,
     save_volume,
 )
-from synth.output.plots import write_plots, write_s2_plot
-from synth.output.render import coherence_image, orientation_image
-from synth.output.volume import write_volume_images
+from texsynth.synth.output.plots import write_plots, write_s2_plot
+from texsynth.synth.output.render import coherence_image, orientation_image
+from texsynth.synth.output.volume import write_volume_images
 
 __all__ = ["versions", "write_artifacts"]
 
@@ -83,7 +85,8 @@ def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list
 
 #: Extra maps rendered on a fixed scale ``(black, white)`` instead of their own min-max, so that maps of
 #: different runs compare: ``copy_map`` is the RMS distance to the nearest exemplar patch
-#: (:func:`synth.evaluate.copy_map`): black = verbatim copy, white = 0.05 or more away. The RGB overlays
+#: (:func:`texsynth.synth.evaluate.copy_map`): black = verbatim copy, white = 0.05 or more away. The RGB
+# overlays
 #: of ``feature-guided`` (feature maps, seams) are already pictures in [0, 1].
 FIXED_RANGES: dict[str, tuple[float, float]] = {
     "copy_map": (0.0, 0.05),
@@ -145,7 +148,8 @@ def write_artifacts(
     bit_depth : {8, 16}, optional
         That of ``output.png``; ``output.tiff`` is always 16-bit. Default: from ``input_bits``.
     input_bits : InputBits, optional
-        The exemplar's bit depth (:mod:`synth.io.depth`; default ``result.input_bits``). An input of more
+        The exemplar's bit depth (:mod:`texsynth.synth.io.depth`; default ``result.input_bits``). An input of
+        more
         than 8 bits gives a 16-bit grey ``output.png``; one that uses fewer bits than its 16-bit
         container (12-bit camera data: 0-4095) gives ``output.tiff`` at that depth (values 0-4095;
         ``output.png`` stays full-scale, the picture to look at), and ``metrics.json`` says it:
@@ -157,7 +161,7 @@ def write_artifacts(
         their own exemplar. Ignored for 2-D results.
     voxel_size : float or (float, float, float), optional
         A volume's voxel size in ``unit`` (one value, or ``(z, y, x)``): ImageJ calibration of
-        ``output.tiff`` (:func:`synth.io.save_volume`); with cubic voxels in nm, fringe lengths are
+        ``output.tiff`` (:func:`texsynth.synth.io.save_volume`); with cubic voxels in nm, fringe lengths are
         also reported in nm. Ignored for 2-D results.
     unit : str
         The unit of ``voxel_size``.

@@ -1,11 +1,11 @@
 """A small chart painter on Pillow: line and step charts, rose diagrams, titles and legends.
 
-The evaluation plots (:mod:`synth.output.plots`) need a handful of chart elements, and a synthesis
+The evaluation plots (:mod:`texsynth.synth.output.plots`) need a handful of chart elements, and a synthesis
 writes them every run: matplotlib took longer to import (0.4-0.7 s on the project's machine) than the
 whole evaluation, and 1.5 s to draw five figures. Here a chart is painted with Pillow at twice its
 size and halved with a box filter, which smooths lines and text like an anti-aliased renderer, in a
 few milliseconds. Sizes are in output pixels (a 640 x 400 chart is a 640 x 400 PNG); the text is
-Pillow's default font, as in the legends of :mod:`synth.output.render`.
+Pillow's default font, as in the legends of :mod:`texsynth.synth.output.render`.
 
 Only what the plots use: :class:`Chart` (a canvas of panels, a title, :meth:`Chart.save`),
 :class:`Axes` (``stairs``, ``plot``, ``axvline``, ``axhline``, labels, ``legend``) and :class:`Rose`
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from synth.io import atomic_write_bytes
+from texsynth.synth.io import atomic_write_bytes
 
 __all__ = ["Axes", "Chart", "Rose", "hex_colour", "nice_ticks"]
 

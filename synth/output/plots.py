@@ -1,7 +1,7 @@
-"""Comparison plots of an evaluation (PNG, painted with Pillow by :mod:`synth.output.chart`).
+"""Comparison plots of an evaluation (PNG, painted with Pillow by :mod:`texsynth.synth.output.chart`).
 
-:func:`write_plots` draws, from the metrics of :func:`synth.evaluate.evaluate_pair` or
-:func:`synth.evaluate.evaluate_volume` and the images themselves:
+:func:`write_plots` draws, from the metrics of :func:`texsynth.synth.evaluate.evaluate_pair` or
+:func:`texsynth.synth.evaluate.evaluate_volume` and the images themselves:
 
 - ``grey_histogram.png``: the exemplar's and the output's grey-level histograms, overlaid;
 - ``orientation_rose.png``: rose diagrams of the energy-weighted orientation histograms, one per
@@ -17,7 +17,7 @@ each axis's slices against its own plane's exemplar. :func:`write_s2_plot` draws
 two-point correlation ``S2(r)`` of a volume along ``x``, ``y`` and ``z`` against the exemplars'
 (Torquato, *Random Heterogeneous Materials*, 2002, chapter 2).
 
-The charts are painted with Pillow (:mod:`synth.output.chart`), the overlays are the images
+The charts are painted with Pillow (:mod:`texsynth.synth.output.chart`), the overlays are the images
 themselves enlarged with a title: a synthesis writes them every run, and with matplotlib its import
 and the drawing of the five plots took 1.5-2.5 s of a 256 x 256 run (docs/benchmarks.md, "The whole
 command"). No state is shared but a cache of fonts, so this module is safe in worker processes and
@@ -40,11 +40,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from PIL import Image
 
-from synth.errors import InvalidInput
-from synth.output.chart import Axes, Chart, Rose, hex_colour
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.output.chart import Axes, Chart, Rose, hex_colour
 
 if TYPE_CHECKING:
-    from synth.analysis.fringes import Fringes
+    from texsynth.synth.analysis.fringes import Fringes
 
 __all__ = ["fringe_overlay", "save_fringe_overlay", "write_plots", "write_s2_plot"]
 
@@ -65,7 +65,7 @@ _DOTTED = (1.0, 1.65)
 
 
 def _as_grey(image: np.ndarray, name: str) -> np.ndarray:
-    from synth.evaluate.measures import as_grey
+    from texsynth.synth.evaluate.measures import as_grey
 
     return as_grey(image, name)
 
@@ -383,7 +383,7 @@ def write_s2_plot(metrics: Mapping[str, Any], out_dir: str | Path, *, dpi: int =
     One panel per physical axis ``x``, ``y``, ``z``: the volume's ``S2(r)`` (solid) and each exemplar's
     along the same physical axis (dashed; the ``xy`` exemplar's columns along ``x``, and so on), the
     exemplars' correlation lengths (dotted) and the relative errors of
-    :func:`synth.evaluate.evaluate_volume`.
+    :func:`texsynth.synth.evaluate.evaluate_volume`.
     """
     chart = _s2_chart(metrics)
     if chart is None:
@@ -411,7 +411,8 @@ def write_plots(
     output : ndarray, shape (H, W), (H, W, 3) or (D, H, W)
         The synthesis output; a volume when ``metrics["kind"] == "volume"``.
     metrics : mapping
-        The result of :func:`synth.evaluate.evaluate_pair` or :func:`synth.evaluate.evaluate_volume`
+        The result of :func:`texsynth.synth.evaluate.evaluate_pair` or
+        :func:`texsynth.synth.evaluate.evaluate_volume`
         for these images (its settings also drive the fringe overlays).
     out_dir : str or Path
         Directory, created if missing.
@@ -419,7 +420,7 @@ def write_plots(
         Resolution of the charts (100: the sizes below; others are resampled).
     fringes : mapping ``{'exemplar', 'output'} -> Fringes``, optional
         The fringes of the exemplar and of the (2-D) output when the caller already extracted them
-        with the metrics' settings (:func:`synth.evaluate.measures.evaluate_pair_fringes`); else they
+        with the metrics' settings (:func:`texsynth.synth.evaluate.measures.evaluate_pair_fringes`); else they
         are extracted here.
 
     Returns
@@ -465,7 +466,7 @@ def write_plots(
         if fringes is not None and key in fringes and not (volume and key == "output"):
             fr = fringes[key]
         else:
-            from synth.analysis.fringes import extract_fringes
+            from texsynth.synth.analysis.fringes import extract_fringes
 
             fr = extract_fringes(img, pixel_size=pixel_size, **options)
         paths.append(_save(_overlay_chart(img, fr, _fringe_title(label, fr)), out / fname))

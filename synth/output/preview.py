@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.io import image_to_png_bytes
+from texsynth.synth.io import image_to_png_bytes
 
 __all__ = ["preview_png"]
 

@@ -10,9 +10,11 @@ Conventions (ALGORITHMS.md, "Rendering"):
   OrientationJ "colour survey").
 
 Which angle? The functions colour whatever angle they are given, but the legends are labelled
-**fringe direction**, and the project passes :func:`synth.analysis.tensor.structure_direction` (the direction
+**fringe direction**, and the project passes :func:`texsynth.synth.analysis.tensor.structure_direction` (the
+direction
 fringes and laminae run, as OrientationJ and materials tools show it), not the gradient direction of
-:func:`synth.analysis.tensor.orientation`, which is 90 degrees away. A caller showing something else says so
+:func:`texsynth.synth.analysis.tensor.orientation`, which is 90 degrees away. A caller showing something else
+says so
 with ``title=``. Angles are counter-clockwise from +x with ``y`` up on screen, so the half-disc in the
 orientation legend is a true picture: the ray at +45 degrees points up-right and wears the colour of
 fringes running up-right.
@@ -30,8 +32,8 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from skimage.color import hsv2rgb
 
-from synth.colour import to_grey
-from synth.errors import InvalidParameter
+from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = [
     "LEGEND_KINDS",
@@ -140,7 +142,8 @@ def orientation_image(
     ----------
     theta : ndarray, shape (H, W)
         Angles in radians, counter-clockwise from +x with ``y`` up; by the project's convention the
-        fringe direction (:func:`synth.analysis.tensor.structure_direction`). Non-finite angles are black.
+        fringe direction (:func:`texsynth.synth.analysis.tensor.structure_direction`). Non-finite angles are
+        black.
     coherence : ndarray, shape (H, W), optional
         When given, the saturation (0 white, 1 full colour), so that orientation-less regions fade
         out; otherwise every pixel is fully saturated.
@@ -169,7 +172,7 @@ def coherence_image(coherence: np.ndarray, *, legend: bool = False, title: str |
     Parameters
     ----------
     coherence : ndarray, shape (H, W)
-        Coherence in [0, 1] (:func:`synth.analysis.tensor.coherence`).
+        Coherence in [0, 1] (:func:`texsynth.synth.analysis.tensor.coherence`).
     legend : bool
         Append the grey-ramp legend.
     title : str, optional

@@ -15,7 +15,7 @@ arrow pointing the way the voxel index grows.
   mid-planes inside (outlined in orange). Faces are shaded by their direction (top lightest, right
   darkest) and edged in dark grey so that the block's shape reads even where the material is black.
 - :func:`write_volume_images`: those two PNGs and, per plane, the coherence and fringe-direction
-  images of the mid-slice with their legends (:mod:`synth.output.render`).
+  images of the mid-slice with their legends (:mod:`texsynth.synth.output.render`).
 
 Text is drawn with Pillow's scalable default font; images are ``uint8`` RGB arrays.
 """
@@ -29,16 +29,16 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from synth.analysis.tensor import coherence, structure_direction, structure_tensor
-from synth.colour import LUMA_WEIGHTS
-from synth.errors import InvalidInput, InvalidParameter
-from synth.io import image_to_png_bytes
-from synth.io.atomic import atomic_write_bytes
-from synth.output.render import coherence_image, orientation_image, with_legend
+from texsynth.synth.analysis.tensor import coherence, structure_direction, structure_tensor
+from texsynth.synth.colour import LUMA_WEIGHTS
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.io import image_to_png_bytes
+from texsynth.synth.io.atomic import atomic_write_bytes
+from texsynth.synth.output.render import coherence_image, orientation_image, with_legend
 
 __all__ = ["PLANES", "PLANE_AXES", "cube_image", "mid_slices", "slices_image", "write_volume_images"]
 
-#: The orthogonal planes of a volume, as :data:`synth.api.PLANES`.
+#: The orthogonal planes of a volume, as :data:`texsynth.synth.api.PLANES`.
 PLANES: tuple[str, ...] = ("xy", "xz", "yz")
 #: (row axis, column axis, fixed axis) of each plane's slice images.
 PLANE_AXES: dict[str, tuple[str, str, str]] = {
@@ -141,7 +141,7 @@ def _plane_exemplars(
 def _grey(image: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(image, dtype=np.float64)
     if arr.ndim == 3 and arr.shape[2] == 3:
-        arr = arr @ np.asarray(LUMA_WEIGHTS, dtype=np.float64)  # as synth.io.load_image
+        arr = arr @ np.asarray(LUMA_WEIGHTS, dtype=np.float64)  # as texsynth.synth.io.load_image
     if arr.ndim != 2 or min(arr.shape) < 1:
         raise InvalidInput(name, f"expected a grey (H, W) image, got shape {np.shape(image)}")
     if not np.isfinite(arr).all():
@@ -519,7 +519,7 @@ def write_volume_images(
 
     Per plane ``p`` in ``xy``, ``xz``, ``yz``: ``coherence_p.png`` and ``orientation_p.png``, the
     coherence (grey) and the fringe direction (hue, faded by coherence) of the structure tensor of the
-    mid-slice (the study's 7x7 window, :func:`synth.analysis.tensor.structure_tensor` defaults), each
+    mid-slice (the study's 7x7 window, :func:`texsynth.synth.analysis.tensor.structure_tensor` defaults), each
     with its legend. Angles are counter-clockwise from the slice's column axis with up on screen, as
     in every 2-D rendering (so in an ``xz`` slice, +90 degrees points toward lower ``z``).
 

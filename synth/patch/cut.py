@@ -7,7 +7,8 @@ values, the path and the pixels right of it take the new patch's. A horizontal c
 the transposed strip. For an L-shaped overlap, the two cuts meet at the corner pixel where the sum of
 their costs-to-go (counting the shared pixel once) is least, and each is traced from there.
 
-A wrapped patch of a periodic layout (:class:`synth.patch.layout.Strips`) is also known along its right
+A wrapped patch of a periodic layout (:class:`texsynth.synth.patch.layout.Strips`) is also known along its
+right
 and/or bottom border: each of those strips gets its own cut, a DP across that strip alone (the strip
 mirrored so that the cut runs from its outer border inward, the same kernel), and the new patch wins where
 it wins for every cut (the intersection of their new sides: where two cuts cross in a corner square, the
@@ -20,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.kernels.options import kernel
-from synth.patch.layout import Strips
+from texsynth.synth.kernels.options import kernel
+from texsynth.synth.patch.layout import Strips
 
 __all__ = [
     "boundary_cut_mask",

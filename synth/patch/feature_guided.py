@@ -1,16 +1,21 @@
 """Feature-guided patch synthesis (Wu & Yu 2004, section 3): match on features and colour, bend, cut.
 
-The engine behind the ``feature-guided`` method (:mod:`synth.methods.feature_guided`), composed of the
-project's pieces: (1) the exemplar's feature map (section 2.3, :func:`synth.analysis.features.feature_map`)
+The engine behind the ``feature-guided`` method (:mod:`texsynth.synth.methods.feature_guided`), composed of
+the
+project's pieces: (1) the exemplar's feature map (section 2.3,
+:func:`texsynth.synth.analysis.features.feature_map`)
 and, with ``rotations``, its seven rotated/reflected copies (:func:`variants`); (2) per patch of the raster
-layout (:class:`synth.patch.layout.PatchLayout`), the colour SSD of the overlap against every exemplar
-patch by FFT (:class:`synth.patch.search.PatchSearcher`), the ``candidates`` best kept; (3) the feature
+layout (:class:`texsynth.synth.patch.layout.PatchLayout`), the colour SSD of the overlap against every
+exemplar
+patch by FFT (:class:`texsynth.synth.patch.search.PatchSearcher`), the ``candidates`` best kept; (3) the
+feature
 matching cost (eq 2, eq 1's ``gdist``, ``tau = 0.1``, ``beta = 0.3``;
-:func:`synth.analysis.feature_matching.matching_costs`), plus ``reverse_weight`` times the reverse term;
+:func:`texsynth.synth.analysis.feature_matching.matching_costs`), plus ``reverse_weight`` times the reverse
+term;
 (4) total cost ``w_f F / mean(F) + (1 - w_f) S / mean(S)`` (``w_f = 0.5``, section 3), drawn among
 those within ``1 + tolerance`` of the least; (5) with ``deform``, the warp (section 2.2): gated
 correspondences (eq 1, ``tau = 10``), thinned to spaced controls, a thin-plate spline confined to the
-overlap and a band (:mod:`synth.analysis.warp`); (6) the graph-cut seam (Kwatra et al. 2003).
+overlap and a band (:mod:`texsynth.synth.analysis.warp`); (6) the graph-cut seam (Kwatra et al. 2003).
 
 Choices where the paper is silent, and departures (reasons and figures: docs/feature-guided.md and
 docs/design.md, "the feature-guided engine"):
@@ -37,7 +42,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage as ndi
 
-from synth.analysis.feature_matching import (
+from texsynth.synth.analysis.feature_matching import (
     BETA,
     MATCH_TAU,
     REVERSE_WEIGHT,
@@ -49,15 +54,15 @@ from synth.analysis.feature_matching import (
     matching_costs,
     thin_correspondences,
 )
-from synth.analysis.features import FeatureMap
-from synth.analysis.tensor import wrap_angle
-from synth.analysis.warp import band_falloff, resample, warp_coordinates
-from synth.colour import to_grey
-from synth.evaluate.breaks import Seams
-from synth.patch.graphcut import graph_cut_mask
-from synth.patch.layout import PatchLayout, Strips
-from synth.patch.search import PatchSearcher, k_nearest
-from synth.patch.usage import UsagePenalty
+from texsynth.synth.analysis.features import FeatureMap
+from texsynth.synth.analysis.tensor import wrap_angle
+from texsynth.synth.analysis.warp import band_falloff, resample, warp_coordinates
+from texsynth.synth.colour import to_grey
+from texsynth.synth.evaluate.breaks import Seams
+from texsynth.synth.patch.graphcut import graph_cut_mask
+from texsynth.synth.patch.layout import PatchLayout, Strips
+from texsynth.synth.patch.search import PatchSearcher, k_nearest
+from texsynth.synth.patch.usage import UsagePenalty
 
 __all__ = [
     "FeatureGuidedOutput",
@@ -174,15 +179,16 @@ class FeatureGuidedSettings:
     min_shift: float = 0.5
     #: resampling of warped patches: 1 bilinear, 3 cubic (clipped to the four neighbours)
     warp_order: int = 3
-    #: a torus of the output's size (a tileable output; :class:`synth.patch.layout.PatchLayout`)
+    #: a torus of the output's size (a tileable output; :class:`texsynth.synth.patch.layout.PatchLayout`)
     periodic: bool = False
     #: warp the wrapped patches of a periodic layout too (known on both sides of an axis); False: paste
     #: them unwarped
     warp_two_sided: bool = True
     #: colour error of the candidates: "ssd" (the paper) or "normalised" (SSD over the overlap's plus the
-    #: candidate's variance, :meth:`synth.patch.search.PatchSearcher.normalised_ssd`)
+    #: candidate's variance, :meth:`texsynth.synth.patch.search.PatchSearcher.normalised_ssd`)
     error: str = "ssd"
-    #: gain of the penalty on over-used exemplar regions (:class:`synth.patch.usage.UsagePenalty`, one per
+    #: gain of the penalty on over-used exemplar regions (:class:`texsynth.synth.patch.usage.UsagePenalty`,
+    # one per
     #: copy of the exemplar); 0: off (the paper)
     usage_weight: float = 0.0
 
@@ -196,7 +202,7 @@ class FeatureGuidedOutput:
     ``(row + ROW_CODE * copy, col)`` for pixels copied as they are (unwarped patches, and the
     pixels a warp leaves in place), and ``(row + WARPED_CODE * (label + 1), col)`` (the patch's own
     frame) for pixels a warp moved, which continue nothing outside their patch.
-    :func:`synth.evaluate.breaks.seams_from_sources` of it with ``labels`` gives the seams by the
+    :func:`texsynth.synth.evaluate.breaks.seams_from_sources` of it with ``labels`` gives the seams by the
     same rule as quilting's ``source_map``: a seam is where two patches meet and the pixels are not
     a verbatim continuation.
     """
@@ -271,14 +277,14 @@ def synthesize_feature_guided(
     exemplar : ndarray, shape (h, w) or (h, w, C)
         Float image in [0, 1]; the patch must fit in it (checked by the caller).
     fmap : FeatureMap
-        The exemplar's feature map (:func:`synth.analysis.features.feature_map`).
+        The exemplar's feature map (:func:`texsynth.synth.analysis.features.feature_map`).
     size : (int, int)
         Output shape ``(H, W)``.
     settings : FeatureGuidedSettings
     rng : numpy.random.Generator
         The only source of randomness.
     report : callable ``(stage, fraction)``
-        Progress; it may raise :class:`synth.errors.Cancelled`.
+        Progress; it may raise :class:`texsynth.synth.errors.Cancelled`.
 
     Returns
     -------

@@ -11,7 +11,8 @@ overlap into the pixels that keep the old values and those that take the new pat
 every edge, so the graph stays connected), and "infinite" is ``2^29``, above any finite cut of a patch
 overlap (at most a few thousand edges).
 
-The known region may be any union of border strips (:class:`synth.patch.layout.Strips`): a wrapped patch
+The known region may be any union of border strips (:class:`texsynth.synth.patch.layout.Strips`): a wrapped
+patch
 of a periodic layout is also known along its right and/or bottom border, and those borders are tied to the
 source like the top and left ones, so the cut runs through every strip.
 """

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 __all__ = ["PatchLayout", "Strips", "check_periodic_size", "overlap_mask", "periodic_positions"]
 

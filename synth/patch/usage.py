@@ -9,7 +9,7 @@ uses than its share has its search error multiplied by
 with ``U(q)`` the uses inside the footprint and ``T(q)`` the uses that footprint would hold if every
 candidate position had been drawn equally often (the pixels' "reach", the number of positions whose
 footprint covers them, times the uses so far over the total reach; so border pixels, which fewer
-footprints cover, are not favoured). This is the factor of :func:`synth.kernels.pixel_search` with
+footprints cover, are not favoured). This is the factor of :func:`texsynth.synth.kernels.pixel_search` with
 positions as labels (Chen & Wang 2010, "Texture synthesis with ... position histogram"; the pixel methods'
 ``position`` weighting). Over-used regions lose against equally good, under-used ones; a weight of 0 is
 off. Measured in docs/patch.md: on HRTEM crops that mix ordered shells with a disordered core, the

@@ -33,8 +33,8 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from scipy import ndimage as ndi
 
-from synth.analysis.tensor import mean_coherence, structure_tensor
-from synth.colour import to_grey
+from texsynth.synth.analysis.tensor import mean_coherence, structure_tensor
+from texsynth.synth.colour import to_grey
 
 __all__ = [
     "ISOTROPIC_MAX",
@@ -126,7 +126,8 @@ def starts_laminar(
     ``adapt_to_structure``) is on and one isotropic (:data:`ISOTROPIC_MAX`) exemplar serves the three
     planes: the isotropic sheets fit it when it is fringed (mean coherence >= :data:`START_COHERENCE`);
     between :data:`PILOT_COHERENCE` and that, ``pilot(exemplar)`` decides (the methods pass
-    :func:`synth.methods.solid_kopf.laminar_pilot`: a small volume from each start, the one whose slices
+    :func:`texsynth.synth.methods.solid_kopf.laminar_pilot`: a small volume from each start, the one whose
+    slices
     keep the exemplar's coherence). Per-plane exemplars, two views and one-orientation laminae describe
     anisotropic materials that isotropic sheets do not (docs/solid.md), and a weakly oriented exemplar
     (soot-128) is not laminar: all keep the paper's random start.
@@ -263,7 +264,8 @@ def plane_orientation(image: np.ndarray) -> tuple[np.ndarray, float]:
 def sheet_normal(orientations: Mapping[str, tuple[np.ndarray, float]]) -> np.ndarray:
     """The unit 3D sheet normal ``(n_z, n_y, n_x)`` whose traces best fit the planes' fringe normals.
 
-    Sheets of normal ``n`` show, in a plane of volume axes ``(a, b)`` (:data:`synth.pixel.solid.PLANE_AXES`),
+    Sheets of normal ``n`` show, in a plane of volume axes ``(a, b)``
+    (:data:`texsynth.synth.pixel.solid.PLANE_AXES`),
     fringes whose normal is ``(n_a, n_b)``; a plane whose fringe normal is ``d`` asks
     ``n_a d_b - n_b d_a = 0``. Each plane's equation is weighted by its anisotropy and ``n`` is the
     least-squares solution of unit length (the smallest right singular vector), its largest component

@@ -2,7 +2,7 @@
 
 A voxel of a volume ``(D, H, W) = (z, y, x)`` lies in three orthogonal slices: ``xy`` (rows ``y``,
 columns ``x``), ``xz`` (rows ``z``, columns ``x``) and ``yz`` (rows ``z``, columns ``y``)
-(:data:`synth.api.PLANES`). Its *slice neighbourhoods* are the ``n x n`` squares around it in those
+(:data:`texsynth.synth.api.PLANES`). Its *slice neighbourhoods* are the ``n x n`` squares around it in those
 slices, each compared with the neighbourhoods of that plane's own exemplar. This module holds:
 
 - :func:`plane_offsets` / :func:`exemplar_offsets`: one plane's square as volume offsets and as flat
@@ -10,7 +10,7 @@ slices, each compared with the neighbourhoods of that plane's own exemplar. This
 - :class:`ExemplarNeighbourhoods`: every neighbourhood fully inside an exemplar, its principal axes
   and a k-d tree: exact, fast (PCA + tree, re-ranked) or k-coherent search (:func:`search_plane`);
 - :class:`SolidPlan` (:func:`plan_levels`): exemplar pyramids per plane, the volume's level shapes
-  and each level's neighbourhood side, validated once (:class:`~synth.errors.InvalidInput`);
+  and each level's neighbourhood side, validated once (:class:`~texsynth.synth.errors.InvalidInput`);
 - :func:`checked_planes`: the views a method matches (all three, or two for laminar materials);
 - volumes and coherent sources between levels (:func:`initial_volume`, :func:`upsample_volume`,
   :func:`initial_sources`, :func:`upsample_plane_sources`), Kopf's sparse centres (:func:`plane_centres`);
@@ -38,10 +38,10 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial import cKDTree
 
-from synth.analysis.tensor import mean_coherence
-from synth.errors import InvalidInput
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.kernels.solid_search import (
+from texsynth.synth.analysis.tensor import mean_coherence
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.grid.pyramid import gaussian_pyramid, level_shapes
+from texsynth.synth.kernels.solid_search import (
     CoherenceSets,
     SliceGeometry,
     gather_slices,
@@ -49,8 +49,8 @@ from synth.kernels.solid_search import (
     nearest_exact,
     rerank,
 )
-from synth.pixel.synthesis import level_neighbourhood_size
-from synth.threads import current_threads
+from texsynth.synth.pixel.synthesis import level_neighbourhood_size
+from texsynth.synth.threads import current_threads
 
 __all__ = [
     "PLANES",
@@ -83,7 +83,7 @@ __all__ = [
     "volume_pyramid",
 ]
 
-#: The planes in the order every per-plane array uses (index 0, 1, 2), as :data:`synth.api.PLANES`.
+#: The planes in the order every per-plane array uses (index 0, 1, 2), as :data:`texsynth.synth.api.PLANES`.
 PLANES: tuple[str, ...] = ("xy", "xz", "yz")
 #: The volume axes ``(row axis, column axis)`` of each plane's slices.
 PLANE_AXES: dict[str, tuple[int, int]] = {"xy": (1, 2), "xz": (0, 2), "yz": (0, 1)}
@@ -262,7 +262,7 @@ class ExemplarNeighbourhoods:
         scratch: tuple[np.ndarray, np.ndarray],
         k: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """k-coherence search (:func:`synth.kernels.solid_search.kcoherence_search`) of the queries
+        """k-coherence search (:func:`texsynth.synth.kernels.solid_search.kcoherence_search`) of the queries
         centred at voxels ``centres``, from the plane's current per-voxel positions ``src``; ``k``: how
         many of each k-coherence set to use (all by default)."""
         stamp, counter = scratch
@@ -278,7 +278,7 @@ def exemplar_neighbourhoods(
 
     Principal axes: eigenvectors of the covariance of all neighbourhood vectors (deterministic), the
     :data:`PCA_DIMS` leading ones. The k-coherence sets come from the tree (approximate, then
-    re-ranked). Raises :class:`~synth.errors.InvalidInput` (``role``) when no neighbourhood fits.
+    re-ranked). Raises :class:`~texsynth.synth.errors.InvalidInput` (``role``) when no neighbourhood fits.
     """
     img = np.ascontiguousarray(image, dtype=np.float32)
     h, w = img.shape
@@ -437,7 +437,7 @@ def plan_levels(
     :data:`MIN_EXEMPLAR_SIDE` pixels and the volume at least :data:`MIN_VOLUME_SIDE` voxels on a side
     (Kopf: "fewer levels if the exemplar is small"). The finest level uses ``neighbourhood_size``;
     coarser levels shrink it to at most a quarter of the exemplar's shorter side
-    (:func:`synth.pixel.synthesis.level_neighbourhood_size`) and to the volume's shorter side.
+    (:func:`texsynth.synth.pixel.synthesis.level_neighbourhood_size`) and to the volume's shorter side.
     """
     images = [np.ascontiguousarray(exemplars[p], dtype=np.float32) for p in PLANES]
     same = all(images[p] is images[0] or exemplars[PLANES[p]] is exemplars["xy"] for p in range(3))
@@ -524,7 +524,7 @@ def upsample_volume(vol: np.ndarray, shape: tuple[int, int, int], periodic: bool
 
 
 def volume_pyramid(vol: np.ndarray, levels: int, periodic: bool) -> list[np.ndarray]:
-    """Gaussian pyramid of a volume, finest first (:func:`synth.grid.pyramid.gaussian_pyramid`)."""
+    """Gaussian pyramid of a volume, finest first (:func:`texsynth.synth.grid.pyramid.gaussian_pyramid`)."""
     return gaussian_pyramid(vol, levels, volume=True, mode="wrap" if periodic else "reflect")
 
 
@@ -561,7 +561,7 @@ class ProgressMeter:
 
     The caller declares the run's ``total`` units, asks :meth:`chunk` how many items of a given
     unit cost to do between two reports (at most :data:`PROGRESS_STEP` of the run), and calls
-    :meth:`advance` after each chunk. ``progress`` may raise (e.g. :class:`~synth.errors.Cancelled`).
+    :meth:`advance` after each chunk. ``progress`` may raise (e.g. :class:`~texsynth.synth.errors.Cancelled`).
     """
 
     def __init__(self, progress: Callable[[str, float], None], total: float) -> None:

@@ -5,7 +5,7 @@ its source map (for each output position, the exemplar position it copies), so t
 tensor-valued images, and images guided by a fixed field, share one engine. For each pyramid level,
 coarsest first: initialise the source map (random exemplar positions at the top, the parent's sources
 upsampled below), then run ``iterations`` passes over a scan order, each position taking the exemplar
-position whose neighbourhood is closest (:mod:`synth.kernels.pixel_search`: the distance and the
+position whose neighbourhood is closest (:mod:`texsynth.synth.kernels.pixel_search`: the distance and the
 search). The output's borders wrap (toroidal); exemplar neighbourhoods lie fully inside the exemplar.
 
 Weights (Akl 2014, eq 13): the pixel part (same and parent level) and the guidance part of a
@@ -36,11 +36,11 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
-from synth.analysis.tensor import Metric, coherence, log_tensors, orientation
-from synth.errors import InvalidParameter
-from synth.grid.neighbourhood import Shape, neighbourhood_offsets, parent_offsets
-from synth.grid.scan import ScanOrder, scan_order
-from synth.kernels.pixel_search import (
+from texsynth.synth.analysis.tensor import Metric, coherence, log_tensors, orientation
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.grid.neighbourhood import Shape, neighbourhood_offsets, parent_offsets
+from texsynth.synth.grid.scan import ScanOrder, scan_order
+from texsynth.synth.kernels.pixel_search import (
     METRIC_NORM,
     METRIC_SO,
     METRIC_SSD,
@@ -54,7 +54,7 @@ from synth.kernels.pixel_search import (
     position_distance,
     synthesize_chunk,
 )
-from synth.threads import current_threads
+from texsynth.synth.threads import current_threads
 
 __all__ = [
     "CandidateWindow",
@@ -146,7 +146,7 @@ class CandidateWindow:
     ``transfer_levels`` (optional, finest first): per level, ``(to_common, from_common)``, each
     ``(n_classes, 2, 3)`` affine maps from a class's exemplar positions ``(row, col, 1)`` to a frame all
     classes share, and back. With them a proposal from another class is moved to the same point of the
-    wanted class instead of being dropped (:mod:`synth.kernels.pixel_search`), so coherent copying
+    wanted class instead of being dropped (:mod:`texsynth.synth.kernels.pixel_search`), so coherent copying
     continues across class changes.
     """
 
@@ -243,10 +243,10 @@ def check_neighbourhoods_fit(
 ) -> None:
     """Raise the driver's error now if a neighbourhood would not fit the exemplar at some pyramid level.
 
-    Shapes only (:func:`synth.grid.pyramid.level_shapes`, the driver's pyramid's shapes; no pixels),
+    Shapes only (:func:`texsynth.synth.grid.pyramid.level_shapes`, the driver's pyramid's shapes; no pixels),
     so the service can refuse such a job before queueing it instead of failing it in the worker.
     """
-    from synth.grid.pyramid import level_shapes
+    from texsynth.synth.grid.pyramid import level_shapes
 
     shapes = level_shapes(tuple(int(n) for n in exemplar_shape[:2]), levels)  # type: ignore[arg-type]
     for level in range(levels - 1, -1, -1):  # coarse to fine, as the driver: the same first error

@@ -13,7 +13,7 @@ import pytest
 from kombu import Connection
 from kombu.pidbox import Mailbox
 
-from jobs.broker import SCHEME, prune_mailboxes, quarantine_folder
+from texsynth.jobs.broker import SCHEME, prune_mailboxes, quarantine_folder
 
 
 @pytest.fixture
@@ -116,7 +116,7 @@ def test_an_incomplete_envelope_is_quarantined_and_the_consumer_goes_on(connecti
     q = conn.SimpleQueue(name)
     (queue / f"0_bad.{name}.msg").write_text(json.dumps(envelope))
     q.put({"job": "b"})
-    with caplog.at_level(logging.WARNING, logger="jobs.broker"):
+    with caplog.at_level(logging.WARNING, logger="texsynth.jobs.broker"):
         message = q.get(timeout=5)
     assert message.payload == {"job": "b"}
     message.ack()

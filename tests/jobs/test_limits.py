@@ -1,4 +1,4 @@
-"""One home for the size limits: synth.io.limits defines each limit and its one environment variable;
+"""One home for the size limits: texsynth.synth.io.limits defines each limit and its one environment variable;
 the engine and the service's Settings read the same variable, and the worker runs under the service's."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import io
 import pytest
 from PIL import Image
 
-from jobs.config import Settings
-from synth.errors import InputTooLarge, InvalidParameter
-from synth.io import load_image
-from synth.io.limits import LIMITS
+from texsynth.jobs.config import Settings
+from texsynth.synth.errors import InputTooLarge, InvalidParameter
+from texsynth.synth.io import load_image
+from texsynth.synth.io.limits import LIMITS
 
 
 def _png(side: int) -> bytes:

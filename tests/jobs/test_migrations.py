@@ -10,8 +10,8 @@ import pytest
 from alembic.config import Config
 from alembic.script import ScriptDirectory
 
-from jobs.db import HEAD
-from jobs.store import JobStore
+from texsynth.jobs.db import HEAD
+from texsynth.jobs.store import JobStore
 
 # The schema texsynth made before migrations (jobs/store.py at cc74b7e), verbatim.
 OLD_SCHEMA = """

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.service import BrokerUnavailable, Service, Upload
-from jobs.config import Settings
+from texsynth.app.service import BrokerUnavailable, Service, Upload
+from texsynth.jobs.config import Settings
 
 
 def _png() -> bytes:

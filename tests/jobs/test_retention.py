@@ -7,9 +7,9 @@ import time
 
 import pytest
 
-from jobs.config import Settings
-from jobs.reaper import ORPHAN_SECONDS, purge_expired
-from jobs.store import JobStore
+from texsynth.jobs.config import Settings
+from texsynth.jobs.reaper import ORPHAN_SECONDS, purge_expired
+from texsynth.jobs.store import JobStore
 
 UPLOAD = b"\x89PNG" + bytes(range(256)) * 64  # the bytes are never decoded here
 

@@ -7,10 +7,10 @@ import time
 
 import pytest
 
-from jobs.config import Settings
-from jobs.reaper import purge_expired
-from jobs.storage import LocalStorage, S3Storage, StorageUnavailable, open_storage
-from jobs.store import JobStore
+from texsynth.jobs.config import Settings
+from texsynth.jobs.reaper import purge_expired
+from texsynth.jobs.storage import LocalStorage, S3Storage, StorageUnavailable, open_storage
+from texsynth.jobs.store import JobStore
 
 DEAD_PID = 2**22 + 12345
 

@@ -7,9 +7,9 @@ import time
 
 import pytest
 
-from jobs.config import Settings
-from jobs.reaper import reap_once
-from jobs.store import JobStore
+from texsynth.jobs.config import Settings
+from texsynth.jobs.reaper import reap_once
+from texsynth.jobs.store import JobStore
 
 DEAD_PID = 2**22 + 12345  # above pid_max on Linux: never a live process
 

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.client import Client
-from jobs.store import JobStore
+from texsynth.app.client import Client
+from texsynth.jobs.store import JobStore
 
 REPO = Path(__file__).resolve().parents[2]
 TEST_METHODS = "tests.service.methods_for_tests"
@@ -88,7 +88,7 @@ class Service:
         args = [
             sys.executable,
             "-c",
-            "import sys; from synth.cli import main; sys.exit(main())",
+            "import sys; from texsynth.synth.cli import main; sys.exit(main())",
             "serve",
             "--host",
             "127.0.0.1",

@@ -13,10 +13,10 @@ import numpy as np
 from pydantic import Field
 from scipy import ndimage as ndi
 
-from synth.analysis.tensor import structure_tensor
-from synth.api import MethodSpec, Result, register
-from synth.errors import InvalidParameter
-from synth.params import MethodParams
+from texsynth.synth.analysis.tensor import structure_tensor
+from texsynth.synth.api import MethodSpec, Result, register
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.params import MethodParams
 
 
 class BlurParams(MethodParams):

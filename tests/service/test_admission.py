@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.admission import estimate_memory
-from jobs.config import Settings
 from tests.service.test_tokens import ALICE, BOB, A, _client, finish, submit
+from texsynth.app.admission import estimate_memory
+from texsynth.jobs.config import Settings
 
 
 def _png(side: int) -> bytes:

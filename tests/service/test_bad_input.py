@@ -200,7 +200,7 @@ def test_an_empty_method_is_refused_not_replaced(embedded, exemplar_png):
 
 
 def test_submit_prints_the_service_message_not_json_and_names_a_missing_file(embedded, tmp_path, capsys):
-    from synth.cli import main
+    from texsynth.synth.cli import main
 
     assert main(["submit", str(tmp_path / "missing.png"), "--url", embedded.url]) == 2
     err = capsys.readouterr().err

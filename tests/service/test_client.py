@@ -1,4 +1,5 @@
-"""The batch client (``app.client``): retries, ``Retry-After``, typed answers, array inputs, file names,
+"""The batch client (``texsynth.app.client``): retries, ``Retry-After``, typed answers, array inputs, file
+names,
 streamed downloads, ``submit_many``/``wait_all`` through an API restart, and ``texsynth submit``.
 
 The retry rules are shown on a tiny scripted HTTP server in a thread (each answer chosen by the test,
@@ -20,11 +21,11 @@ import pytest
 import tifffile
 from PIL import Image
 
-from app.client import Client, Retry, ServiceError, encode_array, retry_after
-from app.schemas import JobPublic
-from synth.errors import InvalidInput
-from synth.io import load_image
 from tests.service.conftest import Service, free_port
+from texsynth.app.client import Client, Retry, ServiceError, encode_array, retry_after
+from texsynth.app.schemas import JobPublic
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.io import load_image
 
 JOB = {
     "id": "j1",
@@ -331,7 +332,7 @@ def test_wait_all_of_20_jobs_outlasts_an_api_restart_and_a_full_queue(tmp_path, 
 
 @pytest.mark.integration
 def test_texsynth_submit_uses_the_client_with_width_and_height(embedded, exemplar_png, tmp_path, capsys):
-    from synth.cli import main
+    from texsynth.synth.cli import main
 
     exemplar = tmp_path / "fringes.png"
     exemplar.write_bytes(exemplar_png)

@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from jobs.broker import quarantine_folder
-from jobs.config import Settings
-from jobs.queue import create_celery
 from tests.service.conftest import Service, wait_until
+from texsynth.jobs.broker import quarantine_folder
+from texsynth.jobs.config import Settings
+from texsynth.jobs.queue import create_celery
 
 pytestmark = pytest.mark.integration
 

@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.auth import TokenError, Tokens
-from app.main import create_app
-from jobs.config import Settings
+from texsynth.app.auth import TokenError, Tokens
+from texsynth.app.main import create_app
+from texsynth.jobs.config import Settings
 
 ALICE, BOB = "alice-token-0123456789", "bob-token-0123456789ab"
 
@@ -108,7 +108,7 @@ def test_allowed_hosts_come_from_the_environment_and_the_allowed_origins(tmp_pat
 
 
 def test_the_bound_name_is_allowed(tmp_path):
-    from app.cli import with_bound_host
+    from texsynth.app.cli import with_bound_host
 
     settings = with_bound_host(Settings(data_dir=tmp_path / "data"), "texsynth-box")
     assert with_bound_host(settings, "0.0.0.0") == settings  # every interface: no name to add
@@ -184,7 +184,7 @@ def full_disk(monkeypatch):
             return real_open(path, flags, *args, **kwargs)
 
         monkeypatch.setattr(os, "open", no_room)
-        monkeypatch.setattr("jobs.store.Path.mkdir", _enospc)
+        monkeypatch.setattr("texsynth.jobs.store.Path.mkdir", _enospc)
         real_connect = sqlite3.connect
 
         def connect(*args, **kwargs):
@@ -198,7 +198,7 @@ def full_disk(monkeypatch):
             )
             return _DiskFull(db)
 
-        monkeypatch.setattr("jobs.store.sqlite3.connect", connect)
+        monkeypatch.setattr("texsynth.jobs.store.sqlite3.connect", connect)
 
     return full
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import json
 
-from app.openapi import params_schema_name
-from jobs.config import Settings
-from jobs.store import STATES
-from synth.api import available_methods
 from tests.service.test_tokens import ALICE, _client
+from texsynth.app.openapi import params_schema_name
+from texsynth.jobs.config import Settings
+from texsynth.jobs.store import STATES
+from texsynth.synth.api import available_methods
 
 
 def _schema(settings: Settings) -> dict:

@@ -16,11 +16,11 @@ import time
 
 import pytest
 
-from app.cli import ServeLock
-from jobs.store import pid_alive
 from tests.service.conftest import REPO, Service, free_port, start_redis, wait_until
+from texsynth.app.cli import ServeLock
+from texsynth.jobs.store import pid_alive
 
-CLI = [sys.executable, "-c", "import sys; from synth.cli import main; sys.exit(main())"]
+CLI = [sys.executable, "-c", "import sys; from texsynth.synth.cli import main; sys.exit(main())"]
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -96,7 +96,7 @@ def test_serve_stops_a_worker_left_by_a_vanished_serve(tmp_path):
     data.mkdir()
     # a worker group a previous serve left behind (without PR_SET_PDEATHSIG, e.g. another OS)
     leftover = subprocess.Popen(
-        [sys.executable, "-c", "import time; time.sleep(300)", "-m", "worker"],
+        [sys.executable, "-c", "import time; time.sleep(300)", "-m", "texsynth.worker"],
         start_new_session=True,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,

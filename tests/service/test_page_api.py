@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from jobs.config import Settings
-from synth.api import available_methods
-from synth.params import BOUNDS
 from tests.service.test_tokens import _client
+from texsynth.jobs.config import Settings
+from texsynth.synth.api import available_methods
+from texsynth.synth.params import BOUNDS
 
 #: Words of the papers and the code that a one-sentence help may use only inside brackets, next to the
 #: plain words that explain them ("(k, k-coherence search)", "(σ_w)", "(W, Eq. 5)").
@@ -215,11 +215,14 @@ def test_examples_are_public_with_tokens(tmp_path):
 
 
 def test_the_bundled_examples_are_their_sources_and_packaged():
-    from app.examples.build import main
+    from texsynth.app.examples.build import main
 
     assert main(["--check"]) == 0
+    import tomllib
+
     text = (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text()
-    assert '"examples/*.png"' in text and '"examples/README.md"' in text
+    data = tomllib.loads(text)["tool"]["setuptools"]["package-data"]["texsynth.app.examples"]
+    assert "*.png" in data and "README.md" in data  # tests/test_packaging.py looks inside a wheel
 
 
 # -- job list, thumbnails, zip ---------------------------------------------------------------------------

@@ -16,8 +16,8 @@ import pytest
 import tifffile
 from PIL import Image
 
-from synth.api import available_methods
 from tests.service.conftest import png, wait_until
+from texsynth.synth.api import available_methods
 
 pytestmark = pytest.mark.integration
 

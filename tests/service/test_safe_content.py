@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image, PngImagePlugin
 
-from app.security import CONTENT_SECURITY_POLICY
+from texsynth.app.security import CONTENT_SECURITY_POLICY
 
 pytestmark = pytest.mark.integration
 

@@ -20,8 +20,8 @@ import schemathesis
 from hypothesis import HealthCheck, settings
 from schemathesis.checks import not_a_server_error, response_schema_conformance, status_code_conformance
 
-from app.main import create_app
-from jobs.config import Settings
+from texsynth.app.main import create_app
+from texsynth.jobs.config import Settings
 
 DATA = Path(tempfile.mkdtemp(prefix="texsynth-fuzz-"))
 atexit.register(shutil.rmtree, DATA, True)  # also when the test is deselected

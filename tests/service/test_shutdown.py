@@ -130,7 +130,7 @@ def _start_worker(service: Service, grace: float) -> subprocess.Popen:
     }
     log = open(service.data_dir.parent / "worker.log", "ab")  # noqa: SIM115 (the worker writes it)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "worker", "--loglevel=WARNING"],
+        [sys.executable, "-m", "texsynth.worker", "--loglevel=WARNING"],
         env=env,
         cwd=REPO,
         start_new_session=True,

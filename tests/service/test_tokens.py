@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from app.auth import TokenError, Tokens
-from app.cli import host_notice
-from app.main import create_app
-from jobs.config import Settings
+from texsynth.app.auth import TokenError, Tokens
+from texsynth.app.cli import host_notice
+from texsynth.app.main import create_app
+from texsynth.jobs.config import Settings
 
 ALICE, BOB, ADMIN = "alice-token-0123456789", "bob-token-0123456789ab", "admin-token-0123456789"
 A = {"Authorization": f"Bearer {ALICE}"}

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from app.client import Client, ServiceError
 from tests.service.conftest import ADMIN_TOKEN, REPO, TOKENS, free_port
 from tests.service.test_browser import browser  # noqa: F401  (the module's Chromium fixture)
+from texsynth.app.client import Client, ServiceError
 
 pytestmark = [pytest.mark.integration]
 
-CLI = [sys.executable, "-c", "import sys; from synth.cli import main; sys.exit(main())"]
+CLI = [sys.executable, "-c", "import sys; from texsynth.synth.cli import main; sys.exit(main())"]
 
 
 def test_texsynth_submit_with_a_token(token_service, exemplar_png, tmp_path):

@@ -1,4 +1,5 @@
-"""The worker container's health check (``python -m worker.health``, docker-compose's worker test)."""
+"""The worker container's health check (``python -m texsynth.worker.health``, docker-compose's worker
+test)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ pytestmark = pytest.mark.integration
 def _check(data_dir) -> subprocess.CompletedProcess:
     env = {**os.environ, "TEXSYNTH_DATA_DIR": str(data_dir), "PYTHONPATH": str(REPO)}
     return subprocess.run(
-        [sys.executable, "-m", "worker.health"], env=env, capture_output=True, text=True, timeout=60
+        [sys.executable, "-m", "texsynth.worker.health"], env=env, capture_output=True, text=True, timeout=60
     )
 
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import synth.pixel.synthesis as synthesis
-from synth.kernels.pixel_search import synthesize_chunk_reference
-from synth.pixel.synthesis import CandidateWindow, synthesize_source_map
+import texsynth.synth.pixel.synthesis as synthesis
+from texsynth.synth.kernels.pixel_search import synthesize_chunk_reference
+from texsynth.synth.pixel.synthesis import CandidateWindow, synthesize_source_map
 
 __all__ = ["_rng_image", "_run_both", "_striped_window", "_tiled_window", "synthesize_with_reference"]
 

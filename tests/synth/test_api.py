@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.api import METHODS as REGISTRY
-from synth.api import PLANES, MethodSpec, Result, check_inputs, synthesize
-from synth.errors import InvalidInput, InvalidParameter
-from synth.params import MethodParams
+from texsynth.synth.api import METHODS as REGISTRY
+from texsynth.synth.api import PLANES, MethodSpec, Result, check_inputs, synthesize
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.params import MethodParams
 
 
 class _NoParams(MethodParams):

@@ -10,11 +10,11 @@ import pytest
 import tifffile
 from PIL import Image
 
-from synth.api import synthesize
-from synth.errors import InvalidInput
-from synth.evaluate import evaluate_pair
-from synth.io import InputBits, array_to_unit, load_image_bits, to_uint, used_bits
-from synth.pipeline import load_inputs, synthesize_to_folder
+from texsynth.synth.api import synthesize
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.evaluate import evaluate_pair
+from texsynth.synth.io import InputBits, array_to_unit, load_image_bits, to_uint, used_bits
+from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
 
 METHOD = "random-phase"
 SHAPE = (32, 40)

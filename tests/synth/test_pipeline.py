@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from synth.api import METHODS as REGISTRY
-from synth.cli import main
-from synth.errors import InvalidInput
-from synth.io import save_image
-from synth.pipeline import load_inputs
 from tests.synth.test_api import SOLID
+from texsynth.synth.api import METHODS as REGISTRY
+from texsynth.synth.cli import main
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.io import save_image
+from texsynth.synth.pipeline import load_inputs
 
 
 @pytest.fixture

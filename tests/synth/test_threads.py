@@ -1,4 +1,4 @@
-"""The threads knob (:mod:`synth.threads`): its meaning, its bad values, and the same bytes with 1, 2
+"""The threads knob (:mod:`texsynth.synth.threads`): its meaning, its bad values, and the same bytes with 1, 2
 and 4 threads for every method (issue 25)."""
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ import numba
 import numpy as np
 import pytest
 
-from synth.api import synthesize
-from synth.cli import main
-from synth.errors import InvalidParameter
-from synth.io import save_image
-from synth.io.patterns import undulating_laminae
-from synth.threads import (
+from texsynth.synth.api import synthesize
+from texsynth.synth.cli import main
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.io import save_image
+from texsynth.synth.io.patterns import undulating_laminae
+from texsynth.synth.threads import (
     THREADS_ENV,
     available_cores,
     check_threads,
@@ -35,9 +35,9 @@ from synth.threads import (
 _EVERY_METHOD = """
 import hashlib, json
 import numpy as np
-import synth.kernels.solid_search as k
-from synth.api import available_methods, synthesize
-from synth.io.patterns import undulating_laminae
+import texsynth.synth.kernels.solid_search as k
+from texsynth.synth.api import available_methods, synthesize
+from texsynth.synth.io.patterns import undulating_laminae
 
 k.PARALLEL_MIN_ITEMS = 0
 ex = undulating_laminae((40, 40), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0)
@@ -92,8 +92,8 @@ def test_the_default_inside_a_chosen_count_keeps_it() -> None:
 def test_pipeline_runs_the_synthesis_on_the_chosen_count(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import synth.api as api
-    from synth.pipeline import synthesize_to_folder
+    import texsynth.synth.api as api
+    from texsynth.synth.pipeline import synthesize_to_folder
 
     real, seen = api.use_threads, []
 
@@ -142,14 +142,14 @@ def test_service_divides_the_cores_between_its_workers() -> None:
 
 @pytest.mark.parametrize("raw", ["0", "-2", "abc", "1.5", "999"])
 def test_a_bad_service_value_stops_at_start(raw: str) -> None:
-    from jobs.config import Settings
+    from texsynth.jobs.config import Settings
 
     with pytest.raises(InvalidParameter, match=THREADS_ENV):
         Settings.from_env({THREADS_ENV: raw, "TEXSYNTH_CONCURRENCY": "1"})
 
 
 def test_service_settings_carry_the_count_to_the_workers() -> None:
-    from jobs.config import Settings
+    from texsynth.jobs.config import Settings
 
     settings = Settings.from_env({"TEXSYNTH_CONCURRENCY": "1"})
     assert settings.threads == available_cores()

@@ -15,9 +15,10 @@ def test_child_start_imports_the_methods_and_the_writer(tmp_path) -> None:
     code = textwrap.dedent(
         """
         import json, sys
-        import worker.celery_app as app
-        wanted = ("synth.output.artifacts", "synth.evaluate.measures", "synth.output.plots",
-                  "synth.methods.wei_levoy", "synth.methods.tensor_constrained")
+        import texsynth.worker.celery_app as app
+        wanted = ("texsynth.synth.output.artifacts", "texsynth.synth.evaluate.measures",
+        "texsynth.synth.output.plots",
+                  "texsynth.synth.methods.wei_levoy", "texsynth.synth.methods.tensor_constrained")
         before = [m for m in wanted if m in sys.modules]
         app._on_child_start()
         after = [m for m in wanted if m in sys.modules]

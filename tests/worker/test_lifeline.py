@@ -1,6 +1,6 @@
 """The shutdown guard ends a process whose main thread is stuck and deaf to signals (issue 30).
 
-Each test runs a small Python process that installs :class:`worker.lifeline.ShutdownGuard`, ignores
+Each test runs a small Python process that installs :class:`texsynth.worker.lifeline.ShutdownGuard`, ignores
 SIGTERM in Python (as Celery's handlers do during a shutdown) and blocks its main thread on a lock
 forever (as Celery's cold shutdown did, in a futex); the guard must end it, and its child, anyway.
 """
@@ -18,12 +18,12 @@ from pathlib import Path
 import pytest
 
 from tests.paths import REPO
-from worker.lifeline import ShutdownGuard, children
+from texsynth.worker.lifeline import ShutdownGuard, children
 
 STUCK = textwrap.dedent(
     """
     import os, signal, subprocess, sys, threading
-    from worker.lifeline import ShutdownGuard
+    from texsynth.worker.lifeline import ShutdownGuard
     words = sys.argv[2]
     parent_fd = int(sys.argv[3]) if len(sys.argv) > 3 else None
     def last_words():

@@ -8,9 +8,9 @@ import io
 import numpy as np
 from PIL import Image
 
-from jobs.config import Settings
-from jobs.store import JobStore
-from worker.runner import run_job
+from texsynth.jobs.config import Settings
+from texsynth.jobs.store import JobStore
+from texsynth.worker.runner import run_job
 
 
 def _png(side: int) -> bytes:

@@ -11,8 +11,8 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Path, Response
 from fastapi.responses import FileResponse
 
-from app.examples import EXAMPLES, catalogue, thumbnail_png
-from app.schemas import ErrorPublic, ExamplePublic
+from texsynth.app.examples import EXAMPLES, catalogue, thumbnail_png
+from texsynth.app.schemas import ErrorPublic, ExamplePublic
 
 router = APIRouter(prefix="/api/examples", tags=["examples"])
 

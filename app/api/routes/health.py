@@ -7,12 +7,12 @@ import time
 
 from fastapi import APIRouter, Response
 
-from app.api.deps import ServiceDep
-from app.errors import disk_full
-from app.schemas import HealthPublic
-from app.service import Service
-from jobs.broker import SCHEME
-from jobs.reaper import stranded
+from texsynth.app.api.deps import ServiceDep
+from texsynth.app.errors import disk_full
+from texsynth.app.schemas import HealthPublic
+from texsynth.app.service import Service
+from texsynth.jobs.broker import SCHEME
+from texsynth.jobs.reaper import stranded
 
 router = APIRouter(prefix="/api/health", tags=["health"])
 

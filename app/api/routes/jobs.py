@@ -16,12 +16,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 from starlette.background import BackgroundTask
 
-from app.api.deps import PrincipalDep, ServiceDep
-from app.auth import Principal
-from app.schemas import DeletedPublic, ErrorPublic, JobPublic, JobsPublic
-from app.service import VOXEL_UNITS, Service, Upload
-from jobs.store import STATES, JobRecord
-from synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
+from texsynth.app.api.deps import PrincipalDep, ServiceDep
+from texsynth.app.auth import Principal
+from texsynth.app.schemas import DeletedPublic, ErrorPublic, JobPublic, JobsPublic
+from texsynth.app.service import VOXEL_UNITS, Service, Upload
+from texsynth.jobs.store import STATES, JobRecord
+from texsynth.synth.io import FORMAT_FILES, image_to_png_bytes, load_volume, sniff_format
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
@@ -302,14 +302,14 @@ THUMBNAIL_SIDE = 96
 @lru_cache(maxsize=256)
 def thumbnail_png(path: str, mtime_ns: int) -> bytes:
     """A small 8-bit PNG of the image at ``path`` (cached by its modification time)."""
-    from synth.io import load_image
+    from texsynth.synth.io import load_image
 
     return _thumbnail(load_image(path, name="thumbnail"))
 
 
 def _thumbnail_of_bytes(data: bytes) -> bytes:
     """:func:`thumbnail_png` of an image's bytes (from an object store; nothing written to disk)."""
-    from synth.io import load_image
+    from texsynth.synth.io import load_image
 
     return _thumbnail(load_image(data, name="thumbnail"))
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from app.api.deps import ServiceDep
-from app.schemas import MethodsPublic
+from texsynth.app.api.deps import ServiceDep
+from texsynth.app.schemas import MethodsPublic
 
 router = APIRouter(prefix="/api/methods", tags=["methods"])
 

@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from synth.evaluate.glossary import glossary
+from texsynth.synth.evaluate.glossary import glossary
 
 router = APIRouter(prefix="/api/metrics", tags=["metrics"])
 

@@ -8,9 +8,9 @@ from typing import Annotated
 
 from fastapi import APIRouter, Form, HTTPException, Query, Response
 
-from app.api.deps import PrincipalDep, ServiceDep
-from app.api.routes.jobs import _ERRORS, SizeDep, UploadsDep
-from app.schemas import ErrorPublic, SweepPublic
+from texsynth.app.api.deps import PrincipalDep, ServiceDep
+from texsynth.app.api.routes.jobs import _ERRORS, SizeDep, UploadsDep
+from texsynth.app.schemas import ErrorPublic, SweepPublic
 
 router = APIRouter(prefix="/api/sweeps", tags=["sweeps"])
 

@@ -4,7 +4,7 @@ Revision ID: 0003
 Revises: 0002
 
 ``input_bytes`` is what a submission stored (a sweep's shared upload counts for its first run only),
-``artifact_bytes`` what its committed run's artifacts hold; :meth:`jobs.store.JobStore.usage` sums
+``artifact_bytes`` what its committed run's artifacts hold; :meth:`texsynth.jobs.store.JobStore.usage` sums
 them per owner. Records made before this revision keep NULL here and are measured from their job
 folders the first time their owner's usage is asked.
 """

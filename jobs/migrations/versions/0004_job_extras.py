@@ -3,7 +3,7 @@
 Revision ID: 0004
 Revises: 0003
 
-One JSON text column, ``extras`` (:data:`jobs.store.EXTRA_FIELDS`); records made before it read as
+One JSON text column, ``extras`` (:data:`texsynth.jobs.store.EXTRA_FIELDS`); records made before it read as
 ``{}``.
 """
 

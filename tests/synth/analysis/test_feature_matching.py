@@ -1,4 +1,5 @@
-"""Bucketed chamfer matching (synth.analysis.feature_matching; Wu & Yu 2004, eqs 1-2) against brute force."""
+"""Bucketed chamfer matching (texsynth.synth.analysis.feature_matching; Wu & Yu 2004, eqs 1-2) against brute
+force."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from synth.analysis.feature_matching import (
+from texsynth.synth.analysis.feature_matching import (
     Correspondences,
     build_feature_index,
     context_features,
@@ -24,7 +25,7 @@ from synth.analysis.feature_matching import (
     thin_correspondences,
     unmatched_penalty,
 )
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 
 def _random_features(rng: np.random.Generator, shape: tuple[int, int], density: float):

@@ -1,4 +1,5 @@
-"""Known answers of the curvilinear feature maps (synth.analysis.features; Wu & Yu 2004, section 2.3)."""
+"""Known answers of the curvilinear feature maps (texsynth.synth.analysis.features; Wu & Yu 2004, section
+2.3)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from synth.analysis.features import _classify, feature_map, feature_overlay
-from synth.analysis.tensor import wrap_angle
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.features import _classify, feature_map, feature_overlay
+from texsynth.synth.analysis.tensor import wrap_angle
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 
 def _line_image(angle_deg: float, size: int = 48, width: float = 1.2, bright: bool = True) -> np.ndarray:

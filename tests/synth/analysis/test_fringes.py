@@ -1,4 +1,4 @@
-"""Known answers of the HRTEM fringe analysis (synth.analysis.fringes)."""
+"""Known answers of the HRTEM fringe analysis (texsynth.synth.analysis.fringes)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from skimage.draw import circle_perimeter, line
 
-from synth.analysis.fringes import TORTUOUS, extract_fringes, fringe_band_pass, measure_skeleton
-from synth.errors import InvalidInput, InvalidParameter
 from tests.paths import SHARED_DATA
+from texsynth.synth.analysis.fringes import TORTUOUS, extract_fringes, fringe_band_pass, measure_skeleton
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 SOOT = SHARED_DATA / "hrtem-soot-256.png"
 

@@ -1,4 +1,5 @@
-"""Exemplar stationarity (synth.analysis.stationarity): quiet on one texture, a warning on mixed crops."""
+"""Exemplar stationarity (texsynth.synth.analysis.stationarity): quiet on one texture, a warning on mixed
+crops."""
 
 from __future__ import annotations
 
@@ -6,12 +7,18 @@ import numpy as np
 import pytest
 from skimage import data
 
-from synth.analysis.stationarity import THRESHOLD, exemplar_diagnostics, stationarity
-from synth.errors import InvalidInput
-from synth.io import load_image
-from synth.io.laminar import onion_volume, turbostratic_volume
-from synth.io.patterns import concentric_rings, grating, undulating_laminae, voronoi_cells, wood_grain
 from tests.paths import SHARED_DATA
+from texsynth.synth.analysis.stationarity import THRESHOLD, exemplar_diagnostics, stationarity
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.io import load_image
+from texsynth.synth.io.laminar import onion_volume, turbostratic_volume
+from texsynth.synth.io.patterns import (
+    concentric_rings,
+    grating,
+    undulating_laminae,
+    voronoi_cells,
+    wood_grain,
+)
 
 
 @pytest.fixture(scope="module")

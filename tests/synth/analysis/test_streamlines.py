@@ -1,10 +1,10 @@
-"""Streamlines of an orientation field (synth.analysis.streamlines)."""
+"""Streamlines of an orientation field (texsynth.synth.analysis.streamlines)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from synth.analysis.streamlines import trace
+from texsynth.synth.analysis.streamlines import trace
 
 
 def ring_direction(shape: tuple[int, int], centre: tuple[float, float]) -> np.ndarray:

@@ -1,9 +1,10 @@
-"""Known answers for :mod:`synth.analysis.tensor`: gratings, noise, rotations, metrics and two references.
+"""Known answers for :mod:`texsynth.synth.analysis.tensor`: gratings, noise, rotations, metrics and two
+references.
 
 Conventions pinned here (ALGORITHMS.md, "Conventions"): ``x`` = column, ``y = -row`` (up on
 screen); orientations are radians counter-clockwise from +x, wrapped to ``(-pi/2, pi/2]``;
-:func:`synth.analysis.tensor.orientation` is the gradient direction,
-:func:`synth.analysis.tensor.structure_direction` the fringe direction, 90 degrees away.
+:func:`texsynth.synth.analysis.tensor.orientation` is the gradient direction,
+:func:`texsynth.synth.analysis.tensor.structure_direction` the fringe direction, 90 degrees away.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from scipy import linalg
 from scipy import ndimage as ndi
 from skimage.feature import structure_tensor as skimage_structure_tensor
 
-from synth.analysis.tensor import (
+from texsynth.synth.analysis.tensor import (
     LOG_EPSILON,
     METRICS,
     coherence,
@@ -29,7 +30,7 @@ from synth.analysis.tensor import (
     tensor_dissimilarity,
     wrap_angle,
 )
-from synth.errors import InvalidParameter
+from texsynth.synth.errors import InvalidParameter
 
 ONE_DEGREE = np.radians(1.0)
 # Gratings: the period and the border strip left out of "interior" comparisons (> 4 sigma_w).
@@ -406,7 +407,7 @@ def test_neighbourhood_dissimilarity_is_sum_over_tensors(metric: str) -> None:
 
 def test_mean_coherence_of_stripes_noise_and_rgb() -> None:
     """Straight stripes are fully oriented, white noise is not, and RGB is measured on its grey."""
-    from synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
+    from texsynth.synth.analysis.tensor import ORIENTED_COHERENCE, mean_coherence
 
     _, x = np.mgrid[0:64, 0:64]
     stripes = (0.5 + 0.5 * np.sin(2 * np.pi * x / 8.0)).astype(np.float32)

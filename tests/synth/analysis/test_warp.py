@@ -1,12 +1,18 @@
-"""Thin-plate-spline warps with Shepard fallback (synth.analysis.warp; Wu & Yu 2004, section 2.2)."""
+"""Thin-plate-spline warps with Shepard fallback (texsynth.synth.analysis.warp; Wu & Yu 2004, section 2.2)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth.analysis.warp import band_falloff, resample, shepard_displacement, warp_coordinates, warp_patch
-from synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.warp import (
+    band_falloff,
+    resample,
+    shepard_displacement,
+    warp_coordinates,
+    warp_patch,
+)
+from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 SOURCES = np.array([[10.0, 10.0], [20.0, 30.0], [5.0, 40.0], [30.0, 12.0]])
 TARGETS = SOURCES + np.array([[2.0, 1.0], [-1.0, 2.0], [1.0, -2.0], [0.0, 1.5]])

@@ -1,4 +1,4 @@
-"""``texsynth analyze`` and ``texsynth methods`` through :func:`synth.cli.main`."""
+"""``texsynth analyze`` and ``texsynth methods`` through :func:`texsynth.synth.cli.main`."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from synth.api import available_methods
-from synth.cli import main
-from synth.cli import methods as methods_cli
-from synth.output.render import legend_shape, orientation_image
+from texsynth.synth.api import available_methods
+from texsynth.synth.cli import main
+from texsynth.synth.cli import methods as methods_cli
+from texsynth.synth.output.render import legend_shape, orientation_image
 
 SIZE = 128
 THETA_DEG = 32.0  # gradient direction of the test grating (inside a 5-degree bin); fringes at -58

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from synth.io import save_image
-from synth.io.patterns import undulating_laminae
 from tests.paths import REPO
+from texsynth.synth.io import save_image
+from texsynth.synth.io.patterns import undulating_laminae
 
 HEAVY = ("numpy", "numba", "scipy", "matplotlib", "pydantic", "skimage", "celery", "fastapi")
 
@@ -46,7 +46,7 @@ def test_building_the_parser_imports_no_engine() -> None:
     loaded = _fresh(
         """
         import json, sys
-        from synth.cli import build_parser
+        from texsynth.synth.cli import build_parser
         build_parser()  # every command, the entry points' too (texsynth --help)
         full = sorted(sys.modules)
         build_parser("synthesize")
@@ -54,12 +54,13 @@ def test_building_the_parser_imports_no_engine() -> None:
         """
     )
     assert _top_level(loaded).isdisjoint(HEAVY), sorted(_top_level(loaded) & set(HEAVY))
-    assert not [m for m in loaded if m.startswith(("synth.kernels", "synth.methods", "synth.output"))]
+    heavy_own = ("texsynth.synth.kernels", "texsynth.synth.methods", "texsynth.synth.output")
+    assert not [m for m in loaded if m.startswith(heavy_own)]
 
 
 def test_cli_planes_are_the_engines() -> None:
-    from synth.api import PLANES
-    from synth.cli.inputs import PLANES as CLI_PLANES
+    from texsynth.synth.api import PLANES
+    from texsynth.synth.cli.inputs import PLANES as CLI_PLANES
 
     assert CLI_PLANES == PLANES
 
@@ -76,7 +77,7 @@ def test_synthesize_imports_one_method_and_no_matplotlib(exemplar: Path, tmp_pat
     loaded = _fresh(
         """
         import json, sys
-        from synth.cli import main
+        from texsynth.synth.cli import main
         code = main(["synthesize", "tensor-constrained", "--exemplar", sys.argv[1], "--size", "48x48",
                      "--set", "neighbourhood_size=5", "--out", sys.argv[2], "--seed", "1"])
         assert code == 0
@@ -85,8 +86,9 @@ def test_synthesize_imports_one_method_and_no_matplotlib(exemplar: Path, tmp_pat
         str(exemplar),
         str(out),
     )
-    methods = {m for m in loaded if m.startswith("synth.methods.") and m != "synth.methods.common"}
-    assert methods == {"synth.methods.tensor_constrained"}
+    prefix = "texsynth.synth.methods."
+    methods = {m for m in loaded if m.startswith(prefix) and m != prefix + "common"}
+    assert methods == {"texsynth.synth.methods.tensor_constrained"}
     assert "matplotlib" not in _top_level(loaded)
     assert "scipy.stats" not in loaded  # the exact KS test and the moments are computed without it
     # every artifact is still written, plots included
@@ -115,13 +117,13 @@ def test_a_second_job_in_a_process_imports_and_compiles_nothing(exemplar: Path, 
         """
         import json, sys
         from pathlib import Path
-        from synth.pipeline import load_inputs, synthesize_to_folder
+        from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
 
         def kernels():
             from numba.core.registry import CPUDispatcher
             found = {}
             for name, module in list(sys.modules.items()):
-                if name.startswith("synth.") and module is not None:
+                if name.startswith("texsynth.synth.") and module is not None:
                     for attr, value in vars(module).items():
                         if isinstance(value, CPUDispatcher):
                             found[f"{name}.{attr}"] = len(value.overloads)

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synth.cli import main
-from synth.io import save_image
-from synth.io.patterns import grating
+from texsynth.synth.cli import main
+from texsynth.synth.io import save_image
+from texsynth.synth.io.patterns import grating
 
 
 def _mixed() -> np.ndarray:

@@ -10,12 +10,12 @@ import pytest
 import tifffile
 from PIL import Image
 
-from synth.cli import main
-from synth.cli.synthesize import parse_size
-from synth.errors import InvalidParameter
-from synth.io import save_image
-from synth.io.patterns import undulating_laminae
-from synth.params import parse_assignments
+from texsynth.synth.cli import main
+from texsynth.synth.cli.synthesize import parse_size
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.io import save_image
+from texsynth.synth.io.patterns import undulating_laminae
+from texsynth.synth.params import parse_assignments
 
 FAST = ["--set", "neighbourhood_size=5", "--set", "parent_size=3", "--no-plots"]
 
@@ -151,7 +151,7 @@ def test_same_bytes_whatever_the_number_of_threads(exemplar: Path, tmp_path: Pat
             [
                 sys.executable,
                 "-m",
-                "synth.cli",
+                "texsynth.synth.cli",
                 "synthesize",
                 "tensor-constrained",
                 "--exemplar",

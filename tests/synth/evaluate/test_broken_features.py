@@ -1,12 +1,12 @@
-"""The broken-feature measure (synth.evaluate.broken_features) on constructed known-answer images."""
+"""The broken-feature measure (texsynth.synth.evaluate.broken_features) on constructed known-answer images."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate import (
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.evaluate import (
     Seams,
     broken_features,
     broken_features_from_masks,
@@ -14,7 +14,7 @@ from synth.evaluate import (
     seams_from_labels,
     seams_from_sources,
 )
-from synth.evaluate.breaks import count_kinks, seam_crossings
+from texsynth.synth.evaluate.breaks import count_kinks, seam_crossings
 
 N = 64
 ROWS = np.arange(4, 60, 6)  # horizontal feature lines, all inside the 3 px margin

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate.correlation import (
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.evaluate.correlation import (
     binarize,
     compare_s2,
     correlation_length,
@@ -18,7 +18,7 @@ from synth.evaluate.correlation import (
     two_point_correlation,
     volume_s2,
 )
-from synth.io.patterns import gaussian_random_field
+from texsynth.synth.io.patterns import gaussian_random_field
 
 
 def s2_reference(phase: np.ndarray, axis: int, max_lag: int, periodic: bool) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Known answers of the quantitative evaluation (synth.evaluate, synth.output.plots, texsynth evaluate)."""
+"""Known answers of the quantitative evaluation (texsynth.synth.evaluate, texsynth.synth.output.plots,
+texsynth evaluate)."""
 
 from __future__ import annotations
 
@@ -11,11 +12,11 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from synth.cli import main
-from synth.colour import LUMA_WEIGHTS
-from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate import HIST_EPSILON, evaluate_pair, evaluate_volume, kl_divergence, window_sigma
-from synth.io import save_image, save_volume
+from texsynth.synth.cli import main
+from texsynth.synth.colour import LUMA_WEIGHTS
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.evaluate import HIST_EPSILON, evaluate_pair, evaluate_volume, kl_divergence, window_sigma
+from texsynth.synth.io import save_image, save_volume
 
 
 def _directional(shape: tuple[int, int], seed: int = 1) -> np.ndarray:
@@ -163,7 +164,7 @@ def test_bad_inputs_name_the_argument():
 
 
 def test_write_plots_pair_and_volume(tmp_path):
-    from synth.output.plots import write_plots
+    from texsynth.synth.output.plots import write_plots
 
     tex = _directional((48, 48))
     metrics = evaluate_pair(tex, tex[:, ::-1], pixel_size=0.05)
@@ -219,7 +220,7 @@ def test_moments_and_ks_agree_with_scipy_bit_for_bit():
     import): the same numbers, to the last bit, as scipy's, including ties and equal sample sizes."""
     from scipy import stats
 
-    from synth.evaluate.measures import _ks, _ks_2samp_exact, _skew_kurtosis
+    from texsynth.synth.evaluate.measures import _ks, _ks_2samp_exact, _skew_kurtosis
 
     rng = np.random.default_rng(5)
     for trial in range(120):
@@ -241,7 +242,7 @@ def test_moments_and_ks_agree_with_scipy_bit_for_bit():
 
 
 def test_evaluate_pair_fringes_returns_the_metrics_and_the_fringes():
-    from synth.evaluate.measures import evaluate_pair_fringes
+    from texsynth.synth.evaluate.measures import evaluate_pair_fringes
 
     tex = _directional((48, 48))
     metrics, fringes = evaluate_pair_fringes(tex, tex[:, ::-1], pixel_size=0.05)

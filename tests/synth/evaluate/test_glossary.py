@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synth.analysis.lattice import fringe_presence, spectral_peak
-from synth.evaluate.glossary import GLOSSARY, NEAR_FACTOR, fringes_shown, glossary, headline, verdict
-from synth.io import load_image
-from synth.io.patterns import grating
+from texsynth.synth.analysis.lattice import fringe_presence, spectral_peak
+from texsynth.synth.evaluate.glossary import GLOSSARY, NEAR_FACTOR, fringes_shown, glossary, headline, verdict
+from texsynth.synth.io import load_image
+from texsynth.synth.io.patterns import grating
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "app" / "examples"
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.errors import InvalidInput
-from synth.evaluate.breaks import seams_from_labels, seams_from_sources
-from synth.evaluate.patches import seam_contrast
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.evaluate.breaks import seams_from_labels, seams_from_sources
+from texsynth.synth.evaluate.patches import seam_contrast
 
 
 def test_a_step_on_the_seam_gives_its_energy_over_the_interior() -> None:

@@ -1,11 +1,11 @@
-"""Grey levels along strands (synth.evaluate.strands)."""
+"""Grey levels along strands (texsynth.synth.evaluate.strands)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from synth.evaluate.strands import exemplar_strand_grey, strand_grey
-from synth.io.patterns import wood_grain
+from texsynth.synth.evaluate.strands import exemplar_strand_grey, strand_grey
+from texsynth.synth.io.patterns import wood_grain
 
 
 def _bands(shape: tuple[int, int], seed: int = 0) -> np.ndarray:

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from synth.errors import InvalidInput
-from synth.evaluate import tile_seam
+from texsynth.synth.errors import InvalidInput
+from texsynth.synth.evaluate import tile_seam
 
 
 def test_periodic_image_measures_one():

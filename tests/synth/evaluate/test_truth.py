@@ -1,13 +1,13 @@
-"""A volume against a known answer's slices (synth.evaluate.truth)."""
+"""A volume against a known answer's slices (texsynth.synth.evaluate.truth)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate.truth import evaluate_against_truth, truth_slices
-from synth.io.laminar import onion_volume
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.evaluate.truth import evaluate_against_truth, truth_slices
+from texsynth.synth.io.laminar import onion_volume
 
 
 @pytest.fixture(scope="module")

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from synth.cli import main
-from synth.errors import InvalidInput, InvalidParameter
-from synth.evaluate import PLANES, evaluate_volume, image_s2, volume_s2
-from synth.io import save_image, save_volume
-from synth.io.patterns import gaussian_random_field
+from texsynth.synth.cli import main
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.evaluate import PLANES, evaluate_volume, image_s2, volume_s2
+from texsynth.synth.io import save_image, save_volume
+from texsynth.synth.io.patterns import gaussian_random_field
 
 LENGTHS = (2.0, 4.0, 8.0)  # along z, y, x
 
@@ -37,7 +37,7 @@ def planes() -> dict[str, np.ndarray]:
 
 
 def test_planes_match_the_api():
-    from synth.api import PLANES as API_PLANES
+    from texsynth.synth.api import PLANES as API_PLANES
 
     assert PLANES == API_PLANES
 

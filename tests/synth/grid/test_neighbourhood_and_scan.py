@@ -1,13 +1,13 @@
-"""Neighbourhood offsets (synth.grid.neighbourhood) and scan orders (synth.grid.scan)."""
+"""Neighbourhood offsets (texsynth.synth.grid.neighbourhood) and scan orders (texsynth.synth.grid.scan)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth import InvalidParameter
-from synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
-from synth.grid.scan import SCAN_ORDERS, hilbert_points, morton_points, scan_order
+from texsynth.synth import InvalidParameter
+from texsynth.synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
+from texsynth.synth.grid.scan import SCAN_ORDERS, hilbert_points, morton_points, scan_order
 
 
 def test_causal_neighbourhood_is_the_raster_past() -> None:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from synth.errors import StorageError
-from synth.io.atomic import atomic_write_bytes, atomic_write_json, atomic_writer
+from texsynth.synth.errors import StorageError
+from texsynth.synth.io.atomic import atomic_write_bytes, atomic_write_json, atomic_writer
 
 
 def test_written_in_pieces_and_restarted_the_file_is_the_last_attempt(tmp_path) -> None:

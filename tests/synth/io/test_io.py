@@ -1,4 +1,5 @@
-"""Tests of synth.io: round trips, conversions, and one test per kind of bad input (message included)."""
+"""Tests of texsynth.synth.io: round trips, conversions, and one test per kind of bad input (message
+included)."""
 
 from __future__ import annotations
 
@@ -13,9 +14,16 @@ import pytest
 import tifffile
 from PIL import Image
 
-from synth.colour import LUMA_WEIGHTS
-from synth.errors import InputTooLarge, InvalidInput, InvalidParameter, StorageError, UnsupportedFormat
-from synth.io import (
+from tests.paths import SHARED_DATA
+from texsynth.synth.colour import LUMA_WEIGHTS
+from texsynth.synth.errors import (
+    InputTooLarge,
+    InvalidInput,
+    InvalidParameter,
+    StorageError,
+    UnsupportedFormat,
+)
+from texsynth.synth.io import (
     DEFAULT_MAX_PIXELS,
     MAX_ASPECT_RATIO,
     MIN_SIDE,
@@ -27,7 +35,6 @@ from synth.io import (
     save_volume,
     to_uint,
 )
-from tests.paths import SHARED_DATA
 
 DATA = SHARED_DATA
 H, W = 24, 32  # small, but above MIN_SIDE and well within the aspect-ratio limit
@@ -569,7 +576,7 @@ def test_failed_write_leaves_no_temporary_file_and_keeps_the_old_one(tmp_path, m
     def full_disk(fd: int) -> None:
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("synth.io.atomic.os.fsync", full_disk)
+    monkeypatch.setattr("texsynth.synth.io.atomic.os.fsync", full_disk)
     with pytest.raises(StorageError, match=r"cannot write out\.json: No space left on device"):
         atomic_write_json(path, {"a": 2})
     assert [p.name for p in tmp_path.iterdir()] == ["out.json"]

@@ -1,4 +1,5 @@
-"""Known-answer laminar volumes (synth.io.laminar) and the spectral period (synth.analysis.spectrum)."""
+"""Known-answer laminar volumes (texsynth.synth.io.laminar) and the spectral period
+(texsynth.synth.analysis.spectrum)."""
 
 from __future__ import annotations
 
@@ -6,10 +7,10 @@ import numpy as np
 import pytest
 from scipy import optimize
 
-from synth.analysis.spectrum import dominant_period, radial_power_spectrum
-from synth.errors import InvalidInput, InvalidParameter
-from synth.io.laminar import onion_volume, turbostratic_volume
-from synth.io.patterns import grating
+from texsynth.synth.analysis.spectrum import dominant_period, radial_power_spectrum
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.io.laminar import onion_volume, turbostratic_volume
+from texsynth.synth.io.patterns import grating
 
 
 @pytest.mark.parametrize(

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from synth.errors import InvalidParameter
-from synth.io import load_volume, save_volume
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.io import load_volume, save_volume
 
 
 @pytest.mark.parametrize("bit_depth", [8, 16])

@@ -1,4 +1,5 @@
-"""The pixel search kernel (synth.kernels.pixel_search) against its plain NumPy reference, through whole
+"""The pixel search kernel (texsynth.synth.kernels.pixel_search) against its plain NumPy reference, through
+whole
 source-map syntheses: pixels, tensor guidance, tensors, chunking, histograms, windows, transfers,
 falloff and square refinement."""
 
@@ -7,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.analysis.tensor import structure_tensor
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.kernels.pixel_search import METRIC_NORM, METRIC_SO, METRIC_SSD
-from synth.pixel.synthesis import Guidance, SearchSettings, synthesize_source_map, tensor_features
 from tests.synth.search_cases import _rng_image, _run_both, _striped_window, _tiled_window
+from texsynth.synth.analysis.tensor import structure_tensor
+from texsynth.synth.grid.pyramid import gaussian_pyramid, level_shapes
+from texsynth.synth.kernels.pixel_search import METRIC_NORM, METRIC_SO, METRIC_SSD
+from texsynth.synth.pixel.synthesis import Guidance, SearchSettings, synthesize_source_map, tensor_features
 
 
 @pytest.mark.parametrize("search", ["exact", "kcoherence"])
@@ -83,7 +84,7 @@ def test_how_a_pass_is_chunked_changes_no_byte(monkeypatch: pytest.MonkeyPatch, 
     the exemplar features are rebuilt per call): one call per pass and one call per position give the
     same bytes, with all three parts of a distance (pixels, parent level, SO tensor guidance) and
     histogram matching on."""
-    import synth.pixel.synthesis as synthesis
+    import texsynth.synth.pixel.synthesis as synthesis
 
     ex = _rng_image((24, 24), seed=5)
     ex_tensors = gaussian_pyramid(structure_tensor(ex), 2)

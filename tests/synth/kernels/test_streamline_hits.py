@@ -1,20 +1,20 @@
 """The kernel that follows an orientation field's streamlines to the first marked pixel
-(synth.kernels.streamline_hits), against its plain reference."""
+(texsynth.synth.kernels.streamline_hits), against its plain reference."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from synth.analysis.streamlines import trace
-from synth.kernels.streamline_hits import first_hits
 from tests.synth.analysis.test_streamlines import ring_direction
+from texsynth.synth.analysis.streamlines import trace
+from texsynth.synth.kernels.streamline_hits import first_hits
 
 
 def first_hits_reference(
     angle: np.ndarray, label: np.ndarray, max_steps: int, step: float = 1.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """Plain version (non-periodic) of :func:`first_hits`' steps and hit positions, with
-    :func:`synth.analysis.streamlines.trace` (which mirrors the field outside the image where the
+    :func:`texsynth.synth.analysis.streamlines.trace` (which mirrors the field outside the image where the
     kernel clamps it: the two agree wherever curves stay a pixel inside)."""
     h, w = label.shape
     starts = np.argwhere(np.ones((h, w), bool)).astype(np.float64)

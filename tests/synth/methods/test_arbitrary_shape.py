@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth import InvalidInput, InvalidParameter
-from synth.analysis.rotation import build_rotated_dictionary, rotation_candidates
-from synth.analysis.tensor import (
+from texsynth.synth import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.rotation import build_rotated_dictionary, rotation_candidates
+from texsynth.synth.analysis.tensor import (
     coherence,
     dominant_orientation,
     orientation,
@@ -15,10 +15,10 @@ from synth.analysis.tensor import (
     structure_tensor,
     wrap_angle,
 )
-from synth.api import available_methods, synthesize
-from synth.io.patterns import concentric_rings, grating, waves, wood_grain
-from synth.methods.arbitrary_shape import ArbitraryShapeParams, orientation_agreement
-from synth.params import validate_params
+from texsynth.synth.api import available_methods, synthesize
+from texsynth.synth.io.patterns import concentric_rings, grating, waves, wood_grain
+from texsynth.synth.methods.arbitrary_shape import ArbitraryShapeParams, orientation_agreement
+from texsynth.synth.params import validate_params
 
 # Small and fast: 15-degree steps (M = 24), 7x7 neighbourhoods; the parameters as given (the tests
 # below pin each field's meaning; the recipes have their own tests).
@@ -366,7 +366,7 @@ def test_transfer_candidates_keeps_the_window_and_continues_strands() -> None:
 
 
 def test_histogram_weight_pulls_the_grey_levels_toward_the_exemplar() -> None:
-    from synth.evaluate import grey_histogram, kl_divergence
+    from texsynth.synth.evaluate import grey_histogram, kl_divergence
 
     # An exemplar whose dark quarter is rare: without matching the output over-uses some grey levels.
     ex = _fringes(0, (48, 48), seed=3)
@@ -380,7 +380,7 @@ def test_histogram_weight_pulls_the_grey_levels_toward_the_exemplar() -> None:
 
 
 def test_grey_labels_bin_the_levels_and_target_the_exemplar() -> None:
-    from synth.methods.arbitrary_shape import GREY_LABELS, grey_labels
+    from texsynth.synth.methods.arbitrary_shape import GREY_LABELS, grey_labels
 
     ex = np.linspace(0, 1, 64, dtype=np.float32).reshape(8, 8)
     ((labels, target),) = grey_labels([ex[..., None]], ex)
@@ -391,7 +391,7 @@ def test_grey_labels_bin_the_levels_and_target_the_exemplar() -> None:
 def test_auto_recipe_follows_the_exemplar_coherence() -> None:
     """'auto' picks 'fibres' for a strongly oriented exemplar and 'weak' for an isotropic one; a
     recipe sets only the fields left at their defaults; 'paper' keeps the fields as given."""
-    from synth.methods.arbitrary_shape import RECIPES, ArbitraryShapeParams
+    from texsynth.synth.methods.arbitrary_shape import RECIPES, ArbitraryShapeParams
 
     fibres = _fringes(0)
     noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
@@ -477,7 +477,7 @@ PAPER_HINTS = {"hint_layout": "texture", "initial_sources": "random"}
 
 
 def _grey_ratio(res) -> float:
-    from synth.evaluate.strands import strand_grey
+    from texsynth.synth.evaluate.strands import strand_grey
 
     return strand_grey(res.image, res.extras["constraint_orientation"] + np.pi / 2)["ratio"]
 
@@ -487,7 +487,7 @@ def test_strand_hints_keep_each_strands_grey_level_on_waves() -> None:
     and the output starts from them, so each strand keeps its grey level along its length: the grey
     variance along the strands over across them drops (this case, seeds 1-3: 0.68-1.01 -> 0.13-0.14),
     the waves are followed at least as well, the histogram stays the exemplar's."""
-    from synth.evaluate import grey_histogram, kl_divergence
+    from texsynth.synth.evaluate import grey_histogram, kl_divergence
 
     ex, con = wood_grain((48, 48), seed=1), waves((64, 64), amplitude=8.0, wavelength=64.0)
     small = {"neighbourhood_size": 7, "strand_hint_spacing": 32}
@@ -524,8 +524,8 @@ def test_fibre_grey_spread_separates_fibres_with_their_own_grey_from_uniform_str
     """The measured property behind the choice: a wood grain's fibres each have their own grey level
     (spread well above the threshold), straight and bent uniform stripes do not (below it, whatever
     their period or noise); a flat image is 0."""
-    from synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
-    from synth.io.patterns import undulating_laminae
+    from texsynth.synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
+    from texsynth.synth.io.patterns import undulating_laminae
 
     for seed in (1, 2, 3):
         assert fibre_grey_spread(wood_grain((48, 48), seed=seed)) > 1.3 * OWN_GREY_FIBRES
@@ -546,7 +546,7 @@ def test_fibres_with_their_own_grey_levels_get_the_strand_hints_by_default() -> 
     grain (above the threshold) gets them, straight fringes (below) keep the paper's hints; the choice
     and the measure are recorded in params and stats; a value given wins; without the rotation window
     there are no hints to lay; same seed, same bytes."""
-    from synth.methods.arbitrary_shape import OWN_GREY_FIBRES, ArbitraryShapeParams
+    from texsynth.synth.methods.arbitrary_shape import OWN_GREY_FIBRES, ArbitraryShapeParams
 
     con = waves((48, 48), amplitude=6.0, wavelength=48.0)
     small = {"neighbourhood_size": 7, "angular_step": 15.0, "strand_hint_spacing": 32}

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.analysis.features import feature_map
-from synth.api import synthesize
-from synth.errors import Cancelled, InvalidParameter
-from synth.io.patterns import undulating_laminae, voronoi_cells
-from synth.patch.feature_guided import (
+from texsynth.synth.analysis.features import feature_map
+from texsynth.synth.api import synthesize
+from texsynth.synth.errors import Cancelled, InvalidParameter
+from texsynth.synth.io.patterns import undulating_laminae, voronoi_cells
+from texsynth.synth.patch.feature_guided import (
     WARPED_CODE,
     FeatureGuidedSettings,
     combined_cost,
@@ -135,7 +135,7 @@ def test_extras_and_the_broken_feature_measure(runs):
 
 
 def test_artifacts_are_written_by_the_one_writer(tmp_path, runs, laminae):
-    from synth.output.artifacts import write_artifacts
+    from texsynth.synth.output.artifacts import write_artifacts
 
     names, _ = write_artifacts(tmp_path, runs["on"], laminae, plots=False)
     for name in ("features_exemplar.png", "features_output.png", "seams.png"):
@@ -222,7 +222,7 @@ def test_warp_stats_and_the_kink_measure_are_reported(runs):
 def test_reverse_weight_none_follows_the_exemplars_orientation(laminae):
     """``reverse_weight=None`` (the default): 4 for weakly oriented exemplars, 0 (eq 2) for strongly
     oriented ones, and the run records the weight it used."""
-    from synth.methods.feature_guided import reverse_weight_for
+    from texsynth.synth.methods.feature_guided import reverse_weight_for
 
     noise = np.random.default_rng(3).random((64, 64)).astype(np.float32)
     assert reverse_weight_for(laminae) == 0.0

@@ -7,11 +7,11 @@ import pytest
 from scipy import fft as sfft
 from scipy import ndimage as ndi
 
-from synth.api import synthesize
-from synth.errors import InvalidParameter
-from synth.evaluate import copy_map, copy_share, seam_visibility
-from synth.methods.random_phase import periodic_component, random_phase_noise
-from synth.patch.layout import PatchLayout
+from texsynth.synth.api import synthesize
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.evaluate import copy_map, copy_share, seam_visibility
+from texsynth.synth.methods.random_phase import periodic_component, random_phase_noise
+from texsynth.synth.patch.layout import PatchLayout
 
 
 def _tile(period: int, reps: int, channels: int = 0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -1,6 +1,7 @@
 """Tileable outputs (``periodic=True``) of the patch methods and random-phase: a 2 x 2 tiling shows no seam.
 
-The measure is :func:`synth.evaluate.tile_seam` (1 = tile borders like the interior; ranks about 0.5 for a
+The measure is :func:`texsynth.synth.evaluate.tile_seam` (1 = tile borders like the interior; ranks about 0.5
+for a
 seamless tiling, 1 for a seam stronger than any line inside).
 """
 
@@ -10,9 +11,9 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from synth.api import find_method, synthesize
-from synth.errors import InvalidParameter
-from synth.evaluate import tile_seam
+from texsynth.synth.api import find_method, synthesize
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.evaluate import tile_seam
 
 SIZE = (96, 96)
 SEEDS = (1, 2, 3)

@@ -10,12 +10,12 @@ import sys
 import numpy as np
 import pytest
 
-from synth import InvalidInput, InvalidParameter
-from synth.api import PLANES, synthesize
-from synth.errors import Cancelled
-from synth.grid.scan import SCAN_ORDERS, scan_order
-from synth.io.patterns import undulating_laminae
-from synth.kernels.solid_kcoherence import (
+from texsynth.synth import InvalidInput, InvalidParameter
+from texsynth.synth.api import PLANES, synthesize
+from texsynth.synth.errors import Cancelled
+from texsynth.synth.grid.scan import SCAN_ORDERS, scan_order
+from texsynth.synth.io.patterns import undulating_laminae
+from texsynth.synth.kernels.solid_kcoherence import (
     SolidState,
     SolverWeights,
     new_scratch,
@@ -24,7 +24,7 @@ from synth.kernels.solid_kcoherence import (
     solve_pass,
     solve_reference,
 )
-from synth.methods.solid_chen_wang import (
+from texsynth.synth.methods.solid_chen_wang import (
     _GREY_BINS,
     SolidChenWangParams,
     _bank,
@@ -34,7 +34,7 @@ from synth.methods.solid_chen_wang import (
     _targets,
     synthesize_solid_chen_wang,
 )
-from synth.pixel.solid import plan_levels
+from texsynth.synth.pixel.solid import plan_levels
 
 #: Small and fast: 2 levels, 1 iteration.
 FAST = {"levels": 2, "iterations": 1, "neighbourhood_size": 5}
@@ -123,7 +123,7 @@ def test_search_and_solve_kernels_equal_their_references(periodic, anisotropic, 
 
 
 def test_whole_run_equals_the_reference_run(monkeypatch: pytest.MonkeyPatch) -> None:
-    import synth.methods.solid_chen_wang as method
+    import texsynth.synth.methods.solid_chen_wang as method
 
     ex = _laminae(16)
     params = SolidChenWangParams(levels=2, iterations=1, neighbourhood_size=5, k=4, grey_weight=1.0)
@@ -260,7 +260,8 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
     def broken(stage: str, fraction: float) -> None:
         raise RuntimeError("worker gone")
 
-    # synth.methods.common.checked_progress: only Cancelled means "stop"; a broken callback fails loudly.
+    # texsynth.synth.methods.common.checked_progress: only Cancelled means "stop"; a broken callback fails
+    # loudly.
     with pytest.raises(RuntimeError, match="worker gone"):
         synthesize("solid-chen-wang", _laminae(), size=(16, 16, 16), params=FAST, progress=broken)
 
@@ -297,7 +298,8 @@ def test_same_bytes_with_one_or_two_threads() -> None:
     """The parallel search and solve write only their own slots, sum in a fixed order and split their
     work into a fixed number of blocks: one thread and two give the same bytes."""
     code = (
-        "import hashlib; from synth.api import synthesize; from synth.io.patterns import undulating_laminae;"
+        "import hashlib; from texsynth.synth.api import synthesize; from texsynth.synth.io.patterns import "
+        "undulating_laminae;"
         "ex = undulating_laminae((32, 32), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0);"
         "r = synthesize('solid-chen-wang', ex, size=(12, 12, 12), params={'iterations': 2, 'levels': 2,"
         " 'adapt_to_structure': False}, seed=3);"
@@ -316,8 +318,8 @@ def test_same_bytes_with_one_or_two_threads() -> None:
 def test_orientation_gain_defaults_to_laminae_only() -> None:
     """``orientation_gain=None``: the laminar gain for a laminar exemplar, off for a weakly oriented one,
     and whatever is given when given; the re-weighting changes the volume."""
-    from synth.io.patterns import undulating_laminae
-    from synth.methods.solid_chen_wang import LAMINAR_ORIENTATION_GAIN
+    from texsynth.synth.io.patterns import undulating_laminae
+    from texsynth.synth.methods.solid_chen_wang import LAMINAR_ORIENTATION_GAIN
 
     laminae = undulating_laminae((32, 32), 6, 4, 32, noise=0.2)
     noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
@@ -342,8 +344,8 @@ def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
     laminar exemplar, only the voxel's own matches (0) for a weakly oriented one or when
     ``adapt_to_structure`` is off; a given radius is taken literally, and radius 1 is what the default
     gives on laminae (the same volume)."""
-    from synth.io.patterns import undulating_laminae
-    from synth.methods.solid_chen_wang import LAMINAR_SOLVE_RADIUS
+    from texsynth.synth.io.patterns import undulating_laminae
+    from texsynth.synth.methods.solid_chen_wang import LAMINAR_SOLVE_RADIUS
 
     laminae = undulating_laminae((32, 32), 6, 4, 32, noise=0.2)
     noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)

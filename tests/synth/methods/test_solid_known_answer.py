@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.api import synthesize
-from synth.evaluate.correlation import compare_s2, volume_s2
-from synth.io.patterns import gaussian_random_field
+from texsynth.synth.api import synthesize
+from texsynth.synth.evaluate.correlation import compare_s2, volume_s2
+from texsynth.synth.io.patterns import gaussian_random_field
 
 pytestmark = pytest.mark.slow
 
@@ -47,8 +47,13 @@ def test_s2_along_each_axis_matches_the_truth(truth, method):
 
 def test_the_schedule_adapts_to_the_structure(truth):
     """Micro-structures get 2 levels, laminae 10 iterations; ``adapt_to_structure=False`` is literal."""
-    from synth.io.patterns import laminae_volume
-    from synth.pixel.solid import LAMINAR_ITERATIONS, MICROSTRUCTURE_LEVELS, is_laminar, structure_schedule
+    from texsynth.synth.io.patterns import laminae_volume
+    from texsynth.synth.pixel.solid import (
+        LAMINAR_ITERATIONS,
+        MICROSTRUCTURE_LEVELS,
+        is_laminar,
+        structure_schedule,
+    )
 
     d = truth.shape[0]
     grains = [truth[d // 2], truth[:, d // 2, :], truth[:, :, d // 2]]

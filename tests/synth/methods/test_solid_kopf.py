@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from synth import InvalidInput, InvalidParameter
-from synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
-from synth.api import synthesize
-from synth.errors import Cancelled
-from synth.grid.scan import SCAN_ORDERS
-from synth.io.patterns import undulating_laminae
 from tests.paths import SHARED_DATA
+from texsynth.synth import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
+from texsynth.synth.api import synthesize
+from texsynth.synth.errors import Cancelled
+from texsynth.synth.grid.scan import SCAN_ORDERS
+from texsynth.synth.io.patterns import undulating_laminae
 
 SMALL = {"iterations": 2, "levels": 3}
 
@@ -180,7 +180,7 @@ def test_bad_inputs_are_named() -> None:
 
 
 def _soot(side: int = 32) -> np.ndarray:
-    from synth.io import load_image
+    from texsynth.synth.io import load_image
 
     return load_image(SOOT, mode="grey")[:side, :side].copy()
 
@@ -256,8 +256,10 @@ def test_same_bytes_with_one_or_two_threads() -> None:
     """The parallel kernels (prange) write only their own slots and sum in a fixed order: one thread
     and two give the same bytes (every kernel forced onto the thread pool, however small its input)."""
     code = (
-        "import hashlib; from synth.api import synthesize; from synth.io.patterns import undulating_laminae;"
-        "import synth.kernels.solid_search as k; k.PARALLEL_MIN_ITEMS = 0;"  # small inputs in parallel too
+        "import hashlib; from texsynth.synth.api import synthesize; from texsynth.synth.io.patterns import "
+        "undulating_laminae;"
+        # small inputs in parallel too
+        "import texsynth.synth.kernels.solid_search as k; k.PARALLEL_MIN_ITEMS = 0;"
         "ex = undulating_laminae((32, 32), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0);"
         "r = synthesize('solid-kopf', ex, size=(12, 12, 12), params={'iterations': 2, 'levels': 2}, seed=3);"
         "print(hashlib.sha256(r.image.tobytes()).hexdigest())"
@@ -273,7 +275,7 @@ def test_same_bytes_with_one_or_two_threads() -> None:
 
 
 def test_position_factors_penalise_only_over_used_exemplar_cells() -> None:
-    from synth.methods.solid_kopf import POSITION_CELLS, POSITION_GAIN, _position_factors
+    from texsynth.synth.methods.solid_kopf import POSITION_CELLS, POSITION_GAIN, _position_factors
 
     side = 4 * POSITION_CELLS  # cells of 4 x 4 pixels
     # cell 0 used 3 times, cell 1 once: mean 2, excess of cell 0 is 0.5
@@ -283,8 +285,8 @@ def test_position_factors_penalise_only_over_used_exemplar_cells() -> None:
 
 
 def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
-    from synth.analysis.orientation_histogram import ORIENTATION_BINS, orientation_labels
-    from synth.io.patterns import grating
+    from texsynth.synth.analysis.orientation_histogram import ORIENTATION_BINS, orientation_labels
+    from texsynth.synth.io.patterns import grating
 
     horizontal = grating((48, 48), np.pi / 2, 8.0)  # gradient along the rows: orientation pi/2 = -pi/2
     lower, fraction, shares = orientation_labels(horizontal)
@@ -298,8 +300,8 @@ def test_orientation_labels_bin_a_grating_by_its_gradient() -> None:
 
 
 def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_centres() -> None:
-    from synth.analysis.orientation_histogram import orientation_labels
-    from synth.io.patterns import grating
+    from texsynth.synth.analysis.orientation_histogram import orientation_labels
+    from texsynth.synth.io.patterns import grating
 
     bins = 12  # centres at -82.5, -67.5, ..., 82.5 degrees
     for degrees, lower, fraction in ((-60.0, 1, 0.5), (-67.5, 1, 0.0), (45.0, 8, 0.5), (40.0, 8, 1 / 6)):
@@ -315,8 +317,8 @@ def test_orientation_labels_split_an_orientation_between_the_two_nearest_bin_cen
 
 
 def test_orientation_factors_penalise_only_over_used_orientations() -> None:
-    from synth.analysis.orientation_histogram import OrientationLabels
-    from synth.methods.solid_kopf import _orientation_factors
+    from texsynth.synth.analysis.orientation_histogram import OrientationLabels
+    from texsynth.synth.methods.solid_kopf import _orientation_factors
 
     # exemplar pixels 0, 1 wholly in bin 0; 2, 3 wholly in bin 1 (fraction 0)
     labels = OrientationLabels(np.array([0, 0, 1, 1], dtype=np.int64), np.zeros(4), np.array([0.5, 0.5]))
@@ -328,8 +330,8 @@ def test_orientation_factors_penalise_only_over_used_orientations() -> None:
 
 
 def test_orientation_factors_interpolate_between_the_two_bins() -> None:
-    from synth.analysis.orientation_histogram import OrientationLabels
-    from synth.methods.solid_kopf import _orientation_factors
+    from texsynth.synth.analysis.orientation_histogram import OrientationLabels
+    from texsynth.synth.methods.solid_kopf import _orientation_factors
 
     # pixel 0 half in bin 0, half in bin 1; pixel 1 wholly in bin 1; pixel 2 wholly in bin 2
     labels = OrientationLabels(
@@ -366,8 +368,8 @@ def test_final_step_best_copies_exemplar_grain() -> None:
 
 def test_oriented_start_keeps_a_tilted_stack() -> None:
     """Per-plane slices of sheets normal to (1, 1, 1): the oriented start gives each plane its orientation."""
-    from synth.io.laminar import turbostratic_volume
-    from synth.output.volume import mid_slices
+    from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.output.volume import mid_slices
 
     planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
     params = {"structure": "oriented"}

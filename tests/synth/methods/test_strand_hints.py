@@ -1,13 +1,18 @@
-"""Hints laid along the constraint's strands (synth.methods.strand_hints)."""
+"""Hints laid along the constraint's strands (texsynth.synth.methods.strand_hints)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from synth.analysis.tensor import dominant_orientation, orientation, structure_direction, structure_tensor
-from synth.evaluate.strands import strand_grey
-from synth.io.patterns import concentric_rings, waves, wood_grain
-from synth.methods.strand_hints import fibre_table, strand_hints
+from texsynth.synth.analysis.tensor import (
+    dominant_orientation,
+    orientation,
+    structure_direction,
+    structure_tensor,
+)
+from texsynth.synth.evaluate.strands import strand_grey
+from texsynth.synth.io.patterns import concentric_rings, waves, wood_grain
+from texsynth.synth.methods.strand_hints import fibre_table, strand_hints
 
 
 def _setup(constraint: np.ndarray):

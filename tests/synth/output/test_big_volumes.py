@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 import tifffile
 
-from synth.errors import InvalidParameter
-from synth.evaluate import correlation, measures
-from synth.evaluate.measures import evaluate_volume, moments
-from synth.io import save_volume
-from synth.io.images import to_uint
-from synth.output.volume import write_volume_images
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.evaluate import correlation, measures
+from texsynth.synth.evaluate.measures import evaluate_volume, moments
+from texsynth.synth.io import save_volume
+from texsynth.synth.io.images import to_uint
+from texsynth.synth.output.volume import write_volume_images
 
 
 def _volume(shape: tuple[int, int, int], seed: int = 0) -> np.ndarray:

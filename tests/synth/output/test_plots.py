@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image
 
-from synth.evaluate.measures import evaluate_pair_fringes
-from synth.io.patterns import undulating_laminae
-from synth.output.chart import nice_ticks
-from synth.output.plots import _PALETTE, fringe_overlay, write_plots
+from texsynth.synth.evaluate.measures import evaluate_pair_fringes
+from texsynth.synth.io.patterns import undulating_laminae
+from texsynth.synth.output.chart import nice_ticks
+from texsynth.synth.output.plots import _PALETTE, fringe_overlay, write_plots
 
 
 def _read(path) -> np.ndarray:

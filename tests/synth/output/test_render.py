@@ -1,13 +1,14 @@
-"""Renderings of :mod:`synth.output.render`: palette colours, the wrap at +-90 degrees, legends, dtypes."""
+"""Renderings of :mod:`texsynth.synth.output.render`: palette colours, the wrap at +-90 degrees, legends,
+dtypes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth.analysis.tensor import coherence, structure_direction, structure_tensor
-from synth.errors import InvalidParameter
-from synth.output.render import (
+from texsynth.synth.analysis.tensor import coherence, structure_direction, structure_tensor
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.output.render import (
     LEGEND_KINDS,
     coherence_image,
     composite_image,

@@ -1,4 +1,5 @@
-"""Volume pictures (synth.output.volume) and the artifacts of a volume result (synth.output.artifacts)."""
+"""Volume pictures (texsynth.synth.output.volume) and the artifacts of a volume result
+(texsynth.synth.output.artifacts)."""
 
 from __future__ import annotations
 
@@ -8,10 +9,10 @@ import numpy as np
 import pytest
 import tifffile
 
-from synth.api import Result
-from synth.errors import InvalidInput, InvalidParameter
-from synth.io.patterns import gaussian_random_field
-from synth.output.volume import cube_image, mid_slices, slices_image, write_volume_images
+from texsynth.synth.api import Result
+from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.io.patterns import gaussian_random_field
+from texsynth.synth.output.volume import cube_image, mid_slices, slices_image, write_volume_images
 
 
 def test_mid_slices_follow_the_plane_convention():
@@ -93,7 +94,7 @@ def test_bad_inputs_name_the_argument():
 
 
 def test_write_artifacts_of_a_volume(tmp_path, monkeypatch):
-    from synth.output import artifacts
+    from texsynth.synth.output import artifacts
 
     # the 2-D comparison charts are tested with write_plots itself: here only that they are asked for
     # with the per-plane exemplars, beside the real s2.png

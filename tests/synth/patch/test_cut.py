@@ -7,8 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-from synth.patch.cut import boundary_cut_mask, cut_cost, min_cut, min_cut_reference, strips_cut_mask
-from synth.patch.layout import Strips
+from texsynth.synth.patch.cut import boundary_cut_mask, cut_cost, min_cut, min_cut_reference, strips_cut_mask
+from texsynth.synth.patch.layout import Strips
 
 
 def _brute_vertical(errors: np.ndarray) -> float:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from synth.patch.gaussian import (
+from texsynth.synth.patch.gaussian import (
     GaussianPatchModel,
     clg_patch,
     lg_patch,
@@ -17,7 +17,7 @@ from synth.patch.gaussian import (
     rclg_patch,
     restore_contrast,
 )
-from synth.patch.layout import Strips, overlap_mask
+from texsynth.synth.patch.layout import Strips, overlap_mask
 
 
 def _case(seed: int = 0, n: int = 8, w: int = 5, channels: int = 1):

@@ -7,8 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-from synth.patch.graphcut import graph_cut_mask, overlap_graph
-from synth.patch.layout import Strips, overlap_mask
+from texsynth.synth.patch.graphcut import graph_cut_mask, overlap_graph
+from texsynth.synth.patch.layout import Strips, overlap_mask
 
 
 def _cut_value(graph, labels_old: np.ndarray) -> int:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.errors import InvalidParameter
-from synth.patch.layout import PatchLayout, check_periodic_size, overlap_mask, periodic_positions
-from synth.patch.search import PatchSearcher, candidates_within, k_nearest
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, overlap_mask, periodic_positions
+from texsynth.synth.patch.search import PatchSearcher, candidates_within, k_nearest
 
 
 def test_layout_covers_size_and_kinds():

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth.api import synthesize
-from synth.errors import InvalidParameter
-from synth.evaluate.coverage import exemplar_coverage, footprint_counts
-from synth.io import load_image
-from synth.patch.layout import overlap_mask
-from synth.patch.search import PatchSearcher
-from synth.patch.usage import UsagePenalty
 from tests.paths import REPO
+from texsynth.synth.api import synthesize
+from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.evaluate.coverage import exemplar_coverage, footprint_counts
+from texsynth.synth.io import load_image
+from texsynth.synth.patch.layout import overlap_mask
+from texsynth.synth.patch.search import PatchSearcher
+from texsynth.synth.patch.usage import UsagePenalty
 
 ONION_CORE = REPO / "benchmarks" / "data" / "hrtem-onion-core-128.png"
 
@@ -157,7 +157,7 @@ def test_gaussian_patch_reports_its_neighbours():
 
 
 def test_feature_guided_search_follows_the_exemplar_orientation():
-    from synth.methods.feature_guided import search_for
+    from texsynth.synth.methods.feature_guided import search_for
 
     rng = np.random.default_rng(4)
     noise = rng.random((64, 64))

@@ -1,4 +1,5 @@
-"""The laminar start of the solid methods (synth.pixel.laminar): period, phase field, gating, effect."""
+"""The laminar start of the solid methods (texsynth.synth.pixel.laminar): period, phase field, gating,
+effect."""
 
 from __future__ import annotations
 
@@ -6,11 +7,11 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from synth.analysis.tensor import mean_coherence
-from synth.api import synthesize
-from synth.io.laminar import turbostratic_volume
-from synth.output.volume import mid_slices
-from synth.pixel.laminar import (
+from texsynth.synth.analysis.tensor import mean_coherence
+from texsynth.synth.api import synthesize
+from texsynth.synth.io.laminar import turbostratic_volume
+from texsynth.synth.output.volume import mid_slices
+from texsynth.synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
     laminar_volume,
@@ -141,7 +142,7 @@ def test_laminar_start_makes_slices_as_coherent_as_the_exemplar(method: str) -> 
 
 def test_pilot_decides_only_between_the_two_coherence_thresholds() -> None:
     """Fringed exemplars start laminar without a pilot, weak ones never ask it; in between it decides."""
-    from synth.pixel.laminar import PILOT_COHERENCE, START_COHERENCE
+    from texsynth.synth.pixel.laminar import PILOT_COHERENCE, START_COHERENCE
 
     calls: list[float] = []
 
@@ -177,8 +178,8 @@ def test_pilot_picks_the_start_that_keeps_the_exemplar_coherence() -> None:
     pilot picks the sheets; the pilot is seeded (same answer twice)."""
     from pathlib import Path
 
-    from synth.io import load_image
-    from synth.methods.solid_kopf import laminar_pilot
+    from texsynth.synth.io import load_image
+    from texsynth.synth.methods.solid_kopf import laminar_pilot
 
     crop = Path(__file__).resolve().parents[3] / "benchmarks" / "data" / "hrtem-onion-128.png"
     exemplar = load_image(crop)

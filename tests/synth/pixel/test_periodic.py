@@ -1,6 +1,7 @@
 """Tileable outputs of the 2D pixel methods (``periodic=True``): a 2 x 2 tiling shows no seam.
 
-The measure is :func:`synth.evaluate.tile_seam`. One line of pixel pairs is a noisy sample (a seamless
+The measure is :func:`texsynth.synth.evaluate.tile_seam`. One line of pixel pairs is a noisy sample (a
+seamless
 border's rank is about uniform over [0, 1]), so the checks take the mean over three seeds: the ratio and
 the ranks of a seamless output stay near 1 and 0.5; a causal scan's seam (the default, non-periodic
 output) sits near 1.5 and 0.9.
@@ -12,14 +13,14 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from synth import InvalidParameter
-from synth.analysis.tensor import structure_tensor
-from synth.api import available_methods, synthesize
-from synth.evaluate import tile_seam
-from synth.grid.pyramid import gaussian_pyramid, level_shapes
-from synth.io.patterns import grating, waves
-from synth.methods.arbitrary_shape import constraint_field
-from synth.pixel.synthesis import Guidance, SearchSettings, tensor_features
+from texsynth.synth import InvalidParameter
+from texsynth.synth.analysis.tensor import structure_tensor
+from texsynth.synth.api import available_methods, synthesize
+from texsynth.synth.evaluate import tile_seam
+from texsynth.synth.grid.pyramid import gaussian_pyramid, level_shapes
+from texsynth.synth.io.patterns import grating, waves
+from texsynth.synth.methods.arbitrary_shape import constraint_field
+from texsynth.synth.pixel.synthesis import Guidance, SearchSettings, tensor_features
 
 from .test_synthesis_core import _run_both
 

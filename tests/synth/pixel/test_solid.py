@@ -1,13 +1,14 @@
-"""Solid machinery (synth.pixel.solid) and its kernels (synth.kernels.solid_search) against references."""
+"""Solid machinery (texsynth.synth.pixel.solid) and its kernels (texsynth.synth.kernels.solid_search) against
+references."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth.errors import Cancelled, InvalidInput
-from synth.grid.scan import scan_order
-from synth.kernels.solid_search import (
+from texsynth.synth.errors import Cancelled, InvalidInput
+from texsynth.synth.grid.scan import scan_order
+from texsynth.synth.kernels.solid_search import (
     HistogramState,
     MatchField,
     PackedExemplars,
@@ -23,7 +24,7 @@ from synth.kernels.solid_search import (
     rerank,
     rerank_reference,
 )
-from synth.pixel.solid import (
+from texsynth.synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
     LevelStep,

@@ -7,12 +7,19 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synth import Cancelled, InvalidParameter
-from synth.analysis.tensor import structure_tensor
-from synth.api import synthesize
-from synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
-from synth.grid.scan import scan_order
-from synth.kernels.pixel_search import (
+from tests.synth.search_cases import (
+    _rng_image,
+    _run_both,
+    _striped_window,
+    _tiled_window,
+    synthesize_with_reference,
+)
+from texsynth.synth import Cancelled, InvalidParameter
+from texsynth.synth.analysis.tensor import structure_tensor
+from texsynth.synth.api import synthesize
+from texsynth.synth.grid.neighbourhood import neighbourhood_offsets, parent_offsets
+from texsynth.synth.grid.scan import scan_order
+from texsynth.synth.kernels.pixel_search import (
     METRIC_SSD,
     Candidates,
     ClassWindow,
@@ -22,19 +29,12 @@ from synth.kernels.pixel_search import (
     SearchState,
     synthesize_chunk,
 )
-from synth.pixel.synthesis import (
+from texsynth.synth.pixel.synthesis import (
     Guidance,
     SearchSettings,
     entry_weights,
     synthesize_source_map,
     tensor_features,
-)
-from tests.synth.search_cases import (
-    _rng_image,
-    _run_both,
-    _striped_window,
-    _tiled_window,
-    synthesize_with_reference,
 )
 
 # ---------------------------------------------------------------- option semantics
@@ -314,8 +314,8 @@ def test_structure_histogram_option_selects_the_matching() -> None:
 
 
 def test_orientation_labels_bin_the_field_and_sum_to_one() -> None:
-    from synth.io.patterns import grating
-    from synth.methods.tensor_constrained import orientation_labels
+    from texsynth.synth.io.patterns import grating
+    from texsynth.synth.methods.tensor_constrained import orientation_labels
 
     tensors = structure_tensor(grating((32, 32), period=8, angle=np.pi / 4))
     labels, fractions = orientation_labels(tensors, bins=36)
@@ -338,8 +338,8 @@ def test_candidate_window_restricts_every_copied_position() -> None:
 @pytest.mark.parametrize("side", [12, 16, 24, 40])
 def test_the_neighbourhood_precheck_fails_exactly_when_the_run_would(side: int) -> None:
     """``check_neighbourhoods_fit`` (shapes only, used before queueing) says what the driver would say."""
-    from synth.errors import SynthError
-    from synth.pixel.synthesis import check_neighbourhoods_fit
+    from texsynth.synth.errors import SynthError
+    from texsynth.synth.pixel.synthesis import check_neighbourhoods_fit
 
     ex = np.random.default_rng(0).random((side, side)).astype(np.float32)
     params = {"levels": 4, "neighbourhood_size": 5, "parent_size": 3}
@@ -517,7 +517,7 @@ def test_kset_parameters_are_checked(params: dict, field: str) -> None:
 
 
 def test_kset_parameters_reach_the_k_coherence_sets(monkeypatch: pytest.MonkeyPatch) -> None:
-    import synth.pixel.synthesis as core
+    import texsynth.synth.pixel.synthesis as core
 
     seen: list[tuple[int, int]] = []
     real = core.k_coherence_sets
@@ -534,8 +534,8 @@ def test_kset_parameters_reach_the_k_coherence_sets(monkeypatch: pytest.MonkeyPa
 
 def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
     """The issue-13 defaults are departures; the earlier settings stay reachable by parameters."""
-    from synth.methods.tensor_constrained import TensorConstrainedParams
-    from synth.methods.wei_levoy import WeiLevoyParams
+    from texsynth.synth.methods.tensor_constrained import TensorConstrainedParams
+    from texsynth.synth.methods.wei_levoy import WeiLevoyParams
 
     wl, tc = WeiLevoyParams(), TensorConstrainedParams()
     assert (wl.levels, wl.falloff, wl.refinement, wl.kset_size, wl.kset_dims) == (2, 0.156, "square", 7, 8)
@@ -556,7 +556,7 @@ def test_issue13_defaults_and_the_earlier_settings_differ() -> None:
 
 
 def test_periodic_wei_levoy_gets_a_third_pass_unless_told() -> None:
-    from synth.methods.wei_levoy import WeiLevoyParams
+    from texsynth.synth.methods.wei_levoy import WeiLevoyParams
 
     assert WeiLevoyParams().iterations == 2
     assert WeiLevoyParams(periodic=True).iterations == 3
@@ -566,8 +566,8 @@ def test_periodic_wei_levoy_gets_a_third_pass_unless_told() -> None:
 def test_tensor_constrained_refinement_size_follows_the_exemplars_orientation() -> None:
     """``refinement_size=None``: the whole neighbourhood for strongly oriented exemplars, 7 for weak ones,
     and the run records the side it used; an explicit side is kept."""
-    from synth.analysis.tensor import structure_tensor
-    from synth.methods.tensor_constrained import TensorConstrainedParams, refinement_size_for
+    from texsynth.synth.analysis.tensor import structure_tensor
+    from texsynth.synth.methods.tensor_constrained import TensorConstrainedParams, refinement_size_for
 
     y, x = np.mgrid[0:48, 0:48]
     stripes = (0.5 + 0.5 * np.sin(2 * np.pi * (x + 0.3 * y) / 6.0)).astype(np.float32)
@@ -590,8 +590,8 @@ def test_tensor_constrained_falloff_is_flat_only_for_crossed_oriented_exemplars(
     """``falloff=None``: flat for an oriented exemplar with structures in two directions (brick's joints),
     0.156 for one-directional stripes and for weakly oriented noise; the run records the value it used and
     an explicit falloff is kept."""
-    from synth.analysis.tensor import cross_orientation_fraction, structure_tensor
-    from synth.methods.tensor_constrained import DEFAULT_FALLOFF, falloff_for
+    from texsynth.synth.analysis.tensor import cross_orientation_fraction, structure_tensor
+    from texsynth.synth.methods.tensor_constrained import DEFAULT_FALLOFF, falloff_for
 
     y, x = np.mgrid[0:48, 0:48]
     stripes = (0.5 + 0.5 * np.sin(2 * np.pi * (x + 0.3 * y) / 6.0)).astype(np.float32)
@@ -616,7 +616,7 @@ def test_tensor_constrained_falloff_is_flat_only_for_crossed_oriented_exemplars(
 def test_brick_seam_defaults_and_the_earlier_settings_differ() -> None:
     """The brick-seam defaults (LE metric, pixel-only refinement passes, texture histogram weight 3) are
     departures; ``metric='SO', refinement_p=None, texture_histogram_weight=10`` restore the earlier run."""
-    from synth.methods.tensor_constrained import TensorConstrainedParams
+    from texsynth.synth.methods.tensor_constrained import TensorConstrainedParams
 
     tc = TensorConstrainedParams()
     assert (tc.metric, tc.refinement_p, tc.texture_histogram_weight) == ("LE", 1.0, 3.0)
