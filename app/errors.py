@@ -87,12 +87,23 @@ def _one_line(text: str) -> str:
 
 def unprocessable(items: list[dict[str, Any]], kind: str = "invalid_parameter") -> JSONResponse:
     """A ``422`` listing ``items`` (``loc``, ``msg``, ``type``, maybe ``input``) in FastAPI's shape."""
+    items = [{key: _encodable(value) for key, value in item.items()} for item in items]
     first = items[0]
     field = ".".join(str(p) for p in first["loc"][1:]) or None
     message = "; ".join(
         f"{'.'.join(str(p) for p in item['loc'][1:]) or 'request'}: {item['msg']}" for item in items
     )
     return JSONResponse({"detail": items, "field": field, "error": kind, "message": message}, status_code=422)
+
+
+def _encodable(value: Any) -> Any:
+    """``value`` with any text that UTF-8 cannot carry (a lone surrogate a client sent as ``\\ud800``)
+    escaped, so that the answer itself can be written."""
+    if isinstance(value, str):
+        return value.encode("utf-8", "backslashreplace").decode("utf-8")
+    if isinstance(value, list):
+        return [_encodable(v) for v in value]
+    return value
 
 
 def _parameter_items(exc: InvalidParameter) -> list[dict[str, Any]]:

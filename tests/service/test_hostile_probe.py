@@ -203,8 +203,9 @@ def test_hostile_requests_get_4xx_and_leave_nothing_behind(embedded, png):
             name,
             r.text,
         )
-        if r.status_code == 202:  # a valid job: the client's file name is never used
-            assert list(r.json()["inputs"]) == ["exemplar"] and filename not in r.text
+        if r.status_code == 202:  # a valid job: the client's file name is never a stored path
+            inputs = r.json()["inputs"]  # role -> URL of the stored file, named by the role
+            assert list(inputs) == ["exemplar"] and filename not in json.dumps(inputs)
     print(json.dumps(answers, indent=1))  # the probe's answers, for the record (pytest -s)
     accepted = [name for name, status in answers.items() if status == 202]
     # the valid jobs above (file names, and the forms that are valid after all), and nothing else

@@ -149,6 +149,12 @@ def test_kill_whole_worker_mid_job_never_stuck(service, exemplar_png):
     unacknowledged; the reaper re-queues the job and the restarted worker runs it."""
     embedded = service
     client = embedded.client()
+
+    def idle() -> bool:  # jobs that earlier tests left on this shared service would run first
+        health = httpx.get(embedded.url + "/api/health").json()
+        return health["queued"] == 0 and health["running"] == 0
+
+    wait_until(idle, 180, what="the shared service's earlier jobs to end")
     job = client.submit(
         exemplar_png, method="test-blur", params={"width": 64, "height": 64, "steps": 30, "delay": 0.1}
     )
