@@ -814,35 +814,45 @@ def best_vote_reference(
     vol: np.ndarray, field: MatchField, exemplars: PackedExemplars, periodic: bool
 ) -> np.ndarray:
     """Plain NumPy :func:`best_vote` (one voxel at a time, the same order)."""
-    D, H, W = vol.shape
-    stride = field.stride
     out = vol.copy()
     for v in range(vol.size):
-        z, y, x = np.unravel_index(v, vol.shape)
         best_w = 0.0
-        for p in range(3):
-            if not field.active[p]:
-                continue
-            a, b = (int(t) for t in field.axes[p])
-            c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
-            if periodic:
-                c = np.mod(c, [D, H, W])
-                inside = np.ones(len(c), dtype=bool)
-            else:
-                inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
-            on_grid = ((c[:, a] - field.phase[p, 0]) % stride == 0) & (
-                (c[:, b] - field.phase[p, 1]) % stride == 0
-            )
-            for k in np.flatnonzero(inside & on_grid):
-                u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
-                e = field.match[p, u]
-                if e < 0:
-                    continue
-                w = float(field.weight[p, u])
-                if w > best_w:
-                    best_w = w
-                    out[z, y, x] = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
+        for value, w in _proposals_reference(v, vol.shape, field, exemplars, periodic):
+            if w > best_w:
+                best_w = w
+                out[np.unravel_index(v, vol.shape)] = value
     return out
+
+
+def _proposals_reference(
+    v: int, shape: tuple[int, ...], field: MatchField, exemplars: PackedExemplars, periodic: bool
+) -> list[tuple[np.float32, float]]:
+    """For the plain references: the (exemplar value, weight) that each matched neighbourhood covering
+    voxel ``v`` proposes, planes then window entries, the kernels' order."""
+    D, H, W = shape
+    z, y, x = np.unravel_index(int(v), shape)
+    found = []
+    for p in range(3):
+        if not field.active[p]:
+            continue
+        a, b = (int(t) for t in field.axes[p])
+        c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
+        if periodic:
+            c = np.mod(c, [D, H, W])
+            inside = np.ones(len(c), dtype=bool)
+        else:
+            inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
+        on_grid = ((c[:, a] - field.phase[p, 0]) % field.stride == 0) & (
+            (c[:, b] - field.phase[p, 1]) % field.stride == 0
+        )
+        for k in np.flatnonzero(inside & on_grid):
+            u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
+            e = field.match[p, u]
+            if e < 0:
+                continue
+            value = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
+            found.append((value, float(field.weight[p, u])))
+    return found
 
 
 def _grid_tables(shape: tuple[int, ...], field: MatchField) -> np.ndarray:
@@ -914,12 +924,10 @@ def irls_update_reference(
     block: int = UPDATE_BLOCK,
 ) -> None:
     """Plain NumPy :func:`irls_update` (one voxel at a time, the same order of operations)."""
-    D, H, W = vol.shape
     bins = len(histogram.count)
     n_total = vol.size
     gain = histogram.gain
     count = histogram.count
-    stride = field.stride
     lo = start
     while lo < stop:
         hi = min(stop, (lo // block + 1) * block)
@@ -929,33 +937,14 @@ def irls_update_reference(
             z, y, x = np.unravel_index(int(v), vol.shape)
             num = 0.0
             den = 0.0
-            for p in range(3):
-                if not field.active[p]:
-                    continue
-                a, b = (int(t) for t in field.axes[p])
-                c = np.array([z, y, x])[None, :] - field.offsets[p].astype(np.int64)
-                if periodic:
-                    c = np.mod(c, [D, H, W])
-                    inside = np.ones(len(c), dtype=bool)
-                else:
-                    inside = np.all((c >= 0) & (c < [D, H, W]), axis=1)
-                on_grid = ((c[:, a] - field.phase[p, 0]) % stride == 0) & (
-                    (c[:, b] - field.phase[p, 1]) % stride == 0
-                )
-                for k in np.flatnonzero(inside & on_grid):
-                    u = (c[k, 0] * H + c[k, 1]) * W + c[k, 2]
-                    e = field.match[p, u]
-                    if e < 0:
-                        continue
-                    val = exemplars.values[exemplars.start[p] + e + field.ex_offsets[p, k]]
-                    w = float(field.weight[p, u])
-                    if gain > 0:
-                        bb = histogram_bin(val, bins)
-                        excess = (frozen[bb] - histogram.target[bb]) / n_total
-                        if excess > 0:
-                            w = w / (1.0 + gain * excess)
-                    num += w * float(val)
-                    den += w
+            for val, w in _proposals_reference(int(v), vol.shape, field, exemplars, periodic):
+                if gain > 0:
+                    bb = histogram_bin(val, bins)
+                    excess = (frozen[bb] - histogram.target[bb]) / n_total
+                    if excess > 0:
+                        w = w / (1.0 + gain * excess)
+                num += w * float(val)
+                den += w
             old = vol[z, y, x]
             if den > 0:
                 vol[z, y, x] = np.float32(num / den)
