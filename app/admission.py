@@ -1,8 +1,7 @@
 """Admission control in one place: what the service takes on before anything is stored or queued.
 
 :class:`Admission` is asked by :class:`texsynth.app.service.Service` after a submission's parameters and
-images
-were validated (the engine's own checks: finite numbers, sizes, formats):
+images were validated (the engine's own checks: finite numbers, sizes, formats):
 
 - **the job's working memory**, estimated from the method, its parameters, the output size and the
   decoded inputs, against ``TEXSYNTH_MAX_JOB_MEMORY_BYTES`` (422, naming the parameter that drives

@@ -328,12 +328,11 @@ def strand_exemplars() -> dict[str, np.ndarray]:
 
 def strand_measures(exemplar: np.ndarray, image: np.ndarray, constraint: np.ndarray) -> dict[str, float]:
     """Strand-length ratio, grey KL (both :func:`texsynth.synth.evaluate.evaluate_pair`, as
-    benchmarks/bench_quality),
-    the orientation agreement with the constraint, and ``grey``: the grey-level variance along the
-    constraint's strands over across them (:func:`texsynth.synth.evaluate.strands.strand_grey`, the
-    constraint's
-    strand direction at the methods' scale, sigma_d = 1, sigma_w = 3; the exemplar's own along its
-    fibres is :func:`texsynth.synth.evaluate.strands.exemplar_strand_grey`).
+    benchmarks/bench_quality), the orientation agreement with the constraint, and ``grey``: the grey-level
+    variance along the constraint's strands over across them
+    (:func:`texsynth.synth.evaluate.strands.strand_grey`, the constraint's strand direction at the methods'
+    scale, sigma_d = 1, sigma_w = 3; the exemplar's own along its fibres is
+    :func:`texsynth.synth.evaluate.strands.exemplar_strand_grey`).
 
     The strand ratio is the output's mean fringe length over the exemplar's, fringes extracted by
     :func:`texsynth.synth.analysis.fringes.extract_fringes` with its defaults on each whole image (bottom-hat

@@ -8,10 +8,10 @@ Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbo
 128^2 mid-slice of the 128^3 truth) at 64^3 and 128^3, the defaults and the paper's literal settings
 (:data:`CHEN_WANG_PAPER`), measured against the truth's slices of the same size
 (:func:`texsynth.synth.evaluate.truth.evaluate_against_truth`); the real crops
-``benchmarks/data/hrtem-onion*-128.png``
-against the exemplar (:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice). Cells as in
-docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it
-misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
+``benchmarks/data/hrtem-onion*-128.png`` against the exemplar
+(:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice). Cells as in docs/laminar.md: ``xy / xz
+/ yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it misses its target; CPU s the
+median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
 """
 
 from __future__ import annotations

@@ -5,9 +5,8 @@ Figure 4 in docs/img/feature-guided-*.png) and the ``feature-guided`` section of
 
 The claim: fewer broken features at patch boundaries than plain image quilting. Measured by
 :func:`texsynth.synth.evaluate.broken_features` (feature endpoints within 2 px of a seam and kinks where
-features
-cross a seam, against the exemplar's rates of both; seams from each output's source map and patch labels,
-so that every method is judged by one rule) for quilting (the paper's boundary cut, and the graph cut
+features cross a seam, against the exemplar's rates of both; seams from each output's source map and patch
+labels, so that every method is judged by one rule) for quilting (the paper's boundary cut, and the graph cut
 that feature-guided uses) and ``feature-guided`` without deformation, with the paper's warp and with
 this project's warp, at one patch size and overlap (32 and 8), 128 -> 256, 5 seeds each, on four
 exemplars with the same feature detector settings for every method.
@@ -650,8 +649,7 @@ NOTES = """
   aligned the overlap's features less well than the gated pairs, mean distance 0.42 vs 0.39 px on
   brick, and broke more).
 - **The measure was blind, in two ways, and is changed** (`texsynth.synth.evaluate.breaks`, known-answer
-tests).
-  (1) It counted ends only: a feature that continues across a seam with a tangent jump is broken too,
+  tests). (1) It counted ends only: a feature that continues across a seam with a tangent jump is broken too,
   and on laminae a misaligned lamina meets its neighbour with a kink, not an end. Kinks are now counted
   (a crossing whose directions over 3 px on either side differ by more than 30 degrees), against the
   exemplar's own kink rate at virtual seams. (2) It counted endpoints per pixel of band area, so a band

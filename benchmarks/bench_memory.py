@@ -2,13 +2,13 @@
 
 Run ``python -m benchmarks.bench_memory --method solid-kopf --size 256x256x256`` (``--exemplar``,
 ``--threads``, ``--no-plots``). A fresh child process runs
-:func:`texsynth.synth.pipeline.synthesize_to_folder`
-as the command does, with a progress callback that records the stage (the synthesis' own stages, then
-the writer's: ``output.tiff``, the pictures, the evaluation, the plots) and a thread that samples the
-resident set size (``VmRSS`` in ``/proc/self/status``) every 0.2 s: the largest RSS seen per stage, the
-stage seconds, and the process' peak (``VmHWM``, as ``/usr/bin/time -v`` reports it) come out as one
-JSON document. The admission estimate of the service (:func:`texsynth.app.admission.estimate_memory`) is
-calibrated from these peaks (docs/benchmarks.md, "Big outputs").
+:func:`texsynth.synth.pipeline.synthesize_to_folder` as the command does, with a progress callback that
+records the stage (the synthesis' own stages, then the writer's: ``output.tiff``, the pictures, the
+evaluation, the plots) and a thread that samples the resident set size (``VmRSS`` in ``/proc/self/status``)
+every 0.2 s: the largest RSS seen per stage, the stage seconds, and the process' peak (``VmHWM``, as
+``/usr/bin/time -v`` reports it) come out as one JSON document. The admission estimate of the service
+(:func:`texsynth.app.admission.estimate_memory`) is calibrated from these peaks (docs/benchmarks.md, "Big
+outputs").
 """
 
 from __future__ import annotations

@@ -216,14 +216,13 @@ OBSERVATIONS_LAMINAR = """### Why the papers' search repeats one region, and wha
   0.30).
 - **Fix**: the normalised error times a usage penalty on over-used exemplar regions (Chen & Wang's position
   histogram over each candidate's footprint, against the use uniform draws would give,
-  `texsynth.synth.patch.usage`),
-  gain 1; for `gaussian-patch` also the boundary cut (the paper's Fig. 3) instead of pasting (contrast 0.83
-  -> 0.88 on the onion-core crop). Quilting with the usage penalty alone (gain 4, plain SSD) reached
-  coherence ratio 0.93 (`evaluate_pair`'s coherence) and contrast 0.93 on the onion crop, against 0.96 and
-  0.99 with both at gain 1 (0.95 and 0.95 at gain 4). In the pictures the defaults draw the shells' arcs all
-  over the output, interleaved with the disordered texture, as the crop mixes them; the papers' search shows
-  a few arcs at the left edge and bland texture elsewhere (quilting, gaussian-patch) or one field of
-  straight diagonal fringes (feature-guided on the onion crop).
+  `texsynth.synth.patch.usage`), gain 1; for `gaussian-patch` also the boundary cut (the paper's Fig. 3)
+  instead of pasting (contrast 0.83 -> 0.88 on the onion-core crop). Quilting with the usage penalty alone
+  (gain 4, plain SSD) reached coherence ratio 0.93 (`evaluate_pair`'s coherence) and contrast 0.93 on the
+  onion crop, against 0.96 and 0.99 with both at gain 1 (0.95 and 0.95 at gain 4). In the pictures the
+  defaults draw the shells' arcs all over the output, interleaved with the disordered texture, as the crop
+  mixes them; the papers' search shows a few arcs at the left edge and bland texture elsewhere (quilting,
+  gaussian-patch) or one field of straight diagonal fringes (feature-guided on the onion crop).
 - **Elsewhere**: on brick, grass, gravel and soot the defaults lower or keep both KLs and raise the share of
   the exemplar used (0.81-0.92 -> 0.88-0.94). `feature-guided` keeps the paper's search on strongly oriented
   exemplars (`search_for`: mean coherence >= 0.7, brick), where the new search raised its seam ratio (1.13

@@ -20,8 +20,7 @@ levels, :func:`texsynth.synth.io.patterns.wood_grain`). Measures
   of means over 3 samples, the bright one 16);
 - seam: for methods that report where each pixel came from (``source_map``: the pixel methods and
   quilting), :func:`texsynth.synth.evaluate.patches.seam_contrast` (gradient energy across source seams over
-  that
-  across coherent edges; 1 = seams as the texture itself); for the Gaussian patch models and
+  that across coherent edges; 1 = seams as the texture itself); for the Gaussian patch models and
   feature-guided, :func:`texsynth.synth.evaluate.seam_visibility` of their patch layout; none for random
   phase.
 

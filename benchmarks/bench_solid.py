@@ -496,8 +496,7 @@ DEPARTURES = """## Departures from the papers, and their history
 What each method changes from its paper, why, and the measurements behind each choice (moved here from
 the modules' docstrings, which keep one line per departure). Unless said otherwise: soot =
 `hrtem-soot-128.png`, per-axis means of `texsynth.synth.evaluate.evaluate_volume`, "KL g/o" = grey /
-orientation KL;
-"session N" names the work session that measured it.
+orientation KL; "session N" names the work session that measured it.
 
 ### `solid-kopf` (Kopf et al. 2007)
 
@@ -525,10 +524,9 @@ orientation KL;
   default). Gain 4 (measured with an earlier search setting) gave 0.09/0.07/0.06 and 0.06/0.05/0.05
   against 0.05/0.06/0.02 and 0.05/0.07/0.04 for gain 1.
 - **One rank remap at the very end** (`texsynth.synth.pixel.solid.match_histogram`, when
-`histogram_matching`):
-  the remaining contrast deficit (the optimisation keeps about 0.6-0.7 of the exemplar's std at 64^3) is
-  removed by a monotone remap of the finished volume, which keeps its structure (orientation KL
-  unchanged) and makes grey KL ~0. It does not feed back into the iterations;
+  `histogram_matching`): the remaining contrast deficit (the optimisation keeps about 0.6-0.7 of the
+  exemplar's std at 64^3) is removed by a monotone remap of the finished volume, which keeps its structure
+  (orientation KL unchanged) and makes grey KL ~0. It does not feed back into the iterations;
   `stats['contrast_before_remap']` reports what the optimisation achieved by itself.
 - **Search**: k-coherence on each slice (Tong et al.: candidates from the in-plane neighbours' matches,
   shifted, their `COHERENCE_USED` most similar exemplar positions and `RANDOM_CANDIDATES` random ones),
@@ -555,19 +553,17 @@ orientation KL;
   block's voxels taken in memory order, cache-friendly: at 128^3 an update sweep took 5.6 s with blocks
   of 4096 and 3.0 s with N / 16 (one thread). The histogram lags by at most 1/16 of a sweep.
 - **The schedule follows the structure** (`adapt_to_structure`, on;
-`texsynth.synth.pixel.solid.structure_schedule`):
-  a weakly oriented exemplar (mean coherence < 0.75: soot, grains, pores) is synthesized over at most 2
-  levels, laminae over `levels` with at least 10 iterations per level (the paper's 10; per-plane laminae,
-  mean orientation KL on the xz/yz axes 0.16/0.13 with 4 -> 0.08/0.07 with 10). The coarse levels of a
-  structure a few pixels across hold only residual noise that the iterations amplify into blobs: on the
-  known-answer field (correlation lengths 2/3.5/6) the output's correlation length along z was 5 against
-  2 with 4 levels; S2 error 0.03-0.04 on every axis with 2. More iterations coarsen it further (10 at 2
-  levels: 0.11 along z). Soot: orientation KL 0.04/0.05/0.04 with 2 levels against 0.04/0.06/0.02 with
-  5, S2 error 0.03-0.04 against 0.06-0.08, so soot loses nothing.
+  `texsynth.synth.pixel.solid.structure_schedule`): a weakly oriented exemplar (mean coherence < 0.75: soot,
+  grains, pores) is synthesized over at most 2 levels, laminae over `levels` with at least 10 iterations per
+  level (the paper's 10; per-plane laminae, mean orientation KL on the xz/yz axes 0.16/0.13 with 4 ->
+  0.08/0.07 with 10). The coarse levels of a structure a few pixels across hold only residual noise that the
+  iterations amplify into blobs: on the known-answer field (correlation lengths 2/3.5/6) the output's
+  correlation length along z was 5 against 2 with 4 levels; S2 error 0.03-0.04 on every axis with 2. More
+  iterations coarsen it further (10 at 2 levels: 0.11 along z). Soot: orientation KL 0.04/0.05/0.04 with 2
+  levels against 0.04/0.06/0.02 with 5, S2 error 0.03-0.04 against 0.06-0.08, so soot loses nothing.
 - **Orientation-usage re-weighting** (`orientation_gain`, default `ORIENTATION_GAIN` = 32; 0 = off, the
   paper): eq 4 applied to each plane's orientation histogram (`texsynth.synth.analysis.orientation_histogram`:
-  12
-  bins, coherence-weighted exemplar shares). Eq 4 on grey levels and the usage re-weighting leave the
+  12 bins, coherence-weighted exemplar shares). Eq 4 on grey levels and the usage re-weighting leave the
   volume free to fall into an orientation attractor. Bent horizontal laminae given for the two views that
   admit a volume (`planes=('xz', 'yz')`) came out as straight laminae tilted about 30 degrees on both
   planes (orientation KL xz / yz 2.3 / 1.6, seeds 1-3): every window matched the slopes of the
@@ -601,12 +597,11 @@ orientation KL;
   paper's settings: 2.3 / 1.6, a tilted planar stack); with one exemplar on all three planes no volume
   exists (above).
 - **Laminar start** (`structure`, default `'auto'`; issue 24; `texsynth.synth.pixel.laminar`): when one
-laminar,
-  isotropic exemplar serves the three planes, the structure comes first (Akl 2014's two stages carried to
-  3D): a volume of curved sheets at the exemplar's spectral period (signed distance to the zero level of a
-  smooth random field, `structure_length` = 4 periods) starts the optimisation at the finest levels that
-  keep a 3 px period (2 levels for a 6-7 px period). From noise with 5 levels, the coarse levels hold blobs
-  and the sheets never join: known-answer onion, 64^3, seeds 1-3, coherence ratio 0.78-0.83 per axis and
+  laminar, isotropic exemplar serves the three planes, the structure comes first (Akl 2014's two stages
+  carried to 3D): a volume of curved sheets at the exemplar's spectral period (signed distance to the zero
+  level of a smooth random field, `structure_length` = 4 periods) starts the optimisation at the finest levels
+  that keep a 3 px period (2 levels for a 6-7 px period). From noise with 5 levels, the coarse levels hold
+  blobs and the sheets never join: known-answer onion, 64^3, seeds 1-3, coherence ratio 0.78-0.83 per axis and
   fringe length KS 0.41-0.47 (a labyrinth); laminar start 0.98-1.04 and 0.13-0.28, nested continuous
   shells. Windows of 9 or 11, one level, 4 iterations and a pull toward the sheets after every step
   measured no better ("Laminar HRTEM: the structure first" above has the table and the pictures).
@@ -662,8 +657,7 @@ Measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL,
 - **3 iterations per level** (the study ran 10): on soot the energy stops falling after 2-3 iterations
   (`stats['mean_match_distance']`). Laminae get 10 (`adapt_to_structure`, as `solid-kopf`;
   `texsynth.synth.pixel.solid.structure_schedule`): per-plane laminae, seeds 1-3, mean orientation KL 0.09 /
-  0.26
-  / 0.30 with 3 -> 0.04 / 0.18 / 0.14 with 10. Kopf's other half of that schedule, 2 levels for
+  0.26 / 0.30 with 3 -> 0.04 / 0.18 / 0.14 with 10. Kopf's other half of that schedule, 2 levels for
   micro-structures, is not taken: it doubled the known answer's S2 error here (0.13 against 0.06) and
   saved little time (the finest level is 85-90% of a run).
 - **Parallel passes** (session 5). The search is Jacobi, as Kopf's: every voxel's candidates come from the
@@ -689,9 +683,8 @@ Measured on HRTEM soot, 64^3 from 128^2, seed 0, per-axis grey / orientation KL,
   the constrained exemplars are laminar and `adapt_to_structure` is on, else off): each search pass
   multiplies a candidate's distance by `1 + gain * excess` of its orientation bin in the plane's current
   matches (`texsynth.synth.analysis.orientation_histogram`, as `solid-kopf`'s default). Bent laminae on the
-  two views
-  that admit a volume (`planes=('xz', 'yz')`, 64^3 from 128^2, seeds 1-3, orientation KL xz / yz): 0.52 /
-  0.43 without, 0.20 / 0.17 with gain 32, 0.21 / 0.18 with 64 (the tilted planar stack is gone; more
+  two views that admit a volume (`planes=('xz', 'yz')`, 64^3 from 128^2, seeds 1-3, orientation KL xz / yz):
+  0.52 / 0.43 without, 0.20 / 0.17 with gain 32, 0.21 / 0.18 with 64 (the tilted planar stack is gone; more
   dislocations than Kopf's remain). Per-plane laminae barely move (0.04 / 0.17 / 0.16 against 0.04 / 0.17
   / 0.18): their error is dislocations, not the orientation mix. Not for micro-structures: on soot the
   gain raised the orientation KL from 0.024-0.038 to 0.04-0.08 and the S2 error from 0.05 to 0.11, hence

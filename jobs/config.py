@@ -132,8 +132,7 @@ class Settings(BaseModel):
     def from_env(cls, environ: dict[str, str] | None = None, **overrides: Any) -> Settings:
         """Build from ``TEXSYNTH_<NAME>`` variables (``TEXSYNTH_DATA_DIR``, ...) and ``REDIS_URL``; the
         size limits from their variables in :data:`texsynth.synth.io.limits.LIMITS`. ``threads`` always comes
-        out a
-        number (:func:`texsynth.synth.threads.service_threads`); a bad ``TEXSYNTH_THREADS`` raises
+        out a number (:func:`texsynth.synth.threads.service_threads`); a bad ``TEXSYNTH_THREADS`` raises
         :class:`texsynth.synth.errors.InvalidParameter`."""
         env = os.environ if environ is None else environ
         values: dict[str, Any] = {}

@@ -238,8 +238,7 @@ def synthesize(
     exemplar : ndarray
         ``(h, w)`` or ``(h, w, 3)``: uint8, uint16 (scaled by the bit depth they use: 12-bit data in
         16 bits by 4095), bool, or float in [0, 1] (:mod:`texsynth.synth.io.depth`; other floats are an
-        error).
-    size : tuple of int, optional
+    error). size : tuple of int, optional
         Output array shape ``(H, W)`` (or ``(D, H, W)`` for volumes). Defaults to the constraint's
         shape when there is one, else twice the exemplar's.
     params : dict or the method's parameter model

@@ -95,9 +95,8 @@ def synthesize_to_folder(
     :func:`texsynth.synth.output.artifacts.write_artifacts` for the files; ``manifest.json`` also records when
     the synthesis started and finished (Unix time). ``threads``: numba threads of the synthesis and the
     evaluation (:mod:`texsynth.synth.threads`; default every core). A volume is evaluated plane by plane
-    against its
-    per-plane exemplars when given; ``voxel_size`` (in ``voxel_unit``, nm by default) calibrates its TIFF
-    stack (ImageJ spacing and unit) and, in nm, its fringe lengths.
+    against its per-plane exemplars when given; ``voxel_size`` (in ``voxel_unit``, nm by default) calibrates
+    its TIFF stack (ImageJ spacing and unit) and, in nm, its fringe lengths.
     The exemplar's bit depth (from :func:`load_inputs`' ``bits``, else that of the arrays given) is kept
     for the outputs and said in ``metrics.json`` (``input_bits``).
     """

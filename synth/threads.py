@@ -6,10 +6,9 @@ entry points, ``TEXSYNTH_THREADS`` in the service. The default is every core thi
 (CLI, API); the service divides the cores between its worker processes (:func:`service_threads`).
 The bytes never depend on the count (DESIGN.md, "Parallel and deterministic"): parallel loops write
 only their own slots, draw random numbers from counter-based hashes
-(:func:`texsynth.synth.kernels.common.splitmix`)
-and reduce in a fixed order; ``tests/synth/test_threads.py`` checks every method with 1, 2 and 4.
-numba's count is per calling thread and capped by its pool (``NUMBA_NUM_THREADS``, cores by default),
-so :func:`use_threads` is entered in the thread that runs the work.
+(:func:`texsynth.synth.kernels.common.splitmix`) and reduce in a fixed order; ``tests/synth/test_threads.py``
+checks every method with 1, 2 and 4. numba's count is per calling thread and capped by its pool
+(``NUMBA_NUM_THREADS``, cores by default), so :func:`use_threads` is entered in the thread that runs the work.
 
 **OpenBLAS.** The engine's matrix work is small (the k-coherence PCA of a few thousand neighbourhoods
 of at most a few hundred values), where OpenBLAS's threads cost more than they give and, on a shared

@@ -1,7 +1,6 @@
 """A worker container's health check: ``python -m texsynth.worker.health`` exits 0 when a worker main process
-of
-this host has reported its heartbeat (every 2 s, :mod:`texsynth.worker.celery_app`) within the last 30 s, else
-1 with a one-line reason. docker-compose runs it; the API's own health check cannot see a dead worker
+of this host has reported its heartbeat (every 2 s, :mod:`texsynth.worker.celery_app`) within the last 30 s,
+else 1 with a one-line reason. docker-compose runs it; the API's own health check cannot see a dead worker
 container, only count the live ones."""
 
 from __future__ import annotations

@@ -4,11 +4,9 @@ Six small images, each credited with its licence in ``README.md`` beside them (C
 texsynth's own generators): a real HRTEM micrograph of soot fringes, brick, grass and gravel from
 scikit-image's data (CC0), a generated laminar exemplar (:mod:`texsynth.synth.io.laminar`) and a generated
 constraint image for ``arbitrary-shape`` (:mod:`texsynth.synth.io.patterns`). ``python -m
-texsynth.app.examples.build``
-makes the PNGs again from those sources (same bytes). Whether an example shows lattice fringes is not
-written down here but measured by the engine's own rule
-(:func:`texsynth.synth.evaluate.glossary.fringes_shown`),
-the one the job's metrics use.
+texsynth.app.examples.build`` makes the PNGs again from those sources (same bytes). Whether an example shows
+lattice fringes is not written down here but measured by the engine's own rule
+(:func:`texsynth.synth.evaluate.glossary.fringes_shown`), the one the job's metrics use.
 """
 
 from __future__ import annotations

@@ -5,8 +5,8 @@ HRTEM lattice fringes of carbon are many short dark lines, nearly parallel to th
 almost constant spacing (0.34 nm: about 6 px at 18 px/nm). Two numbers say it:
 
 - ``density_per_10k_px``: fringes per 10 000 pixels that
-:func:`texsynth.synth.analysis.fringes.extract_fringes`
-  finds with its defaults (a few mortar joints or straw edges are not a lattice);
+  :func:`texsynth.synth.analysis.fringes.extract_fringes` finds with its defaults (a few mortar joints or
+  straw edges are not a lattice);
 - ``peak_ratio``: the radially averaged power spectrum's highest point between periods of
   :data:`PERIOD_RANGE` pixels over a power law fitted to the whole spectrum (``P(k) ~ a k^b``, least
   squares in log-log, radii 2 to N/2), with the period where it lies: a near-periodic stack of fringes

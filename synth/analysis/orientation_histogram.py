@@ -3,9 +3,8 @@
 Kopf et al.'s histogram matching (eq 4) re-weights the proposals whose grey level is over-represented
 in the volume; the solid methods apply the same rule to orientations (a departure, measured in
 :mod:`texsynth.synth.methods.solid_kopf` and :mod:`texsynth.synth.methods.solid_chen_wang`): each exemplar
-pixel carries
-the gradient orientation of its structure tensor, the exemplar's coherence-weighted histogram is the
-target, and a plane's matches are counted by the orientation of the exemplar pixels they are centred
+pixel carries the gradient orientation of its structure tensor, the exemplar's coherence-weighted histogram is
+the target, and a plane's matches are counted by the orientation of the exemplar pixels they are centred
 on. Orientations are binned linearly between the two nearest bin centres, so an orientation on a bin
 edge is not split arbitrarily between the exemplar and the slices.
 

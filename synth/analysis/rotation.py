@@ -15,9 +15,8 @@ step, near the copies' borders.
 
 Tensor field of a copy: the exemplar's field ``S_en`` rotated in place and in value,
 ``S_m(T_m p) = R(phi_m) S_en(p) R(phi_m)^T`` (:func:`texsynth.synth.analysis.tensor.rotate_tensors`), which
-equals the
-structure tensor of the rotated image in the continuous limit, without the mirror seams that a tensor
-computed on the padded copy would pick up, and in exactly the frame of the constraint field built
+equals the structure tensor of the rotated image in the continuous limit, without the mirror seams that a
+tensor computed on the padded copy would pick up, and in exactly the frame of the constraint field built
 from ``S_en`` (so that the right rotation matches it exactly).
 """
 

@@ -3,8 +3,7 @@
 Writes ``output.png`` (16-bit with ``--bit-depth 16``), ``output.tiff``, ``manifest.json``,
 ``metrics.json``, the tensor field's ``coherence.png``/``orientation.png`` and comparison plots (see
 :mod:`texsynth.synth.output.artifacts`). Parameters come from the method's model: ``--set name=value`` (values
-are
-read as JSON when they parse, e.g. ``--set levels=3 --set metric=ED``). A progress bar is drawn on
+are read as JSON when they parse, e.g. ``--set levels=3 --set metric=ED``). A progress bar is drawn on
 stderr when it is a terminal.
 """
 

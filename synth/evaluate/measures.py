@@ -936,8 +936,7 @@ def evaluate_volume(
         ``S2`` always uses every voxel.
     s2 : bool
         Compare two-point correlations (:mod:`texsynth.synth.evaluate.correlation`): ``S2`` of the volume
-        along
-        each physical axis ``x``, ``y``, ``z`` (averaged over all lines) against ``S2`` along the same
+        along each physical axis ``x``, ``y``, ``z`` (averaged over all lines) against ``S2`` along the same
         physical axis of each evaluated plane's exemplar that contains it (``x``: columns of the ``xy``
         and ``xz`` exemplars; ``y``: rows of ``xy``, columns of ``yz``; ``z``: rows of ``xz`` and ``yz``).
     threshold : float, optional

@@ -16,9 +16,8 @@
   its nearest grid value. Colour images are measured on their grey (BT.601) levels.
 - **Seam contrast** (:func:`seam_contrast`): for any method that knows where each pixel came from (the
   pixel methods' and quilting's source maps, :func:`texsynth.synth.evaluate.breaks.seams_from_sources`), the
-  mean
-  squared grey-level difference across the seam edges (neighbours whose sources are not neighbours the same
-  way) over the mean across the other edges, and the share of coherent edges. A patchwork of copied
+  mean squared grey-level difference across the seam edges (neighbours whose sources are not neighbours the
+  same way) over the mean across the other edges, and the share of coherent edges. A patchwork of copied
   regions whose borders show raises the ratio above 1; the exemplar's own, cut anywhere, is 1.
 - **Tile seam** (:func:`tile_seam`): whether an output tiles. Laid 2 x 2, the image meets itself where its
   last row touches its first and its last column its first; the squared grey-level differences across

@@ -1,10 +1,9 @@
 """Inputs and outputs: load and validate images and volumes, save PNG and TIFF stacks, write files atomically.
 
 :mod:`texsynth.synth.io.images` decodes and encodes; :mod:`texsynth.synth.io.patterns` generates inputs with
-known orientation
-fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints;
-:mod:`texsynth.synth.io.laminar`
-known-answer volumes of HRTEM-like fringes (carbon onions, turbostratic stacks).
+known orientation fields (laminae, waves, rings, spirals) for tests, benchmarks and constraints;
+:mod:`texsynth.synth.io.laminar` known-answer volumes of HRTEM-like fringes (carbon onions, turbostratic
+stacks).
 """
 
 from texsynth.synth.io.atomic import atomic_write_bytes, atomic_write_json

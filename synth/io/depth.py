@@ -2,8 +2,7 @@
 
 Used by :func:`texsynth.synth.io.load_image` (files), :func:`texsynth.synth.api.synthesize` and
 :func:`texsynth.synth.evaluate.evaluate_pair` (arrays), so that a picture gives the same numbers whichever way
-it
-comes in:
+it comes in:
 
 - ``bool``: ``False`` -> 0, ``True`` -> 1;
 - unsigned integers: divided by ``2**used - 1``, where ``used`` is the bit depth the values actually

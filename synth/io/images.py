@@ -158,16 +158,14 @@ def load_image(
 
     Grey conversion (``mode='grey'``) uses the ITU-R BT.601 luma ``0.299 R + 0.587 G + 0.114 B``
     (:data:`texsynth.synth.colour.LUMA_WEIGHTS`), the weights of Pillow's ``convert("L")`` and ImageJ's
-    weighted
-    conversion, computed in floating point without rounding to 8 bits. (scikit-image's ``rgb2gray``
+    weighted conversion, computed in floating point without rounding to 8 bits. (scikit-image's ``rgb2gray``
     uses the BT.709 weights instead; the difference is small for natural images.)
 
     A 16-bit-per-channel RGB PNG is read at 8 bits per channel (Pillow's limit); 16-bit grey PNG and
     every TIFF keep their full precision.
 
     Unsigned integers are scaled by the depth their values use (:mod:`texsynth.synth.io.depth`): 12-bit data
-    in
-    a 16-bit TIFF (0-4095) by 4095; :func:`load_image_bits` also returns that depth.
+    in a 16-bit TIFF (0-4095) by 4095; :func:`load_image_bits` also returns that depth.
     """
     return load_image_bits(source, name=name, max_pixels=max_pixels, mode=mode)[0]
 
@@ -725,8 +723,7 @@ def _pillow_to_float(im: Image.Image, label: str) -> tuple[np.ndarray, InputBits
 
 def _to_unit_float(arr: np.ndarray, label: str, *, bits: int | None = None) -> tuple[np.ndarray, InputBits]:
     """Unsigned integers by the depth they use (:mod:`texsynth.synth.io.depth`); floats and signed counts
-    checked
-    and rescaled."""
+    checked and rescaled."""
     if arr.dtype == bool or np.issubdtype(arr.dtype, np.unsignedinteger):
         return unsigned_to_unit(arr, bits=bits)
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.signedinteger)):

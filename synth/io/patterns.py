@@ -7,8 +7,7 @@ direction is known in closed form, so tests and benchmarks can vary them freely.
 
 :func:`gaussian_random_field` makes an anisotropic two-phase image or volume whose two-point
 correlation along each axis is known in closed form
-(:func:`texsynth.synth.evaluate.correlation.level_cut_s2`):
-a known answer for the whole solid-synthesis path.
+(:func:`texsynth.synth.evaluate.correlation.level_cut_s2`): a known answer for the whole solid-synthesis path.
 """
 
 from __future__ import annotations

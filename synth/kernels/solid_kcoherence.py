@@ -145,8 +145,7 @@ class SolidState(NamedTuple):
         Per plane, the factor multiplying the search distance of each exemplar neighbourhood: eq 4's
         re-weighting on the plane's orientation histogram
         (:func:`texsynth.synth.analysis.orientation_histogram.usage_factors`), frozen during a search pass;
-        ones
-        switch it off.
+        ones switch it off.
     """
 
     volume: np.ndarray

@@ -4,8 +4,7 @@ The hot loop of :func:`texsynth.synth.methods.strand_hints.strand_hints`: each o
 the constraint's strand direction, both ways, up to ``max_steps`` steps of ``step`` pixels, until its
 curve enters a pixel of a *cut* (``label >= 0``); the nearer hit wins. The tracing is
 :func:`texsynth.synth.analysis.streamlines.trace`'s (midpoint Runge-Kutta on the doubled-angle field, each
-step
-keeping the sign of the previous one; the first step of the "plus" curve goes rightwards, or down when
+step keeping the sign of the previous one; the first step of the "plus" curve goes rightwards, or down when
 vertical, the "minus" curve the other way), with the hit tested at the rounded position after every
 step (and at the pixel itself before the first). Outside the image a curve stops (``periodic``: wraps).
 Its plain reference, built on :func:`texsynth.synth.analysis.streamlines.trace`, lives in the tests

@@ -5,8 +5,8 @@ colour SSD over the overlap and the chamfer matching cost of the features (eq 2 
 then, with ``deform``, warped by a thin-plate spline so that its features meet the context's, and
 merged along a graph-cut seam (Kwatra et al. 2003). The steps: :mod:`texsynth.synth.patch.feature_guided`; the
 feature maps: :mod:`texsynth.synth.analysis.features`; the matching:
-:mod:`texsynth.synth.analysis.feature_matching`;
-the warp: :mod:`texsynth.synth.analysis.warp`. ``Result.extras``: ``features_exemplar``, ``features_output``,
+:mod:`texsynth.synth.analysis.feature_matching`; the warp: :mod:`texsynth.synth.analysis.warp`.
+``Result.extras``: ``features_exemplar``, ``features_output``,
 ``seams`` and ``copy_map``; ``stats['broken_features']`` (:func:`texsynth.synth.evaluate.broken_features`).
 
 Departures, each measured in docs/feature-guided.md (full text: docs/design.md, "feature-guided"):
@@ -301,9 +301,8 @@ def search_for(exemplar: np.ndarray) -> tuple[str, float]:
     """The candidate search ``error=None`` / ``usage_weight=None`` stand for, from the exemplar.
 
     On weakly oriented exemplars (below :data:`~texsynth.synth.analysis.tensor.ORIENTED_COHERENCE`) the
-    paper's
-    colour SSD picks the flattest candidates where the overlap cannot be matched exactly, and on laminar
-    HRTEM crops that mix ordered shells and a disordered core the output converges to one region (the
+    paper's colour SSD picks the flattest candidates where the overlap cannot be matched exactly, and on
+    laminar HRTEM crops that mix ordered shells and a disordered core the output converges to one region (the
     core, or the straightest fringes: onion crop orientation KL 1.22, share of the exemplar used 0.54);
     the variance-normalised error with the usage penalty (1) uses the whole exemplar (0.03, 0.92) and keeps
     or improves grey KL, orientation KL and coherence on grass, gravel and soot (docs/patch.md). On brick

@@ -2,8 +2,8 @@
 
 Patches of side ``w`` are synthesized in raster order with overlap (sec. 2, Fig. 1;
 :class:`texsynth.synth.patch.layout.PatchLayout`). For each new patch, the ``N`` exemplar patches nearest to
-the
-output on the overlap (L2, eq. 1; FFT correlation, :class:`texsynth.synth.patch.search.PatchSearcher`) give
+the output on the overlap (L2, eq. 1; FFT correlation, :class:`texsynth.synth.patch.search.PatchSearcher`)
+give
 ``mu`` and ``Sigma`` (eq. 1); the patch is then a draw from ``N(mu, Sigma)`` (``model='lg'``), the
 conditional mean given the overlap ``y0`` (``'clg'``, eq. 4), or the minimiser of eq. 5 (``'rclg'``,
 closed form eq. 7 with ``G = Sigma + sigma^2 I``), solved in the ``N``-dimensional span of the
@@ -21,8 +21,7 @@ Departures, each measured in docs/patch.md and docs/design.md ("gaussian-patch")
 - ``error='normalised'``, ``usage_weight=1``, ``blending='boundary-cut'`` (since issue 24): the neighbours
   on the variance-normalised overlap error times a penalty on over-used regions, so the output does not
   settle in the exemplar's flattest part (docs/patch.md, "Laminar HRTEM").
-The paper literally: ``estimate='mean'``, ``contrast='none'``, ``neighbours=20``, ``error='ssd'``,
-``usage_weight=0``.
+The paper: ``estimate='mean'``, ``contrast='none'``, ``neighbours=20``, ``error='ssd'``, ``usage_weight=0``.
 
 References
 ----------

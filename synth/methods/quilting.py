@@ -1,12 +1,10 @@
 """Image quilting (Efros & Freeman 2001): patches in raster order, stitched by a minimum-error cut.
 
 For every patch position of the layout (:class:`texsynth.synth.patch.layout.PatchLayout`: side ``w``, overlap
-a
-sixth of it), the masked SSD of the output's overlap (L-shaped, top or left) against every exemplar patch
+a sixth of it), the masked SSD of the output's overlap (L-shaped, top or left) against every exemplar patch
 is computed by FFT correlation (:class:`texsynth.synth.patch.search.PatchSearcher`); one patch is chosen
-uniformly
-at random among those whose error is within ``(1 + tolerance)`` of the best (sec. 2.1: "within 0.1 times
-the error of the best match"), and stitched along the minimum-error boundary cut of the overlap error
+uniformly at random among those whose error is within ``(1 + tolerance)`` of the best (sec. 2.1: "within 0.1
+times the error of the best match"), and stitched along the minimum-error boundary cut of the overlap error
 surface (sec. 2.1, dynamic programming; the vertical and horizontal cuts of an L meet at their cheapest
 common point, :mod:`texsynth.synth.patch.cut`) or, with ``blending='graph-cut'``, along the Kwatra et al. 2003
 graph-cut seam (:mod:`texsynth.synth.patch.graphcut`).
@@ -25,13 +23,11 @@ Departures (docs/patch.md has the measurements)
   against both of its known strips (:func:`texsynth.synth.patch.cut.strips_cut_mask`).
 - ``error='normalised'``, ``usage_weight=1`` (the paper: ``'ssd'``, 0): the SSD divided by the overlap's
   plus the candidate's variance (:meth:`texsynth.synth.patch.search.PatchSearcher.normalised_ssd`) times a
-  penalty
-  on over-used exemplar regions (:class:`texsynth.synth.patch.usage.UsagePenalty`), so the output does not
-  settle
-  in the exemplar's flattest region (docs/patch.md, section "Laminar HRTEM").
+  penalty on over-used exemplar regions (:class:`texsynth.synth.patch.usage.UsagePenalty`), so the output does
+  not settle in the exemplar's flattest region (docs/patch.md, section "Laminar HRTEM").
 - ``stats['patch_sources']`` and ``stats['coverage']``
-(:func:`texsynth.synth.evaluate.coverage.exemplar_coverage`);
-  extras ``copy_map`` (:func:`texsynth.synth.evaluate.copy_map`) and ``source_map`` (row, column per pixel).
+  (:func:`texsynth.synth.evaluate.coverage.exemplar_coverage`); extras ``copy_map``
+  (:func:`texsynth.synth.evaluate.copy_map`) and ``source_map`` (row, column per pixel).
 """
 
 from __future__ import annotations

@@ -22,14 +22,11 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - Kopf's form of histogram re-weighting for both histograms (the paper's formulas are not available);
 - the solver adds a ``consensus`` term (the fit alone is speckled) and Kopf's grey-level histogram;
 - fewer candidates (``solve_radius`` 0, ``kset_window`` 1); a level starts from the first plane's matches;
-- 3 iterations per level (the study: 10); laminae get 10 (``adapt_to_structure``);
 - parallel passes (Jacobi search, index histogram frozen per call; solve in blocks); every voxel searched;
 - a final rank remap onto the exemplars' grey levels (``grey_remap``, as Kopf): the solver loses the tails;
-- laminae only: orientation re-weighting (``orientation_gain`` 32) and an annealing schedule
-  (60 ``coarse_iterations``, ``solve_radius`` 1);
+- 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - the laminar start (``structure``, :mod:`texsynth.synth.pixel.laminar`): one laminar isotropic exemplar
-starts from
-  curved sheets at its period, matched by the tree search, on the levels that keep the period; for
+  starts from curved sheets at its period, matched by the tree search, on the levels that keep the period; for
   short-fringed exemplars solid-kopf's pilot decides (docs/solid.md, "chosen by a pilot").
 """
 
@@ -475,9 +472,8 @@ class _Schedule:
     @classmethod
     def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
         """Laminae (``adapt_to_structure``, :func:`texsynth.synth.pixel.solid.is_laminar`) get at least 10
-        iterations
-        per level and the laminar settings of the parameters left ``None``; fewer levels hurt this method,
-        so they stay."""
+        iterations per level and the laminar settings of the parameters left ``None``; fewer levels hurt this
+        method, so they stay."""
         iterations = params.iterations
         orientation_gain = params.orientation_gain or 0.0
         solve_radius = params.solve_radius or 0

@@ -25,8 +25,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
 - neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
-curved
-  sheets for isotropic fringes (a pilot for short ones), a crumpled stack fitted to anisotropic ones;
+  curved sheets for isotropic fringes (a pilot for short ones), a crumpled stack fitted to anisotropic ones;
 - after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 

@@ -5,9 +5,8 @@ A 2-D run gives ``output.png`` (8-bit, or 16-bit on request), ``output.tiff`` (1
 when the method has none; ``constraint_*`` of the constraint when there is one), renderings of the
 method's extra maps, ``metrics.json`` (:func:`texsynth.synth.evaluate.evaluate_pair`: exemplar vs output),
 ``plots/*.png`` (:func:`texsynth.synth.output.plots.write_plots`) and ``manifest.json`` (method, full
-parameters, seed,
-versions, timings). A volume gives ``output.tiff`` as a multi-page stack (16-bit, with the ImageJ
-voxel size when one is given) and ``output.png`` as its middle ``xy`` slice; ``slices.png`` (the three
+parameters, seed, versions, timings). A volume gives ``output.tiff`` as a multi-page stack (16-bit, with the
+ImageJ voxel size when one is given) and ``output.png`` as its middle ``xy`` slice; ``slices.png`` (the three
 orthogonal mid-slices beside their exemplars), ``cube.png`` (the block and its cut-away corner), the
 mid-slices' ``coherence_{xy,xz,yz}.png`` and ``orientation_{xy,xz,yz}.png``
 (:mod:`texsynth.synth.output.volume`); its metrics are the multi-2D ones with per-plane exemplars and
@@ -16,9 +15,9 @@ two-point correlations (:func:`texsynth.synth.evaluate.evaluate_volume`), its pl
 stationarity and any warning, :func:`texsynth.synth.analysis.stationarity.exemplar_diagnostics`), which the
 manifest repeats in short (``exemplar_stationarity``); ``headline``, each headline measure with its
 target, direction and verdict (:func:`texsynth.synth.evaluate.glossary.headline`); and ``fringes.shown``:
-fringe
-statistics only for an exemplar with lattice fringes (:func:`texsynth.synth.evaluate.glossary.fringes_shown`),
-else ``{"shown": false, "reason"}``. Every run also gets ``exemplar-coherence.png`` and
+fringe statistics only for an exemplar with lattice fringes
+(:func:`texsynth.synth.evaluate.glossary.fringes_shown`), else ``{"shown": false, "reason"}``. Every run also
+gets ``exemplar-coherence.png`` and
 ``exemplar-orientation.png``, the exemplar's own tensor images (the ``xy`` one's for per-plane
 exemplars). Every file is written atomically.
 """
@@ -149,8 +148,7 @@ def write_artifacts(
         That of ``output.png``; ``output.tiff`` is always 16-bit. Default: from ``input_bits``.
     input_bits : InputBits, optional
         The exemplar's bit depth (:mod:`texsynth.synth.io.depth`; default ``result.input_bits``). An input of
-        more
-        than 8 bits gives a 16-bit grey ``output.png``; one that uses fewer bits than its 16-bit
+        more than 8 bits gives a 16-bit grey ``output.png``; one that uses fewer bits than its 16-bit
         container (12-bit camera data: 0-4095) gives ``output.tiff`` at that depth (values 0-4095;
         ``output.png`` stays full-scale, the picture to look at), and ``metrics.json`` says it:
         ``input_bits: {container, used}``.

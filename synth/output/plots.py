@@ -412,9 +412,8 @@ def write_plots(
         The synthesis output; a volume when ``metrics["kind"] == "volume"``.
     metrics : mapping
         The result of :func:`texsynth.synth.evaluate.evaluate_pair` or
-        :func:`texsynth.synth.evaluate.evaluate_volume`
-        for these images (its settings also drive the fringe overlays).
-    out_dir : str or Path
+        :func:`texsynth.synth.evaluate.evaluate_volume` for these images (its settings also drive the fringe
+    overlays). out_dir : str or Path
         Directory, created if missing.
     dpi : int
         Resolution of the charts (100: the sizes below; others are resampled).

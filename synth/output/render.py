@@ -11,11 +11,9 @@ Conventions (ALGORITHMS.md, "Rendering"):
 
 Which angle? The functions colour whatever angle they are given, but the legends are labelled
 **fringe direction**, and the project passes :func:`texsynth.synth.analysis.tensor.structure_direction` (the
-direction
-fringes and laminae run, as OrientationJ and materials tools show it), not the gradient direction of
+direction fringes and laminae run, as OrientationJ and materials tools show it), not the gradient direction of
 :func:`texsynth.synth.analysis.tensor.orientation`, which is 90 degrees away. A caller showing something else
-says so
-with ``title=``. Angles are counter-clockwise from +x with ``y`` up on screen, so the half-disc in the
+says so with ``title=``. Angles are counter-clockwise from +x with ``y`` up on screen, so the half-disc in the
 orientation legend is a true picture: the ray at +45 degrees points up-right and wears the colour of
 fringes running up-right.
 
@@ -143,8 +141,7 @@ def orientation_image(
     theta : ndarray, shape (H, W)
         Angles in radians, counter-clockwise from +x with ``y`` up; by the project's convention the
         fringe direction (:func:`texsynth.synth.analysis.tensor.structure_direction`). Non-finite angles are
-        black.
-    coherence : ndarray, shape (H, W), optional
+    black. coherence : ndarray, shape (H, W), optional
         When given, the saturation (0 white, 1 full colour), so that orientation-less regions fade
         out; otherwise every pixel is fully saturated.
     legend : bool

@@ -8,8 +8,7 @@ the transposed strip. For an L-shaped overlap, the two cuts meet at the corner p
 their costs-to-go (counting the shared pixel once) is least, and each is traced from there.
 
 A wrapped patch of a periodic layout (:class:`texsynth.synth.patch.layout.Strips`) is also known along its
-right
-and/or bottom border: each of those strips gets its own cut, a DP across that strip alone (the strip
+right and/or bottom border: each of those strips gets its own cut, a DP across that strip alone (the strip
 mirrored so that the cut runs from its outer border inward, the same kernel), and the new patch wins where
 it wins for every cut (the intersection of their new sides: where two cuts cross in a corner square, the
 seam follows one up to the crossing and the other from there). The strips' cuts are not optimised jointly.

@@ -1,18 +1,14 @@
 """Feature-guided patch synthesis (Wu & Yu 2004, section 3): match on features and colour, bend, cut.
 
 The engine behind the ``feature-guided`` method (:mod:`texsynth.synth.methods.feature_guided`), composed of
-the
-project's pieces: (1) the exemplar's feature map (section 2.3,
-:func:`texsynth.synth.analysis.features.feature_map`)
-and, with ``rotations``, its seven rotated/reflected copies (:func:`variants`); (2) per patch of the raster
-layout (:class:`texsynth.synth.patch.layout.PatchLayout`), the colour SSD of the overlap against every
-exemplar
-patch by FFT (:class:`texsynth.synth.patch.search.PatchSearcher`), the ``candidates`` best kept; (3) the
-feature
+the project's pieces: (1) the exemplar's feature map (section 2.3,
+:func:`texsynth.synth.analysis.features.feature_map`) and, with ``rotations``, its seven rotated/reflected
+copies (:func:`variants`); (2) per patch of the raster layout
+(:class:`texsynth.synth.patch.layout.PatchLayout`), the colour SSD of the overlap against every exemplar patch
+by FFT (:class:`texsynth.synth.patch.search.PatchSearcher`), the ``candidates`` best kept; (3) the feature
 matching cost (eq 2, eq 1's ``gdist``, ``tau = 0.1``, ``beta = 0.3``;
 :func:`texsynth.synth.analysis.feature_matching.matching_costs`), plus ``reverse_weight`` times the reverse
-term;
-(4) total cost ``w_f F / mean(F) + (1 - w_f) S / mean(S)`` (``w_f = 0.5``, section 3), drawn among
+term; (4) total cost ``w_f F / mean(F) + (1 - w_f) S / mean(S)`` (``w_f = 0.5``, section 3), drawn among
 those within ``1 + tolerance`` of the least; (5) with ``deform``, the warp (section 2.2): gated
 correspondences (eq 1, ``tau = 10``), thinned to spaced controls, a thin-plate spline confined to the
 overlap and a band (:mod:`texsynth.synth.analysis.warp`); (6) the graph-cut seam (Kwatra et al. 2003).

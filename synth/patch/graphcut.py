@@ -12,9 +12,8 @@ every edge, so the graph stays connected), and "infinite" is ``2^29``, above any
 overlap (at most a few thousand edges).
 
 The known region may be any union of border strips (:class:`texsynth.synth.patch.layout.Strips`): a wrapped
-patch
-of a periodic layout is also known along its right and/or bottom border, and those borders are tied to the
-source like the top and left ones, so the cut runs through every strip.
+patch of a periodic layout is also known along its right and/or bottom border, and those borders are tied to
+the source like the top and left ones, so the cut runs through every strip.
 """
 
 from __future__ import annotations

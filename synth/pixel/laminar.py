@@ -127,8 +127,7 @@ def starts_laminar(
     planes: the isotropic sheets fit it when it is fringed (mean coherence >= :data:`START_COHERENCE`);
     between :data:`PILOT_COHERENCE` and that, ``pilot(exemplar)`` decides (the methods pass
     :func:`texsynth.synth.methods.solid_kopf.laminar_pilot`: a small volume from each start, the one whose
-    slices
-    keep the exemplar's coherence). Per-plane exemplars, two views and one-orientation laminae describe
+    slices keep the exemplar's coherence). Per-plane exemplars, two views and one-orientation laminae describe
     anisotropic materials that isotropic sheets do not (docs/solid.md), and a weakly oriented exemplar
     (soot-128) is not laminar: all keep the paper's random start.
     """
@@ -265,8 +264,8 @@ def sheet_normal(orientations: Mapping[str, tuple[np.ndarray, float]]) -> np.nda
     """The unit 3D sheet normal ``(n_z, n_y, n_x)`` whose traces best fit the planes' fringe normals.
 
     Sheets of normal ``n`` show, in a plane of volume axes ``(a, b)``
-    (:data:`texsynth.synth.pixel.solid.PLANE_AXES`),
-    fringes whose normal is ``(n_a, n_b)``; a plane whose fringe normal is ``d`` asks
+    (:data:`texsynth.synth.pixel.solid.PLANE_AXES`), fringes whose normal is ``(n_a, n_b)``; a plane whose
+    fringe normal is ``d`` asks
     ``n_a d_b - n_b d_a = 0``. Each plane's equation is weighted by its anisotropy and ``n`` is the
     least-squares solution of unit length (the smallest right singular vector), its largest component
     made positive. ``orientations`` maps plane names to :func:`plane_orientation` answers.

@@ -1,6 +1,5 @@
 """The batch client (``texsynth.app.client``): retries, ``Retry-After``, typed answers, array inputs, file
-names,
-streamed downloads, ``submit_many``/``wait_all`` through an API restart, and ``texsynth submit``.
+names, streamed downloads, ``submit_many``/``wait_all`` through an API restart, and ``texsynth submit``.
 
 The retry rules are shown on a tiny scripted HTTP server in a thread (each answer chosen by the test,
 every request recorded); the restart on a real ``texsynth serve`` that the test stops and starts again

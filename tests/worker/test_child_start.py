@@ -17,8 +17,8 @@ def test_child_start_imports_the_methods_and_the_writer(tmp_path) -> None:
         import json, sys
         import texsynth.worker.celery_app as app
         wanted = ("texsynth.synth.output.artifacts", "texsynth.synth.evaluate.measures",
-        "texsynth.synth.output.plots",
-                  "texsynth.synth.methods.wei_levoy", "texsynth.synth.methods.tensor_constrained")
+                  "texsynth.synth.output.plots", "texsynth.synth.methods.wei_levoy",
+                  "texsynth.synth.methods.tensor_constrained")
         before = [m for m in wanted if m in sys.modules]
         app._on_child_start()
         after = [m for m in wanted if m in sys.modules]

@@ -1,6 +1,5 @@
 """The pixel search kernel (texsynth.synth.kernels.pixel_search) against its plain NumPy reference, through
-whole
-source-map syntheses: pixels, tensor guidance, tensors, chunking, histograms, windows, transfers,
+whole source-map syntheses: pixels, tensor guidance, tensors, chunking, histograms, windows, transfers,
 falloff and square refinement."""
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """Tileable outputs (``periodic=True``) of the patch methods and random-phase: a 2 x 2 tiling shows no seam.
 
 The measure is :func:`texsynth.synth.evaluate.tile_seam` (1 = tile borders like the interior; ranks about 0.5
-for a
-seamless tiling, 1 for a seam stronger than any line inside).
+for a seamless tiling, 1 for a seam stronger than any line inside).
 """
 
 from __future__ import annotations

@@ -1,9 +1,8 @@
 """Tileable outputs of the 2D pixel methods (``periodic=True``): a 2 x 2 tiling shows no seam.
 
 The measure is :func:`texsynth.synth.evaluate.tile_seam`. One line of pixel pairs is a noisy sample (a
-seamless
-border's rank is about uniform over [0, 1]), so the checks take the mean over three seeds: the ratio and
-the ranks of a seamless output stay near 1 and 0.5; a causal scan's seam (the default, non-periodic
+seamless border's rank is about uniform over [0, 1]), so the checks take the mean over three seeds: the ratio
+and the ranks of a seamless output stay near 1 and 0.5; a causal scan's seam (the default, non-periodic
 output) sits near 1.5 and 0.9.
 """
 
