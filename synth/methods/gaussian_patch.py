@@ -33,6 +33,7 @@ LNCS 9087, pp. 474-485. L. Raad et al., "Locally Gaussian exemplar-based texture
 from __future__ import annotations
 
 import time
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -57,7 +58,7 @@ from texsynth.synth.patch.gaussian import (
     rclg_patch,
     restore_contrast,
 )
-from texsynth.synth.patch.layout import PatchLayout, Strips, check_periodic_size
+from texsynth.synth.patch.layout import PatchLayout, Strips, check_periodic_size, patch_rng, patch_workers
 from texsynth.synth.patch.search import PatchSearcher, k_nearest
 from texsynth.synth.patch.usage import UsagePenalty
 
@@ -297,20 +298,26 @@ def synthesize_gaussian_patches(
     usage = UsagePenalty(ex.shape, w, params.usage_weight)
     tapers: dict[Strips, np.ndarray] = {}
     length = params.localisation if params.localisation is not None else float(overlap)
-    report_every = max(1, len(layout) // 50)
-    for n, (i, j, y, x, kind) in enumerate(layout.patches()):
+    patches = layout.patches()
+    for strips in {layout.strips(i, j) for i, j, *_ in patches}:  # the localisation tapers, once per kind
+        if strips.kind != "none":
+            tapers[strips] = np.repeat(
+                localisation_taper(strips.mask(w), length)[..., None], channels, axis=2
+            ).ravel()
+
+    def place(n: int, factors: np.ndarray | None) -> list[tuple[int, int, float]]:
+        """Build and paste patch ``n`` (writes only its own region, draws from its own random stream);
+        returns the exemplar positions it was built on with their shares (the first is the nearest)."""
+        i, j, y, x, kind = patches[n]
+        draw = patch_rng(base, n)
         at = layout.index(y, x)  # wraps around the torus when periodic
         region = out[at]
         strips = layout.strips(i, j)
         mask = strips.mask(w)
         if out_guide is None and kind == "none":
-            first = np.unravel_index(int(rng.integers(n_pos)), searcher.positions_shape)
+            first = np.unravel_index(int(draw.integers(n_pos)), searcher.positions_shape)
             out[at] = searcher.patch(*first)
-            usage.add(int(first[0]), int(first[1]))
-            sources.append([int(first[0]), int(first[1])])
-            weights_used.append(1.0)
-            firsts.append(True)
-            continue
+            return [(int(first[0]), int(first[1]), 1.0)]
         template = region
         weights = np.repeat(mask[..., None].astype(np.float64), channels, axis=2)
         if out_guide is not None:
@@ -320,28 +327,25 @@ def synthesize_gaussian_patches(
         err = searcher.ssd(template, weights)
         if params.error == "normalised":
             err = searcher.normalised_ssd(template, weights, err)
-        if params.usage_weight > 0:
-            err = err * usage.factors()
+        if factors is not None:
+            err = err * factors
         nearest = k_nearest(err, params.neighbours)
         positions = np.stack(np.unravel_index(nearest, searcher.positions_shape), axis=1)
         member = None
         model = GaussianPatchModel.from_patches(searcher.patches(nearest)[..., :channels])
         if kind == "none":
-            patch = lg_patch(model, rng) if params.model == "lg" else model.mu
+            patch = lg_patch(model, draw) if params.model == "lg" else model.mu
         elif params.model == "lg":
-            patch = lg_patch(model, rng)
+            patch = lg_patch(model, draw)
         else:
             known = np.repeat(mask[..., None], channels, axis=2).ravel()
             theta = params.theta if params.model == "rclg" else 0.0
             y0 = region.ravel()[known]
             if params.estimate == "draw":
-                patch = rclg_draw(model, known, y0, params.sigma, theta, rng)
+                patch = rclg_draw(model, known, y0, params.sigma, theta, draw)
             elif params.estimate == "neighbour":
-                if strips not in tapers:
-                    taper = localisation_taper(mask, length)
-                    tapers[strips] = np.repeat(taper[..., None], channels, axis=2).ravel()
-                member = int(rng.integers(len(nearest)))
-                patch = rclg_neighbour(model, known, y0, params.sigma, theta, rng, tapers[strips], member)
+                member = int(draw.integers(len(nearest)))
+                patch = rclg_neighbour(model, known, y0, params.sigma, theta, draw, tapers[strips], member)
             else:
                 patch = rclg_patch(model, known, y0, params.sigma, theta)
             if params.contrast == "restore":
@@ -349,21 +353,36 @@ def synthesize_gaussian_patches(
             if strips.two_sided:
                 patch = mend_inner_edges(patch.reshape(w, w, channels), mask)
         patch = patch.reshape(w, w, channels)
-        # the exemplar positions this patch was built on: its neighbour, or all N for the model's mean/draws
-        for k, (py, px) in enumerate(positions if member is None else positions[member : member + 1]):
-            share = 1.0 if member is not None else 1.0 / len(positions)
-            usage.add(int(py), int(px), np.full((w, w), share))
-            sources.append([int(py), int(px)])
-            weights_used.append(share)
-            firsts.append(k == 0)
         if params.blending == "boundary-cut" and kind != "none":
             new_mask = strips_cut_mask(error_surface(region, patch), strips)
             region[new_mask] = patch[new_mask]
         else:
             region[...] = patch
         out[at] = region
-        if report is not None and n % report_every == 0:
-            report("patches", n / len(layout))
+        # the exemplar positions this patch was built on: its neighbour, or all N for the model's mean/draws
+        chosen = positions if member is None else positions[member : member + 1]
+        share = 1.0 if member is not None else 1.0 / len(positions)
+        return [(int(py), int(px), share) for py, px in chosen]
+
+    # The patches of a wave do not overlap: they are built on the job's threads (NumPy, SciPy's FFT and
+    # LAPACK release the GIL), each from its own random stream (patch_rng), the usage counts as they were
+    # when the wave began; then the wave's patches are counted, in raster order.
+    base = int(rng.integers(2**63))
+    built: dict[int, list[tuple[int, int, float]]] = {}
+    with patch_workers() as run_wave:
+        for wave in layout.waves():
+            factors = usage.factors() if params.usage_weight > 0 else None
+            for n, used in zip(wave, run_wave(partial(place, factors=factors), wave), strict=True):
+                built[n] = used
+                for py, px, share in used:
+                    usage.add(py, px, np.full((w, w), share))
+            if report is not None:
+                report("patches", len(built) / len(layout))
+    for n in range(len(patches)):
+        for k, (py, px, share) in enumerate(built[n]):
+            sources.append([py, px])
+            weights_used.append(share)
+            firsts.append(k == 0)
     return out[: size[0], : size[1]], layout
 
 

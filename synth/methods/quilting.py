@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -47,7 +48,7 @@ from texsynth.synth.methods.common import PatchParams, checked_progress
 from texsynth.synth.params import ui
 from texsynth.synth.patch.cut import error_surface, strips_cut_mask
 from texsynth.synth.patch.graphcut import graph_cut_mask
-from texsynth.synth.patch.layout import PatchLayout, check_periodic_size
+from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, patch_rng, patch_workers
 from texsynth.synth.patch.search import PatchSearcher, candidates_within
 from texsynth.synth.patch.usage import UsagePenalty
 
@@ -165,7 +166,6 @@ def run_quilting(
     precheck_patch_method(params, {"exemplar": exemplar.shape, "output": size})
     report = checked_progress(progress)
     start = time.perf_counter()
-    rng = np.random.default_rng(seed)
     w = params.patch_size
     layout = PatchLayout(size, w, overlap, periodic=params.periodic)
     searcher = PatchSearcher(exemplar, w)
@@ -175,42 +175,69 @@ def run_quilting(
     source = np.zeros((gh, gw, 2), dtype=np.int32)
     n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
     offsets = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int32)
-    errors = []
-    used: list[tuple[int, int]] = []
     usage = UsagePenalty(ex.shape, w, params.usage_weight)
-    report_every = max(1, len(layout) // 50)
-    for n, (i, j, y, x, kind) in enumerate(layout.patches()):
+    patches = layout.patches()
+    placed: dict[int, tuple[int, int, np.ndarray, float | None]] = {}
+    base = int(np.random.default_rng(seed).integers(2**63))
+
+    def search(n: int, factors: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The candidates of patch ``n`` (flat exemplar positions within tolerance) and its overlap SSD."""
+        i, j, y, x, kind = patches[n]
+        if kind == "none":
+            return np.arange(n_pos), None
+        region = out[layout.index(y, x)]
+        mask = layout.strips(i, j).mask(w)
+        ssd = searcher.ssd(region, mask)
+        err = searcher.normalised_ssd(region, mask, ssd) if params.error == "normalised" else ssd
+        if factors is not None:
+            err = err * factors
+        return candidates_within(err, params.tolerance), ssd
+
+    def stitch(n: int, choices: dict) -> tuple[int, int, np.ndarray, float | None]:
+        """Cut and paste the exemplar patch ``choices[n]`` chose at patch ``n``'s place (writes only its
+        own region)."""
+        choice, ssd = choices[n]
+        i, j, y, x, kind = patches[n]
         at = layout.index(y, x)  # wraps around the torus when periodic
         region = out[at]
         strips = layout.strips(i, j)
+        py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
+        patch = searcher.patch(py, px)
+        error = None
         if kind == "none":
-            choice = int(rng.integers(n_pos))
             new_mask = np.ones((w, w), dtype=bool)
         else:
             mask = strips.mask(w)
-            ssd = searcher.ssd(region, mask)
-            err = searcher.normalised_ssd(region, mask, ssd) if params.error == "normalised" else ssd
-            if params.usage_weight > 0:
-                err = err * usage.factors()
-            pool = candidates_within(err, params.tolerance)
-            choice = int(pool[rng.integers(len(pool))])
-            errors.append(float(ssd.ravel()[choice]) / (mask.sum() * ex.shape[2]))
-        py, px = np.unravel_index(choice, searcher.positions_shape)
-        used.append((int(py), int(px)))
-        patch = searcher.patch(py, px)
-        if kind != "none":
+            error = float(ssd.ravel()[choice]) / (mask.sum() * ex.shape[2])  # type: ignore[union-attr]
             if params.blending == "graph-cut":
                 new_mask = graph_cut_mask(region, patch, mask, layout.sealed(i, j))
             else:
                 new_mask = strips_cut_mask(error_surface(region, patch), strips)
         region[new_mask] = patch[new_mask]
-        usage.add(py, px, new_mask)
         out[at] = region
         src = source[at]
         src[new_mask] = (offsets + np.array([py, px], dtype=np.int32))[new_mask]
         source[at] = src
-        if n % report_every == 0:
-            report("quilting", n / len(layout))
+        return py, px, new_mask, error
+
+    # The patches of a wave do not overlap: their searches, then their cuts, run on the job's threads
+    # (NumPy and SciPy's FFT release the GIL), the usage counts as they were when the wave began; between
+    # the two, each patch's choice is drawn from its own random stream (seed, patch).
+    with patch_workers() as run_wave:
+        for wave in layout.waves():
+            factors = usage.factors() if params.usage_weight > 0 else None
+            found = run_wave(partial(search, factors=factors), wave)
+            choices = {
+                n: (int(pool[patch_rng(base, n).integers(len(pool))]), ssd)
+                for n, (pool, ssd) in zip(wave, found, strict=True)
+            }
+            for n, done in zip(wave, run_wave(partial(stitch, choices=choices), wave), strict=True):
+                placed[n] = done
+            for n in wave:
+                usage.add(placed[n][0], placed[n][1], placed[n][2])
+            report("quilting", len(placed) / len(layout))
+    used = [(placed[n][0], placed[n][1]) for n in range(len(patches))]
+    errors = [placed[n][3] for n in range(len(patches)) if placed[n][3] is not None]
     h, wd = layout.size
     image = np.clip(out[:h, :wd], 0.0, 1.0).astype(np.float32)
     image = image[..., 0] if exemplar.ndim == 2 else image

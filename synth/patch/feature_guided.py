@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -56,7 +57,7 @@ from texsynth.synth.analysis.warp import band_falloff, resample, warp_coordinate
 from texsynth.synth.colour import to_grey
 from texsynth.synth.evaluate.breaks import Seams
 from texsynth.synth.patch.graphcut import graph_cut_mask
-from texsynth.synth.patch.layout import PatchLayout, Strips
+from texsynth.synth.patch.layout import PatchLayout, Strips, patch_rng, patch_workers
 from texsynth.synth.patch.search import PatchSearcher, k_nearest
 from texsynth.synth.patch.usage import UsagePenalty
 
@@ -319,59 +320,65 @@ def synthesize_feature_guided(
     colour_costs: list[float] = []
     reranked = 0
     usages = [UsagePenalty(v.image.shape, w, s.usage_weight) for v in copies]
-    used_sources: list[list[int]] = []
-    report_every = max(1, len(layout) // 50)
 
-    for n, (i, j, y, x, kind) in enumerate(layout.patches()):
+    patches = layout.patches()
+
+    def search(n: int, factors: list[np.ndarray] | None) -> tuple | None:
+        """Patch ``n``'s candidates: flat positions, the costs' near-best set, feature and colour costs,
+        the overlap SSD (``None`` for the first patch, drawn among all)."""
+        i, j, y, x, kind = patches[n]
+        if kind == "none":
+            return None
+        at = layout.index(y, x)
+        region, region_mask, region_tan = out[at], out_mask[at], out_tan[at]
+        mask = layout.strips(i, j).mask(w)
+        ssds = [sr.ssd(region, mask) for sr in searchers]
+        ssd = np.concatenate([d.ravel() for d in ssds])
+        if s.error == "normalised" or s.usage_weight > 0:
+            errs = [
+                sr.normalised_ssd(region, mask, d) if s.error == "normalised" else d
+                for sr, d in zip(searchers, ssds, strict=True)
+            ]
+            if factors is not None:
+                errs = [e * f for e, f in zip(errs, factors, strict=True)]
+            err = np.concatenate([e.ravel() for e in errs])
+            pool = k_nearest(err, s.candidates)
+            colour = err[pool]
+        else:
+            pool = k_nearest(ssd, s.candidates)
+            colour = ssd[pool] / (mask.sum() * channels)
+        context = context_features(region_mask, region_tan, mask)
+        feature = np.zeros(len(pool))
+        which = np.searchsorted(starts, pool, side="right") - 1
+        for v in np.unique(which):
+            sel = which == v
+            local = pool[sel] - starts[v]
+            offsets = np.stack(np.unravel_index(local, searchers[v].positions_shape), axis=1)
+            feature[sel] = matching_costs(
+                context,
+                indices[v],
+                offsets.astype(np.int64),
+                tau=s.tau,
+                beta=s.beta,
+                reverse_weight=s.reverse_weight,
+            )
+        total = combined_cost(feature, colour, s.feature_weight)
+        best = float(total.min())
+        ok = np.flatnonzero(total <= best * (1.0 + s.tolerance) + 1e-12)
+        return pool, ok, feature, colour, ssd
+
+    def stitch(
+        n: int, flats: dict[int, int]
+    ) -> tuple[int, int, int, np.ndarray, int | None, str | None, float]:
+        """Warp, cut and paste the exemplar patch ``flats[n]`` at patch ``n``'s place (writes only its own
+        region); returns its source, variant, cut mask and warp figures (correspondences, kind, shift)."""
+        i, j, y, x, kind = patches[n]
+        flat = flats[n]
         at = layout.index(y, x)  # wraps around the torus when periodic
         region = out[at]
         region_mask, region_tan = out_mask[at], out_tan[at]
         strips = layout.strips(i, j)
-        if kind == "none":
-            flat = int(rng.integers(int(starts[-1])))
-            mask = None
-        else:
-            mask = strips.mask(w)
-            if strips not in falloffs:
-                falloffs[strips] = None if s.warp_band is None else band_falloff(mask, s.warp_band)
-            ssds = [sr.ssd(region, mask) for sr in searchers]
-            ssd = np.concatenate([d.ravel() for d in ssds])
-            if s.error == "normalised" or s.usage_weight > 0:
-                errs = [
-                    sr.normalised_ssd(region, mask, d) if s.error == "normalised" else d
-                    for sr, d in zip(searchers, ssds, strict=True)
-                ]
-                if s.usage_weight > 0:
-                    errs = [e * u.factors() for e, u in zip(errs, usages, strict=True)]
-                err = np.concatenate([e.ravel() for e in errs])
-                pool = k_nearest(err, s.candidates)
-                colour = err[pool]
-            else:
-                pool = k_nearest(ssd, s.candidates)
-                colour = ssd[pool] / (mask.sum() * channels)
-            context = context_features(region_mask, region_tan, mask)
-            feature = np.zeros(len(pool))
-            which = np.searchsorted(starts, pool, side="right") - 1
-            for v in np.unique(which):
-                sel = which == v
-                local = pool[sel] - starts[v]
-                offsets = np.stack(np.unravel_index(local, searchers[v].positions_shape), axis=1)
-                feature[sel] = matching_costs(
-                    context,
-                    indices[v],
-                    offsets.astype(np.int64),
-                    tau=s.tau,
-                    beta=s.beta,
-                    reverse_weight=s.reverse_weight,
-                )
-            total = combined_cost(feature, colour, s.feature_weight)
-            best = float(total.min())
-            ok = np.flatnonzero(total <= best * (1.0 + s.tolerance) + 1e-12)
-            pick = int(ok[rng.integers(len(ok))])
-            flat = int(pool[pick])
-            reranked += int(pick != int(np.argmin(colour)))
-            feature_costs.append(float(feature[pick]))
-            colour_costs.append(float(ssd[flat]) / (mask.sum() * channels))
+        mask = None if kind == "none" else strips.mask(w)
         v = int(np.searchsorted(starts, flat, side="right") - 1)
         py, px = (int(t) for t in np.unravel_index(flat - int(starts[v]), searchers[v].positions_shape))
         variant = copies[v]
@@ -379,6 +386,7 @@ def synthesize_feature_guided(
         p_mask = variant.mask[py : py + w, px : px + w]
         p_tan = variant.tangent[py : py + w, px : px + w]
         src = grid + np.array([py + ROW_CODE * v, px], dtype=np.int64)
+        count, warp, shift = None, None, 0.0
         if mask is not None and s.deform and (s.warp_two_sided or not strips.two_sided):
             corr = feature_correspondences(
                 region_mask,
@@ -392,7 +400,7 @@ def synthesize_feature_guided(
                 normal_only=s.normal_only,
             )
             corr = thin_correspondences(corr, s.warp_spacing)
-            pairs.append(corr.count)
+            count = corr.count
             coords, used, _ = warp_coordinates(
                 (w, w),
                 np.clip(corr.sources, 0.0, w - 1.0),  # a projected source may fall just outside
@@ -405,13 +413,12 @@ def synthesize_feature_guided(
             )
             shift = float(np.abs(coords - grid.transpose(2, 0, 1)).max())
             if used != "identity" and _folds(coords):
-                warps["folded"] += 1
+                warp = "folded"
             elif used != "identity" and shift < s.min_shift:
-                warps["small"] += 1
+                warp = "small"
             else:
-                warps[used] += 1
+                warp = used
                 if used != "identity":
-                    shifts.append(shift)
                     patch, p_mask, p_tan = _sample(variant, coords, py, px, s.warp_order, coefficients[v])
                     moved = (coords != grid.transpose(2, 0, 1)).any(axis=0)
                     src[moved] = (grid + np.array([WARPED_CODE * (n + 1), 0], dtype=np.int64))[moved]
@@ -421,8 +428,6 @@ def synthesize_feature_guided(
             else graph_cut_mask(region, patch, mask, layout.sealed(i, j))
         )
         region[new] = patch[new]
-        usages[v].add(py, px, new)
-        used_sources.append([py, px, v])
         region_mask[new] = p_mask[new]
         region_tan[new] = np.where(p_mask, p_tan, np.nan)[new]
         region_labels, region_sources = labels[at], sources[at]
@@ -435,8 +440,46 @@ def synthesize_feature_guided(
             region_labels,
             region_sources,
         )
-        if n % report_every == 0:
-            report("feature-guided", n / len(layout))
+        return py, px, v, new, count, warp, shift
+
+    for i, j, _, _, kind in patches:  # the warp's band falloff of every kind of known region, once
+        strips = layout.strips(i, j)
+        if kind != "none" and strips not in falloffs:
+            falloffs[strips] = None if s.warp_band is None else band_falloff(strips.mask(w), s.warp_band)
+    # The patches of a wave do not overlap: their searches, then their warps and cuts, run on the job's
+    # threads, the usage counts as they were when the wave began; between the two each patch's choice is
+    # drawn from its own random stream (patch_rng), and after them the figures are kept in raster order.
+    base = int(rng.integers(2**63))
+    by_patch: dict[int, list[int]] = {}
+    with patch_workers() as run_wave:
+        for wave in layout.waves():
+            factors = [u.factors() for u in usages] if s.usage_weight > 0 else None
+            found = run_wave(partial(search, factors=factors), wave)
+            flats: dict[int, int] = {}
+            for n, got in zip(wave, found, strict=True):
+                draw = patch_rng(base, n)
+                if got is None:
+                    flats[n] = int(draw.integers(int(starts[-1])))
+                    continue
+                pool, ok, feature, colour, ssd = got
+                pick = int(ok[draw.integers(len(ok))])
+                flats[n] = int(pool[pick])
+                reranked += int(pick != int(np.argmin(colour)))
+                feature_costs.append(float(feature[pick]))
+                known = layout.strips(*patches[n][:2]).mask(w).sum()
+                colour_costs.append(float(ssd[flats[n]]) / (known * channels))
+            stitched = run_wave(partial(stitch, flats=flats), wave)
+            for n, (py, px, v, new, count, warp, shift) in zip(wave, stitched, strict=True):
+                usages[v].add(py, px, new)
+                by_patch[n] = [py, px, v]
+                if count is not None:
+                    pairs.append(count)
+                if warp is not None:
+                    warps[warp] += 1
+                    if warp not in ("folded", "small", "identity"):
+                        shifts.append(shift)
+            report("feature-guided", len(by_patch) / len(layout))
+    used_sources = [by_patch[n] for n in range(len(patches))]
 
     h, wd = layout.size
     stats: dict[str, Any] = {

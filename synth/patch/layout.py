@@ -21,6 +21,8 @@ A periodic axis needs at least two steps (:func:`check_periodic_size`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -28,8 +30,33 @@ from typing import Any
 import numpy as np
 
 from texsynth.synth.errors import InvalidParameter
+from texsynth.synth.threads import current_threads, thread_map
 
-__all__ = ["PatchLayout", "Strips", "check_periodic_size", "overlap_mask", "periodic_positions"]
+__all__ = [
+    "PatchLayout",
+    "Strips",
+    "check_periodic_size",
+    "overlap_mask",
+    "patch_rng",
+    "patch_workers",
+    "periodic_positions",
+]
+
+
+def patch_rng(base: int, n: int) -> np.random.Generator:
+    """Patch ``n``'s own random stream (``base``: a number drawn once from the method's seeded generator):
+    a patch draws the same numbers whichever thread places it and whenever (:meth:`PatchLayout.waves`)."""
+    return np.random.default_rng((int(base), int(n)))
+
+
+@contextmanager
+def patch_workers() -> Iterator[Callable[[Callable[[int], Any], list[int]], list[Any]]]:
+    """A runner for the patches of one wave (:meth:`PatchLayout.waves`): ``run(place, wave)`` returns
+    ``[place(n) for n in wave]``, computed on the job's threads (``current_threads``, read here, in the
+    thread that runs the job; :func:`texsynth.synth.threads.thread_map`). The results do not depend on
+    the count when ``place`` writes only its own patch's pixels and draws its own random numbers."""
+    threads = current_threads()
+    yield lambda place, wave: thread_map(place, wave, threads)
 
 
 def overlap_mask(w: int, overlap: int, kind: str) -> np.ndarray:
@@ -263,6 +290,35 @@ class PatchLayout:
         """``(i, j, y, x, kind)`` of every patch in raster order; ``(y, x)`` is its top-left corner."""
         ys, xs = self.row_positions, self.col_positions
         return [(i, j, ys[i], xs[j], self.kind(i, j)) for i in range(self.rows) for j in range(self.cols)]
+
+    def waves(self) -> list[list[int]]:
+        """The patches (indices into :meth:`patches`) in waves that can be placed in parallel.
+
+        A patch's wave is one more than the highest wave among the earlier patches (raster order) whose
+        ``w x w`` regions meet its own (on the torus when periodic), so overlapping patches keep their
+        order and the patches of a wave are disjoint: placing a wave's patches at once gives the raster
+        result (Lefebvre & Hoppe 2005's idea, on patches). Without wrap-around the waves are the grid's
+        diagonals ``j + 2 i`` (overlap below half a patch); a periodic layout's last column meets the next
+        row's first patch, which chains the rows: one patch per wave.
+        """
+        ys, xs = self.row_positions, self.col_positions
+
+        def meets(pos: list[int], n: int) -> list[list[int]]:
+            out = []
+            for a in pos:
+                d = [abs(b - a) if not self.periodic else min((b - a) % n, (a - b) % n) for b in pos]
+                out.append([k for k, dk in enumerate(d) if dk < self.w])
+            return out
+
+        row_hits, col_hits = meets(ys, self.size[0]), meets(xs, self.size[1])
+        cols = len(xs)
+        wave = np.zeros(len(ys) * cols, dtype=np.int64)
+        for i in range(len(ys)):
+            for j in range(cols):
+                n = i * cols + j
+                earlier = [wave[a * cols + b] for a in row_hits[i] for b in col_hits[j] if a * cols + b < n]
+                wave[n] = 1 + max(earlier) if earlier else 0
+        return [np.flatnonzero(wave == k).tolist() for k in range(int(wave.max()) + 1)] if len(wave) else []
 
     def index(self, y: int, x: int) -> tuple[np.ndarray, np.ndarray]:
         """:func:`numpy.ix_` indices of the ``w x w`` output region at ``(y, x)``, wrapped around the torus

@@ -186,3 +186,71 @@ def test_cli_threads_runs_and_gives_the_same_bytes(
         assert main([*words, "--out", str(out), *(["--threads", threads] if threads else [])]) == 0
         outputs.append((out / "output.png").read_bytes())
     assert outputs[0] == outputs[1]
+
+
+# The patch methods at sizes whose waves hold several patches (small patches on a 96^2 output), their
+# copy maps in several blocks of queries, and a periodic layout (one patch a wave): with 1, 2 and 4
+# threads in a process whose pools have 4 (issue 25). Every extra array of the result is in the digest.
+_PATCH_METHODS = """
+import hashlib, json
+import numpy as np
+from texsynth.synth.api import synthesize
+from texsynth.synth.io.patterns import undulating_laminae
+
+ex = undulating_laminae((48, 48), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0)
+cases = {
+    "quilting": ("quilting", {"patch_size": 12, "overlap": 4}),
+    "quilting-graph-cut": ("quilting", {"patch_size": 12, "overlap": 4, "blending": "graph-cut"}),
+    "quilting-periodic": ("quilting", {"patch_size": 12, "overlap": 4, "periodic": True}),
+    "gaussian-patch": ("gaussian-patch", {"patch_size": 12, "overlap": 4}),
+    "feature-guided": ("feature-guided", {"patch_size": 12, "overlap": 4}),
+}
+out = {}
+for name, (method, params) in cases.items():
+    digests = []
+    for threads in (1, 2, 4):
+        r = synthesize(method, ex, size=(96, 96), seed=3, params=params, threads=threads)
+        h = hashlib.sha256(r.image.tobytes())
+        for key in sorted(r.extras):
+            h.update(np.ascontiguousarray(r.extras[key]).tobytes())
+        h.update(json.dumps(r.stats.get("coverage"), sort_keys=True, default=str).encode())
+        digests.append(h.hexdigest())
+    out[name] = digests
+print(json.dumps(out))
+"""
+
+
+def test_patch_methods_give_the_same_bytes_with_one_two_and_four_threads() -> None:
+    env = {**os.environ, "NUMBA_NUM_THREADS": "4"}
+    done = subprocess.run(
+        [sys.executable, "-c", _PATCH_METHODS], env=env, capture_output=True, text=True, check=True
+    )
+    digests = json.loads(done.stdout.strip().splitlines()[-1])
+    assert len(digests) == 5
+    differ = {name: d for name, d in digests.items() if len(set(d)) != 1}
+    assert not differ, f"bytes depend on the thread count: {differ}"
+
+
+def test_thread_map_keeps_the_order_and_raises_the_first_error() -> None:
+    import threading
+
+    from texsynth.synth.threads import thread_map
+
+    seen: set[str] = set()
+
+    def square(n: int) -> int:
+        seen.add(threading.current_thread().name)
+        return n * n
+
+    assert thread_map(square, list(range(50)), 1) == [n * n for n in range(50)]
+    assert seen == {threading.current_thread().name}  # one thread: the caller alone
+    assert thread_map(square, list(range(50)), 3) == [n * n for n in range(50)]
+    assert thread_map(square, [], 2) == []
+
+    def fail(n: int) -> int:
+        if n == 7:
+            raise ValueError("seven")
+        return n
+
+    with pytest.raises(ValueError, match="seven"):
+        thread_map(fail, list(range(20)), 2)

@@ -116,3 +116,52 @@ def test_periodic_size_error_when_the_last_patch_keeps_nothing():
     with pytest.raises(InvalidParameter, match="no pixel of its own") as err:
         check_periodic_size((41, 64), 32, 12)
     assert err.value.name == "height"
+
+
+def _regions_meet(layout: PatchLayout, a: tuple, b: tuple) -> bool:
+    """Whether the w x w regions of patches ``a`` and ``b`` (``patches()`` rows) share a pixel."""
+    ha, hb = np.zeros(layout.grown_shape, bool), np.zeros(layout.grown_shape, bool)
+    ha[layout.index(a[2], a[3])] = True
+    hb[layout.index(b[2], b[3])] = True
+    return bool((ha & hb).any())
+
+
+@pytest.mark.parametrize(
+    ("size", "w", "overlap", "periodic"),
+    [((100, 90), 16, 3, False), ((64, 80), 16, 8, False), ((60, 60), 12, 7, False), ((96, 80), 16, 4, True)],
+)
+def test_waves_keep_every_overlapping_pair_in_raster_order(size, w, overlap, periodic):
+    """Patches of one wave never meet; a patch meeting an earlier one comes in a later wave (issue 25)."""
+    layout = PatchLayout(size, w, overlap, periodic=periodic)
+    patches = layout.patches()
+    waves = layout.waves()
+    assert sorted(n for wave in waves for n in wave) == list(range(len(layout)))
+    wave_of = {n: k for k, wave in enumerate(waves) for n in wave}
+    for a in range(len(patches)):
+        for b in range(a + 1, len(patches)):
+            if _regions_meet(layout, patches[a], patches[b]):
+                assert wave_of[a] < wave_of[b], (patches[a][:2], patches[b][:2])
+    if not periodic and 2 * overlap < w:  # the diagonals j + 2 i
+        assert all(
+            wave_of[i * layout.cols + j] == j + 2 * i for i in range(layout.rows) for j in range(layout.cols)
+        )
+    if periodic:  # the last column meets the next row's first patch: one patch a wave
+        assert all(len(wave) == 1 for wave in waves)
+
+
+def test_patch_streams_depend_on_the_patch_only():
+    from texsynth.synth.patch.layout import patch_rng
+
+    assert patch_rng(7, 3).integers(1 << 30) == patch_rng(7, 3).integers(1 << 30)
+    assert patch_rng(7, 3).integers(1 << 30) != patch_rng(7, 4).integers(1 << 30)
+    assert patch_rng(7, 3).integers(1 << 30) != patch_rng(8, 3).integers(1 << 30)
+
+
+def test_patch_workers_run_every_patch_and_keep_the_order():
+    from texsynth.synth.patch.layout import patch_workers
+    from texsynth.synth.threads import use_threads
+
+    for threads in (1, 2):
+        with use_threads(threads), patch_workers() as run:
+            assert run(lambda n: n * n, [3, 1, 2]) == [9, 1, 4]
+            assert run(lambda n: -n, [5]) == [-5]

@@ -117,12 +117,21 @@ def test_quilting_reports_its_sources():
 
 @pytest.mark.skipif(not ONION_CORE.exists(), reason=f"{ONION_CORE} missing")
 def test_quilting_defaults_use_the_whole_laminar_exemplar():
-    """On the onion crop (ordered shells around a disordered core) the paper's error settles in the core."""
+    """On the onion crop (ordered shells around a disordered core) the paper's error settles in the core.
+
+    Over seeds 1-3 (one seed's contrast varies by about 0.03: the paper's was 0.80-0.91 over seeds 1-6,
+    ours 0.94-0.97): ours covers more of the exemplar and keeps its contrast, the paper's loses some."""
     ex = load_image(ONION_CORE)
-    paper = synthesize("quilting", ex, size=(192, 192), seed=1, params={"error": "ssd", "usage_weight": 0})
-    ours = synthesize("quilting", ex, size=(192, 192), seed=1)
-    assert ours.stats["coverage"]["share"] > paper.stats["coverage"]["share"] + 0.1
-    assert ours.image.std() / ex.std() > 0.88 > paper.image.std() / ex.std()
+    cover: dict[str, list[float]] = {"paper": [], "ours": []}
+    contrast: dict[str, list[float]] = {"paper": [], "ours": []}
+    for seed in (1, 2, 3):
+        for name, params in (("paper", {"error": "ssd", "usage_weight": 0}), ("ours", {})):
+            r = synthesize("quilting", ex, size=(192, 192), seed=seed, params=params)
+            cover[name].append(r.stats["coverage"]["share"])
+            contrast[name].append(float(r.image.std() / ex.std()))
+    assert np.mean(cover["ours"]) > np.mean(cover["paper"]) + 0.1
+    assert min(contrast["ours"]) > 0.9 > np.mean(contrast["paper"])
+    assert np.mean(contrast["ours"]) > np.mean(contrast["paper"]) + 0.05
 
 
 @pytest.mark.parametrize("method", ["gaussian-patch", "feature-guided"])
