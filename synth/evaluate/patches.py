@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from texsynth.synth.colour import to_grey
 from texsynth.synth.errors import InvalidInput, InvalidParameter
+from texsynth.synth.threads import current_threads, thread_map
 
 __all__ = [
     "CANDIDATES",
@@ -142,12 +143,17 @@ def copy_map(
     windows = sliding_window_view(out, (patch, patch))[ys][:, xs].reshape(-1, patch * patch)
     k = min(CANDIDATES, len(ex_patches))
     dist = np.empty(len(windows))
-    for start in range(0, len(windows), 8192):
-        q = windows[start : start + 8192]
+
+    def nearest(start: int) -> None:  # one block of queries: writes only its own slots
+        q = windows[start : start + 2048]
         _, idx = tree.query((q - mean) @ basis, k=k)
         idx = idx.reshape(len(q), k)
         d = ((ex_patches[idx] - q[:, None, :]) ** 2).mean(axis=2)
         dist[start : start + len(q)] = np.sqrt(d.min(axis=1))
+
+    # Blocks on the job's threads (the tree query and NumPy release the GIL): the same bytes on any count.
+    blocks = range(0, len(windows), 2048)
+    thread_map(nearest, blocks, current_threads())
     grid = dist.reshape(len(ys), len(xs))
     half = patch // 2
     iy = np.clip(np.rint((np.arange(out.shape[0]) - half) / stride).astype(int), 0, len(ys) - 1)
