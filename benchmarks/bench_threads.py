@@ -38,6 +38,10 @@ CASES = {
     "kopf-64": ("solid-kopf", "64x64x64"),
     "kopf-128": ("solid-kopf", "128x128x128"),
     "chen-wang-64": ("solid-chen-wang", "64x64x64"),
+    # the patch methods (waves of disjoint patches on the job's threads, docs/patch.md)
+    "quilting-1024": ("quilting", "1024x1024"),
+    "gaussian-patch-512": ("gaussian-patch", "512x512"),
+    "feature-guided-512": ("feature-guided", "512x512"),
 }
 
 _CHILD = """
