@@ -180,35 +180,31 @@ def run_quilting(
     placed: dict[int, tuple[int, int, np.ndarray, float | None]] = {}
     base = int(np.random.default_rng(seed).integers(2**63))
 
-    def search(n: int, factors: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """The candidates of patch ``n`` (flat exemplar positions within tolerance) and its overlap SSD."""
-        i, j, y, x, kind = patches[n]
-        if kind == "none":
-            return np.arange(n_pos), None
-        region = out[layout.index(y, x)]
-        mask = layout.strips(i, j).mask(w)
-        ssd = searcher.ssd(region, mask)
-        err = searcher.normalised_ssd(region, mask, ssd) if params.error == "normalised" else ssd
-        if factors is not None:
-            err = err * factors
-        return candidates_within(err, params.tolerance), ssd
-
-    def stitch(n: int, choices: dict) -> tuple[int, int, np.ndarray, float | None]:
-        """Cut and paste the exemplar patch ``choices[n]`` chose at patch ``n``'s place (writes only its
-        own region)."""
-        choice, ssd = choices[n]
+    def place(n: int, factors: np.ndarray | None) -> tuple[int, int, np.ndarray, float | None]:
+        """Search, draw, cut and paste patch ``n`` (reads and writes only its own region; draws from its
+        own random stream): the exemplar position, the new pixels' mask and the overlap error."""
         i, j, y, x, kind = patches[n]
         at = layout.index(y, x)  # wraps around the torus when periodic
         region = out[at]
         strips = layout.strips(i, j)
-        py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
-        patch = searcher.patch(py, px)
+        draw = patch_rng(base, n)
         error = None
         if kind == "none":
+            choice = int(draw.integers(n_pos))
+            py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
+            patch = searcher.patch(py, px)
             new_mask = np.ones((w, w), dtype=bool)
         else:
             mask = strips.mask(w)
-            error = float(ssd.ravel()[choice]) / (mask.sum() * ex.shape[2])  # type: ignore[union-attr]
+            ssd = searcher.ssd(region, mask)
+            err = searcher.normalised_ssd(region, mask, ssd) if params.error == "normalised" else ssd
+            if factors is not None:
+                err = err * factors
+            pool = candidates_within(err, params.tolerance)
+            choice = int(pool[draw.integers(len(pool))])
+            py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
+            patch = searcher.patch(py, px)
+            error = float(ssd.ravel()[choice]) / (mask.sum() * ex.shape[2])
             if params.blending == "graph-cut":
                 new_mask = graph_cut_mask(region, patch, mask, layout.sealed(i, j))
             else:
@@ -220,21 +216,15 @@ def run_quilting(
         source[at] = src
         return py, px, new_mask, error
 
-    # The patches of a wave do not overlap: their searches, then their cuts, run on the job's threads
-    # (NumPy and SciPy's FFT release the GIL), the usage counts as they were when the wave began; between
-    # the two, each patch's choice is drawn from its own random stream (seed, patch).
+    # The patches of a wave do not overlap: each is searched, drawn from its own random stream (seed,
+    # patch), cut and pasted on the job's threads (NumPy, SciPy's FFT and the cut kernels release the
+    # GIL), with the usage counts as they were when the wave began; then the wave's patches are counted.
     with patch_workers() as run_wave:
         for wave in layout.waves():
             factors = usage.factors() if params.usage_weight > 0 else None
-            found = run_wave(partial(search, factors=factors), wave)
-            choices = {
-                n: (int(pool[patch_rng(base, n).integers(len(pool))]), ssd)
-                for n, (pool, ssd) in zip(wave, found, strict=True)
-            }
-            for n, done in zip(wave, run_wave(partial(stitch, choices=choices), wave), strict=True):
+            for n, done in zip(wave, run_wave(partial(place, factors=factors), wave), strict=True):
                 placed[n] = done
-            for n in wave:
-                usage.add(placed[n][0], placed[n][1], placed[n][2])
+                usage.add(done[0], done[1], done[2])
             report("quilting", len(placed) / len(layout))
     used = [(placed[n][0], placed[n][1]) for n in range(len(patches))]
     errors = [placed[n][3] for n in range(len(patches)) if placed[n][3] is not None]

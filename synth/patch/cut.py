@@ -33,7 +33,7 @@ __all__ = [
 ]
 
 
-@kernel
+@kernel(nogil=True)
 def _cost_to_go_kernel(errors: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """``C[i, j]``: least error of an 8-connected path from ``(i, j)`` down to the last row."""
     rows, cols = errors.shape
@@ -51,7 +51,7 @@ def _cost_to_go_kernel(errors: np.ndarray) -> np.ndarray:  # pragma: no cover - 
     return cost
 
 
-@kernel
+@kernel(nogil=True)
 def _min_cut_kernel(errors: np.ndarray, row0: int, col0: int) -> np.ndarray:  # pragma: no cover - numba
     """The least-error 8-connected path from ``(row0, col0)`` to the last row (``col0 < 0``: the best start
     in ``row0``): ``path[i]`` = its column in row ``i >= row0`` (``-1`` above ``row0``)."""

@@ -367,13 +367,10 @@ def synthesize_feature_guided(
         ok = np.flatnonzero(total <= best * (1.0 + s.tolerance) + 1e-12)
         return pool, ok, feature, colour, ssd
 
-    def stitch(
-        n: int, flats: dict[int, int]
-    ) -> tuple[int, int, int, np.ndarray, int | None, str | None, float]:
-        """Warp, cut and paste the exemplar patch ``flats[n]`` at patch ``n``'s place (writes only its own
+    def stitch(n: int, flat: int) -> tuple[int, int, int, np.ndarray, int | None, str | None, float]:
+        """Warp, cut and paste the exemplar patch ``flat`` at patch ``n``'s place (writes only its own
         region); returns its source, variant, cut mask and warp figures (correspondences, kind, shift)."""
         i, j, y, x, kind = patches[n]
-        flat = flats[n]
         at = layout.index(y, x)  # wraps around the torus when periodic
         region = out[at]
         region_mask, region_tan = out_mask[at], out_tan[at]
@@ -446,30 +443,40 @@ def synthesize_feature_guided(
         strips = layout.strips(i, j)
         if kind != "none" and strips not in falloffs:
             falloffs[strips] = None if s.warp_band is None else band_falloff(strips.mask(w), s.warp_band)
-    # The patches of a wave do not overlap: their searches, then their warps and cuts, run on the job's
-    # threads, the usage counts as they were when the wave began; between the two each patch's choice is
-    # drawn from its own random stream (patch_rng), and after them the figures are kept in raster order.
+
+    def place(n: int, factors: list[np.ndarray] | None) -> tuple[tuple | None, tuple]:
+        """Search, draw (patch ``n``'s own random stream), warp, cut and paste patch ``n`` (reads and writes
+        only its own region): the choice's figures (reranked, feature cost, overlap error) and
+        :func:`stitch`'s."""
+        got = search(n, factors)
+        draw = patch_rng(base, n)
+        if got is None:
+            return None, stitch(n, int(draw.integers(int(starts[-1]))))
+        pool, ok, feature, colour, ssd = got
+        pick = int(ok[draw.integers(len(ok))])
+        flat = int(pool[pick])
+        known = layout.strips(*patches[n][:2]).mask(w).sum()
+        figures = (
+            pick != int(np.argmin(colour)),
+            float(feature[pick]),
+            float(ssd[flat]) / (known * channels),
+        )
+        return figures, stitch(n, flat)
+
+    # The patches of a wave do not overlap: each is searched, drawn from its own random stream
+    # (patch_rng), warped, cut and pasted on the job's threads, with the usage counts as they were when
+    # the wave began; then the wave's patches are counted and their figures kept, in raster order.
     base = int(rng.integers(2**63))
     by_patch: dict[int, list[int]] = {}
     with patch_workers() as run_wave:
         for wave in layout.waves():
             factors = [u.factors() for u in usages] if s.usage_weight > 0 else None
-            found = run_wave(partial(search, factors=factors), wave)
-            flats: dict[int, int] = {}
-            for n, got in zip(wave, found, strict=True):
-                draw = patch_rng(base, n)
-                if got is None:
-                    flats[n] = int(draw.integers(int(starts[-1])))
-                    continue
-                pool, ok, feature, colour, ssd = got
-                pick = int(ok[draw.integers(len(ok))])
-                flats[n] = int(pool[pick])
-                reranked += int(pick != int(np.argmin(colour)))
-                feature_costs.append(float(feature[pick]))
-                known = layout.strips(*patches[n][:2]).mask(w).sum()
-                colour_costs.append(float(ssd[flats[n]]) / (known * channels))
-            stitched = run_wave(partial(stitch, flats=flats), wave)
-            for n, (py, px, v, new, count, warp, shift) in zip(wave, stitched, strict=True):
+            placed = run_wave(partial(place, factors=factors), wave)
+            for n, (figures, (py, px, v, new, count, warp, shift)) in zip(wave, placed, strict=True):
+                if figures is not None:
+                    reranked += int(figures[0])
+                    feature_costs.append(figures[1])
+                    colour_costs.append(figures[2])
                 usages[v].add(py, px, new)
                 by_patch[n] = [py, px, v]
                 if count is not None:
