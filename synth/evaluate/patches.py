@@ -140,7 +140,9 @@ def copy_map(
     valid = (out.shape[0] - patch + 1, out.shape[1] - patch + 1)
     stride = max(1, int(np.ceil(np.sqrt(valid[0] * valid[1] / max_queries))))
     ys, xs = np.arange(0, valid[0], stride), np.arange(0, valid[1], stride)
-    windows = sliding_window_view(out, (patch, patch))[ys][:, xs].reshape(-1, patch * patch)
+    # a strided view (the same windows as [ys][:, xs], without the copy of every row's windows that
+    # the row indexing made first: 51 MB at 1024^2)
+    windows = sliding_window_view(out, (patch, patch))[::stride, ::stride].reshape(-1, patch * patch)
     k = min(CANDIDATES, len(ex_patches))
     dist = np.empty(len(windows))
 
