@@ -3,7 +3,8 @@
 Run: ``python -m benchmarks.bench_quality`` (writes docs/quality.md and docs/img/quality-*.png; the sections
 other benchmarks own there, between ``<!-- begin:name -->`` and ``<!-- end:name -->``, are kept).
 ``--seeds 1`` for a quick look. ``--methods quilting,gaussian-patch`` re-measures only those methods and
-replaces only their rows in docs/quality.md (the pictures and the other rows stay as they are).
+replaces only their rows in docs/quality.md and their panels (the first seed) in the pictures; the other
+rows and panels stay as they are.
 
 Every 2D method with its defaults, 128 x 128 exemplars -> 256 x 256, seeds 1-3, on the public crops
 (``skimage.data`` grass, gravel, brick: ``[:128, :128]``, grey), HRTEM soot (``hrtem-soot-128.png``), a
@@ -149,6 +150,18 @@ def figure(exemplar: np.ndarray, outputs: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(tiles[:-1], axis=1)
 
 
+def replace_panels(path: Path, panels: dict[str, np.ndarray]) -> None:
+    """Replace the panels of some methods (name -> output) in one of :func:`figure`'s pictures."""
+    if not path.exists() or not panels:
+        return
+    picture = load_image(path)
+    picture = picture if picture.ndim == 2 else picture.mean(axis=2).astype(np.float32)
+    for method, image in panels.items():
+        x = (1 + METHODS.index(method)) * (SIZE[1] + 4)  # the exemplar's tile first, then METHODS' order
+        picture[: SIZE[0], x : x + SIZE[1]] = image
+    save_image(path, picture)
+
+
 def replace_rows(methods: tuple[str, ...], n_seeds: int) -> int:
     """Re-measure ``methods`` on every exemplar and replace their rows in docs/quality.md's tables."""
     unknown = [m for m in methods if m not in METHODS]
@@ -165,6 +178,7 @@ def replace_rows(methods: tuple[str, ...], n_seeds: int) -> int:
             print(f"{name}: no section in {doc.name}, skipped", flush=True)
             continue
         section = text[start:end]
+        panels: dict[str, np.ndarray] = {}
         for method in methods:
             runs, times = [], []
             for seed in seeds:
@@ -172,16 +186,19 @@ def replace_rows(methods: tuple[str, ...], n_seeds: int) -> int:
                 result = synthesize(method, exemplar, size=SIZE, seed=seed)
                 times.append(time.perf_counter() - t0)
                 runs.append(measures(exemplar, result.image, result, polarity=polarity))
+                if seed == seeds[0]:
+                    panels[method] = result.image
             cells = " | ".join(cell(key, runs) for key, _ in MEASURES)
             row = f"| `{method}` | {statistics.median(times):.1f} | {cells} |"
             section = re.sub(rf"^\| `{re.escape(method)}` \|.*$", row, section, count=1, flags=re.M)
             print(f"{name}: {row}", flush=True)
         text = text[:start] + section + text[end:]
+        replace_panels(DOCS / "img" / f"quality-{name}.png", panels)
     note = (
         f"<!-- rows-note -->_Rows of {', '.join(f'`{m}`' for m in methods)} re-measured alone "
         f"(`--methods`, {time.strftime('%Y-%m-%d')}, 1-minute load {os.getloadavg()[0]:.1f} after them on "
-        "the shared 2-core machine): their time column is wall time under that load; the pictures still "
-        "show the earlier outputs._\n\n"
+        "the shared 2-core machine): their time column is wall time under that load; their panels in the "
+        f"pictures replaced (seed {seeds[0]})._\n\n"
     )
     text = re.sub(r"<!-- rows-note -->.*?\n\n", "", text, flags=re.S)
     first = text.find("\n## ") + 1
