@@ -99,6 +99,17 @@ _POOLS: dict[int, ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
 
 
+def _forget_pools() -> None:
+    """In a forked child: the parent's helper threads do not exist there, so their pools are dropped."""
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
+
+
 def _helpers(count: int) -> ThreadPoolExecutor:
     """This process's pool of ``count`` helper threads, started at first use and kept (one per count)."""
     with _POOLS_LOCK:

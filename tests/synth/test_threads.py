@@ -254,3 +254,15 @@ def test_thread_map_keeps_the_order_and_raises_the_first_error() -> None:
 
     with pytest.raises(ValueError, match="seven"):
         thread_map(fail, list(range(20)), 2)
+
+
+def test_thread_map_works_in_a_forked_child_after_the_parent_used_it() -> None:
+    """The parent's helper threads do not exist in a fork: the child starts its own (no hang)."""
+    import multiprocessing
+
+    from texsynth.synth.threads import thread_map
+
+    assert thread_map(abs, [-1, -2, -3], 2) == [1, 2, 3]  # the parent's helpers now exist
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(1) as pool:
+        assert pool.apply_async(thread_map, (abs, [-4, -5, -6], 2)).get(timeout=60) == [4, 5, 6]
