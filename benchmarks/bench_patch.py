@@ -44,9 +44,10 @@ SIZE = (256, 256)
 W, N = 30, 20
 SEED = 0
 #: The paper's estimate (the conditional mode); the method's default is estimate='neighbour' (a departure).
+#: GAUSS pastes whole patches (blending='none', the paper's; the default is 'boundary-cut' since issue 24).
 #: The papers' overlap search (the defaults since issue 24 normalise the error, penalise over-used regions).
 LITERAL: dict[str, Any] = {"error": "ssd", "usage_weight": 0.0}
-GAUSS = {"patch_size": W, "neighbours": N, "estimate": "mean", **LITERAL}
+GAUSS = {"patch_size": W, "neighbours": N, "estimate": "mean", "blending": "none", **LITERAL}
 QUILT = {"patch_size": W, **LITERAL}
 
 
@@ -551,9 +552,10 @@ def laminar(others: bool = True) -> str:
     return "\n".join(md)
 
 
-def _laminar_block(text: str) -> str:
-    found = re.search(r"<!-- begin:laminar -->.*?<!-- end:laminar -->", text, re.S)
-    return found.group(0) if found else ""
+def _kept_blocks(text: str) -> str:
+    """The doc's ``<!-- begin:NAME -->`` ... ``<!-- end:NAME -->`` blocks (laminar, threads), which a full
+    run keeps."""
+    return "\n\n".join(m.group(0) for m in re.finditer(r"<!-- begin:(.*?) -->.*?<!-- end:\1 -->", text, re.S))
 
 
 if __name__ == "__main__":
@@ -566,7 +568,7 @@ if __name__ == "__main__":
             "laminar", laminar(others=not args.laminar_only_crops) + "\n" + OBSERVATIONS_LAMINAR, DOC
         )
     else:
-        kept = _laminar_block(DOC.read_text()) if DOC.exists() else ""
+        kept = _kept_blocks(DOC.read_text()) if DOC.exists() else ""
         main()
         if kept:
             DOC.write_text(DOC.read_text().rstrip() + "\n\n" + kept + "\n")
