@@ -46,6 +46,8 @@ CASES = {
 
 _CHILD = """
 import json, os, sys, time
+from texsynth.synth.threads import single_threaded_blas
+single_threaded_blas()  # before NumPy loads, as the texsynth command does (else OpenBLAS spins a thread)
 import texsynth.synth.pipeline as pipeline
 from texsynth.synth.cli import main
 
