@@ -108,8 +108,8 @@ def _hsv_uint8(hue: np.ndarray, saturation: np.ndarray, value: np.ndarray) -> np
 
 
 #: Pixels coloured at once: the renderings are per pixel, so they are made in blocks of rows, and
-#: ``hsv2rgb``'s float64 temporaries (about 300 bytes per pixel) stay at about 80 MB whatever the image.
-_BLOCK_PIXELS = 1 << 18
+#: ``hsv2rgb``'s float64 temporaries (about 300 bytes per pixel) stay at about 20 MB whatever the image.
+_BLOCK_PIXELS = 1 << 16
 
 
 def _row_blocks(shape: tuple[int, ...]) -> Iterator[slice]:
