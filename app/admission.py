@@ -62,7 +62,7 @@ GENERIC_BYTES_PER_ELEMENT = 48
 #: (tests/service/test_admission.py pins the measurements).
 IMAGE_MEMORY: dict[str, tuple[int, int]] = {
     "arbitrary-shape": (416 * 2**20, 150),
-    "feature-guided": (336 * 2**20, 180),
+    "feature-guided": (336 * 2**20, 190),
     "gaussian-patch": (304 * 2**20, 150),
     "quilting": (304 * 2**20, 150),
     "random-phase": (272 * 2**20, 150),
