@@ -5,9 +5,10 @@ images were validated (the engine's own checks: finite numbers, sizes, formats):
 
 - **the job's working memory**, estimated from the method, its parameters, the output size and the
   decoded inputs, against ``TEXSYNTH_MAX_JOB_MEMORY_BYTES`` (422, naming the parameter that drives
-  it). The estimate is coarse and generous on purpose: a generic term (float32 working copies of
-  inputs and output: pyramids, features, distances, tensor maps), for a volume the measured peak per
-  voxel of a whole solid run (:data:`VOLUME_BYTES_PER_VOXEL`), plus the terms that are known to
+  it). The estimate is generous on purpose: for an image the measured peak of a whole run of the
+  method, fixed and per output pixel (:data:`IMAGE_MEMORY`), for a volume the measured peak per
+  voxel of a whole solid run (:data:`VOLUME_BYTES_PER_VOXEL`), a generic term per input pixel
+  (:data:`GENERIC_BYTES_PER_ELEMENT`), plus the terms that are known to
   explode: a rotated dictionary's copies (``angular_step``) and its k-coherence sets. The engine
   still checks the k-coherence sets itself in the worker (``texsynth.synth.methods.arbitrary_shape``); here
   the same bound is applied before queueing, so the person gets the 422 at once;
@@ -48,9 +49,31 @@ __all__ = ["Admission", "QuotaExceeded", "estimate_memory", "estimate_seconds"]
 #: the time a small job takes; the refusal stores nothing, so trying again later is always safe.
 QUEUE_RETRY_AFTER = 10
 
-#: Bytes of working memory per input pixel or output element, the generic term (float32 arrays:
-#: the image and its pyramid, feature and distance buffers, tensor fields and the rendered maps).
+#: Bytes of working memory per input pixel, the generic term (float32 arrays: the image and its pyramid,
+#: feature and distance buffers, tensor fields).
 GENERIC_BYTES_PER_ELEMENT = 48
+#: A 2-D job's peak memory by method, ``(fixed bytes, bytes per output pixel)``: the whole
+#: ``texsynth synthesize`` process' ``VmHWM`` (interpreter and compiled kernels, synthesis, pictures,
+#: evaluation and plots) of ``python -m benchmarks.bench_memory --method M --size SxS --threads 2`` runs
+#: from the 128^2 laminar HRTEM exemplar at 512^2 and 1024^2 (and 4096^2 for tensor-constrained): the
+#: per-pixel term is 1.1 times the slope between the two largest sizes, rounded up to 10; the fixed term the
+#: rest of the largest peak, rounded up to 16 MiB (docs/benchmarks.md, "Big outputs: 2-D images"). The
+#: input pixels and a rotated dictionary are counted on top. Never below a measured peak
+#: (tests/service/test_admission.py pins the measurements).
+IMAGE_MEMORY: dict[str, tuple[int, int]] = {
+    "arbitrary-shape": (416 * 2**20, 150),
+    "feature-guided": (336 * 2**20, 190),
+    "gaussian-patch": (304 * 2**20, 150),
+    "quilting": (304 * 2**20, 150),
+    "random-phase": (272 * 2**20, 150),
+    "tensor-constrained": (304 * 2**20, 220),
+    "wei-levoy": (304 * 2**20, 150),
+}
+#: A 2-D method missing from :data:`IMAGE_MEMORY` counts as the largest of each term.
+IMAGE_MEMORY_DEFAULT: tuple[int, int] = (
+    max(fixed for fixed, _ in IMAGE_MEMORY.values()),
+    max(per_pixel for _, per_pixel in IMAGE_MEMORY.values()),
+)
 #: Bytes of a volume job's peak memory per output voxel: a whole ``solid-kopf`` 256^3 run, synthesis and
 #: artifacts (``python -m benchmarks.bench_memory --size 256x256x256``; docs/benchmarks.md, "Big
 #: outputs"), rounded up; the other solid methods are taken to be alike.
@@ -81,16 +104,25 @@ class QuotaExceeded(Exception):
 
 
 def estimate_memory(
-    params: Mapping[str, Any], size: Mapping[str, int], shapes: Mapping[str, Sequence[int]]
+    params: Mapping[str, Any],
+    size: Mapping[str, int],
+    shapes: Mapping[str, Sequence[int]],
+    method: str | None = None,
 ) -> tuple[int, str, str]:
-    """``(bytes, the parameter that drives them, why)``: a generous estimate of a job's working memory.
+    """``(bytes, the parameter that drives them, why)``: a generous estimate of a job's peak memory.
 
-    ``shapes`` are the decoded inputs' array shapes by role, ``size`` the output's sides.
+    ``shapes`` are the decoded inputs' array shapes by role, ``size`` the output's sides, ``method`` the
+    method's name: a 2-D output counts the method's measured :data:`IMAGE_MEMORY`.
     """
     out = math.prod(size.values())
     inputs = sum(math.prod(s[:2]) for s in shapes.values())
-    total = GENERIC_BYTES_PER_ELEMENT * (out + inputs)
-    driver, why = ("width", f"the output of {out} elements and {inputs} input pixels")
+    fixed, per_pixel = IMAGE_MEMORY.get(method or "", IMAGE_MEMORY_DEFAULT)
+    total = fixed + per_pixel * out + GENERIC_BYTES_PER_ELEMENT * inputs
+    driver, why = (
+        "width",
+        f"{per_pixel} bytes per pixel of the {size.get('width')}x{size.get('height')} output and "
+        f"{_size(fixed)} for the process, as measured, and {GENERIC_BYTES_PER_ELEMENT} per input pixel",
+    )
     if "depth" in size:
         total = VOLUME_BYTES_PER_VOXEL * out + GENERIC_BYTES_PER_ELEMENT * inputs
         sides = "x".join(str(size[k]) for k in ("width", "height", "depth"))
@@ -112,7 +144,7 @@ def estimate_memory(
             ks = min(int(params.get("neighbourhood_size", 9)), 9)
             dictionary += rotations * h * w * ks * ks * (channels + 3) * 12  # the engine's k-set bound
         total += dictionary
-        if dictionary > out * GENERIC_BYTES_PER_ELEMENT:
+        if dictionary > per_pixel * out:
             driver, why = (
                 "angular_step",
                 f"{rotations} rotated copies of the {w}x{h} exemplar (angular_step={step:g})",
@@ -148,7 +180,7 @@ class Admission:
         ``seconds_per_element``: the method's measured rate (``MethodSpec.seconds_per_element``).
         """
         limit = self.settings.max_job_memory_bytes
-        need, driver, why = estimate_memory(params, size, shapes)
+        need, driver, why = estimate_memory(params, size, shapes, method)
         elements = math.prod(size.values())
         threads = max(1, self.settings.threads or 1)
         seconds = estimate_seconds(seconds_per_element, elements, threads)

@@ -1,7 +1,8 @@
 """Peak memory of a whole ``texsynth synthesize`` process, and in which stage it is reached (issue 25).
 
 Run ``python -m benchmarks.bench_memory --method solid-kopf --size 256x256x256`` (``--exemplar``,
-``--threads``, ``--no-plots``). A fresh child process runs
+``--threads``, ``--no-plots``, ``--constraint``: concentric rings of the output's size by default for a
+method that needs one). A fresh child process runs
 :func:`texsynth.synth.pipeline.synthesize_to_folder` as the command does, with a progress callback that
 records the stage (the synthesis' own stages, then the writer's: ``output.tiff``, the pictures, the
 evaluation, the plots) and a thread that samples the resident set size (``VmRSS`` in ``/proc/self/status``)
@@ -61,6 +62,12 @@ threading.Thread(target=sampler, daemon=True).start()
 from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
 enter("loading")
 images = load_inputs({"exemplar": args["exemplar"]})
+size = tuple(int(v) for v in reversed(args["size"].split("x")))
+if args["constraint"] == "rings":
+    from texsynth.synth.io.patterns import concentric_rings
+    images["constraint"] = concentric_rings(size)
+elif args["constraint"]:
+    images["constraint"] = load_inputs({"constraint": args["constraint"]})["constraint"]
 
 def progress(stage, fraction, **_):
     # the synthesis' stages are many (levels, passes): one bucket; the writer's are named
@@ -70,7 +77,6 @@ def progress(stage, fraction, **_):
         enter(name)
 
 enter("synthesis")
-size = tuple(int(v) for v in reversed(args["size"].split("x")))
 synthesize_to_folder(args["method"], images, args["out"], size=size, seed=1, progress=progress,
                      plots=args["plots"], threads=args["threads"])
 enter("end")
@@ -82,11 +88,28 @@ print(json.dumps({"stages": [{"stage": s, "peak_rss_mb": round(peaks[s] / 2**20)
 """
 
 
-def run(method: str, size: str, exemplar: Path, threads: int | None, plots: bool, out: Path) -> dict:
-    """One child process; its stages, their peak RSS and seconds, its ``VmHWM`` and CPU seconds."""
+def run(
+    method: str,
+    size: str,
+    exemplar: Path,
+    threads: int | None,
+    plots: bool,
+    out: Path,
+    constraint: str | None = None,
+) -> dict:
+    """One child process; its stages, their peak RSS and seconds, its ``VmHWM`` and CPU seconds.
+
+    ``constraint``: a constraint image's path, or ``'rings'`` for concentric rings of the output's size
+    (:func:`texsynth.synth.io.patterns.concentric_rings`); by default ``'rings'`` for a method that needs one.
+    """
+    from texsynth.synth.api import available_methods
+
+    if constraint is None and available_methods()[method].constraint == "required":
+        constraint = "rings"
     args = {
         "method": method,
         "size": size,
+        "constraint": constraint,
         "exemplar": str(exemplar),
         "threads": threads,
         "plots": plots,
@@ -108,6 +131,7 @@ def run(method: str, size: str, exemplar: Path, threads: int | None, plots: bool
         wall_s=round(time.perf_counter() - start, 1),
         cpu_s=round(usage.ru_utime + usage.ru_stime, 1),
         maxrss_mb=round(usage.ru_maxrss / 1024),
+        constraint=constraint,
         load=os.getloadavg()[0],
     )
     return report
@@ -120,9 +144,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--exemplar", type=Path, default=DEFAULT_EXEMPLAR)
     parser.add_argument("--threads", type=int, default=None)
     parser.add_argument("--no-plots", action="store_true")
+    parser.add_argument(
+        "--constraint",
+        default=None,
+        help="constraint image, or 'rings' (default when the method needs one)",
+    )
     parser.add_argument("--out", type=Path, default=Path("/tmp") / "texsynth-bench-memory")
     args = parser.parse_args(argv)
-    report = run(args.method, args.size, args.exemplar, args.threads, not args.no_plots, args.out)
+    report = run(
+        args.method, args.size, args.exemplar, args.threads, not args.no_plots, args.out, args.constraint
+    )
     print(json.dumps(report, indent=2))
     return 0
 

@@ -24,12 +24,14 @@ exemplars). Every file is written atomically.
 
 from __future__ import annotations
 
+import io
 import platform
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image
 
 from texsynth.synth import __version__
 from texsynth.synth.analysis.stationarity import exemplar_diagnostics
@@ -70,8 +72,12 @@ def versions() -> dict[str, str]:
 
 
 def _png(path: Path, rendering: np.ndarray) -> None:
-    arr = rendering.astype(np.float32) / 255.0 if rendering.dtype == np.uint8 else rendering
-    atomic_write_bytes(path, image_to_png_bytes(arr))
+    if rendering.dtype == np.uint8:  # already quantised: encoded as it is (the bytes a float round trip gave)
+        buf = io.BytesIO()
+        Image.fromarray(rendering).save(buf, format="PNG")
+        atomic_write_bytes(path, buf.getvalue())
+        return
+    atomic_write_bytes(path, image_to_png_bytes(rendering))
 
 
 def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list[str]:

@@ -24,6 +24,7 @@ white when it is narrower than the legend. All functions are vectorised and retu
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Literal
 
 import numpy as np
@@ -106,8 +107,20 @@ def _hsv_uint8(hue: np.ndarray, saturation: np.ndarray, value: np.ndarray) -> np
     return _to_uint8(hsv2rgb(hsv))
 
 
-def _field(name: str, array: np.ndarray, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """Validate a 2D float field (and its shape against ``shape``); non-finite values become NaN."""
+#: Pixels coloured at once: the renderings are per pixel, so they are made in blocks of rows, and
+#: ``hsv2rgb``'s float64 temporaries (about 300 bytes per pixel) stay at about 20 MB whatever the image.
+_BLOCK_PIXELS = 1 << 16
+
+
+def _row_blocks(shape: tuple[int, ...]) -> Iterator[slice]:
+    """Slices of consecutive rows of about :data:`_BLOCK_PIXELS` pixels that cover ``shape[0]`` rows."""
+    rows = max(1, _BLOCK_PIXELS // max(1, shape[1]))
+    for start in range(0, shape[0], rows):
+        yield slice(start, min(start + rows, shape[0]))
+
+
+def _checked(name: str, array: np.ndarray, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """Validate a 2D real field (and its shape against ``shape``); returned as it is, not copied."""
     arr = np.asarray(array)
     if arr.ndim != 2 or arr.size == 0:
         raise InvalidParameter(name, f"array of shape {arr.shape}", "must be a non-empty 2D array (H, W)")
@@ -115,13 +128,22 @@ def _field(name: str, array: np.ndarray, shape: tuple[int, ...] | None = None) -
         raise InvalidParameter(name, f"array of shape {arr.shape}", f"must have the shape {shape}")
     if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise InvalidParameter(name, f"array of dtype {arr.dtype}", "must be a real-valued array")
-    return arr.astype(np.float64)
+    return arr
+
+
+def _field(name: str, array: np.ndarray, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """Validate a 2D float field (and its shape against ``shape``); non-finite values become NaN."""
+    return _checked(name, array, shape).astype(np.float64)
+
+
+def _clipped(arr: np.ndarray) -> np.ndarray:
+    """Values in [0, 1] (clipped; NaN -> 0), float64."""
+    return np.clip(np.nan_to_num(arr.astype(np.float64), nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
 
 
 def _unit(name: str, array: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """A field of values in [0, 1] (clipped; NaN -> 0)."""
-    arr = _field(name, array, shape)
-    return np.clip(np.nan_to_num(arr, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    return _clipped(_checked(name, array, shape))
 
 
 # --- images -----------------------------------------------------------------------------------
@@ -153,11 +175,15 @@ def orientation_image(
     -------
     ndarray, shape (H, W, 3) or (H + legend, max(W, legend width), 3), uint8
     """
-    t = _field("theta", theta)
-    finite = np.isfinite(t)
-    hue = orientation_hue(np.where(finite, t, 0.0))
-    sat = np.ones_like(hue) if coherence is None else _unit("coherence", coherence, t.shape)
-    rgb = _hsv_uint8(hue, sat, finite.astype(np.float64))
+    theta_all = _checked("theta", theta)
+    coherence_all = None if coherence is None else _checked("coherence", coherence, theta_all.shape)
+    rgb = np.empty((*theta_all.shape, 3), dtype=np.uint8)
+    for rows in _row_blocks(theta_all.shape):  # per pixel: blocks of rows give the same bytes
+        t = theta_all[rows].astype(np.float64)
+        finite = np.isfinite(t)
+        hue = orientation_hue(np.where(finite, t, 0.0))
+        sat = np.ones_like(hue) if coherence_all is None else _clipped(coherence_all[rows])
+        rgb[rows] = _hsv_uint8(hue, sat, finite.astype(np.float64))
     if not legend:
         return rgb
     return with_legend(rgb, "orientation" if coherence is None else "composite", title=title)
@@ -185,8 +211,10 @@ def coherence_image(coherence: np.ndarray, *, legend: bool = False, title: str |
     >>> coherence_image(np.array([[0.0, 0.5, 1.0]])).tolist()
     [[0, 128, 255]]
     """
-    c = _field("coherence", coherence)
-    grey = _to_uint8(_unit("coherence", c, c.shape))
+    c = _checked("coherence", coherence)
+    grey = np.empty(c.shape, dtype=np.uint8)
+    for rows in _row_blocks(c.shape):
+        grey[rows] = _to_uint8(_clipped(c[rows]))
     return with_legend(grey, "coherence", title=title) if legend else grey
 
 

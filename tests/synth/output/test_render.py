@@ -192,3 +192,40 @@ def test_rendering_a_grating_field() -> None:
     centre = out[24:40, 24:40].reshape(-1, 3).astype(int)
     assert np.abs(centre - np.array(CYAN)).max() <= 3
     assert np.array_equal(out, composite_image(structure_direction(S), coherence(S), np.ones_like(image)))
+
+
+def test_renderings_in_blocks_of_rows_equal_the_whole_field_at_once():
+    """Fields taller than one block (issue 25): the same bytes as the per-pixel formula on the whole field."""
+    from skimage.color import hsv2rgb
+
+    from texsynth.synth.output import render
+
+    rng = np.random.default_rng(3)
+    shape = (3 * (render._BLOCK_PIXELS // 100) + 7, 100)  # three blocks of rows and a bit
+    theta = (rng.random(shape) * 4 - 2).astype(np.float32)
+    coh = (rng.random(shape) * 1.4 - 0.2).astype(np.float32)
+    theta[0, 0], theta[-1, -1], coh[5, 5] = np.nan, np.inf, np.nan
+    assert len(list(render._row_blocks(shape))) >= 3
+    t = theta.astype(np.float64)
+    finite = np.isfinite(t)
+    sat = np.clip(np.nan_to_num(coh.astype(np.float64), nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    hsv = np.stack([np.mod((np.where(finite, t, 0.0) + np.pi / 2) / np.pi, 1.0), sat, finite], axis=-1)
+    whole = np.round(np.clip(hsv2rgb(hsv), 0.0, 1.0) * 255.0).astype(np.uint8)
+    assert np.array_equal(render.orientation_image(theta, coherence=coh), whole)
+    assert np.array_equal(render.coherence_image(coh), np.round(sat * 255.0).astype(np.uint8))
+
+
+def test_an_orientation_picture_needs_no_float64_copies_of_its_field():
+    """Traced peak of a 1024^2 orientation picture with coherence: about 4.5 MB of temporaries per
+    block and the 3 MB picture (main: 360 bytes per pixel, 380 MB)."""
+    import tracemalloc
+
+    rng = np.random.default_rng(0)
+    theta, coh = rng.random((1024, 1024), dtype=np.float32), rng.random((1024, 1024), dtype=np.float32)
+    tracemalloc.start()
+    try:
+        orientation_image(theta, coherence=coh)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 40 * 2**20, peak / 2**20
