@@ -403,7 +403,7 @@ class _KopfLoop:
             field.weight[p, flat[a:b]] = (rms ** (params.r - 2.0)).astype(np.float32)
             sum_d2 += float(np.sum(d2 / queries.shape[1]))
             count += b - a
-        self.src[p] = dense_sources(field.match[p], shape, plane, s, phase, self.images[p].shape)
+        dense_sources(field.match[p], shape, plane, s, phase, self.images[p].shape, out=self.src[p])
         if POSITION_GAIN > 0:
             field.weight[p, flat] *= _position_factors(field.match[p, flat], self.images[p].shape)
         if params.orientation_gain > 0:
@@ -503,6 +503,7 @@ def run_solid_kopf(
             plan.shapes[0], params.structure_length * period, run.rng, periodic=params.periodic
         )
     loop = _KopfLoop(params, plan, run, iterations, period, phi)
+    del phi  # the start read its coarsest level; the full-size float64 phase is not kept through the levels
     run_levels(plan, [iterations] * plan.levels, loop)
     return loop.result(seed)
 

@@ -49,6 +49,7 @@ from texsynth.synth.kernels.solid_search import (
     nearest_exact,
     rerank,
 )
+from texsynth.synth.kernels.solid_sources import dense_sources, upsample_sources
 from texsynth.synth.pixel.synthesis import level_neighbourhood_size
 from texsynth.synth.threads import current_threads
 
@@ -338,60 +339,6 @@ def slice_geometry(shape: tuple[int, int, int], plane: str, periodic: bool) -> S
         axes=np.asarray(PLANE_AXES[plane], dtype=np.int64),
         periodic=periodic,
     )
-
-
-def dense_sources(
-    match: np.ndarray,
-    shape: tuple[int, int, int],
-    plane: str,
-    stride: int,
-    phase: tuple[int, int],
-    ex_shape: tuple[int, int],
-) -> np.ndarray:
-    """Every voxel's exemplar position ``(N,)`` int64 in ``plane``, from matches on a sparse grid.
-
-    ``match`` (N,) holds the matched centre position at the grid's centres (:func:`plane_centres` with
-    ``stride``, ``phase``). A voxel takes the position its grid centre (the one at or before it along
-    each plane axis, else after it) matched, shifted by its offset from that centre and clamped
-    inside the exemplar: the coherent proposal of Tong et al. for the next search.
-    """
-    a, b = PLANE_AXES[plane]
-    h, w = ex_shape
-    grids = np.meshgrid(*[np.arange(s, dtype=np.int64) for s in shape], indexing="ij")
-    cen = [g.copy() for g in grids]
-    for axis, ph in ((a, phase[0]), (b, phase[1])):
-        snapped = grids[axis] - (grids[axis] - ph % stride) % stride
-        snapped = np.where(snapped < 0, snapped + stride, snapped)
-        cen[axis] = np.minimum(snapped, shape[axis] - 1 - (shape[axis] - 1 - ph % stride) % stride)
-    flat = np.ravel_multi_index(tuple(cen), shape).ravel()
-    m = match[flat]
-    row = m // w + (grids[a] - cen[a]).ravel()
-    col = m % w + (grids[b] - cen[b]).ravel()
-    out = np.clip(row, 0, h - 1) * w + np.clip(col, 0, w - 1)
-    return np.ascontiguousarray(np.where(m >= 0, out, 0), dtype=np.int64)
-
-
-def upsample_sources(
-    src: np.ndarray,
-    coarse_shape: tuple[int, int, int],
-    shape: tuple[int, int, int],
-    plane: str,
-    ex_shape: tuple[int, int],
-    coarse_ex_shape: tuple[int, int],
-) -> np.ndarray:
-    """A plane's per-voxel exemplar positions at the next finer level (Wei-Levoy/Lefebvre-Hoppe
-    coordinate upsampling): voxel ``v`` takes ``2 * src(v // 2) + (v mod 2)`` along the plane's axes."""
-    a, b = PLANE_AXES[plane]
-    h, w = ex_shape
-    grids = np.meshgrid(*[np.arange(s, dtype=np.int64) for s in shape], indexing="ij")
-    parent = np.ravel_multi_index(
-        tuple(np.minimum(g // 2, cs - 1) for g, cs in zip(grids, coarse_shape, strict=True)), coarse_shape
-    )
-    s = src[parent.ravel()]
-    cw = coarse_ex_shape[1]
-    row = 2 * (s // cw) + (grids[a] % 2).ravel()
-    col = 2 * (s % cw) + (grids[b] % 2).ravel()
-    return np.ascontiguousarray(np.clip(row, 0, h - 1) * w + np.clip(col, 0, w - 1), dtype=np.int64)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -684,20 +631,19 @@ def initial_sources(
 
 def upsample_plane_sources(src: np.ndarray, plan: SolidPlan, level: int) -> np.ndarray:
     """The three planes' per-voxel exemplar positions ``(3, N)`` of level ``level + 1`` at ``level``
-    (:func:`upsample_sources`)."""
-    return np.stack(
-        [
-            upsample_sources(
-                src[p],
-                plan.shapes[level + 1],
-                plan.shapes[level],
-                plane,
-                plan.exemplars[p][level].shape,
-                plan.exemplars[p][level + 1].shape,
-            )
-            for p, plane in enumerate(PLANES)
-        ]
-    )
+    (:func:`upsample_sources`, written plane by plane into one array)."""
+    out = np.empty((3, int(np.prod(plan.shapes[level]))), dtype=np.int64)
+    for p, plane in enumerate(PLANES):
+        upsample_sources(
+            src[p],
+            plan.shapes[level + 1],
+            plan.shapes[level],
+            plane,
+            plan.exemplars[p][level].shape,
+            plan.exemplars[p][level + 1].shape,
+            out=out[p],
+        )
+    return out
 
 
 def search_plane(
