@@ -122,7 +122,9 @@ def _gather_slices_kernel(vol, centres, offsets, periodic, out):
             out[m, k] = vol[zz, yy, xx]
 
 
-def gather_slices(vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, periodic: bool) -> np.ndarray:
+def gather_slices(
+    vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, periodic: bool, out: np.ndarray | None = None
+) -> np.ndarray:
     """Neighbourhood vectors ``(M, K)`` float32 of the voxels ``centres`` in one plane.
 
     Parameters
@@ -135,8 +137,14 @@ def gather_slices(vol: np.ndarray, centres: np.ndarray, offsets: np.ndarray, per
         (:func:`texsynth.synth.pixel.solid.plane_offsets`).
     periodic : bool
         Wrap around the volume's faces (toroidal volume) or mirror about them.
+    out : ndarray (M, K) float32, optional
+        C-contiguous array to write into (e.g. a view of a buffer reused batch after batch), else a new one.
     """
-    out = np.empty((centres.shape[0], offsets.shape[0]), dtype=np.float32)
+    shape = (centres.shape[0], offsets.shape[0])
+    if out is None:
+        out = np.empty(shape, dtype=np.float32)
+    elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous float32 array of shape {shape}")
     with _threads_for(centres.shape[0]):
         _gather_slices_kernel(
             np.ascontiguousarray(vol, dtype=np.float32),

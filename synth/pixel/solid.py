@@ -493,10 +493,18 @@ def plane_centres(
 
 
 def gather_plane(
-    vol: np.ndarray, centres: np.ndarray, plane: str, size: int, periodic: bool, *, centre: bool = True
+    vol: np.ndarray,
+    centres: np.ndarray,
+    plane: str,
+    size: int,
+    periodic: bool,
+    *,
+    centre: bool = True,
+    out: np.ndarray | None = None,
 ):
-    """Slice neighbourhood vectors ``(M, K)`` float32 of ``centres`` in ``plane`` (kernel-gathered)."""
-    return gather_slices(vol, centres, plane_offsets(plane, size, centre=centre), periodic)
+    """Slice neighbourhood vectors ``(M, K)`` float32 of ``centres`` in ``plane`` (kernel-gathered; into
+    ``out`` when given)."""
+    return gather_slices(vol, centres, plane_offsets(plane, size, centre=centre), periodic, out)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -63,3 +63,22 @@ def test_bad_outputs_are_refused() -> None:
             upsample_sources(np.zeros(8, dtype=np.int64), (2, 2, 2), shape, "xy", (10, 10), (5, 5), out=bad)
     with pytest.raises(ValueError, match="out must not share memory with match"):
         dense_sources(match, shape, "xy", 2, (0, 0), (10, 10), out=match)
+
+
+def test_gather_slices_writes_into_a_given_buffer_or_names_a_bad_one() -> None:
+    from texsynth.synth.kernels.solid_search import gather_slices
+
+    vol = np.random.default_rng(0).random((6, 7, 8)).astype(np.float32)
+    centres = np.array([[0, 0, 0], [5, 6, 7], [2, 3, 4]], dtype=np.int64)
+    offsets = np.array([[0, -1, 0], [0, 0, 0], [0, 1, 1]], dtype=np.int32)
+    want = gather_slices(vol, centres, offsets, True)
+    out = np.empty((3, 3), dtype=np.float32)
+    assert gather_slices(vol, centres, offsets, True, out) is out
+    np.testing.assert_array_equal(out, want)
+    for bad in (
+        np.empty((3, 4), dtype=np.float32),
+        np.empty((3, 3)),
+        np.empty((3, 6), dtype=np.float32)[:, ::2],
+    ):
+        with pytest.raises(ValueError, match=r"out must be a C-contiguous float32 array of shape \(3, 3\)"):
+            gather_slices(vol, centres, offsets, True, bad)
