@@ -30,7 +30,10 @@ Stanford 2002, ch. 7): the per-slice neighbourhoods of Wei-Levoy solid synthesis
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -280,15 +283,41 @@ def exemplar_neighbourhoods(
     Principal axes: eigenvectors of the covariance of all neighbourhood vectors (deterministic), the
     :data:`PCA_DIMS` leading ones. The k-coherence sets come from the tree (approximate, then
     re-ranked). Raises :class:`~texsynth.synth.errors.InvalidInput` (``role``) when no neighbourhood fits.
+    The tables of the last :data:`NEIGHBOURHOOD_CACHE` (image content, size, centre) are kept and handed
+    out again (the same object: callers only read it).
     """
     img = np.ascontiguousarray(image, dtype=np.float32)
     h, w = img.shape
-    r = size // 2
     if h < size or w < size:
         raise InvalidInput(
             role,
             f"{h}x{w} pixels is smaller than the {size}x{size} neighbourhood: use a smaller neighbourhood",
         )
+    key = (img.shape, hashlib.blake2b(img.tobytes(), digest_size=16).digest(), int(size), bool(centre))
+    with _BUILT_LOCK:
+        if key in _BUILT:
+            _BUILT.move_to_end(key)
+            return _BUILT[key]
+    built = _build_neighbourhoods(img, int(size), bool(centre))
+    with _BUILT_LOCK:
+        _BUILT[key] = built
+        while len(_BUILT) > NEIGHBOURHOOD_CACHE:
+            _BUILT.popitem(last=False)
+    return built
+
+
+#: Exemplar tables kept in the process (most recently used): a pilot, then the run, and the pyramid levels
+#: of a method's stages build the same tables from the same images; building them is serial NumPy work.
+NEIGHBOURHOOD_CACHE = 8
+_BUILT: OrderedDict[tuple, ExemplarNeighbourhoods] = OrderedDict()
+_BUILT_LOCK = threading.Lock()
+
+
+def _build_neighbourhoods(img: np.ndarray, size: int, centre: bool) -> ExemplarNeighbourhoods:
+    """:func:`exemplar_neighbourhoods` of a validated float32 image, on a copy of it (the key's content)."""
+    img = img.copy()
+    h, w = img.shape
+    r = size // 2
     rows, cols = np.mgrid[r : h - r, r : w - r]
     centres = (rows * w + cols).ravel().astype(np.int64)
     offs = exemplar_offsets(size, w, centre=centre)
