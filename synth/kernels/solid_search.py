@@ -703,6 +703,27 @@ def _irls_voxel(vol, v, proposals, exemplars, histogram, periodic):
     return num, den
 
 
+#: The optimisation step visits a block's voxels grouped into this many runs of the volume's memory
+#: (a counting sort by ``v * UPDATE_BUCKETS // N``: one pass, where a full sort of a 256^3 volume's 16
+#: blocks of a million voxels each took about a second per iteration on the calling thread alone).
+UPDATE_BUCKETS = 4096
+
+
+@kernel
+def _memory_runs(order, lo, hi, n_total, counts, out):
+    """``order[lo:hi]`` into ``out[: hi - lo]`` grouped by runs of the volume's memory (stable)."""
+    buckets = counts.shape[0] - 1
+    counts[:] = 0
+    for i in range(lo, hi):
+        counts[order[i] * buckets // n_total + 1] += 1
+    for b in range(buckets):
+        counts[b + 1] += counts[b]
+    for i in range(lo, hi):
+        b = order[i] * buckets // n_total
+        out[counts[b]] = order[i]
+        counts[b] += 1
+
+
 @kernel(parallel=True)
 def _irls_update_kernel(vol, order, start, stop, proposals, exemplars, histogram, periodic, block):
     flat = vol.reshape(-1)
@@ -710,10 +731,14 @@ def _irls_update_kernel(vol, order, start, stop, proposals, exemplars, histogram
     gain = histogram.gain
     bins = count.shape[0]
     old = np.empty(block, dtype=np.float32)
+    voxels = np.empty(block, dtype=np.int64)
+    runs = np.empty(min(UPDATE_BUCKETS, flat.shape[0]) + 1, dtype=np.int64)
     lo = start
     while lo < stop:
         hi = min(stop, (lo // block + 1) * block)  # blocks aligned on multiples of ``block`` in ``order``
-        voxels = np.sort(order[lo:hi])  # the block's voxels in memory order: same answer, fewer misses
+        # the block's voxels near memory order: fewer misses, the same answer (a voxel's new value reads
+        # only the matches and the histogram at the block's start; the counts below change by whole units)
+        _memory_runs(order, lo, hi, flat.shape[0], runs, voxels)
         for idx in prange(lo, hi):
             v = voxels[idx - lo]
             num, den = _irls_voxel(vol, v, proposals, exemplars, histogram, periodic)
