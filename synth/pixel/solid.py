@@ -30,7 +30,10 @@ Stanford 2002, ch. 7): the per-slice neighbourhoods of Wei-Levoy solid synthesis
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -49,6 +52,7 @@ from texsynth.synth.kernels.solid_search import (
     nearest_exact,
     rerank,
 )
+from texsynth.synth.kernels.solid_sources import dense_sources, upsample_sources
 from texsynth.synth.pixel.synthesis import level_neighbourhood_size
 from texsynth.synth.threads import current_threads
 
@@ -279,15 +283,41 @@ def exemplar_neighbourhoods(
     Principal axes: eigenvectors of the covariance of all neighbourhood vectors (deterministic), the
     :data:`PCA_DIMS` leading ones. The k-coherence sets come from the tree (approximate, then
     re-ranked). Raises :class:`~texsynth.synth.errors.InvalidInput` (``role``) when no neighbourhood fits.
+    The tables of the last :data:`NEIGHBOURHOOD_CACHE` (image content, size, centre) are kept and handed
+    out again (the same object: callers only read it).
     """
     img = np.ascontiguousarray(image, dtype=np.float32)
     h, w = img.shape
-    r = size // 2
     if h < size or w < size:
         raise InvalidInput(
             role,
             f"{h}x{w} pixels is smaller than the {size}x{size} neighbourhood: use a smaller neighbourhood",
         )
+    key = (img.shape, hashlib.blake2b(img.tobytes(), digest_size=16).digest(), int(size), bool(centre))
+    with _BUILT_LOCK:
+        if key in _BUILT:
+            _BUILT.move_to_end(key)
+            return _BUILT[key]
+    built = _build_neighbourhoods(img, int(size), bool(centre))
+    with _BUILT_LOCK:
+        _BUILT[key] = built
+        while len(_BUILT) > NEIGHBOURHOOD_CACHE:
+            _BUILT.popitem(last=False)
+    return built
+
+
+#: Exemplar tables kept in the process (most recently used): a pilot, then the run, and the pyramid levels
+#: of a method's stages build the same tables from the same images; building them is serial NumPy work.
+NEIGHBOURHOOD_CACHE = 8
+_BUILT: OrderedDict[tuple, ExemplarNeighbourhoods] = OrderedDict()
+_BUILT_LOCK = threading.Lock()
+
+
+def _build_neighbourhoods(img: np.ndarray, size: int, centre: bool) -> ExemplarNeighbourhoods:
+    """:func:`exemplar_neighbourhoods` of a validated float32 image, on a copy of it (the key's content)."""
+    img = img.copy()
+    h, w = img.shape
+    r = size // 2
     rows, cols = np.mgrid[r : h - r, r : w - r]
     centres = (rows * w + cols).ravel().astype(np.int64)
     offs = exemplar_offsets(size, w, centre=centre)
@@ -338,60 +368,6 @@ def slice_geometry(shape: tuple[int, int, int], plane: str, periodic: bool) -> S
         axes=np.asarray(PLANE_AXES[plane], dtype=np.int64),
         periodic=periodic,
     )
-
-
-def dense_sources(
-    match: np.ndarray,
-    shape: tuple[int, int, int],
-    plane: str,
-    stride: int,
-    phase: tuple[int, int],
-    ex_shape: tuple[int, int],
-) -> np.ndarray:
-    """Every voxel's exemplar position ``(N,)`` int64 in ``plane``, from matches on a sparse grid.
-
-    ``match`` (N,) holds the matched centre position at the grid's centres (:func:`plane_centres` with
-    ``stride``, ``phase``). A voxel takes the position its grid centre (the one at or before it along
-    each plane axis, else after it) matched, shifted by its offset from that centre and clamped
-    inside the exemplar: the coherent proposal of Tong et al. for the next search.
-    """
-    a, b = PLANE_AXES[plane]
-    h, w = ex_shape
-    grids = np.meshgrid(*[np.arange(s, dtype=np.int64) for s in shape], indexing="ij")
-    cen = [g.copy() for g in grids]
-    for axis, ph in ((a, phase[0]), (b, phase[1])):
-        snapped = grids[axis] - (grids[axis] - ph % stride) % stride
-        snapped = np.where(snapped < 0, snapped + stride, snapped)
-        cen[axis] = np.minimum(snapped, shape[axis] - 1 - (shape[axis] - 1 - ph % stride) % stride)
-    flat = np.ravel_multi_index(tuple(cen), shape).ravel()
-    m = match[flat]
-    row = m // w + (grids[a] - cen[a]).ravel()
-    col = m % w + (grids[b] - cen[b]).ravel()
-    out = np.clip(row, 0, h - 1) * w + np.clip(col, 0, w - 1)
-    return np.ascontiguousarray(np.where(m >= 0, out, 0), dtype=np.int64)
-
-
-def upsample_sources(
-    src: np.ndarray,
-    coarse_shape: tuple[int, int, int],
-    shape: tuple[int, int, int],
-    plane: str,
-    ex_shape: tuple[int, int],
-    coarse_ex_shape: tuple[int, int],
-) -> np.ndarray:
-    """A plane's per-voxel exemplar positions at the next finer level (Wei-Levoy/Lefebvre-Hoppe
-    coordinate upsampling): voxel ``v`` takes ``2 * src(v // 2) + (v mod 2)`` along the plane's axes."""
-    a, b = PLANE_AXES[plane]
-    h, w = ex_shape
-    grids = np.meshgrid(*[np.arange(s, dtype=np.int64) for s in shape], indexing="ij")
-    parent = np.ravel_multi_index(
-        tuple(np.minimum(g // 2, cs - 1) for g, cs in zip(grids, coarse_shape, strict=True)), coarse_shape
-    )
-    s = src[parent.ravel()]
-    cw = coarse_ex_shape[1]
-    row = 2 * (s // cw) + (grids[a] % 2).ravel()
-    col = 2 * (s % cw) + (grids[b] % 2).ravel()
-    return np.ascontiguousarray(np.clip(row, 0, h - 1) * w + np.clip(col, 0, w - 1), dtype=np.int64)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -546,10 +522,18 @@ def plane_centres(
 
 
 def gather_plane(
-    vol: np.ndarray, centres: np.ndarray, plane: str, size: int, periodic: bool, *, centre: bool = True
+    vol: np.ndarray,
+    centres: np.ndarray,
+    plane: str,
+    size: int,
+    periodic: bool,
+    *,
+    centre: bool = True,
+    out: np.ndarray | None = None,
 ):
-    """Slice neighbourhood vectors ``(M, K)`` float32 of ``centres`` in ``plane`` (kernel-gathered)."""
-    return gather_slices(vol, centres, plane_offsets(plane, size, centre=centre), periodic)
+    """Slice neighbourhood vectors ``(M, K)`` float32 of ``centres`` in ``plane`` (kernel-gathered; into
+    ``out`` when given)."""
+    return gather_slices(vol, centres, plane_offsets(plane, size, centre=centre), periodic, out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -684,20 +668,19 @@ def initial_sources(
 
 def upsample_plane_sources(src: np.ndarray, plan: SolidPlan, level: int) -> np.ndarray:
     """The three planes' per-voxel exemplar positions ``(3, N)`` of level ``level + 1`` at ``level``
-    (:func:`upsample_sources`)."""
-    return np.stack(
-        [
-            upsample_sources(
-                src[p],
-                plan.shapes[level + 1],
-                plan.shapes[level],
-                plane,
-                plan.exemplars[p][level].shape,
-                plan.exemplars[p][level + 1].shape,
-            )
-            for p, plane in enumerate(PLANES)
-        ]
-    )
+    (:func:`upsample_sources`, written plane by plane into one array)."""
+    out = np.empty((3, int(np.prod(plan.shapes[level]))), dtype=np.int64)
+    for p, plane in enumerate(PLANES):
+        upsample_sources(
+            src[p],
+            plan.shapes[level + 1],
+            plan.shapes[level],
+            plane,
+            plan.exemplars[p][level].shape,
+            plan.exemplars[p][level + 1].shape,
+            out=out[p],
+        )
+    return out
 
 
 def search_plane(

@@ -385,3 +385,17 @@ def test_oriented_start_keeps_a_tilted_stack() -> None:
 def test_bad_start_and_final_step_are_named(field: str, value: str) -> None:
     with pytest.raises(InvalidParameter, match=field):
         synthesize("solid-kopf", _soft(), size=SIZE, params={field: value})
+
+
+@pytest.mark.parametrize("search", ["tree", "exact"])
+def test_search_batches_do_not_change_the_volume(monkeypatch: pytest.MonkeyPatch, search: str) -> None:
+    """The search step gathers and searches its queries in batches through one buffer: batches of 37
+    queries give the volume and the energies of the default batch (every answer is per query)."""
+    import texsynth.synth.methods.solid_kopf as kopf
+
+    params = {**_small("solid-kopf"), "search": search, "structure": "laminar"}
+    whole = synthesize("solid-kopf", _soft(), size=SIZE, params=params, seed=2)
+    monkeypatch.setattr(kopf, "SEARCH_BATCH", 37)
+    batched = synthesize("solid-kopf", _soft(), size=SIZE, params=params, seed=2)
+    assert whole.image.tobytes() == batched.image.tobytes()
+    assert whole.stats["energy"] == batched.stats["energy"]

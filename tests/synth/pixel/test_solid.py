@@ -411,3 +411,20 @@ def test_best_vote_copies_the_heaviest_proposal() -> None:
     images = [np.full((5, 5), v, np.float32) for v in (0.2, 0.7, 0.0)]
     out = best_vote(rng.random(shape, dtype=np.float32), field, PackedExemplars.pack(images), True)
     np.testing.assert_array_equal(out, np.float32(0.7))
+
+
+def test_exemplar_tables_are_kept_by_content() -> None:
+    """The same image content (another array), size and centre give the same tables back; a changed
+    pixel, size or centre does not, and changing the caller's array afterwards leaves the tables alone."""
+    img = _exemplar((24, 26), seed=5)
+    first = exemplar_neighbourhoods(img, 5)
+    assert exemplar_neighbourhoods(img.copy(), 5) is first
+    assert exemplar_neighbourhoods(img, 3) is not first
+    assert exemplar_neighbourhoods(img, 5, centre=False) is not first
+    before = first.image.copy()
+    img[3, 4] += 0.25
+    changed = exemplar_neighbourhoods(img, 5)
+    assert changed is not first and changed.image[3, 4] == img[3, 4]
+    np.testing.assert_array_equal(first.image, before)
+    with pytest.raises(InvalidInput, match="exemplar_xz"):
+        exemplar_neighbourhoods(img, 31, role="exemplar_xz")
