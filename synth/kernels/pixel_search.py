@@ -682,9 +682,9 @@ class Schedule(NamedTuple):
 @kernel
 def _schedule_kernel(order, H, W, offs):
     n = order.shape[0]
-    rank = np.full(H * W, -1, dtype=np.int64)
-    for i in range(n):
-        rank[order[i]] = i
+    # A position's level once placed; -1 before (and for positions the order leaves out), so that the
+    # positions after it in the order count as level -1 + 1 = 0: no rank to look up.
+    placed = np.full(H * W, -1, dtype=np.int64)
     level = np.zeros(n, dtype=np.int64)  # by rank
     top = 0
     for i in range(n):
@@ -693,10 +693,20 @@ def _schedule_kernel(order, H, W, offs):
         x = p % W
         lv = 0
         for j in range(offs.shape[0]):
-            q = ((y + offs[j, 0]) % H) * W + (x + offs[j, 1]) % W
-            r = rank[q]
-            if q != p and 0 <= r < i and level[r] + 1 > lv:
-                lv = level[r] + 1
+            qy = y + offs[j, 0]
+            qx = x + offs[j, 1]
+            while qy < 0:
+                qy += H
+            while qy >= H:
+                qy -= H
+            while qx < 0:
+                qx += W
+            while qx >= W:
+                qx -= W
+            lq = placed[qy * W + qx] + 1
+            if lq > lv:
+                lv = lq
+        placed[p] = lv
         level[i] = lv
         top = max(top, lv)
     starts = np.zeros(top + 2, dtype=np.int64)
