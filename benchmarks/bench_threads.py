@@ -1,20 +1,20 @@
 """Speed-up from 1 to 2 threads (issue 25): whole ``texsynth synthesize`` processes and the synthesis alone.
 
-Run ``python -m benchmarks.bench_threads`` (``--runs N``, ``--cases kopf-64,kopf-128,chen-wang-64``);
-writes the ``threads`` section of docs/benchmarks.md. Each run is a fresh ``python -m texsynth.synth.cli
-synthesize METHOD --threads N`` process on the real HRTEM soot crop (``hrtem-soot-128.png``; a
-generated laminae pattern when ``../shared/data`` is absent), plots off, every other artifact written
-(the volume's evaluation included). The child wraps :func:`texsynth.synth.pipeline.synthesize` to time the
-synthesis alone (wall and CPU of the process, the only threads then at work being the job's); the
-parent times the whole process (wall from start to exit, CPU from ``os.wait4``: all threads, user +
-system). One untimed run first (numba's cache on disk, as after any earlier run of the user's), then
-runs with 1 and 2 threads alternated (1, 2, 2, 1, 1, 2, ...) so that both see the same load; medians.
-The 1-minute load average is read before and after every run and reported: on a machine shared with
-other jobs, a 2-thread run cannot get two cores, and the wall-time speed-up is then a floor (CPU time
-says what the work costs; its growth from 1 to 2 threads is the parallel overhead). The bytes of
-every run are compared: the same with 1 and 2 threads. The CPU time of the synthesis' busiest
-thread (Linux's per-thread counters) gives a speed-up estimate that the load inflates less (see the
-section's note).
+Run ``python -m benchmarks.bench_threads`` (``--runs N``, ``--cases kopf-64,tensor-512,...``); writes the
+``threads`` (volumes) and ``threads-2d`` sections of docs/benchmarks.md. Each run is a fresh ``python -m
+texsynth.synth.cli synthesize METHOD --threads N`` process on the real HRTEM soot crop
+(``hrtem-soot-128.png``; a generated laminae pattern when ``../shared/data`` is absent), plots off, every
+other artifact written (the volume's evaluation included). The child wraps
+:func:`texsynth.synth.pipeline.synthesize` to time the synthesis alone (wall and CPU of the process, the
+only threads then at work being the job's); the parent times the whole process (wall from start to exit,
+CPU from ``os.wait4``: all threads, user + system). One untimed run first (numba's cache on disk, as after
+any earlier run of the user's), then runs with 1 and 2 threads alternated (1, 2, 2, 1, 1, 2, ...) so that
+both see the same load; medians. The 1-minute load average is read before and after every run and
+reported: on a machine shared with other jobs, a 2-thread run cannot get two cores, and the wall-time
+speed-up is then a floor (CPU time says what the work costs; its growth from 1 to 2 threads is the
+parallel overhead). The bytes of every run are compared: the same with 1 and 2 threads. The CPU time of
+the synthesis' busiest thread (Linux's per-thread counters) gives a speed-up estimate that the load
+inflates less (see the section's note).
 """
 
 from __future__ import annotations
@@ -38,11 +38,17 @@ CASES = {
     "kopf-64": ("solid-kopf", "64x64x64"),
     "kopf-128": ("solid-kopf", "128x128x128"),
     "chen-wang-64": ("solid-chen-wang", "64x64x64"),
+    # The 2D methods (their own section, threads-2d): one line a case.
+    "wei-levoy-512": ("wei-levoy", "512x512"),
+    "tensor-512": ("tensor-constrained", "512x512"),
+    "arbitrary-shape-256": ("arbitrary-shape", "256x256"),
     # the patch methods (waves of disjoint patches on the job's threads, docs/patch.md)
     "quilting-1024": ("quilting", "1024x1024"),
     "gaussian-patch-512": ("gaussian-patch", "512x512"),
     "feature-guided-512": ("feature-guided", "512x512"),
 }
+#: Methods that need a constraint image: a generated one of the output's size (undulating rings).
+CONSTRAINED = {"arbitrary-shape"}
 
 _CHILD = """
 import json, os, sys, time
@@ -93,6 +99,21 @@ def _exemplar(folder: Path) -> Path:
     return path
 
 
+def _constraint(folder: Path, size: str) -> Path:
+    """Concentric, undulating rings of the output's size (period 12 px): a constraint for arbitrary-shape."""
+    import numpy as np
+
+    from texsynth.synth.io import save_image
+
+    w, h = (int(v) for v in size.split("x")[:2])
+    path = folder / f"rings-{w}x{h}.png"
+    if not path.is_file():
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+        r = np.hypot(yy - h / 2, xx - w / 2) + 4.0 * np.sin(np.arctan2(yy - h / 2, xx - w / 2) * 5)
+        save_image(path, (0.5 + 0.5 * np.sin(2 * np.pi * r / 12.0)).astype(np.float32))
+    return path
+
+
 def _load() -> float:
     return os.getloadavg()[0]
 
@@ -103,6 +124,8 @@ def run_once(method: str, size: str, threads: int, exemplar: Path, folder: Path)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     words = ["synthesize", method, "--exemplar", str(exemplar), "--size", size, "--seed", "1"]
     words += ["--no-plots", "--threads", str(threads), "--out", str(out)]
+    if method in CONSTRAINED:
+        words += ["--constraint", str(_constraint(folder, size))]
     load_before = _load()
     start = time.perf_counter()
     proc = subprocess.Popen(
@@ -157,9 +180,9 @@ def measure(name: str, runs: int, folder: Path, exemplar: Path) -> dict[str, obj
     }
 
 
-def report(results: list[dict[str, object]]) -> str:
+def report(results: list[dict[str, object]], title: str = "") -> str:
     lines = [
-        "## Threads: 1 -> 2 (`python -m benchmarks.bench_threads`)",
+        f"## Threads: 1 -> 2{title} (`python -m benchmarks.bench_threads`)",
         "",
         "Whole `texsynth synthesize METHOD --threads N --no-plots` processes on `hrtem-soot-128.png`"
         " (seed 1), 1 and 2 threads alternated, medians; CPU = user + system of all the process's"
@@ -209,11 +232,16 @@ def main(argv: list[str] | None = None) -> int:
         exemplar = _exemplar(folder)
         for name in names:
             results.append(measure(name, args.runs, folder, exemplar))
-    table = report(results)
-    print(table)
     print(machine())
-    if not args.no_write:
-        write_section("threads", table)
+    # The volumes' rows and the images' rows are separate sections: a run of one family keeps the other's.
+    for section, family in (("threads", True), ("threads-2d", False)):
+        rows = [r for r in results if (str(r["size"]).count("x") == 2) == family]
+        if not rows:
+            continue
+        table = report(rows, title="" if family else ", 2D methods")
+        print(table)
+        if not args.no_write:
+            write_section(section, table)
     return 0 if all(r["same_bytes"] for r in results) else 1
 
 

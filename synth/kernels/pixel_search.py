@@ -19,20 +19,25 @@ source and its ``k`` most similar exemplar positions shifted by ``p - q``, the s
 candidate counts only when its class, e.g. its rotated copy, is within ``span`` of the wanted one,
 cyclically; with a *transfer* a proposal of another class moves to the same point of the wanted class).
 
-The inputs come in named groups (:class:`SearchState`: three :class:`Part` blocks,
-:class:`Candidates`, :class:`Histogram`, :class:`ClassWindow`, :class:`Pass`), numba named tuples built
-once per level. :func:`synthesize_chunk_reference` is the plain NumPy version the tests compare the
-kernel with; it takes the same state. The kernel's speed-ups that keep every bit (no array-taking
-helper in the candidate loop, unsigned indexing) are measured in docs/pixel.md.
+Parallel, same bytes on any thread count: a pass is units (positions run in order by one thread) in levels
+whose units never read what another of the level writes (Lefebvre & Hoppe 2005's sub-passes):
+:func:`tile_schedule` for a raster pass (parallelogram tiles), :func:`schedule_levels` for any other order
+(a position a unit); :func:`synthesize_levels` runs each level's units on numba's threads, the histogram
+counts changing between levels. The inputs come in named groups (:class:`SearchState`), numba
+named tuples built once per level; :func:`synthesize_levels_reference` and
+:func:`synthesize_chunk_reference` are the plain NumPy versions the tests compare the kernel with. The
+speed-ups that keep every bit (no array-taking helper in the candidate loop) are in docs/pixel.md.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from numba import prange
 
 from texsynth.synth.kernels.common import histogram_factor, splitmix
 from texsynth.synth.kernels.options import kernel
@@ -46,11 +51,20 @@ __all__ = [
     "Histogram",
     "Part",
     "Pass",
+    "Schedule",
     "SearchState",
     "candidate_capacity",
+    "conflict_offsets",
     "position_distance",
+    "schedule_levels",
+    "schedule_levels_reference",
     "synthesize_chunk",
     "synthesize_chunk_reference",
+    "synthesize_levels",
+    "synthesize_levels_reference",
+    "tile_schedule",
+    "tile_shape",
+    "tile_units",
 ]
 
 METRIC_SSD = 0
@@ -338,15 +352,44 @@ def _valid_positions(valid, mask):
 
 
 @kernel
-def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win, run, feats, part_start):
+def _search_block(
+    sched,
+    units,
+    u_lo,
+    u_hi,
+    cur,
+    par,
+    gui,
+    alpha,
+    cands,
+    hist,
+    win,
+    run,
+    feats,
+    part_start,
+    all_cand,
+    stamp,
+    tag0,
+    labs,
+    delta,
+):
+    """Search and copy the units ``u_lo:u_hi`` (unit ``u``: the positions ``sched[units[u]:units[u + 1]]``),
+    one position after the other, in place.
+
+    A position reads the histogram counts as they were when its level began plus its own unit's changes
+    so far (``delta``, this block's scratch, zero between units), its own current label less one;
+    ``labs[0, i]`` and ``labs[1, i]`` receive the old and the new label of ``sched[i]`` (-1: unchanged),
+    which :func:`_levels_body` adds to the counts after the level. ``stamp`` is this block's
+    de-duplication scratch; ``tag0 + i + 1`` the tag of ``sched[i]``.
+    """
     # Unpacked once, so the loop below reads as the algorithm (see SearchState for each name).
     out, ex, offs, metric, w_cur, ew_cur = cur
     par_out, par_ex, par_offs, par_metric, w_par, ew_par = par
     gui_out, gui_ex, gui_offs, gui_metric, w_gui, ew_gui = gui
-    src, _, _, valid, mask, _, _, exact, _, capacity = cands  # the rest: _gather_candidates
+    src, _, _, _, _, _, _, exact, _, capacity = cands  # the rest: _gather_candidates
     labels, label_count, label_target, hist_weight = hist
     cls, want_cls, cls_period, cls_span, _, _ = win
-    order, first_pass, done, seed_key, stamp, counter, best_out = run
+    _, first_pass, done, seed_key, _, _, best_out = run
     W = out.shape[1]
     w = ex.shape[1]
     C = out.shape[2]
@@ -366,181 +409,522 @@ def _synthesize_chunk_kernel(start, stop, cur, par, gui, alpha, cands, hist, win
     one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
     bounds = np.zeros(4, dtype=np.int64)
     cand = np.empty((capacity, 2), dtype=np.int64)
-    all_cand = _valid_positions(valid, mask) if exact else np.empty((0, 2), dtype=np.int64)
-    for idx in range(start, stop):
-        p = order[idx]
-        oy = p // W
-        ox = p % W
-        n_cur = _gather_query(out, oy, ox, offs, w, C, part_start[0], done, first_pass, q, lin, 0, ew_cur, wq)
-        n_par = 0
-        if w_par > 0.0:
-            c_par, s_par = part_c[1], part_start[1]
-            n_par = _gather_query(
-                par_out,
-                oy // 2,
-                ox // 2,
-                par_offs,
-                par_width,
-                c_par,
-                s_par,
-                done,
-                False,
-                q,
-                lin,
-                n_cur,
-                ew_par,
-                wq,
+    for u in range(u_lo, u_hi):
+        for idx in range(units[u], units[u + 1]):
+            p = sched[idx]
+            labs[0, idx] = -1
+            oy = p // W
+            ox = p % W
+            n_cur = _gather_query(
+                out, oy, ox, offs, w, C, part_start[0], done, first_pass, q, lin, 0, ew_cur, wq
             )
-        n_gui = 0
-        if w_gui > 0.0:
-            n_gui = _gather_query(
-                gui_out,
-                oy,
-                ox,
-                gui_offs,
-                w,
-                part_c[2],
-                part_start[2],
-                done,
-                False,
-                q,
-                lin,
-                n_cur + n_par,
-                ew_gui,
-                wq,
-            )
-        bounds[1] = n_cur
-        bounds[2] = n_cur + n_par
-        bounds[3] = n_cur + n_par + n_gui
-        if n_cur == 0 and n_par == 0 and n_gui == 0:  # nothing to compare yet: keep the initial source
-            sy = src[oy, ox, 0]
-            sx = src[oy, ox, 1]
-            for c in range(C):
-                out[oy, ox, c] = ex[sy, sx, c]
-            done[oy, ox] = 1
-            best_out[oy, ox] = 0.0
-            continue
-        # This pixel's current source leaves the histogram while it looks for a new one.
-        if hist_weight > 0.0:
-            label_count[labels[src[oy, ox, 0] * w + src[oy, ox, 1]]] -= 1
-        best = np.inf
-        best_raw = np.inf
-        by = -1
-        bx = -1
-        want = want_cls[oy, ox] if cls_span >= 0 else 0
-        if exact:  # the definition: every valid exemplar position
-            n = all_cand.shape[0]
-        else:
-            counter[0] += 1
-            key = splitmix(seed_key ^ np.uint64(p))
-            n = _gather_candidates(cand, oy, ox, cands, win, want, key, stamp, counter[0], w)
-            if n == 0:  # every proposal fell outside the class window: keep the current source
-                cand[0, 0] = src[oy, ox, 0]
-                cand[0, 1] = src[oy, ox, 1]
-                n = 1
-        for j in range(n):
-            if exact:
-                cy = all_cand[j, 0]
-                cx = all_cand[j, 1]
-                if cls_span >= 0 and not _class_allowed(cls, cy * w + cx, want, cls_period, cls_span):
-                    continue
+            n_par = 0
+            if w_par > 0.0:
+                c_par, s_par = part_c[1], part_start[1]
+                n_par = _gather_query(
+                    par_out,
+                    oy // 2,
+                    ox // 2,
+                    par_offs,
+                    par_width,
+                    c_par,
+                    s_par,
+                    done,
+                    False,
+                    q,
+                    lin,
+                    n_cur,
+                    ew_par,
+                    wq,
+                )
+            n_gui = 0
+            if w_gui > 0.0:
+                n_gui = _gather_query(
+                    gui_out,
+                    oy,
+                    ox,
+                    gui_offs,
+                    w,
+                    part_c[2],
+                    part_start[2],
+                    done,
+                    False,
+                    q,
+                    lin,
+                    n_cur + n_par,
+                    ew_gui,
+                    wq,
+                )
+            bounds[1] = n_cur
+            bounds[2] = n_cur + n_par
+            bounds[3] = n_cur + n_par + n_gui
+            if n_cur == 0 and n_par == 0 and n_gui == 0:  # nothing to compare yet: keep the initial source
+                sy = src[oy, ox, 0]
+                sx = src[oy, ox, 1]
+                for c in range(C):
+                    out[oy, ox, c] = ex[sy, sx, c]
+                done[oy, ox] = 1
+                best_out[oy, ox] = 0.0
+                continue
+            # This pixel's current source leaves the histogram while it looks for a new one.
+            old_lab = labels[src[oy, ox, 0] * w + src[oy, ox, 1]] if hist_weight > 0.0 else -1
+            best = np.inf
+            best_raw = np.inf
+            by = -1
+            bx = -1
+            want = want_cls[oy, ox] if cls_span >= 0 else 0
+            if exact:  # the definition: every valid exemplar position
+                n = all_cand.shape[0]
             else:
-                cy = cand[j, 0]
-                cx = cand[j, 1]
-            f = 1.0
-            if hist_weight > 0.0:
-                lab = labels[cy * w + cx]
-                f = histogram_factor(label_count[lab], label_target[lab], hist_weight)
-            # The distance, part by part, cheapest first (plain SSD over pixels), each part's sum
-            # stopping once it exceeds what is left below the best so far (the argmin is unchanged).
-            bound = best / f
-            d = 0.0
-            for b in range(3):
-                wb = part_w[b]
-                if not wb > 0.0:
-                    continue
-                mb = part_metric[b]
-                cb = part_c[b]
-                # The candidate's element offset (each entry's ``lin`` holds its part's start); the
-                # parent part is read at half the position.
-                e_base = ((cy // 2) * par_width + cx // 2) * cb if b == 1 else (cy * w + cx) * cb
-                limit = (bound - d) / wb
-                s = 0.0
-                # Unsigned indices (all are >= 0 here): numba then emits no negative-index
-                # wrap-around per load, a quarter of the loop's time.
-                lo = np.uint64(bounds[b])
-                hi = np.uint64(bounds[b + 1])
-                if mb == METRIC_SO and alpha == 0.5:  # channel 3 (1 / C) is not read
-                    for i in range(lo, hi):
-                        e = np.uint64(lin[i] + e_base)
-                        r = i * cq
-                        qs, qc, qk = qf[r], qf[r + one], qf[r + two]
-                        s += wq[i] * _so_half(qs, qc, qk, feats[e], feats[e + one], feats[e + two])
-                        if s > limit:
-                            break
-                elif mb == METRIC_SO:
-                    for i in range(lo, hi):
-                        e = np.uint64(lin[i] + e_base)
-                        r = i * cq
-                        qs, qc, qk, qr = qf[r], qf[r + one], qf[r + two], qf[r + three]
-                        es, ec, ek, er = feats[e], feats[e + one], feats[e + two], feats[e + three]
-                        s += wq[i] * _so_term(qs, qc, qk, qr, es, ec, ek, er, alpha)
-                        if s > limit:
-                            break
-                elif mb == METRIC_SSD and cb == 1:  # one channel: the channel loop's sum is its one term
-                    for i in range(lo, hi):
-                        t = qf[i * cq] - feats[np.uint64(lin[i] + e_base)]
-                        s += wq[i] * (t * t)
-                        if s > limit:
-                            break
+                key = splitmix(seed_key ^ np.uint64(p))
+                n = _gather_candidates(cand, oy, ox, cands, win, want, key, stamp, tag0 + idx + 1, w)
+                if n == 0:  # every proposal fell outside the class window: keep the current source
+                    cand[0, 0] = src[oy, ox, 0]
+                    cand[0, 1] = src[oy, ox, 1]
+                    n = 1
+            for j in range(n):
+                if exact:
+                    cy = all_cand[j, 0]
+                    cx = all_cand[j, 1]
+                    if cls_span >= 0 and not _class_allowed(cls, cy * w + cx, want, cls_period, cls_span):
+                        continue
                 else:
-                    for i in range(lo, hi):
-                        e = np.uint64(lin[i] + e_base)
-                        r = i * cq
-                        t = 0.0
-                        for c in range(np.uint64(cb)):
-                            dc = qf[r + c] - feats[e + c]
-                            t += dc * dc
-                        s += wq[i] * (math.sqrt(t) if mb == METRIC_NORM else t)
-                        if s > limit:
-                            break
-                d += wb * s
-                if d >= bound:
-                    break
-            d = f * d
-            if d < best:
-                best = d
-                best_raw = d / f
-                by = cy
-                bx = cx
-        if by < 0:  # an exact search with an empty class window: keep the source and its distance
-            by = src[oy, ox, 0]
-            bx = src[oy, ox, 1]
-            best_raw = best_out[oy, ox]
-        src[oy, ox, 0] = by
-        src[oy, ox, 1] = bx
+                    cy = cand[j, 0]
+                    cx = cand[j, 1]
+                f = 1.0
+                if hist_weight > 0.0:
+                    lab = labels[cy * w + cx]
+                    count = label_count[lab] + delta[lab] - (1 if lab == old_lab else 0)
+                    f = histogram_factor(count, label_target[lab], hist_weight)
+                # The distance, part by part, cheapest first (plain SSD over pixels), each part's sum
+                # stopping once it exceeds what is left below the best so far (the argmin is unchanged).
+                bound = best / f
+                d = 0.0
+                for b in range(3):
+                    wb = part_w[b]
+                    if not wb > 0.0:
+                        continue
+                    mb = part_metric[b]
+                    cb = part_c[b]
+                    # The candidate's element offset (each entry's ``lin`` holds its part's start); the
+                    # parent part is read at half the position.
+                    e_base = ((cy // 2) * par_width + cx // 2) * cb if b == 1 else (cy * w + cx) * cb
+                    limit = (bound - d) / wb
+                    s = 0.0
+                    # Unsigned indices (all are >= 0 here): numba then emits no negative-index
+                    # wrap-around per load, a quarter of the loop's time.
+                    lo = np.uint64(bounds[b])
+                    hi = np.uint64(bounds[b + 1])
+                    if mb == METRIC_SO and alpha == 0.5:  # channel 3 (1 / C) is not read
+                        for i in range(lo, hi):
+                            e = np.uint64(lin[i] + e_base)
+                            r = i * cq
+                            qs, qc, qk = qf[r], qf[r + one], qf[r + two]
+                            s += wq[i] * _so_half(qs, qc, qk, feats[e], feats[e + one], feats[e + two])
+                            if s > limit:
+                                break
+                    elif mb == METRIC_SO:
+                        for i in range(lo, hi):
+                            e = np.uint64(lin[i] + e_base)
+                            r = i * cq
+                            qs, qc, qk, qr = qf[r], qf[r + one], qf[r + two], qf[r + three]
+                            es, ec, ek, er = feats[e], feats[e + one], feats[e + two], feats[e + three]
+                            s += wq[i] * _so_term(qs, qc, qk, qr, es, ec, ek, er, alpha)
+                            if s > limit:
+                                break
+                    elif mb == METRIC_SSD and cb == 1:  # one channel: the channel loop's sum is its one term
+                        for i in range(lo, hi):
+                            t = qf[i * cq] - feats[np.uint64(lin[i] + e_base)]
+                            s += wq[i] * (t * t)
+                            if s > limit:
+                                break
+                    else:
+                        for i in range(lo, hi):
+                            e = np.uint64(lin[i] + e_base)
+                            r = i * cq
+                            t = 0.0
+                            for c in range(np.uint64(cb)):
+                                dc = qf[r + c] - feats[e + c]
+                                t += dc * dc
+                            s += wq[i] * (math.sqrt(t) if mb == METRIC_NORM else t)
+                            if s > limit:
+                                break
+                    d += wb * s
+                    if d >= bound:
+                        break
+                d = f * d
+                if d < best:
+                    best = d
+                    best_raw = d / f
+                    by = cy
+                    bx = cx
+            if by < 0:  # an exact search with an empty class window: keep the source and its distance
+                by = src[oy, ox, 0]
+                bx = src[oy, ox, 1]
+                best_raw = best_out[oy, ox]
+            src[oy, ox, 0] = by
+            src[oy, ox, 1] = bx
+            if hist_weight > 0.0:
+                new_lab = labels[by * w + bx]
+                labs[0, idx] = old_lab
+                labs[1, idx] = new_lab
+                delta[old_lab] -= 1
+                delta[new_lab] += 1
+            for c in range(C):
+                out[oy, ox, c] = ex[by, bx, c]
+            done[oy, ox] = 1
+            best_out[oy, ox] = best_raw
+        if hist_weight > 0.0:  # the unit's changes leave the scratch: the next unit starts from the level's
+            for idx in range(units[u], units[u + 1]):
+                if labs[0, idx] >= 0:
+                    delta[labs[0, idx]] = 0
+                    delta[labs[1, idx]] = 0
+
+
+def _levels_body(
+    level_lo,
+    level_hi,
+    schedule,
+    blocks,
+    cur,
+    par,
+    gui,
+    alpha,
+    cands,
+    hist,
+    win,
+    run,
+    feats,
+    part_start,
+    all_cand,
+    stamps,
+    labs,
+    deltas,
+):
+    """Levels ``level_lo:level_hi`` of ``schedule``: each level's units in ``blocks`` blocks of whole units,
+    of about as many positions each (on the thread pool when compiled parallel), then the level's
+    histogram changes, in schedule order."""
+    sched, units, starts, tag0 = schedule
+    _, label_count, _, hist_weight = hist
+    for level in range(level_lo, level_hi):
+        a = starts[level]
+        z = starts[level + 1]
+        nb = max(1, min(blocks, z - a))
+        first = units[a]
+        total = units[z] - first
+        for b in prange(nb):  # blocks of whole units holding about as many positions each
+            lo = a + np.searchsorted(units[a : z + 1], first + (b * total) // nb)
+            hi = a + np.searchsorted(units[a : z + 1], first + ((b + 1) * total) // nb)
+            if lo < hi:
+                _search_block(
+                    sched,
+                    units,
+                    lo,
+                    hi,
+                    cur,
+                    par,
+                    gui,
+                    alpha,
+                    cands,
+                    hist,
+                    win,
+                    run,
+                    feats,
+                    part_start,
+                    all_cand,
+                    stamps[b],
+                    tag0,
+                    labs,
+                    deltas[b],
+                )
         if hist_weight > 0.0:
-            label_count[labels[by * w + bx]] += 1
-        for c in range(C):
-            out[oy, ox, c] = ex[by, bx, c]
-        done[oy, ox] = 1
-        best_out[oy, ox] = best_raw
+            for idx in range(units[a], units[z]):
+                if labs[0, idx] >= 0:
+                    label_count[labs[0, idx]] -= 1
+                    label_count[labs[1, idx]] += 1
 
 
-def synthesize_chunk(state: SearchState, start: int, stop: int) -> None:
-    """Run the kernel on ``state.run.order[start:stop]``: search, copy, update, in place.
+# One body, compiled twice: on the calling thread, and with the levels' blocks on numba's pool.
+# Units of one level never read what another writes, so both give the same bytes.
+_levels_serial = kernel(_levels_body)
+_levels_parallel = kernel(parallel=True)(_levels_body)
 
-    Every array must be C-contiguous, features float32, maps int64 (the caller,
-    :mod:`texsynth.synth.pixel.synthesis`, prepares them once per level and pass).
+#: Below this many positions per level on average, a pass runs on the calling thread: waking the pool
+#: for every level costs more than it saves (about 20 us a level, a position 2-10 us).
+PARALLEL_MIN_LEVEL = 16
+
+#: Rows and width of the tiles of a raster pass (:func:`tile_schedule`; docs/pixel.md, "Parallel passes"),
+#: smaller on small outputs (:func:`tile_shape`).
+TILE = (4, 24)
+
+
+def tile_shape(shape: tuple[int, int]) -> tuple[int, int]:
+    """The tiles of a raster pass over ``shape``: :data:`TILE`, down to one row by 8 on small outputs, so
+    that a pass has dozens of levels (a progress report comes between levels)."""
+    return max(1, min(TILE[0], int(shape[0]) // 32)), max(8, min(TILE[1], int(shape[1]) // 8))
+
+
+class Schedule(NamedTuple):
+    """A pass's positions in units run one after the other by one thread, the units grouped in levels
+    (:func:`schedule_levels`, :func:`tile_schedule`): no position of a unit reads or writes what a
+    position of another unit of the same level writes."""
+
+    sched: np.ndarray  # (n,) int64: flat output positions, unit by unit, each unit in pass order
+    units: np.ndarray  # (units + 1,) int64: unit u is sched[units[u]:units[u + 1]]
+    starts: np.ndarray  # (levels + 1,) int64: level l is the units starts[l]:starts[l + 1]
+    tag0: int  # the de-duplication tags of this pass are tag0 + 1 ... tag0 + n
+
+    def positions(self, level: int) -> np.ndarray:
+        """The positions of level ``level``, unit by unit."""
+        return self.sched[self.units[self.starts[level]] : self.units[self.starts[level + 1]]]
+
+
+@kernel
+def _schedule_kernel(order, H, W, offs):
+    n = order.shape[0]
+    # A position's level once placed; -1 before (and for positions the order leaves out), so that the
+    # positions after it in the order count as level -1 + 1 = 0: no rank to look up.
+    placed = np.full(H * W, -1, dtype=np.int64)
+    level = np.zeros(n, dtype=np.int64)  # by rank
+    top = 0
+    for i in range(n):
+        p = order[i]
+        y = p // W
+        x = p % W
+        lv = 0
+        for j in range(offs.shape[0]):
+            qy = y + offs[j, 0]
+            qx = x + offs[j, 1]
+            while qy < 0:
+                qy += H
+            while qy >= H:
+                qy -= H
+            while qx < 0:
+                qx += W
+            while qx >= W:
+                qx -= W
+            lq = placed[qy * W + qx] + 1
+            if lq > lv:
+                lv = lq
+        placed[p] = lv
+        level[i] = lv
+        top = max(top, lv)
+    starts = np.zeros(top + 2, dtype=np.int64)
+    for i in range(n):
+        starts[level[i] + 1] += 1
+    for lv in range(top + 1):
+        starts[lv + 1] += starts[lv]
+    fill = starts[:-1].copy()
+    sched = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        sched[fill[level[i]]] = order[i]
+        fill[level[i]] += 1
+    return sched, starts
+
+
+def conflict_offsets(*offsets: np.ndarray) -> np.ndarray:
+    """The offsets ``o`` such that positions ``p`` and ``p + o`` may touch the same data in a pass whose
+    positions read at ``p + offsets`` (each ``(K, 2)``): their union and its mirror, ``(0, 0)`` left out."""
+    both = np.vstack([np.asarray(o, dtype=np.int64).reshape(-1, 2) for o in offsets])
+    both = np.unique(np.vstack([both, -both]), axis=0)
+    return np.ascontiguousarray(both[np.any(both != 0, axis=1)], dtype=np.int64)
+
+
+def schedule_levels(
+    order: np.ndarray, shape: tuple[int, int], offsets: np.ndarray, tag0: int = 0
+) -> Schedule:
+    """Group a pass's ``order`` in levels that can run in parallel and give the sequential pass's result.
+
+    A position's level is one more than the highest level among the positions before it in ``order``
+    within ``offsets`` (:func:`conflict_offsets`, wrapped on ``shape``) of it, so any two positions that
+    read or write each other's data keep their order, and the positions of one level are independent
+    (Lefebvre & Hoppe 2005 split a pass so; here the split follows the pass's own order). Every unit is
+    one position. The levels depend only on the order and the neighbourhood, never on the thread count.
     """
+    sched, starts = _schedule_kernel(
+        np.ascontiguousarray(order, dtype=np.int64),
+        int(shape[0]),
+        int(shape[1]),
+        np.ascontiguousarray(offsets, dtype=np.int64),
+    )
+    return Schedule(sched, np.arange(len(sched) + 1, dtype=np.int64), starts, int(tag0))
+
+
+def schedule_levels_reference(
+    order: np.ndarray, shape: tuple[int, int], offsets: np.ndarray, tag0: int = 0
+) -> Schedule:
+    """Plain Python version of :func:`schedule_levels`."""
+    H, W = shape
+    rank = {int(p): i for i, p in enumerate(order)}
+    level: dict[int, int] = {}
+    for i, p in enumerate(int(v) for v in order):
+        y, x = divmod(p, W)
+        near = {((y + dy) % H) * W + (x + dx) % W for dy, dx in offsets}
+        level[p] = max([level[q] + 1 for q in near if q != p and rank.get(q, len(order)) < i] or [0])
+    top = max(level.values(), default=-1)
+    groups = [[p for p in (int(v) for v in order) if level[p] == lv] for lv in range(top + 1)]
+    starts = np.cumsum([0] + [len(g) for g in groups]).astype(np.int64)
+    sched = np.array([p for g in groups for p in g], dtype=np.int64)
+    return Schedule(sched, np.arange(len(sched) + 1, dtype=np.int64), starts, int(tag0))
+
+
+@kernel
+def _unit_levels_kernel(order, unit_of, H, W, offs, n_units):
+    """Each unit's level: one more than the highest among the earlier units (lower ids) it touches."""
+    level = np.zeros(n_units, dtype=np.int64)
+    for i in range(order.shape[0]):  # unit by unit, so an earlier unit's level is final when read
+        p = order[i]
+        u = unit_of[p]
+        y = p // W
+        x = p % W
+        for j in range(offs.shape[0]):
+            v = unit_of[((y + offs[j, 0]) % H) * W + (x + offs[j, 1]) % W]
+            if v < u and level[v] + 1 > level[u]:
+                level[u] = level[v] + 1
+    return level
+
+
+def _unit_levels_reference(unit_of: np.ndarray, shape: tuple[int, int], offsets: np.ndarray) -> np.ndarray:
+    """Plain Python version of :func:`_unit_levels_kernel` (positions ``unit_of``, flat)."""
+    H, W = shape
+    n_units = int(unit_of.max()) + 1
+    touches: list[set[int]] = [set() for _ in range(n_units)]
+    for p in range(H * W):
+        y, x = divmod(p, W)
+        for dy, dx in offsets:
+            touches[int(unit_of[p])].add(int(unit_of[((y + dy) % H) * W + (x + dx) % W]))
+    level = [0] * n_units
+    for u in range(n_units):
+        level[u] = max([level[v] + 1 for v in touches[u] if v < u] or [0])
+    return np.array(level, dtype=np.int64)
+
+
+def tile_units(shape: tuple[int, int], offsets: np.ndarray, tile: tuple[int, int] = TILE) -> np.ndarray:
+    """Each position's tile (flat ``(H * W,)``), tiles numbered in the order a raster pass takes them.
+
+    The tiles are parallelograms ``tile = (rows, width)``: row band ``i = y // rows`` and ``j = (x + s y) //
+    width``, ``s`` the steepest column reach of an entry above the position among ``offsets``, so every
+    such entry lies in the position's tile or an earlier one; numbered by wave ``i + j``, then ``i``.
+    """
+    H, W = (int(v) for v in shape)
+    offs = np.asarray(offsets, dtype=np.int64).reshape(-1, 2)
+    above = offs[offs[:, 0] < 0]
+    skew = max(0, int(np.max(np.ceil(above[:, 1] / -above[:, 0])))) if len(above) else 0
+    yy, xx = np.mgrid[0:H, 0:W]
+    ti = yy // int(tile[0])
+    tj = (xx + skew * yy) // int(tile[1])
+    key = (ti + tj) * (int(ti.max()) + 1) + ti
+    return np.unique(key.ravel(), return_inverse=True)[1].astype(np.int64)
+
+
+def tile_schedule(
+    shape: tuple[int, int], offsets: np.ndarray, tile: tuple[int, int] | None = None, tag0: int = 0
+) -> Schedule:
+    """A raster pass in parallel: parallelogram tiles (:func:`tile_units`; ``tile``: :func:`tile_shape`),
+    each in raster order inside.
+
+    Every tile is a unit; its level is one more than the highest among the earlier tiles it touches within
+    the conflict ``offsets`` (:func:`conflict_offsets`, wrapped), so touching tiles keep their order and
+    the tiles of a level are independent. Every entry above a position and to its left, short of the
+    output's border, is synthesized before it, as in a raster scan; a position of the first columns no
+    longer sees the end of the row above across the wrap (it comes later).
+    """
+    offs = np.ascontiguousarray(offsets, dtype=np.int64).reshape(-1, 2)
+    tile = tile_shape(shape) if tile is None else tile
+    key = (int(shape[0]), int(shape[1]), offs.tobytes(), int(tile[0]), int(tile[1]))
+    return _tile_schedule(key)._replace(tag0=int(tag0))
+
+
+@functools.lru_cache(maxsize=4)
+def _tile_schedule(key: tuple[int, int, bytes, int, int]) -> Schedule:
+    """:func:`tile_schedule`'s arrays, computed once per shape, offsets and tile (the passes of a level
+    share them; nothing writes them)."""
+    H, W, raw, rows, width = key
+    offs = np.frombuffer(raw, dtype=np.int64).reshape(-1, 2)
+    unit_of = tile_units((H, W), offs, (rows, width))
+    n_units = int(unit_of.max()) + 1
+    flat = np.arange(H * W, dtype=np.int64)
+    order = np.lexsort((flat, unit_of)).astype(np.int64)
+    level = _unit_levels_kernel(order, unit_of, H, W, offs, n_units)
+    by_level = np.lexsort((np.arange(n_units), level))
+    rank = np.empty(n_units, dtype=np.int64)
+    rank[by_level] = np.arange(n_units)
+    sched = np.lexsort((flat, rank[unit_of])).astype(np.int64)
+    units = np.concatenate([[0], np.cumsum(np.bincount(unit_of, minlength=n_units)[by_level])])
+    starts = np.searchsorted(level[by_level], np.arange(int(level.max()) + 2), side="left")
+    return Schedule(sched, units.astype(np.int64), starts.astype(np.int64), 0)
+
+
+def _prepared(state: SearchState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     s = state
     arrays = (s.cur.ex, s.par.ex, s.gui.ex)
     if s.flat is None or any(a is not b for a, b in zip(s.flat[0], arrays, strict=True)):
         s.flat = (arrays, *_concat_features(*arrays))
     _, feats, part_start = s.flat
-    _synthesize_chunk_kernel(
-        start, stop, s.cur, s.par, s.gui, float(s.alpha), s.cands, s.hist, s.win, s.run, feats, part_start
+    all_cand = (
+        _valid_positions(s.cands.valid, s.cands.mask) if s.cands.exact else np.empty((0, 2), dtype=np.int64)
     )
+    return feats, part_start, all_cand
+
+
+def _run_levels(state: SearchState, schedule: Schedule, level_lo: int, level_hi: int, parallel: bool) -> None:
+    import numba
+
+    s = state
+    feats, part_start, all_cand = _prepared(s)
+    stamps = s.run.stamp.reshape(-1, s.run.stamp.shape[-1])
+    blocks = max(1, min(numba.get_num_threads(), stamps.shape[0])) if parallel else 1
+    levels = int(level_hi) - int(level_lo)
+    units = schedule.units
+    span = int(units[schedule.starts[level_hi]] - units[schedule.starts[level_lo]])
+    run = _levels_serial if blocks == 1 or span < PARALLEL_MIN_LEVEL * max(1, levels) else _levels_parallel
+    labs = np.empty((2, len(schedule.sched)), dtype=np.int64)
+    deltas = np.zeros((blocks, len(s.hist.count) if s.hist.weight > 0.0 else 1), dtype=np.int64)
+    run(
+        int(level_lo),
+        int(level_hi),
+        schedule,
+        blocks,
+        s.cur,
+        s.par,
+        s.gui,
+        float(s.alpha),
+        s.cands,
+        s.hist,
+        s.win,
+        s.run,
+        feats,
+        part_start,
+        all_cand,
+        stamps,
+        labs,
+        deltas,
+    )
+
+
+def synthesize_levels(state: SearchState, schedule: Schedule, level_lo: int, level_hi: int) -> None:
+    """Run the kernel on the levels ``level_lo:level_hi`` of ``schedule``: search, copy, update, in place.
+
+    Each level's units run on numba's threads (:func:`texsynth.synth.threads.use_threads`), split in as
+    many blocks of whole units as threads; the histogram counts change between levels (and within a unit).
+    Every array must be C-contiguous, features float32, maps int64 (the caller,
+    :mod:`texsynth.synth.pixel.synthesis`, prepares them once per level and pass); ``state.run.stamp`` is
+    ``(blocks, h * w)`` (or ``(h * w,)``: one block). The bytes do not depend on the thread count.
+    """
+    _run_levels(state, schedule, level_lo, level_hi, parallel=True)
+
+
+def synthesize_chunk(state: SearchState, start: int, stop: int) -> None:
+    """Run the kernel on ``state.run.order[start:stop]``, one position after the other, in place.
+
+    Every array must be C-contiguous, features float32, maps int64 (see :func:`synthesize_levels`, the
+    parallel form the driver uses).
+    """
+    order = np.ascontiguousarray(state.run.order[start:stop], dtype=np.int64)
+    tag0 = int(state.run.counter[0])
+    state.run.counter[0] += len(order) + 1
+    steps = np.arange(len(order) + 1, dtype=np.int64)
+    _run_levels(state, Schedule(order, steps, steps, tag0), 0, len(order), parallel=False)
 
 
 def position_distance(a: np.ndarray, b: np.ndarray, metric: int, alpha: float) -> np.ndarray:
@@ -634,76 +1018,103 @@ def _candidates_reference(state: SearchState, oy: int, ox: int, key: int) -> np.
 
 def synthesize_chunk_reference(state: SearchState, start: int, stop: int) -> None:
     """Slow, obvious NumPy version of :func:`synthesize_chunk` (same arguments, same results)."""
+    for p in state.run.order[start:stop]:
+        _positions_reference(state, [[int(p)]])
+
+
+def synthesize_levels_reference(state: SearchState, schedule: Schedule, level_lo: int, level_hi: int) -> None:
+    """Slow, obvious NumPy version of :func:`synthesize_levels` (same arguments, same results): the
+    levels one after the other, each level's units one after the other."""
+    sched, units, starts = schedule.sched, schedule.units, schedule.starts
+    for level in range(level_lo, level_hi):
+        steps = range(int(starts[level]), int(starts[level + 1]))
+        _positions_reference(state, [[int(p) for p in sched[units[u] : units[u + 1]]] for u in steps])
+
+
+def _positions_reference(state: SearchState, units: list[list[int]]) -> None:
+    """Search and copy the positions of ``units`` in turn, the histogram counts as they were before the
+    first one plus the changes of the position's own unit (each position's own label less one), changed
+    after the last."""
     s = state
     out, ex, src, done = s.cur.out, s.cur.ex, s.cands.src, s.run.done
     H, W = out.shape[:2]
     y0, y1, x0, x1 = (int(v) for v in s.cands.valid)
-    for p in s.run.order[start:stop]:
-        oy, ox = divmod(int(p), W)
-        keep = np.ones(len(s.cur.offsets), dtype=bool)
-        if s.run.first_pass:
-            keep = done[(oy + s.cur.offsets[:, 0]) % H, (ox + s.cur.offsets[:, 1]) % W] != 0
-            if s.par.weight == 0.0 and s.gui.weight == 0.0 and not keep.any():  # nothing to compare yet
-                out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
-                done[oy, ox] = 1
-                s.run.best_out[oy, ox] = 0.0
-                continue
-        if s.cands.exact:
-            gy, gx = np.mgrid[y0:y1, x0:x1]
-            cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
-            cands = cands[s.cands.mask[cands[:, 0], cands[:, 1]] != 0]
-            cands = cands[_in_class_window(s, cands, oy, ox)]
-            if len(cands) == 0:  # an empty class window: keep the source and its distance
-                out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
-                done[oy, ox] = 1
-                continue
-        else:
-            key = int(splitmix(np.uint64(s.run.seed_key) ^ np.uint64(p)))
-            cands = _candidates_reference(s, oy, ox, key)
-        d = np.zeros(len(cands))
-        if s.cur.weight > 0:
-            d += s.cur.weight * _block_reference(
-                out, oy, ox, ex, cands, s.cur.offsets, s.cur.metric, s.alpha, keep, s.cur.entry_weights
-            )
-        if s.par.weight > 0:
-            full = np.ones(len(s.par.offsets), dtype=bool)
-            d += s.par.weight * _block_reference(
-                s.par.out,
-                oy // 2,
-                ox // 2,
-                s.par.ex,
-                cands // 2,
-                s.par.offsets,
-                s.par.metric,
-                s.alpha,
-                full,
-                s.par.entry_weights,
-            )
-        if s.gui.weight > 0:
-            full = np.ones(len(s.gui.offsets), dtype=bool)
-            d += s.gui.weight * _block_reference(
-                s.gui.out,
-                oy,
-                ox,
-                s.gui.ex,
-                cands,
-                s.gui.offsets,
-                s.gui.metric,
-                s.alpha,
-                full,
-                s.gui.entry_weights,
-            )
-        labels, count, ew = s.hist.labels, s.hist.count, ex.shape[1]
-        factor = np.ones(len(cands))
-        if s.hist.weight > 0:  # counts are kept only while they matter
-            count[labels[src[oy, ox, 0] * ew + src[oy, ox, 1]]] -= 1
-            lab = labels[cands[:, 0] * ew + cands[:, 1]]
-            factor = 1.0 + s.hist.weight * np.maximum(count[lab] / s.hist.target[lab] - 1.0, 0.0)
-        best = int(np.argmin(d * factor))
-        by, bx = cands[best]
-        src[oy, ox] = (by, bx)
-        if s.hist.weight > 0:
-            count[labels[by * ew + bx]] += 1
-        out[oy, ox] = ex[by, bx]
-        done[oy, ox] = 1
-        s.run.best_out[oy, ox] = d[best]
+    labels, count, ew = s.hist.labels, s.hist.count, ex.shape[1]
+    frozen = count.copy()
+    changes: list[tuple[int, int]] = []
+    for unit in units:
+        unit_count = frozen.copy()  # the level's counts, with this unit's own changes
+        for p in unit:
+            oy, ox = divmod(int(p), W)
+            keep = np.ones(len(s.cur.offsets), dtype=bool)
+            if s.run.first_pass:
+                keep = done[(oy + s.cur.offsets[:, 0]) % H, (ox + s.cur.offsets[:, 1]) % W] != 0
+                if s.par.weight == 0.0 and s.gui.weight == 0.0 and not keep.any():  # nothing to compare yet
+                    out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
+                    done[oy, ox] = 1
+                    s.run.best_out[oy, ox] = 0.0
+                    continue
+            if s.cands.exact:
+                gy, gx = np.mgrid[y0:y1, x0:x1]
+                cands = np.stack([gy.ravel(), gx.ravel()], axis=1)
+                cands = cands[s.cands.mask[cands[:, 0], cands[:, 1]] != 0]
+                cands = cands[_in_class_window(s, cands, oy, ox)]
+                if len(cands) == 0:  # an empty class window: keep the source and its distance
+                    out[oy, ox] = ex[src[oy, ox, 0], src[oy, ox, 1]]
+                    done[oy, ox] = 1
+                    continue
+            else:
+                key = int(splitmix(np.uint64(s.run.seed_key) ^ np.uint64(p)))
+                cands = _candidates_reference(s, oy, ox, key)
+            d = np.zeros(len(cands))
+            if s.cur.weight > 0:
+                d += s.cur.weight * _block_reference(
+                    out, oy, ox, ex, cands, s.cur.offsets, s.cur.metric, s.alpha, keep, s.cur.entry_weights
+                )
+            if s.par.weight > 0:
+                full = np.ones(len(s.par.offsets), dtype=bool)
+                d += s.par.weight * _block_reference(
+                    s.par.out,
+                    oy // 2,
+                    ox // 2,
+                    s.par.ex,
+                    cands // 2,
+                    s.par.offsets,
+                    s.par.metric,
+                    s.alpha,
+                    full,
+                    s.par.entry_weights,
+                )
+            if s.gui.weight > 0:
+                full = np.ones(len(s.gui.offsets), dtype=bool)
+                d += s.gui.weight * _block_reference(
+                    s.gui.out,
+                    oy,
+                    ox,
+                    s.gui.ex,
+                    cands,
+                    s.gui.offsets,
+                    s.gui.metric,
+                    s.alpha,
+                    full,
+                    s.gui.entry_weights,
+                )
+            factor = np.ones(len(cands))
+            if s.hist.weight > 0:  # counts are kept only while they matter
+                old = int(labels[src[oy, ox, 0] * ew + src[oy, ox, 1]])
+                lab = labels[cands[:, 0] * ew + cands[:, 1]]
+                have = unit_count[lab] - (lab == old)
+                factor = 1.0 + s.hist.weight * np.maximum(have / s.hist.target[lab] - 1.0, 0.0)
+            best = int(np.argmin(d * factor))
+            by, bx = cands[best]
+            src[oy, ox] = (by, bx)
+            if s.hist.weight > 0:
+                changes.append((old, int(labels[by * ew + bx])))
+                unit_count[old] -= 1  # the unit's own changes count at once
+                unit_count[labels[by * ew + bx]] += 1
+            out[oy, ox] = ex[by, bx]
+            done[oy, ox] = 1
+            s.run.best_out[oy, ox] = d[best]
+    for old, new in changes:
+        count[old] -= 1
+        count[new] += 1

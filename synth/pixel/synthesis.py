@@ -15,6 +15,9 @@ weigh them, so that ``p = 0.5`` counts both parts equally whatever the units.
 
 Departures from Wei & Levoy, each with its figures in docs/pixel.md:
 - the first pass leaves a level's not-yet-synthesized positions out of the comparison (not noise);
+- passes run in parallel (Lefebvre & Hoppe 2005's independent sub-passes): a raster pass in tiles taken
+  in waves, then the first columns searched again with the full square (the wrap the tiles cut); other
+  orders by levels; histogram counts change between levels (:mod:`texsynth.synth.kernels.pixel_search`);
 - the fast search is k-coherence (Tong et al. 2002), measured against the exact search;
 - ``SearchSettings.falloff``: the same-level neighbourhood weighed by a Gaussian (Efros & Leung 1999);
 - ``refine_square``: refinement passes compare the full square in a random order;
@@ -31,7 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -51,8 +54,11 @@ from texsynth.synth.kernels.pixel_search import (
     Pass,
     SearchState,
     candidate_capacity,
+    conflict_offsets,
     position_distance,
-    synthesize_chunk,
+    schedule_levels,
+    synthesize_levels,
+    tile_schedule,
 )
 from texsynth.synth.threads import current_threads
 
@@ -475,6 +481,67 @@ def _empty_features(channels: int) -> np.ndarray:
     return np.zeros((1, 1, channels), dtype=np.float32)
 
 
+class _Parts(NamedTuple):
+    """The same-level offsets of a pass and the weights that go with them (:func:`_part_weights`)."""
+
+    offsets: np.ndarray
+    weight: float
+    gui_offsets: np.ndarray
+    gui_weight: float
+    entry_weights: np.ndarray
+
+
+def _seam_parts(
+    size: int, falloff: float, n_par: int, unit: float, p: float, guidance: Guidance | None, gunit: float
+) -> _Parts:
+    """The full square of side ``size`` weighed as the first pass weighs its neighbourhood (eq 13's ``p``)."""
+    offs = _nearest_first(neighbourhood_offsets(size, "square"), falloff)
+    weight, gui_offs, gui_weight = _part_weights(offs, n_par, unit, p, guidance, gunit)
+    return _Parts(offs, weight, gui_offs, gui_weight, entry_weights(offs, size, falloff))
+
+
+def _search_seam(
+    state: SearchState,
+    shape: tuple[int, int],
+    band: int,
+    parts: _Parts,
+    cand_offs: np.ndarray,
+    rng: np.random.Generator,
+) -> None:
+    """Search the first ``band`` columns again, row after row, with the full square ``parts``.
+
+    A raster first pass run in tiles (:func:`texsynth.synth.kernels.pixel_search.tile_schedule`) leaves
+    its first ``r`` columns without the end of the row above across the wrap, which a raster scan compares;
+    once the pass is over every neighbour is there, on both sides. The driver passes ``band = 2 r``
+    (measured best on the bent laminae, docs/pixel.md, "Parallel passes"). A few positions (``band`` x
+    height), levels of one position or a few: on the calling thread.
+    """
+    H, W = shape
+    band = min(band, W)
+    if band <= 0:
+        return
+    kept = (state.cur, state.par, state.gui, state.cands, state.run)
+    order = (np.arange(H)[:, None] * W + np.arange(band)[None, :]).ravel().astype(np.int64)
+    state.cur = state.cur._replace(
+        offsets=parts.offsets, weight=parts.weight, entry_weights=parts.entry_weights
+    )
+    state.par = state.par._replace(weight=parts.weight if state.par.weight > 0.0 else 0.0)
+    state.gui = state.gui._replace(offsets=parts.gui_offsets, weight=float(parts.gui_weight))
+    c = state.cands
+    capacity = candidate_capacity(len(cand_offs), c.kset.shape[2], c.use_hint, c.n_random)
+    state.cands = c._replace(cand_offs=cand_offs, capacity=max(c.capacity, capacity))
+    counter = state.run.counter
+    schedule = schedule_levels(order, shape, conflict_offsets(parts.offsets, cand_offs), int(counter[0]))
+    counter[0] += len(order) + 1
+    state.run = state.run._replace(
+        order=order, first_pass=False, seed_key=np.uint64(int(rng.integers(0, 2**63)))
+    )
+    try:
+        synthesize_levels(state, schedule, 0, len(schedule.starts) - 1)
+    finally:
+        state.cur, state.par, state.gui, state.cands, state.run = kept
+
+
 def synthesize_source_map(
     ex_levels: Sequence[np.ndarray],
     out_shapes: Sequence[tuple[int, int]],
@@ -546,7 +613,7 @@ def synthesize_source_map(
     report: dict[str, float] = {}
     srcs: list[np.ndarray | None] = [None] * levels
     stamp_size = max(int(np.prod(e.shape[:2])) for e in ex_levels)
-    stamp = np.zeros(stamp_size, dtype=np.int64)
+    stamp = np.zeros((current_threads(), stamp_size), dtype=np.int64)  # one row per block of a level
     counter = np.zeros(1, dtype=np.int64)
     for level in range(levels - 1, -1, -1):
         ex = np.ascontiguousarray(ex_levels[level], dtype=np.float32)
@@ -672,23 +739,39 @@ def synthesize_source_map(
                 state.par = state.par._replace(weight=w_ref if has_parent else 0.0)
                 state.gui = state.gui._replace(offsets=gui_ref, weight=float(w_gui_ref))
                 state.cands = state.cands._replace(cand_offs=all_cand_offs)
+            first = it == 0 and not started
+            tiled = not refine and settings.scan == "lexicographic"
+            order = None if tiled else scan_order(shape, "random" if refine else settings.scan, rng)
+            conflicts = conflict_offsets(state.cur.offsets, state.cands.cand_offs)
+            if order is None:  # a raster scan: tiles in waves (a raster scan on a torus is one chain)
+                schedule = tile_schedule(shape, conflicts, tag0=int(counter[0]))
+            else:
+                schedule = schedule_levels(order, shape, conflicts, int(counter[0]))
+            counter[0] += n + 1
             state.run = Pass(
-                order=scan_order(shape, "random" if refine else settings.scan, rng),
-                first_pass=it == 0 and not started,
+                order=schedule.sched if order is None else order,
+                first_pass=first,
                 done=state.run.done if it > 0 else np.full(shape, 1 if started else 0, np.uint8),
                 seed_key=np.uint64(int(rng.integers(0, 2**63))),
                 stamp=stamp,
                 counter=counter,
                 best_out=best_out,
             )
-            step = max(1, n // _CHUNKS_PER_PASS)
             label = f"{stage}: level {level + 1}/{levels}, pass {it + 1}/{settings.iterations}"
-            for start in range(0, n, step):
-                stop = min(n, start + step)
-                synthesize_chunk(state, start, stop)
+            ends = schedule.units[schedule.starts]  # positions done once each level has run
+            n_levels = len(ends) - 1
+            lo = 0
+            while lo < n_levels:  # about _CHUNKS_PER_PASS chunks of whole levels, a progress report each
+                hi = int(np.searchsorted(ends, ends[lo] + max(1, n // _CHUNKS_PER_PASS), side="left"))
+                hi = min(n_levels, max(lo + 1, hi))
+                synthesize_levels(state, schedule, lo, hi)
+                lo = hi
                 if progress is not None:
-                    frac = (done_work + (it * n + stop)) / total_work
+                    frac = (done_work + (it * n + int(ends[hi]))) / total_work
                     progress(label, span[0] + (span[1] - span[0]) * frac)
+            if first and tiled:
+                seam = _seam_parts(size, settings.falloff, n_par, unit, p, guidance, gunit)
+                _search_seam(state, shape, 2 * (size // 2), seam, all_cand_offs, rng)
             report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state.run.best_out))
         done_work += work[level]
         srcs[level] = src

@@ -7,17 +7,17 @@ import numpy as np
 import pytest
 
 import texsynth.synth.pixel.synthesis as synthesis
-from texsynth.synth.kernels.pixel_search import synthesize_chunk_reference
+from texsynth.synth.kernels.pixel_search import synthesize_levels_reference
 from texsynth.synth.pixel.synthesis import CandidateWindow, synthesize_source_map
 
 __all__ = ["_rng_image", "_run_both", "_striped_window", "_tiled_window", "synthesize_with_reference"]
 
 
 def synthesize_with_reference(**kwargs: object) -> tuple:
-    """:func:`synthesize_source_map` with the plain NumPy search (``synthesize_chunk_reference``) in
-    place of the numba kernel: the driver calls whatever its module's ``synthesize_chunk`` is."""
+    """:func:`synthesize_source_map` with the plain NumPy search (``synthesize_levels_reference``) in
+    place of the numba kernel: the driver calls whatever its module's ``synthesize_levels`` is."""
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(synthesis, "synthesize_chunk", synthesize_chunk_reference)
+        patch.setattr(synthesis, "synthesize_levels", synthesize_levels_reference)
         return synthesize_source_map(**kwargs)  # type: ignore[arg-type]
 
 
@@ -63,4 +63,3 @@ def _tiled_window(
     return ex, CandidateWindow(
         [cls], [want], period=period, span=0, transfer_levels=[(to_common, from_common)]
     )
-

@@ -31,15 +31,17 @@ from texsynth.synth.threads import (
 
 # Every method at a small size, with 1, 2 and 4 threads in one process whose numba pool has 4 threads
 # (NUMBA_NUM_THREADS=4, more than this machine's cores, so that 4 threads really run), every solid
-# kernel forced onto the pool however small its input: a digest per method and count.
+# kernel and every pixel pass forced onto the pool however small its input: a digest per method and count.
 _EVERY_METHOD = """
 import hashlib, json
 import numpy as np
 import texsynth.synth.kernels.solid_search as k
+import texsynth.synth.kernels.pixel_search as pixel
 from texsynth.synth.api import available_methods, synthesize
 from texsynth.synth.io.patterns import undulating_laminae
 
 k.PARALLEL_MIN_ITEMS = 0
+pixel.PARALLEL_MIN_LEVEL = 0
 ex = undulating_laminae((40, 40), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0)
 yy, xx = np.mgrid[0:48, 0:48].astype(np.float32)
 con = (0.5 + 0.5 * np.sin(2 * np.pi * (xx + 6 * np.sin(2 * np.pi * yy / 48)) / 12)).astype(np.float32)

@@ -90,10 +90,12 @@ def test_the_default_output_shows_the_seam_the_measure_catches(method: str) -> N
     configuration this test was written for). The fibres recipe's causal passes alone keep a seam too,
     less far above the interior on this case (mean ratio 1.30, rank 0.79; with transfer_candidates alone
     1.44, 0.70); its square refinement passes (the defaults since) look across the borders: 0.86, 0.30.
-    wei-levoy with the paper's passes: its default square refinement already looks across the borders."""
+    wei-levoy with the paper's passes: its default square refinement already looks across the borders.
+    Since raster passes run in tiles (issue 25) a seam pass searches the first columns again with the full
+    square, across the left border: arbitrary-shape's rank 0.78 (ratio 2.99), below the 0.85 before."""
     paper = {"recipe": "paper", "transfer_candidates": False} if method == "arbitrary-shape" else PAPER_WL
     ratio, rank = _mean_seam(method, periodic=False, extra=paper)
-    assert ratio > 1.3 and rank > 0.85, (ratio, rank)
+    assert ratio > 1.3 and rank > 0.75, (ratio, rank)
 
 
 def test_paper_passes_tile_with_periodic() -> None:
