@@ -56,7 +56,12 @@ def _serve(data_dir: Path) -> tuple[subprocess.Popen, str]:
         # of the real methods is now refused at submission with a 422)
         "TEXSYNTH_EXTRA_METHODS": "tests.service.methods_for_tests",
     }
-    command = [sys.executable, "-c", "import sys; from texsynth.synth.cli import main; sys.exit(main())", "serve"]
+    command = [
+        sys.executable,
+        "-c",
+        "import sys; from texsynth.synth.cli import main; sys.exit(main())",
+        "serve",
+    ]
     command += ["--host", "127.0.0.1", "--port", str(port), "--data-dir", str(data_dir)]
     with open(data_dir.parent / "serve.log", "wb") as log:
         proc = subprocess.Popen(
@@ -259,7 +264,9 @@ def main() -> None:
                 page.wait_for_selector("#job-state.failed")
                 page.click("#timings-box summary")
                 page.screenshot(
-                    path=str(OUT / "service-failed.png"), clip=_clip(page, "#view h2", "#inputs"), full_page=True
+                    path=str(OUT / "service-failed.png"),
+                    clip=_clip(page, "#view h2", "#inputs"),
+                    full_page=True,
                 )
 
                 # the home page: the examples, the short form, and the jobs (failed ones with their reason)
