@@ -25,9 +25,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - parallel passes (Jacobi search, index histogram frozen per call; solve in blocks); every voxel searched;
 - a final rank remap onto the exemplars' grey levels (``grey_remap``, as Kopf): the solver loses the tails;
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
-- the laminar start (``structure``, :mod:`texsynth.synth.pixel.laminar`): one laminar isotropic exemplar
-  starts from curved sheets at its period, matched by the tree search, on the levels that keep the period; for
-  short-fringed exemplars solid-kopf's pilot decides (docs/solid.md, "chosen by a pilot").
+- structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
+  levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
+  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for fringed anisotropic ones.
 """
 
 from __future__ import annotations
@@ -59,9 +59,20 @@ from texsynth.synth.kernels.solid_kcoherence import (
     solve_pass,
 )
 from texsynth.synth.methods.common import SolidParams, checked_progress, laminar_start_fields
-from texsynth.synth.methods.solid_kopf import laminar_pilot
+from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH, laminar_pilot
 from texsynth.synth.params import ui
-from texsynth.synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
+from texsynth.synth.pixel.laminar import (
+    dominant_period,
+    laminar_volume,
+    level_phase,
+    oriented_phase,
+    plane_orientation,
+    sheet_normal,
+    sheets,
+    stack_period,
+    start_kind,
+    structure_levels,
+)
 from texsynth.synth.pixel.solid import (
     PLANE_AXES,
     LevelStep,
@@ -141,9 +152,34 @@ class SolidChenWangParams(SolidParams):
             )
         ),
     )
-    structure: Literal["auto", "none", "laminar"]
+    structure: Literal["auto", "none", "laminar", "oriented"]
     structure_length: float
     structure, structure_length = laminar_start_fields()
+    structure = Field(
+        "auto",
+        description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
+        "(the paper); 'auto' picks by the exemplars.",
+        json_schema_extra=ui(
+            details=(
+                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+                "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
+                "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations (as "
+                "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
+                "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
+                ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
+                "exemplars; 'oriented' for fringed exemplars of which one is anisotropic; else 'none'."
+            )
+        ),
+    )
+    oriented_length: float = Field(
+        ORIENTED_LENGTH,
+        gt=0.0,
+        le=64.0,
+        description="How far the oriented start's crumples stay straight, in fringe periods.",
+        json_schema_extra=ui(
+            unit="periods", details=("Correlation length of the oriented start's crumples, in periods.")
+        ),
+    )
     k: int = Field(
         15,
         ge=0,
@@ -466,8 +502,14 @@ class _Schedule:
     coarse_iterations: int
     orientation_gain: float
     solve_radius: int
-    laminar_start: bool = False
+    start: str = "none"
     period: float = 0.0
+    stack_period: float = 0.0
+
+    @property
+    def laminar_start(self) -> bool:
+        """Whether the coarsest level starts from sheets (laminar or oriented) rather than noise."""
+        return self.start != "none"
 
     @classmethod
     def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
@@ -490,15 +532,16 @@ class _Schedule:
                 coarse_iterations = LAMINAR_COARSE_ITERATIONS
         if coarse_iterations is None:
             coarse_iterations = iterations
-        start = starts_laminar(
+        start = start_kind(
             params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
         )
-        period = (
-            float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
-            if start
-            else 0.0
-        )
-        return cls(iterations, coarse_iterations, orientation_gain, solve_radius, start, period)
+        period = stack = 0.0
+        if start != "none":
+            period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
+        if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
+            views = {p: np.asarray(exemplars[p]) for p in params.planes}
+            stack = stack_period(views, sheet_normal({p: plane_orientation(im) for p, im in views.items()}))
+        return cls(iterations, coarse_iterations, orientation_gain, solve_radius, start, period, stack)
 
     def levels(self, levels: int) -> int:
         """At most ``levels``; with the laminar start, those that keep a 3 px period."""
@@ -539,7 +582,11 @@ class _ChenWangLoop:
             "solve_radius": schedule.solve_radius,
             "sizes": list(plan.sizes),
             "laminar_start": schedule.laminar_start,
-            "period": schedule.period if schedule.laminar_start else None,
+            "start": schedule.start,
+            # The sheets' spacing: the planes' mean period, or the stack's behind it (oriented start).
+            "period": (schedule.stack_period if schedule.start == "oriented" else schedule.period)
+            if schedule.laminar_start
+            else None,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -560,14 +607,30 @@ class _ChenWangLoop:
         start_volume = None
         if (self.match is None or self.prev_bank is None) and self.schedule.laminar_start:
             scale = 2.0**step.level
-            start_volume = laminar_volume(
-                shape,
-                self.schedule.period / scale,
-                params.structure_length * self.schedule.period / scale,
-                np.concatenate([plan.exemplars[PLANES.index(p)][step.level].ravel() for p in params.planes]),
-                rng,
-                periodic=params.periodic,
+            values = np.concatenate(
+                [plan.exemplars[PLANES.index(p)][step.level].ravel() for p in params.planes]
             )
+            if self.schedule.start == "oriented":  # solid-kopf's crumpled stack, at the finest shape
+                views = {p: plan.exemplars[PLANES.index(p)][0] for p in params.planes}
+                stack = self.schedule.stack_period
+                phi = oriented_phase(
+                    plan.shapes[0],
+                    views,
+                    stack,
+                    params.oriented_length * stack,
+                    rng,
+                    periodic=params.periodic,
+                )
+                start_volume = sheets(level_phase(phi, step.level), stack / scale, values)
+            else:
+                start_volume = laminar_volume(
+                    shape,
+                    self.schedule.period / scale,
+                    params.structure_length * self.schedule.period / scale,
+                    values,
+                    rng,
+                    periodic=params.periodic,
+                )
             match = _tree_matches(plan, step.level, bank, start_volume, params.periodic)
         elif self.match is None or self.prev_bank is None:
             match = _random_matches(bank, shape, rng)

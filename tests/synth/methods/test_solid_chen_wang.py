@@ -272,6 +272,8 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"neighbourhood_size": 6}}, InvalidParameter, "neighbourhood_size.*odd"),
         ({"params": {"k": -1}}, InvalidParameter, "'k'"),
         ({"params": {"scan": "spiral"}}, InvalidParameter, "scan"),
+        ({"params": {"structure": "stacked"}}, InvalidParameter, "structure"),
+        ({"params": {"oriented_length": 0.0}}, InvalidParameter, "oriented_length"),
         ({"params": {"histogram": 1}}, InvalidParameter, "unknown parameter"),
         ({"params": {"planes": ["xy"]}}, InvalidParameter, "planes must be two or three distinct planes"),
         ({"params": {"planes": ["xy", "xy"]}}, InvalidParameter, "planes must be two or three distinct"),
@@ -366,3 +368,32 @@ def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
         "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "adapt_to_structure": False}, seed=1
     )
     assert literal.stats["solve_radius"] == 0
+
+
+def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_an_anisotropic_exemplar() -> None:
+    """Per-plane slices of sheets normal to (1, 1, 1): the oriented start (solid-kopf's crumpled stack) gives
+    each plane its orientation and the stack's spacing; 'auto' takes it for these fringed,
+    anisotropic exemplars (the same bytes as asking for it) and keeps the random start on noise."""
+    from texsynth.synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
+    from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.output.volume import mid_slices
+
+    planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
+    small = {"iterations": 1, "coarse_iterations": 4}
+    res = {
+        s: synthesize(
+            "solid-chen-wang", exemplars=planes, size=(24, 24, 24), params={**small, "structure": s}, seed=2
+        )
+        for s in ("oriented", "auto", "none")
+    }
+    assert res["oriented"].stats["start"] == res["auto"].stats["start"] == "oriented"
+    assert res["oriented"].stats["laminar_start"] and 5.0 < res["oriented"].stats["period"] < 7.0
+    assert res["oriented"].image.tobytes() == res["auto"].image.tobytes()
+    assert res["none"].stats["start"] == "none" and not res["none"].stats["laminar_start"]
+    for axis, plane in enumerate(("xy", "xz", "yz")):
+        got = dominant_orientation(structure_tensor(np.take(res["oriented"].image, 12, axis=axis)))
+        want = dominant_orientation(structure_tensor(planes[plane]))
+        assert abs(wrap_angle(got - want)) < np.radians(15), plane
+    noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    grains = synthesize("solid-chen-wang", noise, size=(12, 12, 12), params={**small, "levels": 2}, seed=1)
+    assert grains.stats["start"] == "none"
