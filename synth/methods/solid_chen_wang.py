@@ -27,7 +27,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
-  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for fringed anisotropic ones.
+  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for one fringed anisotropic exemplar.
 """
 
 from __future__ import annotations
@@ -109,6 +109,10 @@ LAMINAR_ORIENTATION_GAIN = 32.0
 LAMINAR_SOLVE_RADIUS = 1
 #: Iterations per level above the finest for laminar exemplars (``coarse_iterations=None``; docs/solid.md).
 LAMINAR_COARSE_ITERATIONS = 60
+#: After the oriented start (``adapt_to_structure``): iterations at the finest level (at least) and above it
+#: (``coarse_iterations=None``); more straighten the fitted crumples and cost time (docs/solid.md).
+ORIENTED_ITERATIONS = 5
+ORIENTED_COARSE_ITERATIONS = 10
 
 
 class SolidChenWangParams(SolidParams):
@@ -128,7 +132,10 @@ class SolidChenWangParams(SolidParams):
         True,
         description="Adapt the schedule to the exemplar: layered ones get more passes per level.",
         json_schema_extra=ui(
-            details=("Laminae get at least 10 iterations per level (off: iterations literally).")
+            details=(
+                "Laminae get at least 10 iterations per level, 5 after the oriented start (off: iterations "
+                "literally)."
+            )
         ),
     )
     iterations: int = Field(
@@ -145,10 +152,9 @@ class SolidChenWangParams(SolidParams):
         description="Passes at every level but the finest; automatic: chosen from the exemplar.",
         json_schema_extra=ui(
             details=(
-                "Iterations at every level but the finest. None: "
-                f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as "
-                f"the "
-                "finest level's."
+                "Iterations at every level but the finest. None, when adapt_to_structure is on: "
+                f"{ORIENTED_COARSE_ITERATIONS} after the oriented start, {LAMINAR_COARSE_ITERATIONS} for "
+                "other laminar exemplars; else as the finest level's."
             )
         ),
     )
@@ -167,7 +173,8 @@ class SolidChenWangParams(SolidParams):
                 "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
                 "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
                 ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
-                "exemplars; 'oriented' for fringed exemplars of which one is anisotropic; else 'none'."
+                "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes (per-plane "
+                "and two-view laminae measured better from noise); else 'none'."
             )
         ),
     )
@@ -494,6 +501,12 @@ def _usage_spread(origin: np.ndarray, bank: ExemplarBank, active: np.ndarray) ->
 # ------------------------------------------------------------------------------------------------ driver
 
 
+def _one_exemplar(exemplars: Mapping[str, np.ndarray], planes: tuple[str, ...]) -> bool:
+    """Whether one image serves the three planes (the case where 'auto' takes the oriented start)."""
+    images = [np.asarray(exemplars[p]) for p in planes]
+    return len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
+
+
 @dataclass(frozen=True)
 class _Schedule:
     """The run's automatic choices, resolved once from the parameters and the constrained exemplars."""
@@ -520,6 +533,11 @@ class _Schedule:
         orientation_gain = params.orientation_gain or 0.0
         solve_radius = params.solve_radius or 0
         coarse_iterations = params.coarse_iterations
+        start = start_kind(
+            params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
+        )
+        if params.structure == "auto" and start == "oriented" and not _one_exemplar(exemplars, params.planes):
+            start = "none"  # bent laminae per plane or in two views: worse than from noise (docs/solid.md)
         if params.adapt_to_structure:
             constrained = [exemplars[name] for name in params.planes]
             _, iterations = structure_schedule(constrained, 1, iterations)
@@ -528,13 +546,14 @@ class _Schedule:
                 orientation_gain = LAMINAR_ORIENTATION_GAIN
             if params.solve_radius is None and laminar:
                 solve_radius = LAMINAR_SOLVE_RADIUS
+            if start == "oriented":  # the stack is there from the start: nothing to grow or anneal
+                iterations = max(params.iterations, ORIENTED_ITERATIONS)
+                if coarse_iterations is None:
+                    coarse_iterations = ORIENTED_COARSE_ITERATIONS
             if coarse_iterations is None and laminar:
                 coarse_iterations = LAMINAR_COARSE_ITERATIONS
         if coarse_iterations is None:
             coarse_iterations = iterations
-        start = start_kind(
-            params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
-        )
         period = stack = 0.0
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))

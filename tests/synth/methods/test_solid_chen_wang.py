@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from texsynth.synth import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
 from texsynth.synth.api import PLANES, synthesize
 from texsynth.synth.errors import Cancelled
 from texsynth.synth.grid.scan import SCAN_ORDERS, scan_order
@@ -370,30 +371,51 @@ def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
     assert literal.stats["solve_radius"] == 0
 
 
-def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_an_anisotropic_exemplar() -> None:
+def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotropic_exemplar() -> None:
     """Per-plane slices of sheets normal to (1, 1, 1): the oriented start (solid-kopf's crumpled stack) gives
-    each plane its orientation and the stack's spacing; 'auto' takes it for these fringed,
-    anisotropic exemplars (the same bytes as asking for it) and keeps the random start on noise."""
-    from texsynth.synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
+    each plane its orientation and the stack's spacing. 'auto' takes it, with its short schedule, for one
+    fringed anisotropic exemplar on the three planes (the same bytes as asking for it), not for per-plane
+    exemplars (bent laminae measured better from noise) nor for noise."""
     from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.methods.solid_chen_wang import (
+        ORIENTED_COARSE_ITERATIONS,
+        ORIENTED_ITERATIONS,
+        SolidChenWangParams,
+        _Schedule,
+    )
     from texsynth.synth.output.volume import mid_slices
 
     planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
     small = {"iterations": 1, "coarse_iterations": 4}
-    res = {
-        s: synthesize(
-            "solid-chen-wang", exemplars=planes, size=(24, 24, 24), params={**small, "structure": s}, seed=2
-        )
-        for s in ("oriented", "auto", "none")
-    }
-    assert res["oriented"].stats["start"] == res["auto"].stats["start"] == "oriented"
-    assert res["oriented"].stats["laminar_start"] and 5.0 < res["oriented"].stats["period"] < 7.0
-    assert res["oriented"].image.tobytes() == res["auto"].image.tobytes()
-    assert res["none"].stats["start"] == "none" and not res["none"].stats["laminar_start"]
+    res = synthesize(
+        "solid-chen-wang",
+        exemplars=planes,
+        size=(24, 24, 24),
+        params={**small, "structure": "oriented"},
+        seed=2,
+    )
+    assert res.stats["start"] == "oriented" and res.stats["laminar_start"] and 5.0 < res.stats["period"] < 7.0
     for axis, plane in enumerate(("xy", "xz", "yz")):
-        got = dominant_orientation(structure_tensor(np.take(res["oriented"].image, 12, axis=axis)))
+        got = dominant_orientation(structure_tensor(np.take(res.image, 12, axis=axis)))
         want = dominant_orientation(structure_tensor(planes[plane]))
         assert abs(wrap_angle(got - want)) < np.radians(15), plane
+    assert _Schedule.resolve(SolidChenWangParams(), planes).start == "none"
+    one = dict.fromkeys(PLANES, planes["xy"])
+    schedule = _Schedule.resolve(SolidChenWangParams(), one)
+    assert (schedule.start, schedule.iterations, schedule.coarse_iterations) == (
+        "oriented",
+        ORIENTED_ITERATIONS,
+        ORIENTED_COARSE_ITERATIONS,
+    )
+    auto, asked = (
+        synthesize(
+            "solid-chen-wang", exemplars=one, size=(16, 16, 16), params={**small, "structure": s}, seed=2
+        )
+        for s in ("auto", "oriented")
+    )
+    assert auto.stats["start"] == "oriented" and auto.image.tobytes() == asked.image.tobytes()
+    # After the oriented start the schedule is shorter (nothing to grow); from noise the laminae's.
+    assert (auto.stats["iterations"], auto.stats["coarse_iterations"]) == (ORIENTED_ITERATIONS, 4)
     noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
     grains = synthesize("solid-chen-wang", noise, size=(12, 12, 12), params={**small, "levels": 2}, seed=1)
     assert grains.stats["start"] == "none"
