@@ -27,7 +27,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
-  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for one fringed anisotropic exemplar.
+  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for one crumpled anisotropic exemplar.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field
+from scipy import ndimage as ndi
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -113,6 +114,9 @@ LAMINAR_COARSE_ITERATIONS = 60
 #: (``coarse_iterations=None``); more straighten the fitted crumples and cost time (docs/solid.md).
 ORIENTED_ITERATIONS = 5
 ORIENTED_COARSE_ITERATIONS = 10
+#: 'auto' takes the oriented start when the exemplar's fringes keep their orientation at most this many
+#: periods (:func:`orientation_length`: the turbostratic stack 1.0, bent laminae 2.0-4.8; docs/solid.md).
+ORIENTED_MAX_LENGTH = 1.5
 
 
 class SolidChenWangParams(SolidParams):
@@ -173,8 +177,9 @@ class SolidChenWangParams(SolidParams):
                 "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
                 "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
                 ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
-                "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes (per-plane "
-                "and two-view laminae measured better from noise); else 'none'."
+                "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes whose "
+                "fringes turn within 1.5 periods (a crumpled stack; bent laminae measured better from "
+                "noise); else 'none'."
             )
         ),
     )
@@ -501,10 +506,39 @@ def _usage_spread(origin: np.ndarray, bank: ExemplarBank, active: np.ndarray) ->
 # ------------------------------------------------------------------------------------------------ driver
 
 
-def _one_exemplar(exemplars: Mapping[str, np.ndarray], planes: tuple[str, ...]) -> bool:
-    """Whether one image serves the three planes (the case where 'auto' takes the oriented start)."""
+def orientation_length(image: np.ndarray) -> float:
+    """How far the fringes keep their orientation, in fringe periods.
+
+    The structure tensor's doubled-angle orientation ``(J_rr - J_cc + 2i J_rc) / |...|`` (Gaussian
+    derivatives of 1 px, integration 2 px), less its mean, is autocorrelated (periodic FFT); the answer is
+    the first radius at which the radial mean of the normalised autocorrelation falls below 0.5, divided
+    by :func:`texsynth.synth.pixel.laminar.dominant_period`. Crumpled stacks: about 1; bent laminae 2-5.
+    """
+    img = np.asarray(image, dtype=np.float64)
+    gr = ndi.gaussian_filter(img, 1.0, order=(1, 0), mode="reflect")
+    gc = ndi.gaussian_filter(img, 1.0, order=(0, 1), mode="reflect")
+    j_rr, j_cc, j_rc = (ndi.gaussian_filter(g, 2.0, mode="reflect") for g in (gr * gr, gc * gc, gr * gc))
+    z = (j_rr - j_cc) + 2j * j_rc
+    z = z / np.maximum(np.abs(z), 1e-12)
+    z = z - z.mean()
+    spectrum = np.fft.fft2(z)
+    ac = np.fft.ifft2(spectrum * np.conj(spectrum)).real
+    ac = ac / max(float(ac[0, 0]), 1e-12)
+    h, w = ac.shape
+    rows, cols = np.meshgrid(np.fft.fftfreq(h) * h, np.fft.fftfreq(w) * w, indexing="ij")
+    radius = np.hypot(rows, cols).astype(np.int64).ravel()
+    profile = np.bincount(radius, ac.ravel()) / np.maximum(np.bincount(radius), 1)
+    below = np.flatnonzero(profile < 0.5)
+    lag = int(below[0]) if below.size else len(profile)
+    return lag / max(dominant_period(img), 1e-6)
+
+
+def _crumpled_stack(exemplars: Mapping[str, np.ndarray], planes: tuple[str, ...]) -> bool:
+    """Whether 'auto' takes the oriented start: one exemplar on the three planes whose fringes turn within
+    :data:`ORIENTED_MAX_LENGTH` periods (:func:`orientation_length`), as the stack's crumples do."""
     images = [np.asarray(exemplars[p]) for p in planes]
-    return len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
+    one = len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
+    return one and orientation_length(images[0]) <= ORIENTED_MAX_LENGTH
 
 
 @dataclass(frozen=True)
@@ -536,8 +570,12 @@ class _Schedule:
         start = start_kind(
             params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
         )
-        if params.structure == "auto" and start == "oriented" and not _one_exemplar(exemplars, params.planes):
-            start = "none"  # bent laminae per plane or in two views: worse than from noise (docs/solid.md)
+        if (
+            params.structure == "auto"
+            and start == "oriented"
+            and not _crumpled_stack(exemplars, params.planes)
+        ):
+            start = "none"  # bent laminae: worse than from noise (docs/solid.md)
         if params.adapt_to_structure:
             constrained = [exemplars[name] for name in params.planes]
             _, iterations = structure_schedule(constrained, 1, iterations)

@@ -374,14 +374,16 @@ def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
 def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotropic_exemplar() -> None:
     """Per-plane slices of sheets normal to (1, 1, 1): the oriented start (solid-kopf's crumpled stack) gives
     each plane its orientation and the stack's spacing. 'auto' takes it, with its short schedule, for one
-    fringed anisotropic exemplar on the three planes (the same bytes as asking for it), not for per-plane
-    exemplars (bent laminae measured better from noise) nor for noise."""
+    crumpled anisotropic exemplar on the three planes (the same bytes as asking for it), not for per-plane
+    exemplars, bent laminae (measured better from noise) nor noise."""
     from texsynth.synth.io.laminar import turbostratic_volume
     from texsynth.synth.methods.solid_chen_wang import (
         ORIENTED_COARSE_ITERATIONS,
         ORIENTED_ITERATIONS,
+        ORIENTED_MAX_LENGTH,
         SolidChenWangParams,
         _Schedule,
+        orientation_length,
     )
     from texsynth.synth.output.volume import mid_slices
 
@@ -419,3 +421,7 @@ def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotrop
     noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
     grains = synthesize("solid-chen-wang", noise, size=(12, 12, 12), params={**small, "levels": 2}, seed=1)
     assert grains.stats["start"] == "none"
+    # Bent laminae (one bend across the exemplar) keep their orientation for several periods: from noise.
+    bent = undulating_laminae((128, 128), 7, 16, 128, noise=0.3)
+    assert orientation_length(planes["xy"]) < ORIENTED_MAX_LENGTH < 3.0 < orientation_length(bent)
+    assert _Schedule.resolve(SolidChenWangParams(), dict.fromkeys(PLANES, bent)).start == "none"
