@@ -297,15 +297,18 @@ def test_bad_inputs_say_what_is_wrong(kwargs, error, match) -> None:
         synthesize("solid-chen-wang", **args)
 
 
-def test_same_bytes_with_one_or_two_threads() -> None:
+@pytest.mark.parametrize("start", ["none", "oriented"])
+def test_same_bytes_with_one_or_two_threads(start: str) -> None:
     """The parallel search and solve write only their own slots, sum in a fixed order and split their
-    work into a fixed number of blocks: one thread and two give the same bytes."""
+    work into a fixed number of blocks: one thread and two give the same bytes (from noise and from the
+    oriented start)."""
     code = (
         "import hashlib; from texsynth.synth.api import synthesize; from texsynth.synth.io.patterns import "
         "undulating_laminae;"
         "ex = undulating_laminae((32, 32), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0);"
         "r = synthesize('solid-chen-wang', ex, size=(12, 12, 12), params={'iterations': 2, 'levels': 2,"
-        " 'adapt_to_structure': False}, seed=3);"
+        f" 'adapt_to_structure': False, 'structure': '{start}'}}, seed=3);"
+        "assert r.stats['start'] == " + repr(start) + ";"
         "print(hashlib.sha256(r.image.tobytes()).hexdigest())"
     )
     digests = []
