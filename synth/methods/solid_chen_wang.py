@@ -534,11 +534,12 @@ def orientation_length(image: np.ndarray) -> float:
 
 
 def _crumpled_stack(exemplars: Mapping[str, np.ndarray], planes: tuple[str, ...]) -> bool:
-    """Whether 'auto' takes the oriented start: one exemplar on the three planes whose fringes turn within
-    :data:`ORIENTED_MAX_LENGTH` periods (:func:`orientation_length`), as the stack's crumples do."""
+    """Whether 'auto' takes the oriented start: one laminar exemplar (:func:`is_laminar`) on the three planes
+    whose fringes turn within :data:`ORIENTED_MAX_LENGTH` periods (:func:`orientation_length`), as the stack's
+    crumples do."""
     images = [np.asarray(exemplars[p]) for p in planes]
     one = len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
-    return one and orientation_length(images[0]) <= ORIENTED_MAX_LENGTH
+    return one and is_laminar(images[:1]) and orientation_length(images[0]) <= ORIENTED_MAX_LENGTH
 
 
 @dataclass(frozen=True)
@@ -575,7 +576,7 @@ class _Schedule:
             and start == "oriented"
             and not _crumpled_stack(exemplars, params.planes)
         ):
-            start = "none"  # bent laminae: worse than from noise (docs/solid.md)
+            start = "none"  # bent laminae: worse than from noise (docs/solid.md); grains: not laminae
         if params.adapt_to_structure:
             constrained = [exemplars[name] for name in params.planes]
             _, iterations = structure_schedule(constrained, 1, iterations)
