@@ -52,6 +52,7 @@ CHEN_WANG_PAPER: dict[str, Any] = {
 RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onions", "defaults", {}, 64),
     ("turbostratic", "defaults", {}, 64),
+    ("turbostratic", "structure=none", {"structure": "none"}, 64),
     ("onions", "paper", CHEN_WANG_PAPER, 64),
     ("turbostratic", "paper", CHEN_WANG_PAPER, 64),
     ("onions", "defaults", {}, 128),

@@ -25,9 +25,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - parallel passes (Jacobi search, index histogram frozen per call; solve in blocks); every voxel searched;
 - a final rank remap onto the exemplars' grey levels (``grey_remap``, as Kopf): the solver loses the tails;
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
-- the laminar start (``structure``, :mod:`texsynth.synth.pixel.laminar`): one laminar isotropic exemplar
-  starts from curved sheets at its period, matched by the tree search, on the levels that keep the period; for
-  short-fringed exemplars solid-kopf's pilot decides (docs/solid.md, "chosen by a pilot").
+- structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
+  levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
+  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for one crumpled anisotropic exemplar.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field
+from scipy import ndimage as ndi
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -59,9 +60,20 @@ from texsynth.synth.kernels.solid_kcoherence import (
     solve_pass,
 )
 from texsynth.synth.methods.common import SolidParams, checked_progress, laminar_start_fields
-from texsynth.synth.methods.solid_kopf import laminar_pilot
+from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH, laminar_pilot
 from texsynth.synth.params import ui
-from texsynth.synth.pixel.laminar import dominant_period, laminar_volume, starts_laminar, structure_levels
+from texsynth.synth.pixel.laminar import (
+    dominant_period,
+    laminar_volume,
+    level_phase,
+    oriented_phase,
+    plane_orientation,
+    sheet_normal,
+    sheets,
+    stack_period,
+    start_kind,
+    structure_levels,
+)
 from texsynth.synth.pixel.solid import (
     PLANE_AXES,
     LevelStep,
@@ -98,6 +110,13 @@ LAMINAR_ORIENTATION_GAIN = 32.0
 LAMINAR_SOLVE_RADIUS = 1
 #: Iterations per level above the finest for laminar exemplars (``coarse_iterations=None``; docs/solid.md).
 LAMINAR_COARSE_ITERATIONS = 60
+#: After the oriented start (``adapt_to_structure``): iterations at the finest level (at least) and above it
+#: (``coarse_iterations=None``); more straighten the fitted crumples and cost time (docs/solid.md).
+ORIENTED_ITERATIONS = 5
+ORIENTED_COARSE_ITERATIONS = 10
+#: 'auto' takes the oriented start when the exemplar's fringes keep their orientation at most this many
+#: periods (:func:`orientation_length`: the turbostratic stack 1.0, bent laminae 2.0-4.8; docs/solid.md).
+ORIENTED_MAX_LENGTH = 1.5
 
 
 class SolidChenWangParams(SolidParams):
@@ -117,7 +136,10 @@ class SolidChenWangParams(SolidParams):
         True,
         description="Adapt the schedule to the exemplar: layered ones get more passes per level.",
         json_schema_extra=ui(
-            details=("Laminae get at least 10 iterations per level (off: iterations literally).")
+            details=(
+                "Laminae get at least 10 iterations per level, 5 after the oriented start (off: iterations "
+                "literally)."
+            )
         ),
     )
     iterations: int = Field(
@@ -134,16 +156,42 @@ class SolidChenWangParams(SolidParams):
         description="Passes at every level but the finest; automatic: chosen from the exemplar.",
         json_schema_extra=ui(
             details=(
-                "Iterations at every level but the finest. None: "
-                f"{LAMINAR_COARSE_ITERATIONS} for laminar exemplars when adapt_to_structure is on, else as "
-                f"the "
-                "finest level's."
+                "Iterations at every level but the finest. None, when adapt_to_structure is on: "
+                f"{ORIENTED_COARSE_ITERATIONS} after the oriented start, {LAMINAR_COARSE_ITERATIONS} for "
+                "other laminar exemplars; else as the finest level's."
             )
         ),
     )
-    structure: Literal["auto", "none", "laminar"]
+    structure: Literal["auto", "none", "laminar", "oriented"]
     structure_length: float
     structure, structure_length = laminar_start_fields()
+    structure = Field(
+        "auto",
+        description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
+        "(the paper); 'auto' picks by the exemplars.",
+        json_schema_extra=ui(
+            details=(
+                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+                "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
+                "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations (as "
+                "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
+                "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
+                ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
+                "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes whose "
+                "fringes turn within 1.5 periods (a crumpled stack; bent laminae measured better from "
+                "noise); else 'none'."
+            )
+        ),
+    )
+    oriented_length: float = Field(
+        ORIENTED_LENGTH,
+        gt=0.0,
+        le=64.0,
+        description="How far the oriented start's crumples stay straight, in fringe periods.",
+        json_schema_extra=ui(
+            unit="periods", details=("Correlation length of the oriented start's crumples, in periods.")
+        ),
+    )
     k: int = Field(
         15,
         ge=0,
@@ -458,6 +506,42 @@ def _usage_spread(origin: np.ndarray, bank: ExemplarBank, active: np.ndarray) ->
 # ------------------------------------------------------------------------------------------------ driver
 
 
+def orientation_length(image: np.ndarray) -> float:
+    """How far the fringes keep their orientation, in fringe periods.
+
+    The structure tensor's doubled-angle orientation ``(J_rr - J_cc + 2i J_rc) / |...|`` (Gaussian
+    derivatives of 1 px, integration 2 px), less its mean, is autocorrelated (periodic FFT); the answer is
+    the first radius at which the radial mean of the normalised autocorrelation falls below 0.5, divided
+    by :func:`texsynth.synth.pixel.laminar.dominant_period`. Crumpled stacks: about 1; bent laminae 2-5.
+    """
+    img = np.asarray(image, dtype=np.float64)
+    gr = ndi.gaussian_filter(img, 1.0, order=(1, 0), mode="reflect")
+    gc = ndi.gaussian_filter(img, 1.0, order=(0, 1), mode="reflect")
+    j_rr, j_cc, j_rc = (ndi.gaussian_filter(g, 2.0, mode="reflect") for g in (gr * gr, gc * gc, gr * gc))
+    z = (j_rr - j_cc) + 2j * j_rc
+    z = z / np.maximum(np.abs(z), 1e-12)
+    z = z - z.mean()
+    spectrum = np.fft.fft2(z)
+    ac = np.fft.ifft2(spectrum * np.conj(spectrum)).real
+    ac = ac / max(float(ac[0, 0]), 1e-12)
+    h, w = ac.shape
+    rows, cols = np.meshgrid(np.fft.fftfreq(h) * h, np.fft.fftfreq(w) * w, indexing="ij")
+    radius = np.hypot(rows, cols).astype(np.int64).ravel()
+    profile = np.bincount(radius, ac.ravel()) / np.maximum(np.bincount(radius), 1)
+    below = np.flatnonzero(profile < 0.5)
+    lag = int(below[0]) if below.size else len(profile)
+    return lag / max(dominant_period(img), 1e-6)
+
+
+def _crumpled_stack(exemplars: Mapping[str, np.ndarray], planes: tuple[str, ...]) -> bool:
+    """Whether 'auto' takes the oriented start: one laminar exemplar (:func:`is_laminar`) on the three planes
+    whose fringes turn within :data:`ORIENTED_MAX_LENGTH` periods (:func:`orientation_length`), as the stack's
+    crumples do."""
+    images = [np.asarray(exemplars[p]) for p in planes]
+    one = len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
+    return one and is_laminar(images[:1]) and orientation_length(images[0]) <= ORIENTED_MAX_LENGTH
+
+
 @dataclass(frozen=True)
 class _Schedule:
     """The run's automatic choices, resolved once from the parameters and the constrained exemplars."""
@@ -466,8 +550,14 @@ class _Schedule:
     coarse_iterations: int
     orientation_gain: float
     solve_radius: int
-    laminar_start: bool = False
+    start: str = "none"
     period: float = 0.0
+    stack_period: float = 0.0
+
+    @property
+    def laminar_start(self) -> bool:
+        """Whether the coarsest level starts from sheets (laminar or oriented) rather than noise."""
+        return self.start != "none"
 
     @classmethod
     def resolve(cls, params: SolidChenWangParams, exemplars: Mapping[str, np.ndarray]) -> _Schedule:
@@ -478,6 +568,15 @@ class _Schedule:
         orientation_gain = params.orientation_gain or 0.0
         solve_radius = params.solve_radius or 0
         coarse_iterations = params.coarse_iterations
+        start = start_kind(
+            params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
+        )
+        if (
+            params.structure == "auto"
+            and start == "oriented"
+            and not _crumpled_stack(exemplars, params.planes)
+        ):
+            start = "none"  # bent laminae: worse than from noise (docs/solid.md); grains: not laminae
         if params.adapt_to_structure:
             constrained = [exemplars[name] for name in params.planes]
             _, iterations = structure_schedule(constrained, 1, iterations)
@@ -486,19 +585,21 @@ class _Schedule:
                 orientation_gain = LAMINAR_ORIENTATION_GAIN
             if params.solve_radius is None and laminar:
                 solve_radius = LAMINAR_SOLVE_RADIUS
+            if start == "oriented":  # the stack is there from the start: nothing to grow or anneal
+                iterations = max(params.iterations, ORIENTED_ITERATIONS)
+                if coarse_iterations is None:
+                    coarse_iterations = ORIENTED_COARSE_ITERATIONS
             if coarse_iterations is None and laminar:
                 coarse_iterations = LAMINAR_COARSE_ITERATIONS
         if coarse_iterations is None:
             coarse_iterations = iterations
-        start = starts_laminar(
-            params.structure, exemplars, params.planes, params.adapt_to_structure, laminar_pilot
-        )
-        period = (
-            float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
-            if start
-            else 0.0
-        )
-        return cls(iterations, coarse_iterations, orientation_gain, solve_radius, start, period)
+        period = stack = 0.0
+        if start != "none":
+            period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
+        if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
+            views = {p: np.asarray(exemplars[p]) for p in params.planes}
+            stack = stack_period(views, sheet_normal({p: plane_orientation(im) for p, im in views.items()}))
+        return cls(iterations, coarse_iterations, orientation_gain, solve_radius, start, period, stack)
 
     def levels(self, levels: int) -> int:
         """At most ``levels``; with the laminar start, those that keep a 3 px period."""
@@ -539,7 +640,11 @@ class _ChenWangLoop:
             "solve_radius": schedule.solve_radius,
             "sizes": list(plan.sizes),
             "laminar_start": schedule.laminar_start,
-            "period": schedule.period if schedule.laminar_start else None,
+            "start": schedule.start,
+            # The sheets' spacing: the planes' mean period, or the stack's behind it (oriented start).
+            "period": (schedule.stack_period if schedule.start == "oriented" else schedule.period)
+            if schedule.laminar_start
+            else None,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -560,14 +665,30 @@ class _ChenWangLoop:
         start_volume = None
         if (self.match is None or self.prev_bank is None) and self.schedule.laminar_start:
             scale = 2.0**step.level
-            start_volume = laminar_volume(
-                shape,
-                self.schedule.period / scale,
-                params.structure_length * self.schedule.period / scale,
-                np.concatenate([plan.exemplars[PLANES.index(p)][step.level].ravel() for p in params.planes]),
-                rng,
-                periodic=params.periodic,
+            values = np.concatenate(
+                [plan.exemplars[PLANES.index(p)][step.level].ravel() for p in params.planes]
             )
+            if self.schedule.start == "oriented":  # solid-kopf's crumpled stack, at the finest shape
+                views = {p: plan.exemplars[PLANES.index(p)][0] for p in params.planes}
+                stack = self.schedule.stack_period
+                phi = oriented_phase(
+                    plan.shapes[0],
+                    views,
+                    stack,
+                    params.oriented_length * stack,
+                    rng,
+                    periodic=params.periodic,
+                )
+                start_volume = sheets(level_phase(phi, step.level), stack / scale, values)
+            else:
+                start_volume = laminar_volume(
+                    shape,
+                    self.schedule.period / scale,
+                    params.structure_length * self.schedule.period / scale,
+                    values,
+                    rng,
+                    periodic=params.periodic,
+                )
             match = _tree_matches(plan, step.level, bank, start_volume, params.periodic)
         elif self.match is None or self.prev_bank is None:
             match = _random_matches(bank, shape, rng)

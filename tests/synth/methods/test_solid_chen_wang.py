@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from texsynth.synth import InvalidInput, InvalidParameter
+from texsynth.synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
 from texsynth.synth.api import PLANES, synthesize
 from texsynth.synth.errors import Cancelled
 from texsynth.synth.grid.scan import SCAN_ORDERS, scan_order
@@ -272,6 +273,8 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"neighbourhood_size": 6}}, InvalidParameter, "neighbourhood_size.*odd"),
         ({"params": {"k": -1}}, InvalidParameter, "'k'"),
         ({"params": {"scan": "spiral"}}, InvalidParameter, "scan"),
+        ({"params": {"structure": "stacked"}}, InvalidParameter, "structure"),
+        ({"params": {"oriented_length": 0.0}}, InvalidParameter, "oriented_length"),
         ({"params": {"histogram": 1}}, InvalidParameter, "unknown parameter"),
         ({"params": {"planes": ["xy"]}}, InvalidParameter, "planes must be two or three distinct planes"),
         ({"params": {"planes": ["xy", "xy"]}}, InvalidParameter, "planes must be two or three distinct"),
@@ -294,15 +297,18 @@ def test_bad_inputs_say_what_is_wrong(kwargs, error, match) -> None:
         synthesize("solid-chen-wang", **args)
 
 
-def test_same_bytes_with_one_or_two_threads() -> None:
+@pytest.mark.parametrize("start", ["none", "oriented"])
+def test_same_bytes_with_one_or_two_threads(start: str) -> None:
     """The parallel search and solve write only their own slots, sum in a fixed order and split their
-    work into a fixed number of blocks: one thread and two give the same bytes."""
+    work into a fixed number of blocks: one thread and two give the same bytes (from noise and from the
+    oriented start)."""
     code = (
         "import hashlib; from texsynth.synth.api import synthesize; from texsynth.synth.io.patterns import "
         "undulating_laminae;"
         "ex = undulating_laminae((32, 32), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0);"
         "r = synthesize('solid-chen-wang', ex, size=(12, 12, 12), params={'iterations': 2, 'levels': 2,"
-        " 'adapt_to_structure': False}, seed=3);"
+        f" 'adapt_to_structure': False, 'structure': '{start}'}}, seed=3);"
+        "assert r.stats['start'] == " + repr(start) + ";"
         "print(hashlib.sha256(r.image.tobytes()).hexdigest())"
     )
     digests = []
@@ -366,3 +372,59 @@ def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
         "solid-chen-wang", laminae, size=(12, 12, 12), params={**small, "adapt_to_structure": False}, seed=1
     )
     assert literal.stats["solve_radius"] == 0
+
+
+def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotropic_exemplar() -> None:
+    """Per-plane slices of sheets normal to (1, 1, 1): the oriented start (solid-kopf's crumpled stack) gives
+    each plane its orientation and the stack's spacing. 'auto' takes it, with its short schedule, for one
+    crumpled anisotropic exemplar on the three planes (the same bytes as asking for it), not for per-plane
+    exemplars, bent laminae (measured better from noise) nor noise."""
+    from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.methods.solid_chen_wang import (
+        ORIENTED_COARSE_ITERATIONS,
+        ORIENTED_ITERATIONS,
+        ORIENTED_MAX_LENGTH,
+        SolidChenWangParams,
+        _Schedule,
+        orientation_length,
+    )
+    from texsynth.synth.output.volume import mid_slices
+
+    planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
+    small = {"iterations": 1, "coarse_iterations": 4}
+    res = synthesize(
+        "solid-chen-wang",
+        exemplars=planes,
+        size=(24, 24, 24),
+        params={**small, "structure": "oriented"},
+        seed=2,
+    )
+    assert res.stats["start"] == "oriented" and res.stats["laminar_start"] and 5.0 < res.stats["period"] < 7.0
+    for axis, plane in enumerate(("xy", "xz", "yz")):
+        got = dominant_orientation(structure_tensor(np.take(res.image, 12, axis=axis)))
+        want = dominant_orientation(structure_tensor(planes[plane]))
+        assert abs(wrap_angle(got - want)) < np.radians(15), plane
+    assert _Schedule.resolve(SolidChenWangParams(), planes).start == "none"
+    one = dict.fromkeys(PLANES, planes["xy"])
+    schedule = _Schedule.resolve(SolidChenWangParams(), one)
+    assert (schedule.start, schedule.iterations, schedule.coarse_iterations) == (
+        "oriented",
+        ORIENTED_ITERATIONS,
+        ORIENTED_COARSE_ITERATIONS,
+    )
+    auto, asked = (
+        synthesize(
+            "solid-chen-wang", exemplars=one, size=(16, 16, 16), params={**small, "structure": s}, seed=2
+        )
+        for s in ("auto", "oriented")
+    )
+    assert auto.stats["start"] == "oriented" and auto.image.tobytes() == asked.image.tobytes()
+    # After the oriented start the schedule is shorter (nothing to grow); from noise the laminae's.
+    assert (auto.stats["iterations"], auto.stats["coarse_iterations"]) == (ORIENTED_ITERATIONS, 4)
+    noise = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    grains = synthesize("solid-chen-wang", noise, size=(12, 12, 12), params={**small, "levels": 2}, seed=1)
+    assert grains.stats["start"] == "none"
+    # Bent laminae (one bend across the exemplar) keep their orientation for several periods: from noise.
+    bent = undulating_laminae((128, 128), 7, 16, 128, noise=0.3)
+    assert orientation_length(planes["xy"]) < ORIENTED_MAX_LENGTH < 3.0 < orientation_length(bent)
+    assert _Schedule.resolve(SolidChenWangParams(), dict.fromkeys(PLANES, bent)).start == "none"
