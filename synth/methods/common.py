@@ -7,11 +7,10 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from texsynth.synth.api import Progress
+from texsynth.synth.api import PLANES, Progress
 from texsynth.synth.grid.neighbourhood import Shape
 from texsynth.synth.grid.scan import ScanOrder
 from texsynth.synth.params import MethodParams, ui
-from texsynth.synth.pixel.solid import PLANES, checked_planes
 from texsynth.synth.pixel.synthesis import SearchSettings
 
 __all__ = [
@@ -265,6 +264,8 @@ class SolidParams(MethodParams):
     @field_validator("planes", mode="before")
     @classmethod
     def _planes(cls, value: object) -> tuple[str, ...]:
+        from texsynth.synth.pixel.solid import checked_planes  # deferred: 2D methods need no solid driver
+
         return checked_planes(value)  # type: ignore[arg-type]
 
     @field_validator("neighbourhood_size")

@@ -143,3 +143,32 @@ def test_a_second_job_in_a_process_imports_and_compiles_nothing(exemplar: Path, 
     )
     assert added["used"] > 0  # the first job did run compiled kernels (loaded from numba's cache)
     assert added["modules"] == [] and added["kernels"] == []
+
+
+@pytest.mark.parametrize("method", ["wei_levoy", "tensor_constrained", "arbitrary_shape", "quilting"])
+def test_a_2d_method_imports_no_solid_driver_and_no_service(method: str) -> None:
+    """A 2D method's module brings neither the solid driver (its kernels, its caches) nor the plots'
+    or the service's libraries; the solid methods still get their planes checked."""
+    loaded = _fresh(
+        f"""
+        import json, sys
+        import texsynth.synth.methods.{method}
+        print(json.dumps(sorted(sys.modules)))
+        """
+    )
+    solid = [
+        m for m in loaded if m.startswith(("texsynth.synth.pixel.solid", "texsynth.synth.kernels.solid"))
+    ]
+    assert solid == []
+    assert _top_level(loaded).isdisjoint({"matplotlib", "celery", "fastapi", "redis"})
+    assert not [m for m in loaded if m.startswith(("texsynth.app", "texsynth.jobs", "texsynth.worker"))]
+
+
+def test_solid_params_still_check_their_planes() -> None:
+    from pydantic import ValidationError
+
+    from texsynth.synth.methods.common import SolidParams
+
+    assert SolidParams(planes=("yz", "xz")).planes == ("xz", "yz")
+    with pytest.raises(ValidationError, match="planes"):
+        SolidParams(planes=("xy", "xy"))
