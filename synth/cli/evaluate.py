@@ -250,8 +250,11 @@ def format_table(metrics: Mapping[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Load, evaluate, print; write plots on request."""
-    from texsynth.synth.evaluate import evaluate_pair, evaluate_volume
-    from texsynth.synth.io import load_image, load_volume
+    from texsynth.synth.cli import imports_without_gc
+
+    with imports_without_gc():  # the package's doc: a one-shot command's imports live to the end
+        from texsynth.synth.evaluate import evaluate_pair, evaluate_volume
+        from texsynth.synth.io import load_image, load_volume
 
     planes = {p: getattr(args, f"exemplar_{p}") for p in ("xy", "xz", "yz")}
     given = [p for p, path in planes.items() if path is not None]

@@ -59,12 +59,17 @@ class _ProgressBar:
 
 
 def _run(args: argparse.Namespace) -> int:
-    # deferred: ``--help`` imports no engine; only the chosen method's module is imported
-    from texsynth.synth.api import available_methods, check_inputs, find_method
-    from texsynth.synth.params import parse_assignments
-    from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
+    from texsynth.synth.cli import imports_without_gc
 
-    spec = find_method(args.method)
+    # deferred: ``--help`` imports no engine; only the chosen method's module is imported, and the writer
+    with imports_without_gc():
+        from texsynth.synth.api import available_methods, check_inputs, find_method
+        from texsynth.synth.params import parse_assignments
+        from texsynth.synth.pipeline import load_inputs, synthesize_to_folder
+
+        spec = find_method(args.method)
+        if spec is not None:
+            import texsynth.synth.output.artifacts  # noqa: F401  (the writer, here: without the collector)
     if spec is None:
         known = ", ".join(sorted(available_methods()))
         raise InvalidParameter("METHOD", args.method, f"unknown method (known: {known})")
