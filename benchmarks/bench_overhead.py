@@ -16,7 +16,8 @@ every thread) are both kept: on this shared 2-core machine the CPU seconds say w
 whatever else runs. One untimed run per case first (numba's cache and the bytecode on disk, as after a
 user's first run; ``PYTHONDONTWRITEBYTECODE`` is dropped from the children's environment); then ``--runs``
 runs, medians per stage. ``--baseline DIR`` (an earlier checkout: ``git archive REV | tar -x -C DIR``)
-runs the same cases alternately with this tree for a before -> after table.
+runs the same cases alternately with this tree for a before -> after table, and compares the two trees'
+last outputs file by file (bytes; the JSON files without their clock fields).
 """
 
 from __future__ import annotations
@@ -197,6 +198,38 @@ def run_once(tree: Path, argv: list[str]) -> dict:
     return {"stages": stages, "wall": wall, "cpu": cpu, "load": load}
 
 
+#: What may differ between two runs of one command: when it ran and how long it took.
+_CLOCK_KEYS = ("timings", "started", "finished")
+
+
+def _without_clock(value: object) -> object:
+    if isinstance(value, dict):
+        return {k: _without_clock(v) for k, v in value.items() if k not in _CLOCK_KEYS}
+    if isinstance(value, list):
+        return [_without_clock(v) for v in value]
+    return value
+
+
+def differing_files(a: Path, b: Path) -> list[str]:
+    """The files of two output folders that differ (or exist in one only): every file byte for byte,
+    except the JSON files' clock fields (``timings``, ``started``, ``finished``)."""
+    names = sorted(
+        {p.relative_to(a).as_posix() for p in a.rglob("*") if p.is_file()}
+        | {p.relative_to(b).as_posix() for p in b.rglob("*") if p.is_file()}
+    )
+    out = []
+    for name in names:
+        x, y = a / name, b / name
+        if not (x.is_file() and y.is_file()):
+            out.append(name)
+        elif name.endswith(".json"):
+            if _without_clock(json.loads(x.read_text())) != _without_clock(json.loads(y.read_text())):
+                out.append(name)
+        elif x.read_bytes() != y.read_bytes():
+            out.append(name)
+    return out
+
+
 def summarise(runs: list[dict]) -> dict:
     """Median per stage (wall, CPU), total, and outside the synthesis."""
     med = {}
@@ -237,9 +270,14 @@ def measure(
             for k in range(runs):
                 for label, tree in trees.items():
                     done[label].append(run_once(tree, [*argv, "--out", str(folder / f"{label}-{k}")]))
+            same = None
+            if len(trees) > 1:  # the last run of each tree: every file, byte for byte
+                folders = [folder / f"{label}-{runs - 1}" for label in trees]
+                same = differing_files(*folders[:2])
+                print(f"{name}: files that differ from the baseline's: {same or 'none'}", flush=True)
             for label in trees:
                 s = summarise(done[label])
-                s.update(method=method, exemplar=exemplar, size=size)
+                s.update(method=method, exemplar=exemplar, size=size, differing=same)
                 results[label][name] = s
                 print(
                     f"{label} {name}: whole {s['wall']:.2f} s wall / {s['cpu']:.2f} s CPU; outside the "
@@ -283,7 +321,8 @@ def report(results: dict, threads: int) -> str:
         )
         if name in before:
             b = before[name]
-            row += f" {b['outside_cpu']:.2f} / {b['outside_wall']:.2f} |"
+            same = "same files" if s.get("differing") == [] else f"differ: {', '.join(s['differing'] or [])}"
+            row += f" {b['outside_cpu']:.2f} / {b['outside_wall']:.2f} ({same}) |"
         lines.append(row)
     return "\n".join(lines)
 
