@@ -163,7 +163,9 @@ def _env(tree: Path) -> dict[str, str]:
     """The children's environment: bytecode written; another checkout's packages found first (through a
     ``texsynth`` folder of links beside it: the installed package maps ``texsynth.*`` to this tree)."""
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONDONTWRITEBYTECODE", "PYTHONPATH")}
-    if tree.resolve() != ROOT:
+    import texsynth.synth
+
+    if tree.resolve() != Path(texsynth.synth.__file__).resolve().parent.parent:  # not the installed tree
         shim = tree / ".overhead-shim"
         package = shim / "texsynth"
         package.mkdir(parents=True, exist_ok=True)

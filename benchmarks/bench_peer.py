@@ -66,7 +66,10 @@ def timed(cmd: list[str]) -> tuple[float, float, float]:
     """``(wall s, CPU s, 1-minute load before)`` of one process, which must succeed."""
     load = os.getloadavg()[0]
     start = time.perf_counter()
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    # bytecode written and read, as after a user's first run (a session may set PYTHONDONTWRITEBYTECODE,
+    # which would recompile every module of ours in every run)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - start
     stderr = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
