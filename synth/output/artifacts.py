@@ -26,7 +26,9 @@ from __future__ import annotations
 
 import io
 import platform
+import threading
 from collections.abc import Callable, Mapping
+from contextlib import suppress
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +53,7 @@ from texsynth.synth.io import (
 from texsynth.synth.output.plots import write_plots, write_s2_plot
 from texsynth.synth.output.render import coherence_image, orientation_image
 from texsynth.synth.output.volume import write_volume_images
+from texsynth.synth.threads import current_threads
 
 __all__ = ["versions", "write_artifacts"]
 
@@ -69,6 +72,29 @@ def versions() -> dict[str, str]:
         "scikit-image": skimage.__version__,
         "numba": numba.__version__,
     }
+
+
+def _start(work: Callable[[], list[str]]) -> Callable[[], list[str]]:
+    """Run ``work`` on a new thread; the function returned waits for it and returns (or raises) its result."""
+    done: list[list[str]] = []
+    failed: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            done.append(work())
+        except BaseException as err:  # raised again in the waiting thread
+            failed.append(err)
+
+    thread = threading.Thread(target=run, name="texsynth-pictures")
+    thread.start()
+
+    def wait() -> list[str]:
+        thread.join()
+        if failed:
+            raise failed[0]
+        return done[0]
+
+    return wait
 
 
 def _png(path: Path, rendering: np.ndarray) -> None:
@@ -214,26 +240,43 @@ def write_artifacts(
         )
         tell("drawing slices, cube and tensor images")
         names += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
+
+    def pictures() -> list[str]:
+        """The 2-D output's TIFF, and every run's tensor images and extra maps (names in order)."""
+        written = []
+        if not volume:
+            save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
+            tensors = (
+                result.tensor_field
+                if result.tensor_field is not None
+                else structure_tensor(image, mode="wrap")
+            )
+            written += _write_tensor_images(folder, "", np.asarray(tensors))
+        written += _write_tensor_images(folder, "exemplar-", structure_tensor(as_grey(exemplar, "exemplar")))
+        if constraint is not None:
+            written += _write_tensor_images(
+                folder, "constraint_", structure_tensor(np.asarray(constraint, np.float32))
+            )
+        for key, extra in sorted(result.extras.items()):
+            if key in ("coherence", "orientation"):  # already rendered above, with legends
+                continue
+            rendered = _render_extra(np.asarray(extra, dtype=np.float32), FIXED_RANGES.get(key))
+            if rendered is not None:
+                save_image(folder / f"{key}.png", rendered)
+                written.append(f"{key}.png")
+        return written
+
+    # a 2-D run writes its pictures on a second thread while this one evaluates (both mostly NumPy,
+    # SciPy and zlib, which release the GIL; neither reads what the other makes)
+    pending = None
+    if volume:
+        names += pictures()
+    elif current_threads() > 1:
+        tell("writing output.tiff and the tensor images; evaluating")
+        pending = _start(pictures)
     else:
-        tell("writing output.tiff")
-        save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
-        tell("drawing the tensor images")
-        tensors = (
-            result.tensor_field if result.tensor_field is not None else structure_tensor(image, mode="wrap")
-        )
-        names += _write_tensor_images(folder, "", np.asarray(tensors))
-    names += _write_tensor_images(folder, "exemplar-", structure_tensor(as_grey(exemplar, "exemplar")))
-    if constraint is not None:
-        names += _write_tensor_images(
-            folder, "constraint_", structure_tensor(np.asarray(constraint, np.float32))
-        )
-    for key, extra in sorted(result.extras.items()):
-        if key in ("coherence", "orientation"):  # already rendered above, with legends
-            continue
-        rendered = _render_extra(np.asarray(extra, dtype=np.float32), FIXED_RANGES.get(key))
-        if rendered is not None:
-            save_image(folder / f"{key}.png", rendered)
-            names.append(f"{key}.png")
+        tell("writing output.tiff and the tensor images")
+        names += pictures()
 
     fringes = None
     shown, reason, presence = fringes_shown(exemplar)
@@ -247,8 +290,17 @@ def write_artifacts(
             evaluate_volume(targets, image, pixel_size=pixel_size, fringes=shown, progress=progress)
         )
     else:
-        tell("evaluating")
-        metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
+        if pending is None:
+            tell("evaluating")
+        try:
+            metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
+        except BaseException:
+            if pending is not None:  # no file is written after this call fails
+                with suppress(BaseException):
+                    pending()
+            raise
+    if pending is not None:
+        names += pending()
     plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
     status = {"shown": shown, "reason": reason, "presence": to_json_types(presence)}  # of the exemplar
     if isinstance(metrics.get("fringes"), dict):
