@@ -264,6 +264,9 @@ def measure(
         files = exemplar_files(folder)
         for name in names:
             method, exemplar, size = table[name]
+            if exemplar not in files:
+                print(f"skipped {name}: no {exemplar} exemplar (the shared data: $TEXSYNTH_SHARED_DATA)")
+                continue
             argv = ["synthesize", method, "--exemplar", str(files[exemplar]), "--size", size, "--seed", "1"]
             argv += ["--threads", str(threads)]
             done: dict[str, list[dict]] = {label: [] for label in trees}
