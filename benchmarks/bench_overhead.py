@@ -10,7 +10,8 @@ top-level import (``importlib._bootstrap._find_and_load``), numba's first call o
 (``Dispatcher._compile_for_args``: the cache load and type dispatch), and the engine's stages (loading the
 inputs, the synthesis, the output PNG/TIFF, the tensor images, the exemplar's analysis, the evaluation,
 the plots, the JSON files). Times are exclusive: a stage's own seconds, without the imports or kernel loads
-or inner stages that ran inside it, so the stages add up to the run; 'start + exit' is the process's wall
+or inner stages that ran inside it, so the stages add up to the run (the writer's second thread's stages
+count in its own CPU time, and leave the main thread's); 'start + exit' is the process's wall
 time outside ``main`` (interpreter start, shutdown). Wall (``perf_counter``) and CPU (``process_time``,
 every thread) are both kept: on this shared 2-core machine the CPU seconds say what the work costs,
 whatever else runs. One untimed run per case first (numba's cache and the bytecode on disk, as after a
@@ -56,23 +57,47 @@ STAGES = (
 
 #: Run in a child: ``argv[1]`` = a JSON list of the command's arguments. Prints the stages as JSON.
 _PROBE = r"""
-import importlib._bootstrap as bootstrap, json, sys, time
-T0, C0 = time.perf_counter(), time.process_time()
-# the stack of open stages: [label, wall at start, CPU at start, inner wall, inner CPU]
-stack, totals = [], {}
+import importlib._bootstrap as bootstrap, json, sys, threading, time
+MAIN = threading.main_thread()
+# CPU of a stage: on the main thread the process's (numba's workers work for it) less what the writer's
+# second thread spent meanwhile (its live clock while it is inside a stage); on that thread its own
+helpers, helpers_done = {}, [0.0]
+
+def cpu():
+    if threading.current_thread() is MAIN:
+        live = sum(time.clock_gettime(c) - c0 for c, c0 in list(helpers.values()))
+        return time.process_time() - helpers_done[0] - live
+    return time.thread_time()
+
+T0, C0 = time.perf_counter(), cpu()
+# each thread's stack of open stages: [label, wall at start, CPU at start, inner wall, inner CPU]
+local, totals, lock = threading.local(), {}, threading.Lock()
+
+def stack():
+    if not hasattr(local, "stack"):
+        local.stack = []
+    return local.stack
 
 def push(label):
-    stack.append([label, time.perf_counter(), time.process_time(), 0.0, 0.0])
+    st = stack()
+    if not st and threading.current_thread() is not MAIN:
+        ident = threading.get_ident()
+        helpers[ident] = (time.pthread_getcpuclockid(ident), time.thread_time())
+    st.append([label, time.perf_counter(), cpu(), 0.0, 0.0])
 
 def pop():
-    label, w0, c0, iw, ic = stack.pop()
-    w, c = time.perf_counter() - w0, time.process_time() - c0
-    own = totals.setdefault(label, [0.0, 0.0])
-    own[0] += w - iw
-    own[1] += c - ic
-    if stack:
-        stack[-1][3] += w
-        stack[-1][4] += c
+    st = stack()
+    label, w0, c0, iw, ic = st.pop()
+    w, c = time.perf_counter() - w0, cpu() - c0
+    with lock:
+        own = totals.setdefault(label, [0.0, 0.0])
+        own[0] += w - iw
+        own[1] += c - ic
+        if not st and threading.current_thread() is not MAIN:
+            helpers_done[0] += time.thread_time() - helpers.pop(threading.get_ident())[1]
+    if st:
+        st[-1][3] += w
+        st[-1][4] += c
 
 def wrap(label, fn):
     def probe(*args, **kwargs):
@@ -117,8 +142,8 @@ def find_and_load(name, import_):
 
 def report():  # at exit (a quick exit runs atexit too): the process's own figures, as the last line
     pop()
-    wall, cpu = time.perf_counter() - T0, time.process_time() - C0
-    print(json.dumps({"stages": totals, "wall": wall, "cpu": cpu}), flush=True)
+    wall, spent = time.perf_counter() - T0, time.process_time() - C0
+    print(json.dumps({"stages": totals, "wall": wall, "cpu": spent}), flush=True)
 
 import atexit
 bootstrap._find_and_load = find_and_load
