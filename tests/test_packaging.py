@@ -90,6 +90,6 @@ def test_the_wheel_installs_one_top_level_name(tmp_path: Path) -> None:
         assert f"texsynth/{module}" in names
     entry_points = next(n for n in names if n.endswith("entry_points.txt"))
     text = zipfile.ZipFile(wheel).read(entry_points).decode()
-    assert "texsynth = texsynth.synth.cli:main" in text
+    assert "texsynth = texsynth.synth.cli:entry" in text  # main, then the quick exit
     assert "serve = texsynth.app.cli:register" in text
     assert any(n.startswith("texsynth/app/examples/") and n.endswith(".png") for n in names)
