@@ -188,11 +188,15 @@ def tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, in
     """
     threads = current_threads()
     if threads > 1 and tensors.ndim >= 2 and tensors.shape[0] >= 2 * _FEATURE_ROWS:
-        starts = range(0, tensors.shape[0], _FEATURE_ROWS)
-        parts = thread_map(
-            lambda r: _tensor_features(tensors[r : r + _FEATURE_ROWS], metric), starts, threads
-        )
-        return np.ascontiguousarray(np.concatenate([f for f, _ in parts])), parts[0][1]
+        # Written in place: each band's arrays are made and freed by the thread that computes it.
+        out = np.empty((*tensors.shape[:-1], 4 if metric == "SO" else 3), dtype=np.float32)
+
+        def band(r: int) -> int:
+            out[r : r + _FEATURE_ROWS], code = _tensor_features(tensors[r : r + _FEATURE_ROWS], metric)
+            return code
+
+        codes = thread_map(band, range(0, tensors.shape[0], _FEATURE_ROWS), threads)
+        return out, codes[0]
     return _tensor_features(tensors, metric)
 
 
