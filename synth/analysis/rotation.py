@@ -30,6 +30,7 @@ from scipy import ndimage as ndi
 from texsynth.synth.analysis.tensor import rotate_tensors, structure_tensor, wrap_angle
 from texsynth.synth.errors import InvalidParameter
 from texsynth.synth.grid.pyramid import level_shapes
+from texsynth.synth.threads import current_threads, thread_map
 
 __all__ = [
     "RotatedDictionary",
@@ -212,7 +213,9 @@ def build_rotated_dictionary(
     prefiltered = [
         ndi.spline_filter(channels[..., k], order=order, mode="mirror") for k in range(channels.shape[2])
     ]
-    for m, phi in enumerate(angles):  # one vectorised warp per copy
+
+    def warp(m: int) -> None:  # one vectorised warp per copy, into its own tile of the canvas
+        phi = angles[m]
         # Inverse map: tile (x', y') -> exemplar (row, col), a rotation by -phi.
         c, s = np.cos(phi), np.sin(phi)
         src_r = (h - 1) / 2 - (-s * xp + c * yp)
@@ -228,6 +231,9 @@ def build_rotated_dictionary(
         eps = 1e-6  # rounding of the rotation must not drop the copies' border pixels
         area[win] = (src_r >= -eps) & (src_r <= h - 1 + eps) & (src_c >= -eps) & (src_c <= w - 1 + eps)
         tile_index[win] = m
+
+    # SciPy's interpolation releases the GIL: the copies on the job's threads (disjoint tiles, same bytes).
+    thread_map(warp, range(m_count), current_threads())
     np.clip(image, 0.0, 1.0, out=image)
     return RotatedDictionary(
         image=image,

@@ -768,19 +768,73 @@ def schedule_levels_reference(
     return Schedule(sched, np.arange(len(sched) + 1, dtype=np.int64), starts, int(tag0))
 
 
+def _offset_runs(offsets: np.ndarray) -> np.ndarray:
+    """``offsets`` as runs of consecutive columns per row: ``(n, 3)`` int64 ``(dy, dx_first, dx_last)``."""
+    runs = []
+    offs = np.asarray(offsets, dtype=np.int64).reshape(-1, 2)
+    for dy in np.unique(offs[:, 0]):
+        dx = np.unique(offs[offs[:, 0] == dy, 1])
+        cut = np.flatnonzero(np.diff(dx) > 1) + 1
+        runs += [(int(dy), int(r[0]), int(r[-1])) for r in np.split(dx, cut)]
+    return np.array(runs, dtype=np.int64).reshape(-1, 3)
+
+
 @kernel
-def _unit_levels_kernel(order, unit_of, H, W, offs, n_units):
-    """Each unit's level: one more than the highest among the earlier units (lower ids) it touches."""
+def _unit_levels_kernel(unit_of, H, W, runs, n_units):
+    """Each unit's level: one more than the highest among the earlier units (lower ids) it touches.
+
+    A unit touches the units of its positions shifted by the offsets; here by rows, without visiting
+    every position and offset: each row's positions fall in segments of one unit (at most a few per
+    tile), and a segment ``[x0, x1)`` of row ``y`` shifted by the offsets' run ``(dy, a, b)`` (consecutive
+    columns, :func:`_offset_runs`) covers the columns ``[x0 + a, x1 - 1 + b]`` of row ``y + dy`` (wrapped),
+    whose segments it touches. Units in increasing order, so an earlier unit's level is final when read.
+    """
+    # Segments of equal unit along each row: row y holds the segments row_seg[y]:row_seg[y + 1].
+    n_seg = 0
+    for y in range(H):
+        for x in range(W):
+            if x == 0 or unit_of[y * W + x] != unit_of[y * W + x - 1]:
+                n_seg += 1
+    seg_y = np.empty(n_seg, dtype=np.int64)
+    seg_x0 = np.empty(n_seg, dtype=np.int64)
+    seg_x1 = np.empty(n_seg, dtype=np.int64)
+    seg_u = np.empty(n_seg, dtype=np.int64)
+    row_seg = np.zeros(H + 1, dtype=np.int64)
+    k = 0
+    for y in range(H):
+        row_seg[y] = k
+        for x in range(W):
+            u = unit_of[y * W + x]
+            if x == 0 or u != unit_of[y * W + x - 1]:
+                seg_y[k] = y
+                seg_x0[k] = x
+                seg_u[k] = u
+                k += 1
+            seg_x1[k - 1] = x + 1
+    row_seg[H] = k
     level = np.zeros(n_units, dtype=np.int64)
-    for i in range(order.shape[0]):  # unit by unit, so an earlier unit's level is final when read
-        p = order[i]
-        u = unit_of[p]
-        y = p // W
-        x = p % W
-        for j in range(offs.shape[0]):
-            v = unit_of[((y + offs[j, 0]) % H) * W + (x + offs[j, 1]) % W]
-            if v < u and level[v] + 1 > level[u]:
-                level[u] = level[v] + 1
+    for i in np.argsort(seg_u, kind="mergesort"):
+        u = seg_u[i]
+        for r in range(runs.shape[0]):
+            yy = (seg_y[i] + runs[r, 0]) % H
+            lo = seg_x0[i] + runs[r, 1]
+            hi = seg_x1[i] + runs[r, 2]  # exclusive
+            if hi - lo >= W:
+                lo = 0
+                hi = W
+            lo_w = lo % W
+            hi_w = lo_w + (hi - lo)
+            for piece in range(2):  # the covered columns, split where they cross the border
+                a = lo_w if piece == 0 else 0
+                z = min(hi_w, W) if piece == 0 else hi_w - W
+                if z <= a:
+                    continue
+                j = row_seg[yy] + np.searchsorted(seg_x0[row_seg[yy] : row_seg[yy + 1]], a, side="right") - 1
+                while j < row_seg[yy + 1] and seg_x0[j] < z:
+                    v = seg_u[j]
+                    if v < u and level[v] + 1 > level[u]:
+                        level[u] = level[v] + 1
+                    j += 1
     return level
 
 
@@ -844,8 +898,7 @@ def _tile_schedule(key: tuple[int, int, bytes, int, int]) -> Schedule:
     unit_of = tile_units((H, W), offs, (rows, width))
     n_units = int(unit_of.max()) + 1
     flat = np.arange(H * W, dtype=np.int64)
-    order = np.lexsort((flat, unit_of)).astype(np.int64)
-    level = _unit_levels_kernel(order, unit_of, H, W, offs, n_units)
+    level = _unit_levels_kernel(unit_of, H, W, _offset_runs(offs), n_units)
     by_level = np.lexsort((np.arange(n_units), level))
     rank = np.empty(n_units, dtype=np.int64)
     rank[by_level] = np.arange(n_units)

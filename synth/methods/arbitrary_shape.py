@@ -602,10 +602,19 @@ def _nearest_allowed(hint: np.ndarray, mask: np.ndarray, copies: np.ndarray) -> 
     if not bad.any():
         return hint
     copy_of = copies[hint[..., 0], hint[..., 1]]
-    for m in np.unique(copy_of[bad]):
-        allowed = np.argwhere((mask != 0) & (copies == m))
+    wanted = np.unique(copy_of[bad])
+    # Each wanted copy's allowed positions in raster order (the points and order np.argwhere gave, so the
+    # same trees and the same ties), from one stable sort instead of a scan of the canvas per copy.
+    flat = np.flatnonzero(mask.ravel())
+    cls = copies.ravel()[flat]
+    by_copy = np.argsort(cls, kind="stable")
+    flat, cls = flat[by_copy], cls[by_copy]
+    lo = np.searchsorted(cls, wanted, side="left")
+    hi = np.searchsorted(cls, wanted, side="right")
+    for m, a, z in zip(wanted, lo, hi, strict=True):
         sel = bad & (copy_of == m)
-        if len(allowed):
+        if z > a:
+            allowed = np.stack(np.divmod(flat[a:z], copies.shape[1]), axis=1)
             hint[sel] = allowed[cKDTree(allowed).query(hint[sel])[1]]
     return hint
 

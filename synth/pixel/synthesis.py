@@ -60,7 +60,7 @@ from texsynth.synth.kernels.pixel_search import (
     synthesize_levels,
     tile_schedule,
 )
-from texsynth.synth.threads import current_threads
+from texsynth.synth.threads import current_threads, thread_map
 
 __all__ = [
     "CandidateWindow",
@@ -85,6 +85,8 @@ _PCA_SAMPLE = 4096
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
+#: Rows of a band of :func:`tensor_features` on the job's threads.
+_FEATURE_ROWS = 64
 #: A coarse level's neighbourhood side is at most its shorter side divided by this.
 _COARSE_DIVISOR = 4
 
@@ -181,7 +183,24 @@ def tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, in
 
     ED: ``(S_xx, sqrt2 S_xy, S_yy)`` under SSD (eq 6); FN: the same under its norm (eq 10);
     LE: the log-tensors under the norm (eq 11); SO: ``(sin O, cos O, C, 1 / C)``, ``C >= 1e-3`` (eqs 7-9).
+    Large fields are computed in bands of rows on the job's threads (element-wise NumPy, which releases
+    the GIL; the same bytes as one call: arbitrary-shape's rotated dictionary holds millions of tensors).
     """
+    threads = current_threads()
+    if threads > 1 and tensors.ndim >= 2 and tensors.shape[0] >= 2 * _FEATURE_ROWS:
+        # Written in place: each band's arrays are made and freed by the thread that computes it.
+        out = np.empty((*tensors.shape[:-1], 4 if metric == "SO" else 3), dtype=np.float32)
+
+        def band(r: int) -> int:
+            out[r : r + _FEATURE_ROWS], code = _tensor_features(tensors[r : r + _FEATURE_ROWS], metric)
+            return code
+
+        codes = thread_map(band, range(0, tensors.shape[0], _FEATURE_ROWS), threads)
+        return out, codes[0]
+    return _tensor_features(tensors, metric)
+
+
+def _tensor_features(tensors: np.ndarray, metric: Metric) -> tuple[np.ndarray, int]:
     t = tensors.astype(np.float32)
     if metric in ("ED", "FN"):
         feats = np.stack([t[..., 0], np.sqrt(2.0) * t[..., 1], t[..., 2]], axis=-1)

@@ -14,6 +14,7 @@ import pytest
 from tests.synth.search_cases import _rng_image
 from texsynth.synth.grid.neighbourhood import neighbourhood_offsets
 from texsynth.synth.kernels.pixel_search import (
+    _offset_runs,
     _unit_levels_kernel,
     _unit_levels_reference,
     conflict_offsets,
@@ -85,9 +86,8 @@ def test_tiles_keep_the_raster_order_and_never_share_data_within_a_level(
     got = tile_schedule(shape, offsets, tile=(3, 8), tag0=3)
     unit_of = tile_units(shape, offsets, (3, 8))
     levels = _unit_levels_reference(unit_of, shape, offsets)  # the plain version of the levels
-    order = np.argsort(unit_of, kind="stable")
     np.testing.assert_array_equal(
-        _unit_levels_kernel(order, unit_of, shape[0], shape[1], offsets, len(levels)), levels
+        _unit_levels_kernel(unit_of, shape[0], shape[1], _offset_runs(offsets), len(levels)), levels
     )
     assert len(got.starts) - 1 == levels.max() + 1
     assert got.tag0 == 3
@@ -108,6 +108,25 @@ def test_tiles_keep_the_raster_order_and_never_share_data_within_a_level(
         for dy, dx in causal:
             if y + dy >= 0 and 0 <= x + dx < W:  # not across the border
                 assert rank[(y + dy) * W + x + dx] < rank[p]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_unit_levels_by_row_segments_match_the_reference_on_any_units_and_offsets(seed: int) -> None:
+    """The kernel's row-segment form against the per-position reference: scattered offsets (gaps inside a
+    row, reaches wider than the output: wrapped more than once) and units that are not tiles (several
+    segments of one unit in a row)."""
+    rng = np.random.default_rng(seed)
+    shape = (int(rng.integers(3, 20)), int(rng.integers(3, 20)))
+    offsets = conflict_offsets(rng.integers(-25, 26, size=(int(rng.integers(1, 12)), 2)))
+    if len(offsets) == 0:
+        offsets = np.array([[0, 1], [0, -1]], dtype=np.int64)
+    blocks = rng.integers(0, 7, size=(shape[0], (shape[1] + 2) // 3))
+    unit_of = np.unique(np.repeat(blocks, 3, axis=1)[:, : shape[1]].ravel(), return_inverse=True)[1]
+    levels = _unit_levels_reference(unit_of, shape, offsets)
+    got = _unit_levels_kernel(
+        unit_of.astype(np.int64), shape[0], shape[1], _offset_runs(offsets), len(levels)
+    )
+    np.testing.assert_array_equal(got, levels)
 
 
 def test_tiles_make_few_levels_of_much_work() -> None:

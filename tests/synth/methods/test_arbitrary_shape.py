@@ -17,7 +17,11 @@ from texsynth.synth.analysis.tensor import (
 )
 from texsynth.synth.api import available_methods, synthesize
 from texsynth.synth.io.patterns import concentric_rings, grating, waves, wood_grain
-from texsynth.synth.methods.arbitrary_shape import ArbitraryShapeParams, orientation_agreement
+from texsynth.synth.methods.arbitrary_shape import (
+    ArbitraryShapeParams,
+    _nearest_allowed,
+    orientation_agreement,
+)
 from texsynth.synth.params import validate_params
 
 # Small and fast: 15-degree steps (M = 24), 7x7 neighbourhoods; the parameters as given (the tests
@@ -78,6 +82,32 @@ def test_masks_keep_only_neighbourhoods_inside_a_copy() -> None:
     # Every copy keeps some positions, and nothing outside the copies is kept.
     assert set(np.unique(d.tile_index[masks[0] != 0])) == set(range(6))
     assert masks[1].shape == ((d.area.shape[0] + 1) // 2, (d.area.shape[1] + 1) // 2)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_nearest_allowed_moves_bad_hints_as_a_search_per_copy_would(seed: int) -> None:
+    """Hints whose neighbourhood does not fit go to the nearest allowed position of their copy: the same
+    answers as the plain form (every copy's allowed positions from a scan of the canvas, a tree each)."""
+    from scipy.spatial import cKDTree
+
+    dictionary = build_rotated_dictionary(_fringes(20.0, seed=seed), 12)
+    mask = dictionary.level_masks([3], [0])[0]
+    copies = dictionary.tile_index.astype(np.int64)
+    rng = np.random.default_rng(seed)
+    inside = np.argwhere(copies >= 0)
+    hint = inside[rng.integers(0, len(inside), 40 * 40)].reshape(40, 40, 2)
+    expect = hint.copy()
+    bad = mask[hint[..., 0], hint[..., 1]] == 0
+    copy_of = copies[hint[..., 0], hint[..., 1]]
+    assert bad.any()
+    for m in np.unique(copy_of[bad]):
+        allowed = np.argwhere((mask != 0) & (copies == m))
+        sel = bad & (copy_of == m)
+        expect[sel] = allowed[cKDTree(allowed).query(hint[sel])[1]]
+    got = _nearest_allowed(hint, mask, copies)
+    np.testing.assert_array_equal(got, expect)
+    assert np.all(mask[got[..., 0], got[..., 1]] != 0)
+    np.testing.assert_array_equal(copies[got[..., 0], got[..., 1]], copy_of)
 
 
 def test_rotation_candidates_stay_within_the_window_modulo_pi() -> None:

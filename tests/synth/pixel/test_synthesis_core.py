@@ -673,3 +673,18 @@ def test_initial_source_map_starts_the_synthesis_and_every_pass_refines() -> Non
     np.testing.assert_array_equal(kept[0], kept[1])
     srcs, _ = synthesize_source_map([ex], [(24, 24)], settings, seed=1)
     assert (srcs[0][inner] == ident[inner]).all(axis=-1).mean() < 0.1
+
+
+@pytest.mark.parametrize("metric", ["ED", "FN", "LE", "SO"])
+def test_tensor_features_in_bands_on_threads_give_the_bytes_of_one_call(metric: str) -> None:
+    """A large field is computed in bands of rows on the job's threads: the same bytes with 1, 2 and 4."""
+    from texsynth.synth.threads import max_threads, use_threads
+
+    field = structure_tensor(_rng_image((300, 77), seed=3))
+    got = []
+    for threads in (1, 2, 4):
+        with use_threads(min(threads, max_threads())):
+            feats, code = tensor_features(field, metric)  # type: ignore[arg-type]
+        assert feats.shape == (300, 77, 4 if metric == "SO" else 3) and feats.flags.c_contiguous
+        got.append((feats.tobytes(), code))
+    assert got[0] == got[1] == got[2]
