@@ -139,7 +139,7 @@ def _finish_into(
     """:func:`finish_errors` into ``err`` and ``ssd``."""
     rows, cols = energy.shape
     mean_t = sum_t / n
-    var_t = max(sum_tt / n - mean_t**2, 0.0)
+    var_t = max(sum_tt / n - mean_t * mean_t, 0.0)  # x * x: what ** 2 compiles to (also unjitted)
     for i in range(rows):
         for j in range(cols):
             v = energy[i, j] - 2.0 * cross[i, j] + sum_tt
@@ -148,7 +148,7 @@ def _finish_into(
             ssd[i, j] = v
             if normalised:
                 mean_e = first[i, j] / n
-                var_e = energy[i, j] / n - mean_e**2
+                var_e = energy[i, j] / n - mean_e * mean_e
                 if not (var_e >= 0.0 or np.isnan(var_e)):
                     var_e = 0.0
                 v = v / (n * (var_t + var_e + eps))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 
@@ -125,6 +126,7 @@ NOGIL = "template_terms finish_errors candidates_within gather error_surface ras
 
 
 @pytest.mark.parametrize("name", NOGIL.split())
+@pytest.mark.skipif(numba.config.DISABLE_JIT, reason="no compiled kernels without the JIT")
 def test_per_patch_kernels_release_the_gil(name):
     """The patches of a wave run on Python threads: a kernel that kept the GIL would serialise them."""
     assert getattr(kernels, name).targetoptions.get("nogil") is True
