@@ -324,11 +324,7 @@ def synthesize_gaussian_patches(
             template = np.concatenate([region, out_guide[at]], axis=2)
             share = mask.sum() / mask.size if kind != "none" else 1.0
             weights = np.concatenate([weights, np.full((w, w, channels), share)], axis=2)
-        err = searcher.ssd(template, weights)
-        if params.error == "normalised":
-            err = searcher.normalised_ssd(template, weights, err)
-        if factors is not None:
-            err = err * factors
+        err, _ = searcher.errors(template, weights, params.error == "normalised", factors)
         nearest = k_nearest(err, params.neighbours)
         positions = np.stack(np.unravel_index(nearest, searcher.positions_shape), axis=1)
         member = None

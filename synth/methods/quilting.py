@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -44,13 +43,15 @@ from texsynth.synth.api import MethodSpec, Progress, Result, register
 from texsynth.synth.errors import InvalidParameter
 from texsynth.synth.evaluate.coverage import exemplar_coverage
 from texsynth.synth.evaluate.patches import copy_map, copy_share
+from texsynth.synth.kernels import patch_search as patch_kernels
 from texsynth.synth.methods.common import PatchParams, checked_progress
 from texsynth.synth.params import ui
 from texsynth.synth.patch.cut import error_surface, strips_cut_mask
 from texsynth.synth.patch.graphcut import graph_cut_mask
-from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, patch_rng, patch_workers
-from texsynth.synth.patch.search import PatchSearcher, candidates_within
+from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, patch_rng
+from texsynth.synth.patch.search import PatchSearcher
 from texsynth.synth.patch.usage import UsagePenalty
+from texsynth.synth.threads import current_threads, thread_map
 
 __all__ = ["QuiltingParams", "check_patch_geometry", "precheck_patch_method", "run_quilting"]
 
@@ -174,58 +175,90 @@ def run_quilting(
     out = np.zeros((gh, gw, ex.shape[2]), dtype=np.float64)
     source = np.zeros((gh, gw, 2), dtype=np.int32)
     n_pos = searcher.positions_shape[0] * searcher.positions_shape[1]
-    offsets = np.stack(np.mgrid[0:w, 0:w], axis=-1).astype(np.int32)
     usage = UsagePenalty(ex.shape, w, params.usage_weight)
     patches = layout.patches()
     placed: dict[int, tuple[int, int, np.ndarray, float | None]] = {}
     base = int(np.random.default_rng(seed).integers(2**63))
 
-    def place(n: int, factors: np.ndarray | None) -> tuple[int, int, np.ndarray, float | None]:
-        """Search, draw, cut and paste patch ``n`` (reads and writes only its own region; draws from its
-        own random stream): the exemplar position, the new pixels' mask and the overlap error."""
-        i, j, y, x, kind = patches[n]
-        at = layout.index(y, x)  # wraps around the torus when periodic
-        region = out[at]
-        strips = layout.strips(i, j)
-        draw = patch_rng(base, n)
-        error = None
-        if kind == "none":
-            choice = int(draw.integers(n_pos))
-            py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
-            patch = searcher.patch(py, px)
-            new_mask = np.ones((w, w), dtype=bool)
-        else:
-            mask = strips.mask(w)
-            ssd = searcher.ssd(region, mask)
-            err = searcher.normalised_ssd(region, mask, ssd) if params.error == "normalised" else ssd
-            if factors is not None:
-                err = err * factors
-            pool = candidates_within(err, params.tolerance)
-            choice = int(pool[draw.integers(len(pool))])
-            py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
-            patch = searcher.patch(py, px)
-            error = float(ssd.ravel()[choice]) / (mask.sum() * ex.shape[2])
-            if params.blending == "graph-cut":
-                new_mask = graph_cut_mask(region, patch, mask, layout.sealed(i, j))
-            else:
-                new_mask = strips_cut_mask(error_surface(region, patch), strips)
-        region[new_mask] = patch[new_mask]
-        out[at] = region
-        src = source[at]
-        src[new_mask] = (offsets + np.array([py, px], dtype=np.int32))[new_mask]
-        source[at] = src
-        return py, px, new_mask, error
+    def place_first(n: int) -> tuple[int, int, np.ndarray, None]:
+        """Patch ``n`` with nothing known around it: drawn uniformly (its own random stream), pasted."""
+        choice = int(patch_rng(base, n).integers(n_pos))
+        py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
+        rows, cols = layout.rows_cols(patches[n][2], patches[n][3])
+        new_mask = np.ones((w, w), dtype=bool)
+        patch = np.ascontiguousarray(searcher.patch(py, px))
+        patch_kernels.paste(out, source, rows, cols, patch, new_mask, py, px)
+        return py, px, new_mask, None
 
-    # The patches of a wave do not overlap: each is searched, drawn from its own random stream (seed,
-    # patch), cut and pasted on the job's threads (NumPy, SciPy's FFT and the cut kernels release the
-    # GIL), with the usage counts as they were when the wave began; then the wave's patches are counted.
-    with patch_workers() as run_wave:
-        for wave in layout.waves():
-            factors = usage.factors() if params.usage_weight > 0 else None
-            for n, done in zip(wave, run_wave(partial(place, factors=factors), wave), strict=True):
-                placed[n] = done
-                usage.add(done[0], done[1], done[2])
-            report("quilting", len(placed) / len(layout))
+    def stitch(n: int, py: int, px: int, region: np.ndarray) -> np.ndarray:
+        """Cut patch ``n`` (a wrapped patch of a periodic layout, or a graph-cut seam) and paste it."""
+        i, j, y, x, _ = patches[n]
+        patch = searcher.patch(py, px)
+        if params.blending == "graph-cut":
+            new_mask = graph_cut_mask(region, patch, layout.strips(i, j).mask(w), layout.sealed(i, j))
+        else:
+            new_mask = strips_cut_mask(error_surface(region, patch), layout.strips(i, j))
+        rows, cols = layout.rows_cols(y, x)
+        patch_kernels.paste(out, source, rows, cols, np.ascontiguousarray(patch), new_mask, py, px)
+        return new_mask
+
+    # The patches of a wave do not overlap: they are searched together (one FFT call for all, the
+    # rest in numba's threads), each drawn from its own random stream (seed, patch), then cut and pasted
+    # together, with the usage counts as they were when the wave began; then the wave's patches are counted.
+    threads = current_threads()
+    normalised = params.error == "normalised"
+    fast = params.blending == "boundary-cut"
+
+    def place_wave(todo: list[int], factors: np.ndarray | None) -> None:
+        """Search, draw, cut and paste the patches ``todo`` of one wave (each has known strips)."""
+        where = [layout.rows_cols(patches[n][2], patches[n][3]) for n in todo]
+        rows = np.stack([r for r, _ in where])
+        cols = np.stack([c for _, c in where])
+        regions = patch_kernels.gather_many(out, rows, cols)
+        strips = [layout.strips(patches[n][0], patches[n][1]) for n in todo]
+        masks = [s.mask(w) for s in strips]
+        _, ssd, pools, counts = searcher.search_many(
+            regions, masks, normalised, factors, params.tolerance, threads
+        )
+        chosen = []
+        for b, n in enumerate(todo):
+            choice = int(pools[b, patch_rng(base, n).integers(counts[b])])
+            py, px = (int(v) for v in np.unravel_index(choice, searcher.positions_shape))
+            chosen.append((py, px, float(ssd[b].ravel()[choice]) / searcher.mask_weight(masks[b])))
+        quick = [b for b in range(len(todo)) if fast and not strips[b].two_sided]
+        new_masks: dict[int, np.ndarray] = {}
+        if quick:
+            got = patch_kernels.stitch_many(
+                out,
+                source,
+                rows[quick],
+                cols[quick],
+                regions[quick],
+                ex,
+                np.array([chosen[b][0] for b in quick], dtype=np.int64),
+                np.array([chosen[b][1] for b in quick], dtype=np.int64),
+                np.array([strips[b].top for b in quick], dtype=np.int64),
+                np.array([strips[b].left for b in quick], dtype=np.int64),
+            )
+            new_masks.update(zip(quick, got, strict=True))
+        rest = [b for b in range(len(todo)) if b not in new_masks]
+        if rest:
+            got = thread_map(lambda b: stitch(todo[b], chosen[b][0], chosen[b][1], regions[b]), rest, threads)
+            new_masks.update(zip(rest, got, strict=True))
+        for b, n in enumerate(todo):
+            placed[n] = (chosen[b][0], chosen[b][1], new_masks[b], chosen[b][2])
+
+    for wave in layout.waves():
+        factors = usage.factors() if params.usage_weight > 0 else None
+        for n in wave:
+            if patches[n][4] == "none":
+                placed[n] = place_first(n)
+        todo = [n for n in wave if patches[n][4] != "none"]
+        if todo:
+            place_wave(todo, factors)
+        for n in wave:
+            usage.add(placed[n][0], placed[n][1], placed[n][2])
+        report("quilting", len(placed) / len(layout))
     used = [(placed[n][0], placed[n][1]) for n in range(len(patches))]
     errors = [placed[n][3] for n in range(len(patches)) if placed[n][3] is not None]
     h, wd = layout.size

@@ -13,67 +13,29 @@ mirrored so that the cut runs from its outer border inward, the same kernel), an
 it wins for every cut (the intersection of their new sides: where two cuts cross in a corner square, the
 seam follows one up to the crossing and the other from there). The strips' cuts are not optimised jointly.
 
-:func:`min_cut_reference` is the plain NumPy DP that the tests compare with the numba kernels.
+The DP, the cuts of a top / left / L overlap and the error surface are numba kernels
+(:mod:`texsynth.synth.kernels.patch_search`, ``nogil``: the patches of a wave cut at once on the job's
+threads); :func:`min_cut_reference`, :func:`raster_cut_reference` and :func:`error_surface_reference` are
+the plain NumPy versions the tests compare them with.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from texsynth.synth.kernels.options import kernel
+from texsynth.synth.kernels import patch_search as kernels
 from texsynth.synth.patch.layout import Strips
 
 __all__ = [
     "boundary_cut_mask",
     "cut_cost",
     "error_surface",
+    "error_surface_reference",
     "min_cut",
     "min_cut_reference",
+    "raster_cut_reference",
     "strips_cut_mask",
 ]
-
-
-@kernel(nogil=True)
-def _cost_to_go_kernel(errors: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
-    """``C[i, j]``: least error of an 8-connected path from ``(i, j)`` down to the last row."""
-    rows, cols = errors.shape
-    cost = np.empty((rows, cols), dtype=np.float64)
-    for j in range(cols):
-        cost[rows - 1, j] = errors[rows - 1, j]
-    for i in range(rows - 2, -1, -1):
-        for j in range(cols):
-            best = cost[i + 1, j]
-            if j > 0 and cost[i + 1, j - 1] < best:
-                best = cost[i + 1, j - 1]
-            if j + 1 < cols and cost[i + 1, j + 1] < best:
-                best = cost[i + 1, j + 1]
-            cost[i, j] = errors[i, j] + best
-    return cost
-
-
-@kernel(nogil=True)
-def _min_cut_kernel(errors: np.ndarray, row0: int, col0: int) -> np.ndarray:  # pragma: no cover - numba
-    """The least-error 8-connected path from ``(row0, col0)`` to the last row (``col0 < 0``: the best start
-    in ``row0``): ``path[i]`` = its column in row ``i >= row0`` (``-1`` above ``row0``)."""
-    rows, cols = errors.shape
-    cost = _cost_to_go_kernel(errors)
-    path = np.full(rows, -1, dtype=np.int64)
-    j = col0
-    if j < 0:
-        j = 0
-        for c in range(1, cols):
-            if cost[row0, c] < cost[row0, j]:
-                j = c
-    path[row0] = j
-    for i in range(row0 + 1, rows):
-        best = j
-        if j > 0 and cost[i, j - 1] < cost[i, best]:
-            best = j - 1
-        if j + 1 < cols and cost[i, j + 1] < cost[i, best]:
-            best = j + 1
-        j = best
-        path[i] = j
-    return path
 
 
 def min_cut_reference(errors: np.ndarray) -> np.ndarray:
@@ -106,9 +68,16 @@ def min_cut_reference(errors: np.ndarray) -> np.ndarray:
     return path
 
 
+def _min_cut(errors: np.ndarray, row0: int = 0, col0: int = -1) -> np.ndarray:
+    """The least-error 8-connected path from ``(row0, col0)`` to the last row (``col0 < 0``: the best start
+    in ``row0``): its column in every row ``>= row0``, ``-1`` above (numba)."""
+    e = np.ascontiguousarray(errors, dtype=np.float64)
+    return kernels.trace_cut(kernels.cost_to_go(e), row0, col0)
+
+
 def min_cut(errors: np.ndarray) -> np.ndarray:
     """The vertical minimum-error cut of ``errors`` (rows x cols): its column in every row (numba)."""
-    return _min_cut_kernel(np.ascontiguousarray(errors, dtype=np.float64), 0, -1)
+    return _min_cut(errors)
 
 
 def cut_cost(errors: np.ndarray, path: np.ndarray) -> float:
@@ -118,7 +87,17 @@ def cut_cost(errors: np.ndarray, path: np.ndarray) -> float:
 
 
 def error_surface(old: np.ndarray, new: np.ndarray) -> np.ndarray:
-    """``||old - new||^2`` per pixel, summed over channels, float64 ``(h, w)``."""
+    """``||old - new||^2`` per pixel, summed over channels, float64 ``(h, w)`` (numba for ``(h, w, C)``
+    float64 inputs; :func:`error_surface_reference` otherwise, the same bytes)."""
+    if np.ndim(old) == 3 and np.shape(old) == np.shape(new):
+        o = np.ascontiguousarray(old, dtype=np.float64)
+        n = np.ascontiguousarray(new, dtype=np.float64)
+        return kernels.error_surface(o, n)
+    return error_surface_reference(old, new)
+
+
+def error_surface_reference(old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """:func:`error_surface` in NumPy."""
     d = np.asarray(old, dtype=np.float64) - np.asarray(new, dtype=np.float64)
     return (d * d).sum(axis=2) if d.ndim == 3 else d * d
 
@@ -145,33 +124,63 @@ def boundary_cut_mask(errors: np.ndarray, overlap: int, kind: str) -> np.ndarray
     return strips_cut_mask(errors, Strips.of_kind(overlap, kind))
 
 
-def _raster_cut(e: np.ndarray, top: int, left: int) -> np.ndarray:
-    """The new side of the cut of a left (``left`` wide) and/or top (``top`` rows) overlap."""
+def raster_cut_reference(e: np.ndarray, top: int, left: int) -> np.ndarray:
+    """The new side of the cut of a left (``left`` wide) and/or top (``top`` rows) overlap, in NumPy
+    (:func:`texsynth.synth.kernels.patch_search.raster_cut` is the kernel the cuts use)."""
     w = e.shape[0]
     new = np.ones((w, w), dtype=bool)
     cols = np.arange(w)
     if top == 0 and left == 0:
         return new
     if top == 0:
-        path = _min_cut_kernel(np.ascontiguousarray(e[:, :left]), 0, -1)
+        path = _trace_reference(_cost_to_go_reference(e[:, :left]), 0, -1)
         return cols[None, :] >= path[:, None]
     if left == 0:
-        path = _min_cut_kernel(np.ascontiguousarray(e[:top, :].T), 0, -1)
+        path = _trace_reference(_cost_to_go_reference(e[:top, :].T), 0, -1)
         return cols[:, None] >= path[None, :]
     # L: vertical strip (w x left) and horizontal strip (top x w) share the top x left corner.
     vert = np.ascontiguousarray(e[:, :left])
     horiz = np.ascontiguousarray(e[:top, :].T)  # transposed: rows = patch columns
-    cv = _cost_to_go_kernel(vert)
-    ch = _cost_to_go_kernel(horiz)
+    cv = _cost_to_go_reference(vert)
+    ch = _cost_to_go_reference(horiz)
     corner = cv[:top, :left] + ch[:left, :top].T - e[:top, :left]
     i0, j0 = (int(v) for v in np.unravel_index(int(np.argmin(corner)), corner.shape))
-    pv = _min_cut_kernel(vert, i0, j0)  # rows i0.. : column of the vertical cut
-    ph = _min_cut_kernel(horiz, j0, i0)  # patch columns j0.. : row of the horizontal cut
+    pv = _trace_reference(cv, i0, j0)  # rows i0.. : column of the vertical cut
+    ph = _trace_reference(ch, j0, i0)  # patch columns j0.. : row of the horizontal cut
     rows = np.arange(w)
     v_side = np.where(rows[:, None] >= i0, cols[None, :] >= pv[:, None], cols[None, :] >= j0)
     h_side = np.where(cols[None, :] >= j0, rows[:, None] >= ph[None, :], rows[:, None] >= i0)
     new &= v_side & h_side
     return new
+
+
+def _cost_to_go_reference(errors: np.ndarray) -> np.ndarray:
+    """``C[i, j]``: least error of an 8-connected path from ``(i, j)`` down to the last row (NumPy)."""
+    cost = np.array(errors, dtype=np.float64)
+    for i in range(cost.shape[0] - 2, -1, -1):
+        below = cost[i + 1]
+        left = np.concatenate((below[:1], below[:-1]))
+        right = np.concatenate((below[1:], below[-1:]))
+        cost[i] += np.minimum(np.minimum(below, left), right)
+    return cost
+
+
+def _trace_reference(cost: np.ndarray, row0: int, col0: int) -> np.ndarray:
+    """The path of least cost-to-go from ``(row0, col0)`` down (``col0 < 0``: the first best start in
+    ``row0``; ties: the straight step, then left)."""
+    rows, cols = cost.shape
+    path = np.full(rows, -1, dtype=np.int64)
+    j = col0 if col0 >= 0 else int(np.argmin(cost[row0]))
+    path[row0] = j
+    for i in range(row0 + 1, rows):
+        best = j
+        if j > 0 and cost[i, j - 1] < cost[i, best]:
+            best = j - 1
+        if j + 1 < cols and cost[i, j + 1] < cost[i, best]:
+            best = j + 1
+        j = best
+        path[i] = j
+    return path
 
 
 def strips_cut_mask(errors: np.ndarray, strips: Strips) -> np.ndarray:
@@ -199,13 +208,13 @@ def strips_cut_mask(errors: np.ndarray, strips: Strips) -> np.ndarray:
     """
     e = np.ascontiguousarray(errors, dtype=np.float64)
     w = e.shape[0]
-    new = _raster_cut(e, strips.top, strips.left)
+    new = kernels.raster_cut(e, strips.top, strips.left)
     cols = np.arange(w)
     if strips.right:
         # mirrored strip: column c' is patch column w - 1 - c'; the new side is c' >= path
-        path = _min_cut_kernel(np.ascontiguousarray(e[:, ::-1][:, : strips.right]), 0, -1)
+        path = _min_cut(e[:, ::-1][:, : strips.right])
         new &= cols[None, :] <= (w - 1 - path)[:, None]
     if strips.bottom:
-        path = _min_cut_kernel(np.ascontiguousarray(e[::-1, :][: strips.bottom, :].T), 0, -1)
+        path = _min_cut(e[::-1, :][: strips.bottom, :].T)
         new &= cols[:, None] <= (w - 1 - path)[None, :]
     return new

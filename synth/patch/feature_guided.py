@@ -332,16 +332,14 @@ def synthesize_feature_guided(
         at = layout.index(y, x)
         region, region_mask, region_tan = out[at], out_mask[at], out_tan[at]
         mask = layout.strips(i, j).mask(w)
-        ssds = [sr.ssd(region, mask) for sr in searchers]
-        ssd = np.concatenate([d.ravel() for d in ssds])
-        if s.error == "normalised" or s.usage_weight > 0:
-            errs = [
-                sr.normalised_ssd(region, mask, d) if s.error == "normalised" else d
-                for sr, d in zip(searchers, ssds, strict=True)
-            ]
-            if factors is not None:
-                errs = [e * f for e, f in zip(errs, factors, strict=True)]
-            err = np.concatenate([e.ravel() for e in errs])
+        normalised = s.error == "normalised"
+        got = [
+            sr.errors(region, mask, normalised, None if factors is None else factors[v])
+            for v, sr in enumerate(searchers)
+        ]
+        ssd = np.concatenate([d.ravel() for _, d in got])
+        if normalised or s.usage_weight > 0:
+            err = np.concatenate([e.ravel() for e, _ in got])
             pool = k_nearest(err, s.candidates)
             colour = err[pool]
         else:

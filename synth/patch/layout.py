@@ -330,6 +330,15 @@ class PatchLayout:
             rows, cols = rows % self.size[0], cols % self.size[1]
         return np.ix_(rows, cols)
 
+    def rows_cols(self, y: int, x: int) -> tuple[np.ndarray, np.ndarray]:
+        """The output rows and columns of the ``w x w`` region at ``(y, x)`` (int64, wrapped around the
+        torus in a periodic layout): :meth:`index` without :func:`numpy.ix_`, for the kernels."""
+        rows = np.arange(y, y + self.w)
+        cols = np.arange(x, x + self.w)
+        if self.periodic:
+            rows, cols = rows % self.size[0], cols % self.size[1]
+        return rows, cols
+
     def describe(self) -> dict[str, Any]:
         """The layout as plain numbers, for ``Result.stats['layout']`` and :func:`seam_visibility`.
 

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from texsynth.synth.kernels.patch_search import usage_factors
+
 __all__ = ["UsagePenalty"]
 
 
@@ -77,7 +79,15 @@ class UsagePenalty:
         self.uses[y : y + self.w, x : x + self.w] += use
 
     def factors(self) -> np.ndarray:
-        """``1 + weight * max(0, U/T - 1)`` at every candidate position, ``(h - w + 1, wd - w + 1)``."""
+        """``1 + weight * max(0, U/T - 1)`` at every candidate position, ``(h - w + 1, wd - w + 1)``
+        (a numba kernel; :meth:`factors_reference` in NumPy)."""
+        total = float(self.uses.sum())
+        if self.weight == 0.0 or total == 0.0:
+            return np.ones(self._reach_box.shape)
+        return usage_factors(self.uses, self._reach_box, total / self._reach_total, self.weight, self.w)
+
+    def factors_reference(self) -> np.ndarray:
+        """:meth:`factors` in NumPy."""
         total = float(self.uses.sum())
         if self.weight == 0.0 or total == 0.0:
             return np.ones(self._reach_box.shape)

@@ -220,13 +220,13 @@ def test_warp_stats_and_the_kink_measure_are_reported(runs):
 
 
 def test_reverse_weight_none_follows_the_exemplars_orientation(laminae):
-    """``reverse_weight=None`` (the default): 4 for weakly oriented exemplars, 0 (eq 2) for strongly
+    """``reverse_weight=None`` (the default): 2 for weakly oriented exemplars, 0 (eq 2) for strongly
     oriented ones, and the run records the weight it used."""
     from texsynth.synth.methods.feature_guided import reverse_weight_for
 
     noise = np.random.default_rng(3).random((64, 64)).astype(np.float32)
     assert reverse_weight_for(laminae) == 0.0
-    assert reverse_weight_for(noise) == 4.0
+    assert reverse_weight_for(noise) == 2.0
     ran = synthesize("feature-guided", laminae, size=SIZE, params=BASE, seed=2)
     assert ran.params["reverse_weight"] == 0.0
     paper = synthesize("feature-guided", laminae, size=SIZE, params={**BASE, "reverse_weight": 0}, seed=2)
