@@ -295,13 +295,15 @@ def test_wait_all_of_20_jobs_outlasts_an_api_restart_and_a_full_queue(tmp_path, 
     )
     restarted = threading.Event()
     unfinished_at_restart: list[int] = []
+    restarts: list[threading.Thread] = []
 
     def restart_once(job, finished: int, total: int) -> None:
         if not restarted.is_set():
             restarted.set()
             unfinished_at_restart.append(total - finished)
             service.stop()
-            threading.Thread(target=service.start, daemon=True).start()
+            restarts.append(threading.Thread(target=service.start, daemon=True))
+            restarts[0].start()
 
     try:
         service.start()
@@ -325,6 +327,8 @@ def test_wait_all_of_20_jobs_outlasts_an_api_restart_and_a_full_queue(tmp_path, 
         with Image.open(io.BytesIO(client.artifact(final[0], "output.png"))) as im:
             assert im.size == (24, 16)  # width x height, as asked by keyword
     finally:
+        for thread in restarts:  # its readiness poll must end before the stop (or it fails the next test)
+            thread.join(timeout=90)
         service.stop()
         client.close()
 
