@@ -199,12 +199,80 @@ def _save(name: str, volume: np.ndarray, planes: dict[str, np.ndarray] | np.ndar
     return f"![{name} slices](img/laminar-{name}-slices.png) ![{name} cube](img/laminar-{name}-cube.png)"
 
 
+def calibrate(side: int = 128, period: float = 6.0) -> dict[str, Any]:
+    """The tables behind the fitted start lengths (:mod:`texsynth.synth.pixel.laminar`).
+
+    ``SHEET_COHERENCE``: the mean :func:`~texsynth.synth.pixel.laminar.period_coherence` of every 8th slice
+    along each axis of the laminar start's sheets (``cos(2 pi phi / period)``, two draws) at each of
+    ``SHEET_LENGTHS``, and ``SHEET_RADIUS`` their :func:`~texsynth.synth.pixel.laminar.fringe_radius`.
+    ``BEND_PER_LENGTH``: the oriented start's slices' mean
+    :func:`~texsynth.synth.pixel.laminar.bend_length` over its crumple length, for the turbostratic truth's
+    exemplar at 2, 3 and 4 periods (two draws).
+    """
+    from texsynth.synth.pixel.laminar import (
+        SHEET_LENGTHS,
+        bend_length,
+        fringe_radius,
+        laminar_phase,
+        oriented_phase,
+        period_coherence,
+        plane_orientation,
+        sheet_normal,
+        stack_period,
+    )
+
+    shape = (side,) * 3
+    table, radii = [], []
+    for length in SHEET_LENGTHS:
+        values, curvature = [], []
+        for draw in (1, 2):
+            wave = np.cos(
+                2.0 * np.pi * laminar_phase(shape, length * period, np.random.default_rng(draw)) / period
+            )
+            cuts = [
+                np.ascontiguousarray(np.take(wave, i, axis=a)) for a in range(3) for i in range(4, side, 8)
+            ]
+            values += [period_coherence(cut) for cut in cuts]
+            curvature += [fringe_radius(cut) for cut in cuts]
+        table.append(round(float(np.mean(values)), 3))
+        radii.append(round(float(np.mean(curvature)), 2))
+        print(
+            f"sheets {length} periods: period coherence {table[-1]:.3f}, radius {radii[-1]:.2f}", flush=True
+        )
+    views = dict.fromkeys(
+        ("xy", "xz", "yz"), exemplars(turbostratic_volume(shape, seed=TRUTH_SEED), "one")["xy"]
+    )
+    normal = sheet_normal({p: plane_orientation(im) for p, im in views.items()})
+    spacing = stack_period(views, normal)
+    ratios = []
+    for length in (2.0, 3.0, 4.0):
+        for draw in (1, 2):
+            phi = oriented_phase(shape, views, spacing, length * spacing, np.random.default_rng(draw))
+            wave = np.cos(2.0 * np.pi * phi / spacing)
+            bends = [
+                bend_length(np.ascontiguousarray(np.take(wave, i, axis=a)))
+                for a in range(3)
+                for i in (32, 96)
+            ]
+            ratios.append(float(np.mean(bends)) / length)
+        print(f"oriented {length} periods: bend length / length {np.mean(ratios[-2:]):.3f}", flush=True)
+    return {
+        "SHEET_COHERENCE": table,
+        "SHEET_RADIUS": radii,
+        "BEND_PER_LENGTH": round(float(np.mean(ratios)), 3),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid synthesis against known laminar answers")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
     parser.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
     parser.add_argument("--report", action="store_true", help="only rewrite docs/laminar.md from the results")
+    parser.add_argument("--calibrate", action="store_true", help="only print the fitted lengths' tables")
     args = parser.parse_args(argv)
+    if args.calibrate:
+        print(json.dumps(calibrate()))
+        return 0
     if args.report:
         (DOCS / "laminar.md").write_text(report(json.loads(RESULTS.read_text())))
         return 0

@@ -381,10 +381,50 @@ def test_oriented_start_keeps_a_tilted_stack() -> None:
         assert abs(wrap_angle(got - want)) < np.radians(15), plane
 
 
-@pytest.mark.parametrize(("field", "value"), [("final_step", "median"), ("structure", "stacked")])
-def test_bad_start_and_final_step_are_named(field: str, value: str) -> None:
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("final_step", "median"),
+        ("structure", "stacked"),
+        ("structure_length", "long"),
+        ("structure_length", 0.0),
+        ("structure_length", 65.0),
+        ("oriented_length", "fitted"),
+        ("oriented_length", -1.0),
+    ],
+)
+def test_bad_start_and_final_step_are_named(field: str, value: object) -> None:
     with pytest.raises(InvalidParameter, match=field):
         synthesize("solid-kopf", _soft(), size=SIZE, params={field: value})
+
+
+def test_start_lengths_are_fitted_or_taken_as_given() -> None:
+    """'auto' (the default) fits the sheets' and the crumples' lengths to the exemplars
+    (:mod:`texsynth.synth.pixel.laminar`) and reports them; a number is used as given; the paper's random
+    start has none."""
+    from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import fitted_oriented_length, fitted_structure_length
+
+    ex = _soft()
+    run = synthesize("solid-kopf", ex, size=SIZE, params={**SMALL, "structure": "laminar"}, seed=1)
+    assert run.stats["start_length"] == pytest.approx(fitted_structure_length([ex]))
+    given = {**SMALL, "structure": "laminar", "structure_length": 3.0}
+    assert synthesize("solid-kopf", ex, size=SIZE, params=given, seed=1).stats["start_length"] == 3.0
+    planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
+    run = synthesize(
+        "solid-kopf", exemplars=planes, size=SIZE, params={**SMALL, "structure": "oriented"}, seed=1
+    )
+    assert run.stats["start_length"] == pytest.approx(fitted_oriented_length(planes))
+    given = {**SMALL, "structure": "oriented", "oriented_length": 5.0}
+    assert (
+        synthesize("solid-kopf", exemplars=planes, size=SIZE, params=given, seed=1).stats["start_length"]
+        == 5.0
+    )
+    assert (
+        synthesize("solid-kopf", ex, size=SIZE, params={**SMALL, "structure": "none"}).stats["start_length"]
+        is None
+    )
 
 
 @pytest.mark.parametrize("search", ["tree", "exact"])
