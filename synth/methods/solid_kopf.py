@@ -25,8 +25,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
 - neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
-  curved sheets for isotropic fringes (a pilot for short ones), a crumpled stack for anisotropic ones, their
-  lengths fitted to the exemplars' curvature, coherence and bends (``structure_length``, ``oriented_length``);
+  curved sheets for isotropic fringes (a pilot for short ones), a crumpled stack for anisotropic ones,
+  the sheets' length fitted to the exemplars' curvature and coherence (``structure_length``); bent laminae
+  (fringes that keep their orientation over 2 periods) keep the random start;
 - after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 
@@ -60,6 +61,7 @@ from texsynth.synth.kernels.solid_search import (
 from texsynth.synth.methods.common import SolidParams, checked_progress
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
+    ORIENTED_MAX_BEND,
     dominant_period,
     fitted_oriented_length,
     fitted_structure_length,
@@ -119,8 +121,8 @@ POSITION_GAIN = 1.0
 POSITION_CELLS = 16
 #: Default gain of the orientation-usage re-weighting (docs/solid.md, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
-#: Correlation length of the oriented start's crumples, in periods, before it was fitted (docs/solid.md;
-#: ``solid-chen-wang``'s default).
+#: Correlation length of the oriented start's crumples, in periods (docs/solid.md: the turbostratic stack's
+#: tortuosity KS worst 0.12 at 2, 0.24 at its fitted 2.5, 0.28 at 4; also ``solid-chen-wang``'s default).
 ORIENTED_LENGTH = 2.0
 #: A start length in periods, given literally.
 Length = Annotated[float, Field(gt=0.0, le=64.0)]
@@ -196,14 +198,15 @@ class SolidKopfParams(SolidParams):
         ),
     )
     oriented_length: Length | Literal["auto"] = Field(
-        "auto",
+        ORIENTED_LENGTH,
         description="How far the oriented start's crumples stay straight, in fringe periods; 'auto' fits it "
         "to the exemplars.",
         json_schema_extra=ui(
             unit="periods",
             details=(
                 "Correlation length of the oriented start's crumples, in periods (0-64]; 'auto': the "
-                "length whose slices keep their orientation as far as the exemplars' fringes do."
+                "length whose slices keep their orientation as far as the exemplars' fringes do (measured "
+                "worse than 2 on the stacks and bent laminae tried: docs/solid.md)."
             ),
         ),
     )
@@ -523,7 +526,9 @@ def run_solid_kopf(
     plan_levels(run.views, size, 1, params.neighbourhood_size)  # names bad exemplars before choosing a start
     period, phi, length = 0.0, None, None
     pilot = partial(laminar_pilot, settings={"structure_length": params.structure_length})
-    kind = start_kind(params.structure, run.views, params.planes, params.adapt_to_structure, pilot)
+    kind = start_kind(
+        params.structure, run.views, params.planes, params.adapt_to_structure, pilot, ORIENTED_MAX_BEND
+    )
     if kind == "oriented":
         views = {PLANES[p]: run.views[PLANES[p]] for p in run.active}
         levels = structure_levels(float(np.mean([dominant_period(im) for im in views.values()])), levels)

@@ -45,6 +45,7 @@ __all__ = [
     "BEND_PER_LENGTH",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
+    "ORIENTED_MAX_BEND",
     "PILOT_COHERENCE",
     "SHEET_COHERENCE",
     "SHEET_LENGTHS",
@@ -52,6 +53,7 @@ __all__ = [
     "START_COHERENCE",
     "bend_length",
     "dominant_period",
+    "exemplar_bend",
     "fitted_oriented_length",
     "fitted_structure_length",
     "fringe_radius",
@@ -164,6 +166,7 @@ def start_kind(
     planes: Sequence[str],
     adapt: bool,
     pilot: Callable[[np.ndarray], bool] | None = None,
+    max_bend: float | None = None,
 ) -> str:
     """Which structured start a solid synthesis takes: ``'laminar'``, ``'oriented'`` or ``'none'``.
 
@@ -172,6 +175,8 @@ def start_kind(
     and every constrained exemplar fringed (mean coherence >= :data:`START_COHERENCE`): ``'laminar'``
     when they are all isotropic (per-plane onions), else ``'oriented'`` (stacks, per-plane laminae, two
     views: :func:`oriented_phase`). Weakly oriented exemplars (soot) keep the paper's random start.
+    With ``max_bend`` (periods), an anisotropic set whose fringes keep their orientation farther than that
+    (:func:`exemplar_bend`: bent laminae, not a crumpled stack) keeps the random start too.
     """
     if structure in ("laminar", "oriented", "none"):
         return structure
@@ -180,8 +185,11 @@ def start_kind(
     images = [np.asarray(exemplars[p]) for p in planes]
     if not adapt or min(mean_coherence(im) for im in images) < START_COHERENCE:
         return "none"
-    isotropic = all(mean_tensor_coherence(im) < ISOTROPIC_MAX for im in images)
-    return "laminar" if isotropic else "oriented"
+    if all(mean_tensor_coherence(im) < ISOTROPIC_MAX for im in images):
+        return "laminar"
+    if max_bend is not None and exemplar_bend({p: exemplars[p] for p in planes}) > max_bend:
+        return "none"
+    return "oriented"
 
 
 def structure_levels(period: float, levels: int) -> int:
@@ -427,8 +435,13 @@ SHEET_RADIUS = (3.77, 4.13, 4.5, 5.01, 5.49, 6.01, 8.24, 10.89, 13.46)
 #: periods of crumple length (``python -m benchmarks.bench_laminar --calibrate``: 0.50-0.56 between 2 and
 #: 4 periods; the crumple field scales with its length, so the ratio is a constant).
 BEND_PER_LENGTH = 0.52
-#: Bounds of the fitted lengths (periods): the table's span, and the oriented start's.
+#: Bounds of the fitted crumple length (periods).
 ORIENTED_LENGTH_RANGE = (1.0, 16.0)
+#: :func:`start_kind`'s ``max_bend`` for ``solid-kopf``: fringes that keep their orientation farther than
+#: this many periods (:func:`exemplar_bend`; turbostratic stack 1.3, per-plane bent sheets 2.5, bent laminae
+#: 4.8) are bent laminae, better served by the random start (docs/solid.md: orientation KL 0.08-0.10
+#: against 0.09-0.31 from crumples of 2 periods and 1.0-2.0 from fitted ones).
+ORIENTED_MAX_BEND = 2.0
 
 
 def period_coherence(image: np.ndarray, period: float | None = None) -> float:
@@ -526,20 +539,27 @@ def bend_length(image: np.ndarray) -> float:
     return lag / max(dominant_period(img), 1e-6)
 
 
-def fitted_oriented_length(exemplars: Mapping[str, np.ndarray]) -> float:
-    """The oriented start's crumple length (periods) whose slices bend as the exemplars' fringes do.
-
-    The planes' :func:`bend_length`, weighted by their anisotropy (:func:`plane_orientation`: a plane
-    nearly parallel to the sheets shows contour bands, not fringes), divided by :data:`BEND_PER_LENGTH`
-    and kept within :data:`ORIENTED_LENGTH_RANGE`: the turbostratic stack (crumples of 1.3 periods) gets
-    about 2 periods, bent laminae that bend once over 18 periods about 8.
-    """
+def exemplar_bend(exemplars: Mapping[str, np.ndarray]) -> float:
+    """The planes' :func:`bend_length` (periods), weighted by their anisotropy (:func:`plane_orientation`: a
+    plane nearly parallel to the sheets shows contour bands, not fringes)."""
     weights, lengths = [], []
     for image in exemplars.values():
         weights.append(max(plane_orientation(image)[1], 1e-3))
         lengths.append(bend_length(image))
-    value = float(np.average(lengths, weights=weights)) / BEND_PER_LENGTH
-    return float(np.clip(value, *ORIENTED_LENGTH_RANGE))
+    return float(np.average(lengths, weights=weights))
+
+
+def fitted_oriented_length(exemplars: Mapping[str, np.ndarray]) -> float:
+    """The oriented start's crumple length (periods) whose slices bend as the exemplars' fringes do.
+
+    :func:`exemplar_bend` divided by :data:`BEND_PER_LENGTH`, kept within :data:`ORIENTED_LENGTH_RANGE`:
+    the turbostratic truth's stack (bends of 1.3 periods) gets 2.5 periods, per-plane bent sheets 4.8 and
+    bent laminae that bend once over 18 periods 9.3. Measured no better than 2 periods (docs/solid.md: the
+    stack's tortuosity KS worst 0.24 against 0.12; at 64^3 long crumples flatten or tilt whole slabs of
+    bent laminae), so ``solid-kopf`` keeps 2 unless asked, and bent laminae keep the random start
+    (:data:`ORIENTED_MAX_BEND`).
+    """
+    return float(np.clip(exemplar_bend(exemplars) / BEND_PER_LENGTH, *ORIENTED_LENGTH_RANGE))
 
 
 def resolved_length(length: float | str, fit: Callable[[], float]) -> float:

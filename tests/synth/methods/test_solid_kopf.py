@@ -399,10 +399,11 @@ def test_bad_start_and_final_step_are_named(field: str, value: object) -> None:
 
 
 def test_start_lengths_are_fitted_or_taken_as_given() -> None:
-    """'auto' (the default) fits the sheets' and the crumples' lengths to the exemplars
-    (:mod:`texsynth.synth.pixel.laminar`) and reports them; a number is used as given; the paper's random
-    start has none."""
+    """``structure_length='auto'`` (the default) fits the sheets' length to the exemplars and
+    ``oriented_length='auto'`` the crumples' (:mod:`texsynth.synth.pixel.laminar`); numbers are used as
+    given (the crumples' default: 2 periods); the paper's random start has none."""
     from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH
     from texsynth.synth.output.volume import mid_slices
     from texsynth.synth.pixel.laminar import fitted_oriented_length, fitted_structure_length
 
@@ -412,15 +413,12 @@ def test_start_lengths_are_fitted_or_taken_as_given() -> None:
     given = {**SMALL, "structure": "laminar", "structure_length": 3.0}
     assert synthesize("solid-kopf", ex, size=SIZE, params=given, seed=1).stats["start_length"] == 3.0
     planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
-    run = synthesize(
-        "solid-kopf", exemplars=planes, size=SIZE, params={**SMALL, "structure": "oriented"}, seed=1
-    )
+    oriented = {**SMALL, "structure": "oriented"}
+    run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=oriented, seed=1)
+    assert run.stats["start_length"] == ORIENTED_LENGTH
+    fitted = {**oriented, "oriented_length": "auto"}
+    run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=fitted, seed=1)
     assert run.stats["start_length"] == pytest.approx(fitted_oriented_length(planes))
-    given = {**SMALL, "structure": "oriented", "oriented_length": 5.0}
-    assert (
-        synthesize("solid-kopf", exemplars=planes, size=SIZE, params=given, seed=1).stats["start_length"]
-        == 5.0
-    )
     assert (
         synthesize("solid-kopf", ex, size=SIZE, params={**SMALL, "structure": "none"}).stats["start_length"]
         is None

@@ -322,3 +322,19 @@ def test_resolved_length_takes_numbers_fits_auto_and_names_bad_words() -> None:
     assert resolved_length("auto", lambda: 2.5) == 2.5
     with pytest.raises(ValueError, match="length"):
         resolved_length("long", lambda: 2.5)
+
+
+def test_auto_keeps_bent_laminae_on_the_random_start_when_bends_are_capped() -> None:
+    """With ``max_bend`` (solid-kopf's ORIENTED_MAX_BEND), a crumpled stack still takes the oriented start
+    and laminae bent once across the exemplar the random one; without it both are oriented."""
+    from texsynth.synth.io.patterns import undulating_laminae
+    from texsynth.synth.pixel.laminar import ORIENTED_MAX_BEND, exemplar_bend
+
+    all3 = ("xy", "xz", "yz")
+    stack = mid_slices(turbostratic_volume((128, 128, 128), seed=11))
+    bent = dict.fromkeys(all3, undulating_laminae((128, 128), 7, 16, 128, noise=0.3))
+    assert exemplar_bend(stack) < ORIENTED_MAX_BEND < exemplar_bend(bent)
+    assert start_kind("auto", stack, all3, True, None, ORIENTED_MAX_BEND) == "oriented"
+    assert start_kind("auto", bent, ("xz", "yz"), True, None, ORIENTED_MAX_BEND) == "none"
+    assert start_kind("auto", bent, ("xz", "yz"), True) == "oriented"
+    assert start_kind("oriented", bent, ("xz", "yz"), True, None, ORIENTED_MAX_BEND) == "oriented"
