@@ -378,7 +378,21 @@ def report(saved: dict[str, Any]) -> str:
     return "\n".join(parts)
 
 
-NOTES = """## The oriented start and the last step (issue 24, `solid-kopf`)
+NOTES = """## The sheets' length fitted to the exemplar (issue 24, `solid-kopf`, session kopf4)
+
+The `solid-kopf` `defaults` rows of the onions (one exemplar and per plane, 64^3 seeds 1-3; one exemplar
+128^3 seeds 1-3) were re-run (2026-11-27, load 9-15 on the 2 cores) after the laminar start's sheet length
+became fitted to the exemplar (`structure_length='auto'`, docs/solid.md "The sheets' length fitted to the
+exemplar"): 2.11 periods for this onion exemplar instead of 4 (2.1 per plane). Every mean meets its target
+at 64^3 and 128^3; per plane every seed-axis too; one exemplar at 64^3 the worst tortuosity KS is 0.18 (seed
+1, xy), the floor's own worst. Before (4 periods, one exemplar 64^3): orientation KL 0.12 / 0.05 / 0.16
+(0.19), length KS 0.13 / 0.11 / 0.09 (0.19), tortuosity KS 0.22 / 0.14 / 0.23 (0.29); 128^3 seed 1 length KS
+0.18, tortuosity KS 0.17. The onions' `final-average` row was re-run too. The turbostratic rows are
+unchanged (same bytes: its oriented start keeps crumples of 2 periods; a fitted 2.53 measured tortuosity KS
+0.08 / 0.13 / 0.13 (0.24)). The `paper` and `solid-chen-wang` rows are from before (their settings do not
+fit the length).
+
+## The oriented start and the last step (issue 24, `solid-kopf`)
 
 The `solid-kopf` `defaults` rows were re-run (2026-11-27, load 13-23 on the 2 cores: wall times say nothing)
 after two departures (docs/solid.md, "Over-ordering, the oriented start and the last step"): `'auto'` starts

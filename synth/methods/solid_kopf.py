@@ -38,7 +38,7 @@ from functools import partial
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -168,16 +168,16 @@ class SolidKopfParams(SolidParams):
         ),
     )
     structure: Literal["auto", "none", "laminar", "oriented"]
-    structure_length: Length | Literal["auto"] = Field(
-        "auto",
-        description="How far the starting sheets run before they bend, in fringe periods; 'auto' fits it to "
-        "the exemplars.",
+    structure_length: Length | None = Field(
+        None,
+        description="How far the starting sheets run before they bend, in fringe periods; empty (or "
+        "'auto'): fitted to the exemplars.",
         json_schema_extra=ui(
             unit="periods",
             details=(
-                "Curvature length of the laminar start, in periods (0-64]; 'auto': the length whose "
-                "sheets' slices are as coherent at the period's scale as the exemplars (small onions get "
-                "short sheets, large shells long ones)."
+                "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': the shortest "
+                "length whose sheets' slices are at least as coherent at the period's scale and at most as "
+                "curved as the exemplars (small onions get short sheets, large shells long ones)."
             ),
         ),
     )
@@ -197,16 +197,16 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
-    oriented_length: Length | Literal["auto"] = Field(
+    oriented_length: Length | None = Field(
         ORIENTED_LENGTH,
-        description="How far the oriented start's crumples stay straight, in fringe periods; 'auto' fits it "
-        "to the exemplars.",
+        description="How far the oriented start's crumples stay straight, in fringe periods; empty (or "
+        "'auto'): fitted to the exemplars.",
         json_schema_extra=ui(
             unit="periods",
             details=(
-                "Correlation length of the oriented start's crumples, in periods (0-64]; 'auto': the "
-                "length whose slices keep their orientation as far as the exemplars' fringes do (measured "
-                "worse than 2 on the stacks and bent laminae tried: docs/solid.md)."
+                "Correlation length of the oriented start's crumples, in periods (0-64]; empty or 'auto': "
+                "the length whose slices keep their orientation as far as the exemplars' fringes do "
+                "(measured worse than 2 on the stacks and bent laminae tried: docs/solid.md)."
             ),
         ),
     )
@@ -268,6 +268,12 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
+
+    @field_validator("structure_length", "oriented_length", mode="before")
+    @classmethod
+    def _auto_length(cls, value: object) -> object:
+        """``'auto'`` is the empty value: the length fitted to the exemplars."""
+        return None if value == "auto" else value
 
 
 def _position_factors(match: np.ndarray, ex_shape: tuple[int, int]) -> np.ndarray:

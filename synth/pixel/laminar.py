@@ -562,10 +562,10 @@ def fitted_oriented_length(exemplars: Mapping[str, np.ndarray]) -> float:
     return float(np.clip(exemplar_bend(exemplars) / BEND_PER_LENGTH, *ORIENTED_LENGTH_RANGE))
 
 
-def resolved_length(length: float | str, fit: Callable[[], float]) -> float:
-    """``length`` (periods) as given, or ``fit()`` when it is ``'auto'``; anything else is refused."""
-    if isinstance(length, str):
-        if length != "auto":
-            raise ValueError(f"length must be a number of periods or 'auto', not {length!r}")
+def resolved_length(length: float | str | None, fit: Callable[[], float]) -> float:
+    """``length`` (periods) as given, or ``fit()`` when it is ``None`` or ``'auto'``; other words: refused."""
+    if length is None or length == "auto":
         return float(fit())
+    if isinstance(length, str):
+        raise ValueError(f"length must be a number of periods or 'auto', not {length!r}")
     return float(length)

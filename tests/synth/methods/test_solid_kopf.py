@@ -399,8 +399,8 @@ def test_bad_start_and_final_step_are_named(field: str, value: object) -> None:
 
 
 def test_start_lengths_are_fitted_or_taken_as_given() -> None:
-    """``structure_length='auto'`` (the default) fits the sheets' length to the exemplars and
-    ``oriented_length='auto'`` the crumples' (:mod:`texsynth.synth.pixel.laminar`); numbers are used as
+    """``structure_length`` empty (the default; or ``'auto'``) fits the sheets' length to the exemplars and
+    ``oriented_length`` empty the crumples' (:mod:`texsynth.synth.pixel.laminar`); numbers are used as
     given (the crumples' default: 2 periods); the paper's random start has none."""
     from texsynth.synth.io.laminar import turbostratic_volume
     from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH
@@ -416,9 +416,10 @@ def test_start_lengths_are_fitted_or_taken_as_given() -> None:
     oriented = {**SMALL, "structure": "oriented"}
     run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=oriented, seed=1)
     assert run.stats["start_length"] == ORIENTED_LENGTH
-    fitted = {**oriented, "oriented_length": "auto"}
-    run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=fitted, seed=1)
-    assert run.stats["start_length"] == pytest.approx(fitted_oriented_length(planes))
+    for empty in ("auto", None):  # the JSON schema's empty value and its spelled-out name
+        fitted = {**oriented, "oriented_length": empty}
+        run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=fitted, seed=1)
+        assert run.stats["start_length"] == pytest.approx(fitted_oriented_length(planes))
     assert (
         synthesize("solid-kopf", ex, size=SIZE, params={**SMALL, "structure": "none"}).stats["start_length"]
         is None

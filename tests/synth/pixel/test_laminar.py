@@ -320,6 +320,7 @@ def test_resolved_length_takes_numbers_fits_auto_and_names_bad_words() -> None:
 
     assert resolved_length(3.0, lambda: 9.0) == 3.0
     assert resolved_length("auto", lambda: 2.5) == 2.5
+    assert resolved_length(None, lambda: 2.5) == 2.5
     with pytest.raises(ValueError, match="length"):
         resolved_length("long", lambda: 2.5)
 
