@@ -382,7 +382,7 @@ NOTES = """## The sheets' length fitted to the exemplar (issue 24, `solid-kopf`,
 
 The `solid-kopf` `defaults` rows of the onions (one exemplar and per plane, 64^3 seeds 1-3; one exemplar
 128^3 seeds 1-3) were re-run (2026-11-27, load 9-15 on the 2 cores) after the laminar start's sheet length
-became fitted to the exemplar (`structure_length='auto'`, docs/solid.md "The sheets' length fitted to the
+became fitted to the exemplar (`structure_length` empty, docs/solid.md "The sheets' length fitted to the
 exemplar"): 2.11 periods for this onion exemplar instead of 4 (2.1 per plane). Every mean meets its target
 at 64^3 and 128^3; per plane every seed-axis too; one exemplar at 64^3 the worst tortuosity KS is 0.18 (seed
 1, xy), the floor's own worst. Before (4 periods, one exemplar 64^3): orientation KL 0.12 / 0.05 / 0.16
