@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import time
 from functools import partial
-from typing import Annotated, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -124,8 +124,6 @@ ORIENTATION_GAIN = 32.0
 #: Correlation length of the oriented start's crumples, in periods (docs/solid.md: the turbostratic stack's
 #: tortuosity KS worst 0.12 at 2, 0.24 at its fitted 2.5, 0.28 at 4; also ``solid-chen-wang``'s default).
 ORIENTED_LENGTH = 2.0
-#: A start length in periods, given literally.
-Length = Annotated[float, Field(gt=0.0, le=64.0)]
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
 RANDOM_CANDIDATES = 2
 #: Queries gathered and searched at once, through one buffer reused all run (a progress chunk at 256^3
@@ -168,8 +166,10 @@ class SolidKopfParams(SolidParams):
         ),
     )
     structure: Literal["auto", "none", "laminar", "oriented"]
-    structure_length: Length | None = Field(
+    structure_length: float | None = Field(
         None,
+        gt=0.0,
+        le=64.0,
         description="How far the starting sheets run before they bend, in fringe periods; empty (or "
         "'auto'): fitted to the exemplars.",
         json_schema_extra=ui(
@@ -197,8 +197,10 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
-    oriented_length: Length | None = Field(
+    oriented_length: float | None = Field(
         ORIENTED_LENGTH,
+        gt=0.0,
+        le=64.0,
         description="How far the oriented start's crumples stay straight, in fringe periods; empty (or "
         "'auto'): fitted to the exemplars.",
         json_schema_extra=ui(
