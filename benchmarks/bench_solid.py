@@ -127,6 +127,8 @@ ANISOTROPIC_RUNS = (
     ("solid-kopf", {}),
     ("solid-kopf", {"orientation_gain": 0.0}),
     ("solid-kopf", {"adapt_to_structure": False}),
+    ("solid-kopf", {"structure": "oriented"}),
+    ("solid-kopf", {"structure": "oriented", "oriented_length": "auto"}),
     ("solid-chen-wang", {}),
 )
 
@@ -166,6 +168,8 @@ def anisotropic(seeds: tuple[int, ...] = (1, 2, 3)) -> tuple[str, dict[str, floa
 TWO_VIEW_RUNS = (
     ("solid-kopf", {}),
     ("solid-kopf", {"orientation_gain": 0.0}),
+    ("solid-kopf", {"structure": "oriented"}),
+    ("solid-kopf", {"structure": "oriented", "oriented_length": "auto"}),
     ("solid-chen-wang", {}),
 )
 
@@ -806,19 +810,25 @@ def _extra_sections() -> list[str]:
         "bands. 64^3, mean over seeds 1-3 (worst); target < 0.10.\n\n"
         f"{two_views()}\n\n"
         "Exemplar, then the xy, xz and yz mid-slices, seed 1: `solid-kopf` (defaults), the same without "
-        "the orientation re-weighting, `solid-chen-wang`:\n\n"
+        "the orientation re-weighting, from the oriented start (crumples of 2 periods, then fitted), "
+        "`solid-chen-wang`:\n\n"
         "![kopf](img/solid-two-views-solid-kopf-defaults.png) "
         "![kopf, gain 0](img/solid-two-views-solid-kopf-orientation_gain0.0.png) "
+        "![kopf, oriented](img/solid-two-views-solid-kopf-structureoriented.png) "
+        "![kopf, oriented, fitted](img/solid-two-views-solid-kopf-structureoriented-oriented_lengthauto.png) "
         "![chen-wang](img/solid-two-views-solid-chen-wang-defaults.png)\n",
         "## Anisotropic material from three per-plane exemplars (64^3 from 128^2)\n\n"
         "The exemplars are the three mid-slices of bent sheets normal to z (a material that exists). "
         "Cells: mean over seeds 1-3 (worst seed); target < 0.10 on every axis.\n\n"
         f"{aniso}\n\n"
         "Exemplar (xz), then the xy, xz, yz mid-slices, seed 1: defaults (10 iterations, orientation "
-        "re-weighting), without the re-weighting, 4 iterations, chen-wang:\n\n"
+        "re-weighting), without the re-weighting, 4 iterations, the oriented start (2 periods, fitted), "
+        "chen-wang:\n\n"
         "![defaults](img/solid-anisotropic-solid-kopf-defaults.png) "
         "![gain 0](img/solid-anisotropic-solid-kopf-orientation_gain0.0.png) "
         "![4 iterations](img/solid-anisotropic-solid-kopf-adapt_to_structureFalse.png) "
+        "![oriented](img/solid-anisotropic-solid-kopf-structureoriented.png) "
+        "![oriented, fitted](img/solid-anisotropic-solid-kopf-structureoriented-oriented_lengthauto.png) "
         "![chen-wang](img/solid-anisotropic-solid-chen-wang-defaults.png)\n",
         "## Known answer: S2 of a level-cut Gaussian random field\n\n"
         "32^3 from the three 64^2 mid-slices of a 64^3 two-phase field; relative L1 error of S2 up to "

@@ -25,7 +25,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels;
 - neighbourhoods fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
-  curved sheets for isotropic fringes (a pilot for short ones), a crumpled stack fitted to anisotropic ones;
+  curved sheets for isotropic fringes (a pilot for short ones), a crumpled stack for anisotropic ones,
+  the sheets' length fitted to the exemplars' curvature and coherence (``structure_length``); bent laminae
+  (fringes that keep their orientation over 2 periods) keep the random start;
 - after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 
@@ -36,7 +38,7 @@ from functools import partial
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -56,14 +58,18 @@ from texsynth.synth.kernels.solid_search import (
     best_vote,
     irls_update,
 )
-from texsynth.synth.methods.common import SolidParams, checked_progress, laminar_start_fields
+from texsynth.synth.methods.common import SolidParams, checked_progress
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
+    ORIENTED_MAX_BEND,
     dominant_period,
+    fitted_oriented_length,
+    fitted_structure_length,
     laminar_phase,
     level_phase,
     oriented_phase,
     plane_orientation,
+    resolved_length,
     sheet_normal,
     sheets,
     stack_period,
@@ -115,7 +121,8 @@ POSITION_GAIN = 1.0
 POSITION_CELLS = 16
 #: Default gain of the orientation-usage re-weighting (docs/solid.md, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
-#: Correlation length of the oriented start's crumples, in periods (docs/solid.md).
+#: Correlation length of the oriented start's crumples, in periods (docs/solid.md: the turbostratic stack's
+#: tortuosity KS worst 0.12 at 2, 0.24 at its fitted 2.5, 0.28 at 4; also ``solid-chen-wang``'s default).
 ORIENTED_LENGTH = 2.0
 #: k-coherence search: random exemplar positions added to every voxel's candidates.
 RANDOM_CANDIDATES = 2
@@ -159,8 +166,21 @@ class SolidKopfParams(SolidParams):
         ),
     )
     structure: Literal["auto", "none", "laminar", "oriented"]
-    structure_length: float
-    structure, structure_length = laminar_start_fields()
+    structure_length: float | None = Field(
+        None,
+        gt=0.0,
+        le=64.0,
+        description="How far the starting sheets run before they bend, in fringe periods; empty (or "
+        "'auto'): fitted to the exemplars.",
+        json_schema_extra=ui(
+            unit="periods",
+            details=(
+                "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': the shortest "
+                "length whose sheets' slices are at least as coherent at the period's scale and at most as "
+                "curved as the exemplars (small onions get short sheets, large shells long ones)."
+            ),
+        ),
+    )
     structure = Field(
         "auto",
         description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
@@ -177,13 +197,19 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
-    oriented_length: float = Field(
+    oriented_length: float | None = Field(
         ORIENTED_LENGTH,
         gt=0.0,
         le=64.0,
-        description="How far the oriented start's crumples stay straight, in fringe periods.",
+        description="How far the oriented start's crumples stay straight, in fringe periods; empty (or "
+        "'auto'): fitted to the exemplars.",
         json_schema_extra=ui(
-            unit="periods", details=("Correlation length of the oriented start's crumples, in periods.")
+            unit="periods",
+            details=(
+                "Correlation length of the oriented start's crumples, in periods (0-64]; empty or 'auto': "
+                "the length whose slices keep their orientation as far as the exemplars' fringes do "
+                "(measured worse than 2 on the stacks and bent laminae tried: docs/solid.md)."
+            ),
         ),
     )
     iterations: int = Field(
@@ -244,6 +270,12 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
+
+    @field_validator("structure_length", "oriented_length", mode="before")
+    @classmethod
+    def _auto_length(cls, value: object) -> object:
+        """``'auto'`` is the empty value: the length fitted to the exemplars."""
+        return None if value == "auto" else value
 
 
 def _position_factors(match: np.ndarray, ex_shape: tuple[int, int]) -> np.ndarray:
@@ -311,6 +343,7 @@ class _KopfLoop:
         self.src = np.zeros((3, 0), dtype=np.int64)
         self.pooled = np.zeros(0, dtype=np.float32)
         self.final = "average"  # the last step taken (``final_step``)
+        self.start_length: float | None = None  # periods; set by the caller after a structured start
 
     def start_level(self, step: LevelStep) -> None:
         """Upsample the volume and the coherent sources (or draw them), and build the level's tables."""
@@ -477,6 +510,8 @@ class _KopfLoop:
                 "laminar_start": self.period > 0,
                 "final_step": self.final,
                 "period": self.period if self.period > 0 else None,
+                # The structured start's sheet or crumple length (periods), fitted ('auto') or given.
+                "start_length": self.start_length,
             },
         )
 
@@ -497,26 +532,30 @@ def run_solid_kopf(
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
     plan_levels(run.views, size, 1, params.neighbourhood_size)  # names bad exemplars before choosing a start
-    period, phi = 0.0, None
+    period, phi, length = 0.0, None, None
     pilot = partial(laminar_pilot, settings={"structure_length": params.structure_length})
-    kind = start_kind(params.structure, run.views, params.planes, params.adapt_to_structure, pilot)
+    kind = start_kind(
+        params.structure, run.views, params.planes, params.adapt_to_structure, pilot, ORIENTED_MAX_BEND
+    )
     if kind == "oriented":
         views = {PLANES[p]: run.views[PLANES[p]] for p in run.active}
         levels = structure_levels(float(np.mean([dominant_period(im) for im in views.values()])), levels)
         normal = sheet_normal({p: plane_orientation(im) for p, im in views.items()})
         period = stack_period(views, normal)
         plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
-        length = params.oriented_length * period
-        phi = oriented_phase(plan.shapes[0], views, period, length, run.rng, periodic=params.periodic)
+        length = resolved_length(params.oriented_length, partial(fitted_oriented_length, views))
+        phi = oriented_phase(
+            plan.shapes[0], views, period, length * period, run.rng, periodic=params.periodic
+        )
     elif kind == "laminar":
         period = float(np.mean([dominant_period(image) for image in run.constrained()]))
         levels = structure_levels(period, levels)
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
     if period > 0 and phi is None:
-        phi = laminar_phase(
-            plan.shapes[0], params.structure_length * period, run.rng, periodic=params.periodic
-        )
+        length = resolved_length(params.structure_length, partial(fitted_structure_length, run.constrained()))
+        phi = laminar_phase(plan.shapes[0], length * period, run.rng, periodic=params.periodic)
     loop = _KopfLoop(params, plan, run, iterations, period, phi)
+    loop.start_length = length
     del phi  # the start read its coarsest level; the full-size float64 phase is not kept through the levels
     run_levels(plan, [iterations] * plan.levels, loop)
     return loop.result(seed)

@@ -18,7 +18,10 @@ the exemplar's, at the finest pyramid levels where the period is still at least 
 Anisotropic laminae (a stack seen at an angle, per-plane exemplars, two views) get an *oriented* start
 instead (:func:`oriented_phase`): a stack ``n . r + c u(r)`` whose mean normal ``n`` is fitted to the planes'
 fringe orientations (:func:`sheet_normal`), crumpled as much as their fringes spread. :func:`start_kind`
-chooses between them.
+chooses between them. Both lengths can be fitted to the exemplars: ``L`` to their coherence at the period's
+scale and their fringes' curvature (:func:`fitted_structure_length`), the crumples' to how far their fringes
+keep an orientation (:func:`fitted_oriented_length`); the field scales with its length, so tables measured
+once on the starts' own slices hold at every period.
 
 References
 ----------
@@ -34,22 +37,34 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from scipy import ndimage as ndi
 
-from texsynth.synth.analysis.tensor import mean_coherence, structure_tensor
+from texsynth.synth.analysis.tensor import coherence, mean_coherence, structure_tensor
 from texsynth.synth.colour import to_grey
 from texsynth.synth.threads import current_threads
 
 __all__ = [
+    "BEND_PER_LENGTH",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
+    "ORIENTED_MAX_BEND",
     "PILOT_COHERENCE",
+    "SHEET_COHERENCE",
+    "SHEET_LENGTHS",
+    "SHEET_RADIUS",
     "START_COHERENCE",
+    "bend_length",
     "dominant_period",
+    "exemplar_bend",
+    "fitted_oriented_length",
+    "fitted_structure_length",
+    "fringe_radius",
     "laminar_phase",
     "laminar_volume",
     "level_phase",
     "mean_tensor_coherence",
     "oriented_phase",
+    "period_coherence",
     "plane_orientation",
+    "resolved_length",
     "sheet_normal",
     "sheets",
     "stack_period",
@@ -151,6 +166,7 @@ def start_kind(
     planes: Sequence[str],
     adapt: bool,
     pilot: Callable[[np.ndarray], bool] | None = None,
+    max_bend: float | None = None,
 ) -> str:
     """Which structured start a solid synthesis takes: ``'laminar'``, ``'oriented'`` or ``'none'``.
 
@@ -159,6 +175,8 @@ def start_kind(
     and every constrained exemplar fringed (mean coherence >= :data:`START_COHERENCE`): ``'laminar'``
     when they are all isotropic (per-plane onions), else ``'oriented'`` (stacks, per-plane laminae, two
     views: :func:`oriented_phase`). Weakly oriented exemplars (soot) keep the paper's random start.
+    With ``max_bend`` (periods), an anisotropic set whose fringes keep their orientation farther than that
+    (:func:`exemplar_bend`: bent laminae, not a crumpled stack) keeps the random start too.
     """
     if structure in ("laminar", "oriented", "none"):
         return structure
@@ -167,8 +185,11 @@ def start_kind(
     images = [np.asarray(exemplars[p]) for p in planes]
     if not adapt or min(mean_coherence(im) for im in images) < START_COHERENCE:
         return "none"
-    isotropic = all(mean_tensor_coherence(im) < ISOTROPIC_MAX for im in images)
-    return "laminar" if isotropic else "oriented"
+    if all(mean_tensor_coherence(im) < ISOTROPIC_MAX for im in images):
+        return "laminar"
+    if max_bend is not None and exemplar_bend({p: exemplars[p] for p in planes}) > max_bend:
+        return "none"
+    return "oriented"
 
 
 def structure_levels(period: float, levels: int) -> int:
@@ -397,3 +418,154 @@ def oriented_phase(
 def _ramp(k: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     """``k . r`` over a volume of ``shape`` (float64)."""
     return sum(k[i] * np.arange(shape[i]).reshape([-1 if j == i else 1 for j in range(3)]) for i in range(3))
+
+
+# ------------------------------------------------------------------ lengths fitted to the exemplars
+
+
+#: The laminar start's sheet lengths (periods), and the mean :func:`period_coherence` of their slices:
+#: ``python -m benchmarks.bench_laminar --calibrate`` (sheets of period 6 px, 128^3, two draws, every 8th
+#: slice of each axis; the measure is in periods, so the table holds at every period). Short sheets bend
+#: within a period or two and cross at many kinks; long ones are large gently curved shells.
+SHEET_LENGTHS = (1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0)
+SHEET_COHERENCE = (0.257, 0.345, 0.416, 0.481, 0.542, 0.592, 0.695, 0.755, 0.8)
+#: ... and the mean :func:`fringe_radius` of their slices (periods of the slices).
+SHEET_RADIUS = (3.77, 4.13, 4.5, 5.01, 5.49, 6.01, 8.24, 10.89, 13.46)
+#: The oriented start's slices keep their orientation :func:`bend_length` periods for every this many
+#: periods of crumple length (``python -m benchmarks.bench_laminar --calibrate``: 0.50-0.56 between 2 and
+#: 4 periods; the crumple field scales with its length, so the ratio is a constant).
+BEND_PER_LENGTH = 0.52
+#: Bounds of the fitted crumple length (periods).
+ORIENTED_LENGTH_RANGE = (1.0, 16.0)
+#: :func:`start_kind`'s ``max_bend`` for ``solid-kopf``: fringes that keep their orientation farther than
+#: this many periods (:func:`exemplar_bend`; turbostratic stack 1.3, per-plane bent sheets 2.5, bent laminae
+#: 4.8) are bent laminae, better served by the random start (docs/solid.md: orientation KL 0.08-0.10
+#: against 0.09-0.31 from crumples of 2 periods and 1.0-2.0 from fitted ones).
+ORIENTED_MAX_BEND = 2.0
+
+
+def period_coherence(image: np.ndarray, period: float | None = None) -> float:
+    """Mean structure-tensor coherence at the fringes' own scale: how far they run unbroken and unbent.
+
+    Gaussian derivatives of a quarter period (they average much of the pixel noise out: the laminar
+    truth's onion exemplar 0.36 against 0.38 without its noise, where 1 px derivatives give 0.67 against
+    0.74) and an integration window of one period, over which a ring of radius ``r`` turns by ``1 / r``
+    radians; a border of two periods is left out. ``period`` defaults to :func:`dominant_period`.
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    c = coherence(structure_tensor(img, p / 4.0, p))
+    m = min(int(np.ceil(2.0 * p)), (min(c.shape) - 1) // 4)
+    return float(c[m : c.shape[0] - m, m : c.shape[1] - m].mean())
+
+
+def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
+    """The median radius of curvature (periods) of the fringes where they are the more coherent half.
+
+    The orientation field of the structure tensor (Gaussian derivatives of 1 px, integration of half a
+    period: the pixel noise averages out, a ring of two periods keeps its turn) is differentiated along
+    the fringes: ``kappa = |d theta / d s|`` from the doubled-angle unit field ``u``, ``kappa = |u x
+    (t . grad) u| / 2`` with ``t`` the fringe tangent; the median over the pixels of above-median
+    coherence (the fringes, not the gaps between onions) is inverted. A border of two periods is left out.
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    t = structure_tensor(img, 1.0, p / 2.0).astype(np.float64)
+    a, b, c = t[..., 0], t[..., 1], t[..., 2]
+    z = (a - c) + 2j * b  # doubled angle of the gradient in (x, y) = (column, -row) axes
+    mag = np.abs(z)
+    u = z / np.maximum(mag, 1e-12)
+    theta = 0.5 * np.angle(u)  # gradient (fringe normal) angle; the tangent is perpendicular
+    tx, ty = -np.sin(theta), np.cos(theta)
+    d_row = [np.gradient(f, axis=0) for f in (u.real, u.imag)]
+    d_col = [np.gradient(f, axis=1) for f in (u.real, u.imag)]
+    # along t = (tx, ty) in (x, y): d/ds = tx d/dcol - ty d/drow
+    dr, di = (tx * dc - ty * dr_ for dc, dr_ in zip(d_col, d_row, strict=True))
+    kappa = 0.5 * np.abs(u.real * di - u.imag * dr)
+    coh = mag / np.maximum(a + c, 1e-12)
+    m = min(int(np.ceil(2.0 * p)), (min(img.shape) - 1) // 4)
+    kappa, coh = (
+        kappa[m : img.shape[0] - m, m : img.shape[1] - m],
+        coh[m : img.shape[0] - m, m : img.shape[1] - m],
+    )
+    k = float(np.median(kappa[coh >= np.median(coh)]))
+    return 1.0 / max(k, 1e-6) / p
+
+
+def fitted_structure_length(images: Sequence[np.ndarray]) -> float:
+    """The laminar start's sheet length (periods): the shortest whose slices are at least as coherent at
+    the period's scale (:func:`period_coherence`) and at most as curved (:func:`fringe_radius`) as the
+    exemplars.
+
+    Each of the exemplars' means is looked up in its table (:data:`SHEET_COHERENCE`,
+    :data:`SHEET_RADIUS`: linear between the table's lengths, clipped to its ends) and the longer length
+    is kept. The random sheets' kinks and curvature both fall as they lengthen; an exemplar may need
+    them long for either reason: large shells (the tests' three onions in 64 px: 3.3 periods, by the
+    coherence), or straight but short fringes (the real onion crops: 4-5 periods, by the curvature;
+    their breaks lower the coherence). Small onions get short sheets (the laminar truth's: 2.1 periods).
+    A fit from the 1 px coherence chose 1.5 periods for every noisy exemplar.
+    """
+    coherent = float(np.mean([period_coherence(im) for im in images]))
+    radius = float(np.mean([fringe_radius(im) for im in images]))
+    return max(
+        float(np.interp(coherent, SHEET_COHERENCE, SHEET_LENGTHS)),
+        float(np.interp(radius, SHEET_RADIUS, SHEET_LENGTHS)),
+    )
+
+
+def bend_length(image: np.ndarray) -> float:
+    """How far (periods) the fringes keep their orientation, the pixel noise's share left out.
+
+    The structure tensor's doubled-angle orientation (unit complex, 1 px derivatives, integration 2 px),
+    less its mean, is autocorrelated (periodic FFT) and radially averaged; noise decorrelates within the
+    integration window only, so the profile is normalised by its value at 4 px (not at 0) and the
+    answer is the first radius beyond 4 px where it falls below half of that, divided by
+    :func:`dominant_period`. Crumpled stacks about 1.3, bent laminae bending once over 18 periods 4.8.
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    t = structure_tensor(img, 1.0, 2.0).astype(np.float64)
+    z = (t[..., 0] - t[..., 2]) + 2j * t[..., 1]
+    z = z / np.maximum(np.abs(z), 1e-12)
+    z = z - z.mean()
+    spectrum = np.fft.fft2(z)
+    ac = np.fft.ifft2(spectrum * np.conj(spectrum)).real
+    h, w = ac.shape
+    rows, cols = np.meshgrid(np.fft.fftfreq(h) * h, np.fft.fftfreq(w) * w, indexing="ij")
+    radius = np.rint(np.hypot(rows, cols)).astype(np.int64).ravel()
+    profile = np.bincount(radius, ac.ravel()) / np.maximum(np.bincount(radius), 1)
+    start = 4
+    below = np.flatnonzero(profile[start:] < 0.5 * profile[start])
+    lag = start + int(below[0]) if below.size else len(profile)
+    return lag / max(dominant_period(img), 1e-6)
+
+
+def exemplar_bend(exemplars: Mapping[str, np.ndarray]) -> float:
+    """The planes' :func:`bend_length` (periods), weighted by their anisotropy (:func:`plane_orientation`: a
+    plane nearly parallel to the sheets shows contour bands, not fringes)."""
+    weights, lengths = [], []
+    for image in exemplars.values():
+        weights.append(max(plane_orientation(image)[1], 1e-3))
+        lengths.append(bend_length(image))
+    return float(np.average(lengths, weights=weights))
+
+
+def fitted_oriented_length(exemplars: Mapping[str, np.ndarray]) -> float:
+    """The oriented start's crumple length (periods) whose slices bend as the exemplars' fringes do.
+
+    :func:`exemplar_bend` divided by :data:`BEND_PER_LENGTH`, kept within :data:`ORIENTED_LENGTH_RANGE`:
+    the turbostratic truth's stack (bends of 1.3 periods) gets 2.5 periods, per-plane bent sheets 4.8 and
+    bent laminae that bend once over 18 periods 9.3. Measured no better than 2 periods (docs/solid.md: the
+    stack's tortuosity KS worst 0.24 against 0.12; at 64^3 long crumples flatten or tilt whole slabs of
+    bent laminae), so ``solid-kopf`` keeps 2 unless asked, and bent laminae keep the random start
+    (:data:`ORIENTED_MAX_BEND`).
+    """
+    return float(np.clip(exemplar_bend(exemplars) / BEND_PER_LENGTH, *ORIENTED_LENGTH_RANGE))
+
+
+def resolved_length(length: float | str | None, fit: Callable[[], float]) -> float:
+    """``length`` (periods) as given, or ``fit()`` when it is ``None`` or ``'auto'``; other words: refused."""
+    if length is None or length == "auto":
+        return float(fit())
+    if isinstance(length, str):
+        raise ValueError(f"length must be a number of periods or 'auto', not {length!r}")
+    return float(length)

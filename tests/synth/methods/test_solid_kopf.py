@@ -381,10 +381,49 @@ def test_oriented_start_keeps_a_tilted_stack() -> None:
         assert abs(wrap_angle(got - want)) < np.radians(15), plane
 
 
-@pytest.mark.parametrize(("field", "value"), [("final_step", "median"), ("structure", "stacked")])
-def test_bad_start_and_final_step_are_named(field: str, value: str) -> None:
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("final_step", "median"),
+        ("structure", "stacked"),
+        ("structure_length", "long"),
+        ("structure_length", 0.0),
+        ("structure_length", 65.0),
+        ("oriented_length", "fitted"),
+        ("oriented_length", -1.0),
+    ],
+)
+def test_bad_start_and_final_step_are_named(field: str, value: object) -> None:
     with pytest.raises(InvalidParameter, match=field):
         synthesize("solid-kopf", _soft(), size=SIZE, params={field: value})
+
+
+def test_start_lengths_are_fitted_or_taken_as_given() -> None:
+    """``structure_length`` empty (the default; or ``'auto'``) fits the sheets' length to the exemplars and
+    ``oriented_length`` empty the crumples' (:mod:`texsynth.synth.pixel.laminar`); numbers are used as
+    given (the crumples' default: 2 periods); the paper's random start has none."""
+    from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import fitted_oriented_length, fitted_structure_length
+
+    ex = _soft()
+    run = synthesize("solid-kopf", ex, size=SIZE, params={**SMALL, "structure": "laminar"}, seed=1)
+    assert run.stats["start_length"] == pytest.approx(fitted_structure_length([ex]))
+    given = {**SMALL, "structure": "laminar", "structure_length": 3.0}
+    assert synthesize("solid-kopf", ex, size=SIZE, params=given, seed=1).stats["start_length"] == 3.0
+    planes = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))
+    oriented = {**SMALL, "structure": "oriented"}
+    run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=oriented, seed=1)
+    assert run.stats["start_length"] == ORIENTED_LENGTH
+    for empty in ("auto", None):  # the JSON schema's empty value and its spelled-out name
+        fitted = {**oriented, "oriented_length": empty}
+        run = synthesize("solid-kopf", exemplars=planes, size=SIZE, params=fitted, seed=1)
+        assert run.stats["start_length"] == pytest.approx(fitted_oriented_length(planes))
+    assert (
+        synthesize("solid-kopf", ex, size=SIZE, params={**SMALL, "structure": "none"}).stats["start_length"]
+        is None
+    )
 
 
 @pytest.mark.parametrize("search", ["tree", "exact"])

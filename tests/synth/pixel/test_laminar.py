@@ -238,3 +238,104 @@ def test_slab_distance_transform_is_scipys_to_the_byte() -> None:
         mask = ndi.gaussian_filter(rng.standard_normal(shape), 2.0) > 0
         for m in (mask, ~mask):
             assert _edt(m).tobytes() == ndi.distance_transform_edt(m).tobytes()
+
+
+# ------------------------------------------------------------------ lengths fitted to the exemplars
+
+
+def _onions_slice(n: int, centres: int, noise: float, seed: int = 0) -> np.ndarray:
+    """Rings of 6 px around ``centres`` random centres (more centres: smaller, more curved rings), blurred,
+    with white noise."""
+    rng = np.random.default_rng(seed)
+    r, c = np.mgrid[0:n, 0:n].astype(np.float64)
+    d = np.min([np.hypot(r - y, c - x) for y, x in rng.uniform(0, n, size=(centres, 2))], axis=0)
+    img = ndi.gaussian_filter(0.5 + 0.4 * np.cos(2 * np.pi * d / 6.0), 0.8) + rng.normal(0, noise, d.shape)
+    return img.astype(np.float32)
+
+
+def test_period_coherence_is_lowered_less_by_pixel_noise_than_the_fine_coherence() -> None:
+    from texsynth.synth.pixel.laminar import period_coherence
+
+    clean, noisy = _onions_slice(128, 12, 0.0), _onions_slice(128, 12, 0.12)  # noise 0.3 of the fringes
+    fine = mean_coherence(noisy) / mean_coherence(clean)  # 1 px derivatives: 0.93
+    coarse = period_coherence(noisy) / period_coherence(clean)  # a quarter period: 0.95
+    assert fine < coarse < 1.0, (fine, coarse)
+    assert coarse > 0.92
+
+
+def test_fitted_sheet_length_follows_the_rings_size_not_their_noise() -> None:
+    """Many small rings get shorter sheets than a few large ones; noise barely moves the fit; the tables
+    behind it are what the laminar start's own slices give (one 96^3 draw at 2 and 4 periods)."""
+    from texsynth.synth.pixel.laminar import (
+        SHEET_COHERENCE,
+        SHEET_LENGTHS,
+        SHEET_RADIUS,
+        fitted_structure_length,
+        fringe_radius,
+        period_coherence,
+    )
+
+    small, large = _onions_slice(128, 40, 0.0), _onions_slice(128, 4, 0.0)
+    short, long_ = fitted_structure_length([small]), fitted_structure_length([large])
+    assert SHEET_LENGTHS[0] <= short < long_ - 1.0 <= SHEET_LENGTHS[-1], (short, long_)
+    assert abs(fitted_structure_length([_onions_slice(128, 40, 0.12)]) - short) < 0.3
+    assert fringe_radius(large) > 1.5 * fringe_radius(small)
+    assert list(SHEET_COHERENCE) == sorted(SHEET_COHERENCE)  # monotone: the look-ups are well posed
+    assert list(SHEET_RADIUS) == sorted(SHEET_RADIUS)
+    for length in (2.0, 4.0):
+        wave = np.cos(2 * np.pi * laminar_phase((96,) * 3, length * 6.0, np.random.default_rng(1)) / 6.0)
+        cuts = [np.ascontiguousarray(np.take(wave, i, axis=a)) for a in range(3) for i in (8, 40, 72)]
+        at = SHEET_LENGTHS.index(length)
+        got = np.mean([period_coherence(cut) for cut in cuts])
+        assert abs(got - SHEET_COHERENCE[at]) < 0.05, (length, got)
+        got = np.mean([fringe_radius(cut) for cut in cuts])
+        assert abs(got - SHEET_RADIUS[at]) < 0.2 * SHEET_RADIUS[at], (length, got)  # one draw: +-15%
+
+
+def test_bend_length_tells_a_single_bend_from_crumples_through_noise() -> None:
+    from texsynth.synth.pixel.laminar import bend_length, fitted_oriented_length
+
+    r, c = np.mgrid[0:128, 0:128].astype(np.float64)
+    rng = np.random.default_rng(2)
+
+    def laminae(displacement: np.ndarray, noise: float) -> np.ndarray:
+        return (np.cos(2 * np.pi * (r + displacement) / 6.0) + rng.normal(0, noise, r.shape)).astype(
+            np.float32
+        )
+
+    bent = 12.0 * np.sin(2 * np.pi * c / 128.0)  # one bend across the image
+    crumpled = ndi.gaussian_filter(rng.standard_normal(r.shape), 4.0, mode="wrap")
+    crumpled *= 1.0 / np.sqrt(np.mean(np.gradient(crumpled)[1] ** 2))  # slopes about 1: turns within a period
+    b_bent, b_crumpled = bend_length(laminae(bent, 0.0)), bend_length(laminae(0.6 * crumpled, 0.0))
+    assert b_bent > 2.0 * b_crumpled, (b_bent, b_crumpled)
+    assert abs(bend_length(laminae(bent, 0.5)) - b_bent) < 0.2 * b_bent  # the noise's share is left out
+    views = dict.fromkeys(("xz", "yz"), laminae(bent, 0.3))
+    assert fitted_oriented_length(views) > 2.0 * fitted_oriented_length(
+        dict.fromkeys(("xz", "yz"), laminae(0.6 * crumpled, 0.3))
+    )
+
+
+def test_resolved_length_takes_numbers_fits_auto_and_names_bad_words() -> None:
+    from texsynth.synth.pixel.laminar import resolved_length
+
+    assert resolved_length(3.0, lambda: 9.0) == 3.0
+    assert resolved_length("auto", lambda: 2.5) == 2.5
+    assert resolved_length(None, lambda: 2.5) == 2.5
+    with pytest.raises(ValueError, match="length"):
+        resolved_length("long", lambda: 2.5)
+
+
+def test_auto_keeps_bent_laminae_on_the_random_start_when_bends_are_capped() -> None:
+    """With ``max_bend`` (solid-kopf's ORIENTED_MAX_BEND), a crumpled stack still takes the oriented start
+    and laminae bent once across the exemplar the random one; without it both are oriented."""
+    from texsynth.synth.io.patterns import undulating_laminae
+    from texsynth.synth.pixel.laminar import ORIENTED_MAX_BEND, exemplar_bend
+
+    all3 = ("xy", "xz", "yz")
+    stack = mid_slices(turbostratic_volume((128, 128, 128), seed=11))
+    bent = dict.fromkeys(all3, undulating_laminae((128, 128), 7, 16, 128, noise=0.3))
+    assert exemplar_bend(stack) < ORIENTED_MAX_BEND < exemplar_bend(bent)
+    assert start_kind("auto", stack, all3, True, None, ORIENTED_MAX_BEND) == "oriented"
+    assert start_kind("auto", bent, ("xz", "yz"), True, None, ORIENTED_MAX_BEND) == "none"
+    assert start_kind("auto", bent, ("xz", "yz"), True) == "oriented"
+    assert start_kind("oriented", bent, ("xz", "yz"), True, None, ORIENTED_MAX_BEND) == "oriented"
