@@ -67,6 +67,7 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     # Departures measured against the misses (docs/solid.md, session cw4); none is a default.
     ("onions", "solve_radius=1", {"solve_radius": 1}, 64),
     ("onions", "structure_length=2", {"structure_length": 2.0}, 64),
+    ("onions", "structure_length=3", {"structure_length": 3.0}, 64),
     ("onion crop", "solve_radius=1", {"solve_radius": 1}, 64),
     ("onion crop", "position_weight=1", {"position_weight": 1.0}, 64),
     ("onion-core crop", "solve_radius=1", {"solve_radius": 1}, 64),
