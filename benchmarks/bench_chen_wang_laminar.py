@@ -68,6 +68,7 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onions", "solve_radius=1", {"solve_radius": 1}, 64),
     ("onions", "structure_length=2", {"structure_length": 2.0}, 64),
     ("onions", "structure_length=3", {"structure_length": 3.0}, 64),
+    ("onions", "structure_length=3", {"structure_length": 3.0}, 128),
     ("onion crop", "solve_radius=1", {"solve_radius": 1}, 64),
     ("onion crop", "position_weight=1", {"position_weight": 1.0}, 64),
     ("onion-core crop", "solve_radius=1", {"solve_radius": 1}, 64),
