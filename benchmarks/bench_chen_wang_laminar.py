@@ -9,9 +9,10 @@ Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbo
 (:data:`CHEN_WANG_PAPER`), measured against the truth's slices of the same size
 (:func:`texsynth.synth.evaluate.truth.evaluate_against_truth`); the real crops
 ``benchmarks/data/hrtem-onion*-128.png`` against the exemplar
-(:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice). Cells as in docs/laminar.md: ``xy / xz
-/ yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it misses its target; CPU s the
-median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
+(:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice); and the departures measured against
+their misses (``solve_radius``, ``position_weight``, ``structure_length``; none a default). Cells as in
+docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it
+misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
 """
 
 from __future__ import annotations
@@ -57,10 +58,21 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("turbostratic", "paper", CHEN_WANG_PAPER, 64),
     ("onions", "defaults", {}, 128),
     ("turbostratic", "defaults", {}, 128),
+    ("onions", "paper", CHEN_WANG_PAPER, 128),
+    ("turbostratic", "paper", CHEN_WANG_PAPER, 128),
     ("onion crop", "defaults", {}, 64),
     ("onion crop", "grey_remap=False", {"grey_remap": False}, 64),
     ("onion-core crop", "defaults", {}, 64),
     ("onion-core crop", "grey_remap=False", {"grey_remap": False}, 64),
+    # Departures measured against the misses (docs/solid.md, session cw4); none is a default.
+    ("onions", "solve_radius=1", {"solve_radius": 1}, 64),
+    ("onions", "structure_length=2", {"structure_length": 2.0}, 64),
+    ("onions", "structure_length=3", {"structure_length": 3.0}, 64),
+    ("onions", "structure_length=3", {"structure_length": 3.0}, 128),
+    ("onion crop", "solve_radius=1", {"solve_radius": 1}, 64),
+    ("onion crop", "position_weight=1", {"position_weight": 1.0}, 64),
+    ("onion-core crop", "solve_radius=1", {"solve_radius": 1}, 64),
+    ("onion-core crop", "position_weight=1", {"position_weight": 1.0}, 64),
 )
 
 
