@@ -6,14 +6,14 @@ images were validated (the engine's own checks: finite numbers, sizes, formats):
 - **the job's working memory**, estimated from the method, its parameters, the output size and the
   decoded inputs, against ``TEXSYNTH_MAX_JOB_MEMORY_BYTES`` (422, naming the parameter that drives
   it). The estimate is generous on purpose: for an image the measured peak of a whole run of the
-  method, fixed and per output pixel (:data:`IMAGE_MEMORY`), for a volume the measured peak per
-  voxel of a whole solid run (:data:`VOLUME_BYTES_PER_VOXEL`), a generic term per input pixel
+  method, fixed and per output pixel (:data:`IMAGE_MEMORY`) or voxel (:data:`VOLUME_MEMORY`), a
+  generic term per input pixel
   (:data:`GENERIC_BYTES_PER_ELEMENT`), plus the terms that are known to
   explode: a rotated dictionary's copies (``angular_step``) and its k-coherence sets. The engine
   still checks the k-coherence sets itself in the worker (``texsynth.synth.methods.arbitrary_shape``); here
   the same bound is applied before queueing, so the person gets the 422 at once;
-- **the job's run time**, estimated from the method's measured rate per output element divided by the
-  threads a job gets (``TEXSYNTH_THREADS``; a lower bound: perfect speed-up), against the soft time
+- **the job's run time**, estimated from the method's measured rate per output element on one core and
+  its measured 2-thread speed-up, for the threads a job gets (``TEXSYNTH_THREADS``), against the soft time
   limit (``TEXSYNTH_SOFT_TIME_LIMIT``, 422 naming the output size): a job the worker would stop after
   30 minutes anyway is refused at once. Either refusal states both estimates;
 - **an exemplar much larger than the output** (422): above 512x512 pixels an exemplar may have at
@@ -43,7 +43,7 @@ from texsynth.jobs.config import Settings
 from texsynth.jobs.store import JobStore
 from texsynth.synth.errors import InvalidInput, InvalidParameter
 
-__all__ = ["Admission", "QuotaExceeded", "estimate_memory", "estimate_seconds"]
+__all__ = ["Admission", "QuotaExceeded", "estimate_memory", "estimate_seconds", "parallel_fraction"]
 
 #: Seconds a client refused for a full queue is told to wait (``Retry-After`` on the 429): a hint, about
 #: the time a small job takes; the refusal stores nothing, so trying again later is always safe.
@@ -74,10 +74,37 @@ IMAGE_MEMORY_DEFAULT: tuple[int, int] = (
     max(fixed for fixed, _ in IMAGE_MEMORY.values()),
     max(per_pixel for _, per_pixel in IMAGE_MEMORY.values()),
 )
-#: Bytes of a volume job's peak memory per output voxel: a whole ``solid-kopf`` 256^3 run, synthesis and
-#: artifacts (``python -m benchmarks.bench_memory --size 256x256x256``; docs/benchmarks.md, "Big
-#: outputs"), rounded up; the other solid methods are taken to be alike.
-VOLUME_BYTES_PER_VOXEL = 200
+#: A volume job's peak memory by method, ``(fixed bytes, bytes per output voxel)``: the whole
+#: ``texsynth synthesize`` process' ``VmHWM`` (synthesis, TIFF, pictures, evaluation, plots) of
+#: ``python -m benchmarks.bench_memory --method M --size SxSxS --threads 2`` runs from the 128^2 laminar
+#: HRTEM exemplar, and of a 512^3 ``solid-kopf`` job of the service (its worker's ``VmHWM``): the per-voxel
+#: term is 1.1 times the slope between the two largest sizes, rounded up to 10; the fixed term the largest
+#: rest of a peak, rounded up to 16 MiB (``benchmarks.bench_memory.admission_terms``; docs/benchmarks.md,
+#: "Big outputs: volumes"). Never below a measured peak (tests/service/test_admission.py pins them).
+VOLUME_MEMORY: dict[str, tuple[int, int]] = {
+    "solid-chen-wang": (336 * 2**20, 140),
+    "solid-kopf": (352 * 2**20, 70),
+    "solid-wei-levoy": (352 * 2**20, 180),
+}
+#: A volume method missing from :data:`VOLUME_MEMORY` counts as the largest of each term.
+VOLUME_MEMORY_DEFAULT: tuple[int, int] = (
+    max(fixed for fixed, _ in VOLUME_MEMORY.values()),
+    max(per_voxel for _, per_voxel in VOLUME_MEMORY.values()),
+)
+#: A method's synthesis speed-up from 1 to 2 threads on the project's 2-core machine, quiet (``python -m
+#: benchmarks.bench_threads``; docs/benchmarks.md, "Threads"; the largest size measured). The run-time
+#: estimate takes the fraction ``f = 2 (1 - 1 / s)`` of the work as parallel (Amdahl) and the rest as
+#: serial; a method missing here is taken to scale perfectly (``s = 2``: a lower bound of its time).
+TWO_THREAD_SPEEDUP: dict[str, float] = {
+    "arbitrary-shape": 1.34,
+    "feature-guided": 1.01,
+    "gaussian-patch": 1.01,
+    "quilting": 1.0,
+    "solid-chen-wang": 1.75,
+    "solid-kopf": 1.84,
+    "tensor-constrained": 1.48,
+    "wei-levoy": 1.61,
+}
 #: Exemplars up to this many pixels are always accepted, whatever the output's size.
 SMALL_EXEMPLAR = 512 * 512
 
@@ -124,11 +151,13 @@ def estimate_memory(
         f"{_size(fixed)} for the process, as measured, and {GENERIC_BYTES_PER_ELEMENT} per input pixel",
     )
     if "depth" in size:
-        total = VOLUME_BYTES_PER_VOXEL * out + GENERIC_BYTES_PER_ELEMENT * inputs
+        fixed, per_pixel = VOLUME_MEMORY.get(method or "", VOLUME_MEMORY_DEFAULT)
+        total = fixed + per_pixel * out + GENERIC_BYTES_PER_ELEMENT * inputs
         sides = "x".join(str(size[k]) for k in ("width", "height", "depth"))
         driver, why = (
             "depth",
-            f"{VOLUME_BYTES_PER_VOXEL} bytes per voxel of the {sides} volume, as measured",
+            f"{per_pixel} bytes per voxel of the {sides} volume and {_size(fixed)} for the process, "
+            f"as measured, and {GENERIC_BYTES_PER_ELEMENT} per input pixel",
         )
     step = params.get("angular_step")
     exemplar = shapes.get("exemplar")
@@ -152,10 +181,28 @@ def estimate_memory(
     return int(total), driver, why
 
 
-def estimate_seconds(seconds_per_element: float, elements: int, threads: int) -> float:
-    """A lower bound of a job's run time: the method's one-core rate times the output's elements,
-    divided by the job's threads (a perfect speed-up; measured ones are 1.5-2x on 2 threads)."""
-    return seconds_per_element * elements / max(1, threads)
+def parallel_fraction(speedup: float) -> float:
+    """The parallel fraction ``f`` of a run that speeds up ``speedup`` times from 1 to 2 threads (Amdahl:
+    ``s = 1 / (1 - f + f / 2)``, so ``f = 2 (1 - 1 / s)``), clipped to [0, 1].
+
+    >>> parallel_fraction(2.0), parallel_fraction(1.0)
+    (1.0, 0.0)
+    """
+    return min(1.0, max(0.0, 2.0 * (1.0 - 1.0 / max(float(speedup), 1e-9))))
+
+
+def estimate_seconds(
+    seconds_per_element: float, elements: int, threads: int, method: str | None = None
+) -> float:
+    """A job's run time: the method's one-core rate times the output's elements, its parallel part
+    (:func:`parallel_fraction` of its measured :data:`TWO_THREAD_SPEEDUP`) divided by the job's threads.
+    A method without a measured speed-up counts a perfect one (a lower bound)."""
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise InvalidParameter("threads", threads, "must be a whole number of threads, at least 1")
+    if not math.isfinite(seconds_per_element) or seconds_per_element < 0:
+        raise InvalidParameter("seconds_per_element", seconds_per_element, "must be a finite rate >= 0")
+    share = parallel_fraction(TWO_THREAD_SPEEDUP.get(method or "", 2.0))
+    return seconds_per_element * elements * ((1.0 - share) + share / threads)
 
 
 class Admission:
@@ -183,11 +230,17 @@ class Admission:
         need, driver, why = estimate_memory(params, size, shapes, method)
         elements = math.prod(size.values())
         threads = max(1, self.settings.threads or 1)
-        seconds = estimate_seconds(seconds_per_element, elements, threads)
+        seconds = estimate_seconds(seconds_per_element, elements, threads, method)
+        speedup = TWO_THREAD_SPEEDUP.get(method)
+        split = (
+            f"{parallel_fraction(speedup):.0%} of it parallel, from the measured {speedup:.2f}x of 2 threads"
+            if speedup is not None
+            else "split perfectly between the threads"
+        )
         timing = (
             f"about {seconds / 60:.0f} minutes with {threads} thread{'s' if threads > 1 else ''} "
             f"({elements} output elements at {seconds_per_element:.1e} s each on one core of the "
-            "project's machine, split perfectly between the threads)"
+            f"project's machine, {split})"
         )
         if need > limit:
             raise InvalidParameter(

@@ -9,13 +9,15 @@ evaluation, the plots) and a thread that samples the resident set size (``VmRSS`
 every 0.2 s: the largest RSS seen per stage, the stage seconds, and the process' peak (``VmHWM``, as
 ``/usr/bin/time -v`` reports it) come out as one JSON document. The admission estimate of the service
 (:func:`texsynth.app.admission.estimate_memory`) is calibrated from these peaks (docs/benchmarks.md, "Big
-outputs").
+outputs"): ``--size`` given twice or more runs each size, one after the other, and adds the admission's
+terms (:func:`admission_terms`: 1.1 times the slope between the two largest, the fixed rest of the largest).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -137,10 +139,30 @@ def run(
     return report
 
 
+def admission_terms(peaks: dict[int, int]) -> tuple[int, int]:
+    """``(fixed bytes, bytes per output element)`` from peaks (bytes) by output elements, the rule of
+    :data:`texsynth.app.admission.IMAGE_MEMORY` and ``VOLUME_MEMORY``: per element 1.1 times the slope
+    between the two largest sizes, rounded up to 10; fixed the largest rest of a peak (peak minus the
+    per-element term), rounded up to 16 MiB, at least 0: never below a peak it was fitted on.
+
+    >>> admission_terms({2**21: 400 * 2**20, 2**24: 1700 * 2**20})
+    (201326592, 110)
+    """
+    if len(peaks) < 2:
+        raise ValueError("peaks: at least two sizes are needed for a slope")
+    (n1, p1), (n2, p2) = sorted(peaks.items())[-2:]
+    per = max(0, math.ceil(1.1 * (p2 - p1) / (n2 - n1) / 10) * 10)
+    mib16 = 16 * 2**20
+    fixed = max([0] + [math.ceil((p - per * n) / mib16) * mib16 for n, p in peaks.items()])
+    return fixed, per
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--method", default="solid-kopf")
-    parser.add_argument("--size", default="128x128x128", help="WxH or WxHxD")
+    parser.add_argument(
+        "--size", action="append", help="WxH or WxHxD (default 128x128x128); twice or more: fit the terms"
+    )
     parser.add_argument("--exemplar", type=Path, default=DEFAULT_EXEMPLAR)
     parser.add_argument("--threads", type=int, default=None)
     parser.add_argument("--no-plots", action="store_true")
@@ -151,10 +173,16 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", type=Path, default=Path("/tmp") / "texsynth-bench-memory")
     args = parser.parse_args(argv)
-    report = run(
-        args.method, args.size, args.exemplar, args.threads, not args.no_plots, args.out, args.constraint
-    )
-    print(json.dumps(report, indent=2))
+    reports = [
+        run(args.method, size, args.exemplar, args.threads, not args.no_plots, args.out, args.constraint)
+        for size in args.size or ["128x128x128"]
+    ]
+    for report in reports:
+        print(json.dumps(report, indent=2))
+    if len(reports) > 1:
+        peaks = {math.prod(int(v) for v in r["size"].split("x")): r["vmhwm_mb"] * 2**20 for r in reports}
+        fixed, per = admission_terms(peaks)
+        print(json.dumps({"method": args.method, "fixed_mib": fixed // 2**20, "bytes_per_element": per}))
     return 0
 
 

@@ -86,7 +86,7 @@ def scan_order(shape: tuple[int, ...], kind: ScanOrder, rng: np.random.Generator
     if kind == "random":
         if rng is None:
             raise InvalidParameter("rng", None, "a random scan needs a seeded generator")
-        return rng.permutation(n).astype(np.int64)
+        return rng.permutation(n).astype(np.int64, copy=False)
     if kind in ("morton", "hilbert"):
         pts = (morton_points if kind == "morton" else hilbert_points)(len(shape), _bits_for(shape))
         inside = np.all(pts < np.asarray(shape), axis=1)

@@ -558,7 +558,7 @@ class MatchField:
     exemplar offsets ``row * width + col``.
     """
 
-    match: np.ndarray  # (3, N) int64
+    match: np.ndarray  # (3, N) int32 (or int64)
     weight: np.ndarray  # (3, N) float32
     offsets: np.ndarray  # (3, K, 3) int32
     ex_offsets: np.ndarray  # (3, K) int64
@@ -613,7 +613,7 @@ def _bin(value, bins):
 class _Proposals(NamedTuple):
     """The kernel's view of a :class:`MatchField`: the matches, their weights and where they lie."""
 
-    match: np.ndarray  # (3, N) int64
+    match: np.ndarray  # (3, N) int32 (or int64)
     weight: np.ndarray  # (3, N) float32
     ex_offsets: np.ndarray  # (3, K) int64
     axes: np.ndarray  # (3, 2) int64

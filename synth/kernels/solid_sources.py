@@ -9,8 +9,8 @@ maintain them, each a loop over voxels that reads only its own voxel's inputs:
 - :func:`upsample_sources`: a level's positions at the next finer level, ``2 * src(v // 2) + (v mod 2)``
   along the plane's axes (Wei-Levoy / Lefebvre-Hoppe coordinate upsampling).
 
-The kernels write into a given output row, so that a volume of 256^3 voxels and more needs no
-full-size temporaries (the NumPy versions, kept as ``*_reference`` for the tests, allocated about ten
+The kernels write into a given output row (int32, or int64), so that a volume of 256^3 voxels and more
+needs no full-size temporaries (the NumPy versions, kept as ``*_reference`` for the tests, allocated about ten
 int64 arrays of the volume's size per call: 1.3 GiB at 256^3, and the page faults of fresh memory
 every iteration). Each voxel's answer is integer arithmetic on its own coordinates: the same values on
 any number of threads.
@@ -36,8 +36,27 @@ __all__ = [
     "upsample_sources_reference",
 ]
 
+#: Index types the kernels read and write: int32 halves a volume's per-voxel positions (an exemplar position
+#: is below 2^31), int64 is accepted as well; other types are converted to int64.
+INDEX_TYPES = (np.dtype(np.int32), np.dtype(np.int64))
+
 #: Volume axes ``(row axis, column axis)`` of each plane's slices, as ``texsynth.synth.pixel.solid``.
 _PLANE_AXES: dict[str, tuple[int, int]] = {"xy": (1, 2), "xz": (0, 2), "yz": (0, 1)}
+
+
+def _indices(values: np.ndarray) -> np.ndarray:
+    """``values`` as a C-contiguous int32 or int64 array (no copy when it already is one)."""
+    values = np.asarray(values)
+    return np.ascontiguousarray(values, dtype=values.dtype if values.dtype in INDEX_TYPES else np.int64)
+
+
+def _check_out(out: np.ndarray | None, n: int, dtype: np.dtype) -> np.ndarray:
+    """A new ``(n,)`` array of ``dtype``, or ``out`` checked: C-contiguous int32 or int64, ``n`` entries."""
+    if out is None:
+        return np.empty(n, dtype=dtype)
+    if out.shape != (n,) or out.dtype not in INDEX_TYPES or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous int32 or int64 array of {n} entries")
+    return out
 
 
 @kernel(inline="always")
@@ -95,24 +114,23 @@ def dense_sources(
     ex_shape: tuple[int, int],
     out: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Every voxel's exemplar position ``(N,)`` int64 in ``plane``, from matches on a sparse grid.
+    """Every voxel's exemplar position ``(N,)`` in ``plane``, from matches on a sparse grid.
 
     ``match`` (N,) holds the matched centre position at the grid's centres (every ``stride``-th voxel
     from ``phase`` along the plane's two axes, -1 elsewhere). A voxel takes the position its grid centre
     (the one at or before it along each plane axis, else after it) matched, shifted by its offset from
-    that centre and clamped inside the exemplar (0 when that centre has no match). ``out``: a
-    C-contiguous int64 array of N entries to write into (else a new one); it must not be ``match``.
+    that centre and clamped inside the exemplar (0 when that centre has no match). ``match`` and
+    ``out`` are int32 or int64 (:data:`INDEX_TYPES`); ``out``: a C-contiguous array of N entries to write
+    into (else a new one of ``match``'s type); it must not be ``match``.
     """
     a, b = _PLANE_AXES[plane]
     n = int(np.prod(shape))
-    if out is None:
-        out = np.empty(n, dtype=np.int64)
-    if out.shape != (n,) or out.dtype != np.int64 or not out.flags.c_contiguous:
-        raise ValueError(f"out must be a C-contiguous int64 array of {n} entries")
+    match = _indices(match)
+    out = _check_out(out, n, match.dtype)
     if np.shares_memory(out, match):
         raise ValueError("out must not share memory with match")
     _dense_sources_kernel(
-        np.ascontiguousarray(match, dtype=np.int64),
+        match,
         np.asarray(shape, dtype=np.int64),
         a,
         b,
@@ -185,16 +203,15 @@ def upsample_sources(
     ``2 * src(v // 2) + (v mod 2)`` along the plane's axes, clamped inside the finer exemplar ``ex_shape``.
 
     ``src`` (``prod(coarse_shape)``,) holds non-negative positions in the coarser exemplar (of width
-    ``coarse_ex_shape[1]``). ``out``: a C-contiguous int64 array of ``prod(shape)`` entries (else a new one).
+    ``coarse_ex_shape[1]``), int32 or int64. ``out``: a C-contiguous int32 or int64 array of
+    ``prod(shape)`` entries (else a new one of ``src``'s type).
     """
     a, b = _PLANE_AXES[plane]
     n = int(np.prod(shape))
-    if out is None:
-        out = np.empty(n, dtype=np.int64)
-    if out.shape != (n,) or out.dtype != np.int64 or not out.flags.c_contiguous:
-        raise ValueError(f"out must be a C-contiguous int64 array of {n} entries")
+    src = _indices(src)
+    out = _check_out(out, n, src.dtype)
     _upsample_sources_kernel(
-        np.ascontiguousarray(src, dtype=np.int64),
+        src,
         np.asarray(coarse_shape, dtype=np.int64),
         np.asarray(shape, dtype=np.int64),
         a,

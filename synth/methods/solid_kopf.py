@@ -79,6 +79,7 @@ from texsynth.synth.pixel.laminar import (
 from texsynth.synth.pixel.solid import (
     PLANE_AXES,
     PLANES,
+    SOURCE_DTYPE,
     LevelStep,
     ProgressMeter,
     SolidPlan,
@@ -359,7 +360,7 @@ class _KopfLoop:
             self.src = upsample_plane_sources(self.src, plan, step.level)
         self.vol = np.ascontiguousarray(self.vol, dtype=np.float32)
         self.field = MatchField(
-            match=np.full((3, self.vol.size), -1, dtype=np.int64),
+            match=np.full((3, self.vol.size), -1, dtype=SOURCE_DTYPE),
             weight=np.zeros((3, self.vol.size), dtype=np.float32),
             offsets=np.ascontiguousarray(np.stack([plane_offsets(p, n) for p in PLANES]), dtype=np.int32),
             ex_offsets=np.ascontiguousarray(np.stack([exemplar_offsets(n, im.shape[1]) for im in images])),

@@ -202,12 +202,17 @@ def structure_levels(period: float, levels: int) -> int:
 
 def _smooth_field(shape: tuple[int, int, int], sigma: float, rng: np.random.Generator) -> np.ndarray:
     """White noise low-passed by a Gaussian of ``sigma`` voxels, periodic (FFT), unit variance."""
-    noise = rng.standard_normal(shape)
-    freqs = np.meshgrid(*[np.fft.fftfreq(s) for s in shape[:2]], np.fft.rfftfreq(shape[2]), indexing="ij")
-    f2 = sum(f**2 for f in freqs)
-    low_pass = np.exp(-2.0 * (np.pi * sigma) ** 2 * f2)
-    field = np.fft.irfftn(np.fft.rfftn(noise) * low_pass, s=shape, axes=(0, 1, 2))
-    return field / max(float(field.std()), 1e-12)
+    spectrum = np.fft.rfftn(rng.standard_normal(shape))
+    fz, fy, fx = np.fft.fftfreq(shape[0]), np.fft.fftfreq(shape[1]), np.fft.rfftfreq(shape[2])
+    # the same sums and products as on whole meshgrids, broadcast and in place (memory: issue 25)
+    low_pass = fz[:, None, None] ** 2 + fy[None, :, None] ** 2 + fx[None, None, :] ** 2
+    low_pass *= -2.0 * (np.pi * sigma) ** 2
+    spectrum *= np.exp(low_pass, out=low_pass)
+    del low_pass
+    field = np.fft.irfftn(spectrum, s=shape, axes=(0, 1, 2))
+    del spectrum
+    field /= max(float(field.std()), 1e-12)
+    return field
 
 
 def laminar_phase(
@@ -255,10 +260,16 @@ def _edt(mask: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Above this many voxels (128^3) the two distance transforms run one after the other: each holds 20 bytes
+#: per padded voxel, and two at once made the start the peak of a whole solid run (issue 25).
+PARALLEL_EDT_VOXELS = 2**21
+
+
 def _signed_distance(inside: np.ndarray) -> np.ndarray:
     """``edt(inside) - edt(~inside)`` (float64), the two transforms on two threads when the work has
-    them (SciPy's transform releases the GIL; each is exact, so the bytes do not depend on the threads)."""
-    if current_threads() < 2:
+    them (SciPy's transform releases the GIL; each is exact, so the bytes do not depend on the threads)
+    and the volume is below :data:`PARALLEL_EDT_VOXELS` (each transform holds 20 bytes per voxel)."""
+    if current_threads() < 2 or inside.size > PARALLEL_EDT_VOXELS:
         return _edt(inside) - _edt(~inside)
     with ThreadPoolExecutor(max_workers=2) as pool:
         outside = pool.submit(_edt, ~inside)

@@ -59,6 +59,7 @@ from texsynth.synth.threads import current_threads
 __all__ = [
     "PLANES",
     "PLANE_AXES",
+    "SOURCE_DTYPE",
     "ExemplarNeighbourhoods",
     "LevelLoop",
     "LevelStep",
@@ -427,6 +428,10 @@ def plan_levels(
             raise InvalidInput(
                 role, f"{h}x{w} pixels is smaller than the {n}x{n} neighbourhood: use a smaller neighbourhood"
             )
+        if img.size > MAX_EXEMPLAR_PIXELS:
+            raise InvalidInput(
+                role, f"{img.size} pixels is too many for a solid method: at most {MAX_EXEMPLAR_PIXELS}"
+            )
     min_ex = min(min(img.shape) for img in images)
     min_vol = min(size)
     used = 1
@@ -463,14 +468,22 @@ def match_histogram(vol: np.ndarray, values: np.ndarray) -> np.ndarray:
 
     Exact histogram specification: the voxel of rank ``i`` (ties by position, a stable sort, so the
     result is deterministic) takes the value of rank ``i * n / N`` among the ``n`` sorted ``values``.
-    The volume's histogram becomes the exemplar's while its order (its structure) is kept.
+    The volume's histogram becomes the exemplar's while its order (its structure) is kept. The ranks
+    are written :data:`RANK_SLAB` at a time (a whole-volume rank array and its quantile indices were
+    two more int64 arrays of the volume's size: 2 GiB at 512^3).
     """
     flat = vol.ravel()
     ranks = np.argsort(flat, kind="stable")
     ref = np.sort(np.asarray(values, dtype=np.float32).ravel())
     out = np.empty_like(flat)
-    out[ranks] = ref[(np.arange(flat.size, dtype=np.int64) * ref.size) // flat.size]
+    for a in range(0, flat.size, RANK_SLAB):
+        b = min(flat.size, a + RANK_SLAB)
+        out[ranks[a:b]] = ref[(np.arange(a, b, dtype=np.int64) * ref.size) // flat.size]
     return out.reshape(vol.shape)
+
+
+#: Ranks remapped at once by :func:`match_histogram`.
+RANK_SLAB = 1 << 20
 
 
 def _upsample_axis(arr: np.ndarray, axis: int, n_out: int, periodic: bool) -> np.ndarray:
@@ -517,8 +530,11 @@ def plane_centres(
     ranges = [np.arange(s, dtype=np.int64) for s in shape]
     ranges[a] = ranges[a][phase[0] % stride :: stride]
     ranges[b] = ranges[b][phase[1] % stride :: stride]
-    grid = np.meshgrid(*ranges, indexing="ij")
-    return np.ascontiguousarray(np.stack([g.ravel() for g in grid], axis=1))
+    lengths = [len(r) for r in ranges]
+    out = np.empty((*lengths, 3), dtype=np.int64)  # each coordinate broadcast in place: no meshgrid copies
+    for axis, r in enumerate(ranges):
+        out[..., axis] = r.reshape([-1 if i == axis else 1 for i in range(3)])
+    return out.reshape(-1, 3)
 
 
 def gather_plane(
@@ -661,15 +677,26 @@ def run_levels(plan: SolidPlan, iterations: Sequence[int], loop: LevelLoop) -> N
 def initial_sources(
     nbhs: Sequence[ExemplarNeighbourhoods], n_voxels: int, rng: np.random.Generator
 ) -> np.ndarray:
-    """Every voxel's exemplar position ``(3, N)`` int64 per plane, drawn at random (``rng``) among the
-    plane's neighbourhood centres: the coarsest level's k-coherence seeds."""
-    return np.stack([nbhs[p].centres[rng.integers(0, len(nbhs[p].centres), n_voxels)] for p in range(3)])
+    """Every voxel's exemplar position ``(3, N)`` (:data:`SOURCE_DTYPE`) per plane, drawn at random
+    (``rng``) among the plane's neighbourhood centres: the coarsest level's k-coherence seeds."""
+    out = np.empty((3, n_voxels), dtype=SOURCE_DTYPE)
+    for p in range(3):
+        out[p] = nbhs[p].centres[rng.integers(0, len(nbhs[p].centres), n_voxels)]
+    return out
+
+
+#: Type of the per-voxel exemplar positions (sources, matches) the driver keeps for every voxel and plane:
+#: a flat exemplar position is below 2^31 (an exemplar is at most 4096^2 pixels), and int32 halves the
+#: two ``(3, N)`` arrays a solid run holds at its finest level (48 of its bytes per voxel with int64).
+SOURCE_DTYPE = np.int32
+#: The largest exemplar (pixels) whose flat positions :data:`SOURCE_DTYPE` holds.
+MAX_EXEMPLAR_PIXELS = int(np.iinfo(SOURCE_DTYPE).max)
 
 
 def upsample_plane_sources(src: np.ndarray, plan: SolidPlan, level: int) -> np.ndarray:
-    """The three planes' per-voxel exemplar positions ``(3, N)`` of level ``level + 1`` at ``level``
-    (:func:`upsample_sources`, written plane by plane into one array)."""
-    out = np.empty((3, int(np.prod(plan.shapes[level]))), dtype=np.int64)
+    """The three planes' per-voxel exemplar positions ``(3, N)`` (:data:`SOURCE_DTYPE`) of level
+    ``level + 1`` at ``level`` (:func:`upsample_sources`, written plane by plane into one array)."""
+    out = np.empty((3, int(np.prod(plan.shapes[level]))), dtype=SOURCE_DTYPE)
     for p, plane in enumerate(PLANES):
         upsample_sources(
             src[p],

@@ -288,9 +288,12 @@ def test_a_job_whose_time_estimate_exceeds_the_time_limit_is_422_before_queueing
 
 
 def test_a_512_cubed_solid_kopf_job_is_refused_before_queueing_with_both_estimates(api):
-    """Volumes up to 512^3 pass the size limit; the memory estimate (200 bytes a voxel, measured) refuses."""
+    """Volumes up to 512^3 pass the size limit; under the default 4 GiB the memory estimate (solid-kopf's
+    measured terms) refuses."""
     client, service = api
     params = {"width": 512, "height": 512, "depth": 512}
+    need, _, _ = estimate_memory(_defaults("solid-kopf"), params, {"exemplar": (64, 64)}, "solid-kopf")
+    assert need > 4 * 2**30
     r = client.post(
         "/api/jobs",
         data={"method": "solid-kopf", "params": json.dumps(params)},
@@ -299,7 +302,7 @@ def test_a_512_cubed_solid_kopf_job_is_refused_before_queueing_with_both_estimat
     assert r.status_code == 422, r.text
     body = r.json()
     assert body["field"] == "depth" and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["message"]
-    assert "about 25.0 GiB" in body["message"] and "512x512x512 volume" in body["message"]
+    assert f"about {need / 2**30:.1f} GiB" in body["message"] and "512x512x512 volume" in body["message"]
     assert re.search(r"run about \d+ minutes with 1 thread ", body["message"])
     assert service.store.count() == 0
 
@@ -372,9 +375,7 @@ def test_the_2d_estimate_is_never_below_a_measured_peak(method):
         shapes = {"exemplar": (128, 128)}
         if method == "arbitrary-shape":
             shapes["constraint"] = (side, side)
-        need, _, _ = estimate_memory(
-            _defaults(method), {"width": side, "height": side}, shapes, method
-        )
+        need, _, _ = estimate_memory(_defaults(method), {"width": side, "height": side}, shapes, method)
         assert need >= peak_mib * 2**20, (method, side, need / 2**20, peak_mib)
         assert need <= 2 * peak_mib * 2**20 + 2**28, (method, side, need / 2**20, peak_mib)  # not absurd
 
@@ -400,4 +401,109 @@ def test_a_4096_squared_image_is_admitted_or_refused_before_queueing_with_the_es
     )
     assert body["field"] == "width" and "TEXSYNTH_MAX_JOB_MEMORY_BYTES" in body["message"]
     assert f"about {need / 2**30:.1f} GiB" in body["message"] and "4096x4096 output" in body["message"]
+    assert service.store.count() == 0
+
+
+# -- volume memory and time estimates, per method, measured (issue 25) --------------------------------
+
+#: Peak RSS (``VmHWM``, MiB) of whole ``python -m benchmarks.bench_memory --method M --size SxSxS``
+#: runs (``--threads 2``) from the 128^2 laminar HRTEM exemplar, and of the service's 512^3 ``solid-kopf``
+#: job (its worker child's ``VmHWM``); docs/benchmarks.md, "Big outputs: volumes".
+MEASURED_VOLUME_PEAK_MIB: dict[str, dict[int, int]] = {
+    "solid-chen-wang": {64: 361, 128: 577},
+    "solid-kopf": {64: 360, 128: 470, 512: 8188},
+    "solid-wei-levoy": {48: 357, 64: 358, 96: 451},
+}
+
+
+@pytest.mark.parametrize("method", sorted(MEASURED_VOLUME_PEAK_MIB))
+def test_the_volume_estimate_is_per_method_and_never_below_a_measured_peak(method):
+    from texsynth.app.admission import VOLUME_MEMORY
+
+    assert method in VOLUME_MEMORY and MEASURED_VOLUME_PEAK_MIB[method]
+    for side, peak_mib in MEASURED_VOLUME_PEAK_MIB[method].items():
+        size = {"width": side, "height": side, "depth": side}
+        need, driver, why = estimate_memory(_defaults(method), size, {"exemplar": (128, 128)}, method)
+        assert driver == "depth" and f"{side}x{side}x{side} volume" in why
+        assert need >= peak_mib * 2**20, (method, side, need / 2**20, peak_mib)
+        assert need <= 2 * peak_mib * 2**20 + 2**28, (method, side, need / 2**20, peak_mib)  # not absurd
+
+
+def test_the_volume_terms_are_the_rule_applied_to_the_measured_peaks():
+    """The table is the fit of the peaks above (bench_memory.admission_terms), not typed numbers."""
+    from benchmarks.bench_memory import admission_terms
+    from texsynth.app.admission import VOLUME_MEMORY
+
+    for method, peaks in MEASURED_VOLUME_PEAK_MIB.items():
+        fitted = admission_terms({side**3: mib * 2**20 for side, mib in peaks.items()})
+        assert VOLUME_MEMORY[method] == fitted, (method, fitted)
+
+
+def test_an_unknown_volume_method_counts_the_largest_terms():
+    from texsynth.app.admission import VOLUME_MEMORY, VOLUME_MEMORY_DEFAULT
+
+    size = {"width": 256, "height": 256, "depth": 256}
+    shapes = {"exemplar": (128, 128)}
+    unknown, _, _ = estimate_memory({}, size, shapes, "solid-from-elsewhere")
+    assert all(unknown >= estimate_memory({}, size, shapes, m)[0] for m in VOLUME_MEMORY)
+    assert tuple(max(t[i] for t in VOLUME_MEMORY.values()) for i in (0, 1)) == VOLUME_MEMORY_DEFAULT
+
+
+def test_the_time_estimate_follows_the_measured_speed_up_of_each_method():
+    from texsynth.app.admission import TWO_THREAD_SPEEDUP, estimate_seconds, parallel_fraction
+
+    one = estimate_seconds(1.6e-5, 512**3, 1, "solid-kopf")
+    assert one == pytest.approx(1.6e-5 * 512**3)
+    # 2 threads: exactly the measured speed-up; 4: more, but less than 4x (its serial part stays)
+    assert one / estimate_seconds(1.6e-5, 512**3, 2, "solid-kopf") == pytest.approx(
+        TWO_THREAD_SPEEDUP["solid-kopf"]
+    )
+    four = one / estimate_seconds(1.6e-5, 512**3, 4, "solid-kopf")
+    assert TWO_THREAD_SPEEDUP["solid-kopf"] < four < 4.0
+    # a method that does not scale gains nothing; one never measured counts a perfect speed-up
+    assert estimate_seconds(1e-6, 10**6, 2, "quilting") == pytest.approx(
+        estimate_seconds(1e-6, 10**6, 1, "quilting")
+    )
+    assert estimate_seconds(1e-6, 10**6, 4, "solid-from-elsewhere") == pytest.approx(0.25)
+    assert parallel_fraction(1.84) == pytest.approx(2 * (1 - 1 / 1.84))
+    assert parallel_fraction(0.5) == 0.0 and parallel_fraction(3.0) == 1.0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"threads": 0}, "threads"),
+        ({"threads": True}, "threads"),
+        ({"threads": 1.5}, "threads"),
+        ({"seconds_per_element": -1.0}, "seconds_per_element"),
+        ({"seconds_per_element": float("nan")}, "seconds_per_element"),
+    ],
+)
+def test_bad_time_estimate_inputs_name_the_field(kwargs, field):
+    from texsynth.app.admission import estimate_seconds
+    from texsynth.synth.errors import InvalidParameter
+
+    args = {"seconds_per_element": 1e-5, "elements": 1000, "threads": 2, "method": "solid-kopf", **kwargs}
+    with pytest.raises(InvalidParameter) as info:
+        estimate_seconds(**args)
+    assert info.value.name == field
+
+
+def test_a_512_cubed_solid_kopf_job_is_accepted_under_a_limit_its_estimate_fits(tmp_path):
+    """Raised as an operator would (TEXSYNTH_MAX_JOB_MEMORY_BYTES), the limit admits the 512^3 job; just below
+    its estimate, the same job is a 422 on depth giving both estimates, and nothing is stored."""
+    size = {"width": 512, "height": 512, "depth": 512}
+    need, _, _ = estimate_memory(_defaults("solid-kopf"), size, {"exemplar": (64, 64)}, "solid-kopf")
+    data = {"method": "solid-kopf", "params": json.dumps(size)}
+    client, service = _client(Settings(data_dir=tmp_path / "a", max_job_memory_bytes=need, threads=2))
+    with client:
+        r = client.post("/api/jobs", data=data, files={"exemplar": ("e.png", _png(64))})
+    assert r.status_code == 202, r.text
+    client, service = _client(Settings(data_dir=tmp_path / "b", max_job_memory_bytes=need - 1, threads=2))
+    with client:
+        r = client.post("/api/jobs", data=data, files={"exemplar": ("e.png", _png(64))})
+    assert r.status_code == 422, r.text
+    message = r.json()["message"]
+    assert r.json()["field"] == "depth" and f"about {need / 2**30:.1f} GiB" in message
+    assert re.search(r"run about \d+ minutes with 2 threads \(.*measured 1\.84x of 2 threads", message)
     assert service.store.count() == 0

@@ -27,9 +27,12 @@ def test_dense_sources_equal_the_reference(shape: tuple[int, int, int], plane: s
                 match[sel] = rng.integers(0, ex[0] * ex[1], int(sel.sum()))
                 want = dense_sources_reference(match, shape, plane, stride, phase, ex)
                 np.testing.assert_array_equal(dense_sources(match, shape, plane, stride, phase, ex), want)
-                out = np.full(match.size, 7, dtype=np.int64)
-                assert dense_sources(match, shape, plane, stride, phase, ex, out=out) is out
-                np.testing.assert_array_equal(out, want)
+                for dtype in (np.int64, np.int32):  # int32: the solid driver's per-voxel positions
+                    out = np.full(match.size, 7, dtype=dtype)
+                    assert dense_sources(match.astype(dtype), shape, plane, stride, phase, ex, out=out) is out
+                    np.testing.assert_array_equal(out, want)
+                small = match.astype(np.int32)
+                assert dense_sources(small, shape, plane, stride, phase, ex).dtype == np.int32
 
 
 @pytest.mark.parametrize("plane", PLANES)
@@ -44,9 +47,10 @@ def test_upsample_sources_equal_the_reference(plane: str) -> None:
                 src = rng.integers(0, cex[0] * cex[1], int(np.prod(coarse)))
                 want = upsample_sources_reference(src, coarse, fine, plane, ex, cex)
                 np.testing.assert_array_equal(upsample_sources(src, coarse, fine, plane, ex, cex), want)
-                out = np.empty(int(np.prod(fine)), dtype=np.int64)
-                upsample_sources(src, coarse, fine, plane, ex, cex, out=out)
-                np.testing.assert_array_equal(out, want)
+                for dtype in (np.int64, np.int32):
+                    out = np.empty(int(np.prod(fine)), dtype=dtype)
+                    upsample_sources(src.astype(dtype), coarse, fine, plane, ex, cex, out=out)
+                    np.testing.assert_array_equal(out, want)
 
 
 def test_bad_outputs_are_refused() -> None:
@@ -54,12 +58,12 @@ def test_bad_outputs_are_refused() -> None:
     match = np.full(64, -1, dtype=np.int64)
     for bad in (
         np.empty(63, dtype=np.int64),
-        np.empty(64, dtype=np.int32),
+        np.empty(64, dtype=np.int16),
         np.empty(128, dtype=np.int64)[::2],
     ):
-        with pytest.raises(ValueError, match="out must be a C-contiguous int64 array of 64 entries"):
+        with pytest.raises(ValueError, match="out must be a C-contiguous int32 or int64 array of 64 entries"):
             dense_sources(match, shape, "xy", 2, (0, 0), (10, 10), out=bad)
-        with pytest.raises(ValueError, match="out must be a C-contiguous int64 array of 64 entries"):
+        with pytest.raises(ValueError, match="out must be a C-contiguous int32 or int64 array of 64 entries"):
             upsample_sources(np.zeros(8, dtype=np.int64), (2, 2, 2), shape, "xy", (10, 10), (5, 5), out=bad)
     with pytest.raises(ValueError, match="out must not share memory with match"):
         dense_sources(match, shape, "xy", 2, (0, 0), (10, 10), out=match)
