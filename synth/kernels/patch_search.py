@@ -123,20 +123,16 @@ def template_terms(
 
 @kernel(nogil=True)
 def _finish_into(
-    energy: np.ndarray,
-    cross: np.ndarray,
-    first: np.ndarray,
-    factors: np.ndarray,
-    sum_t: float,
-    sum_tt: float,
-    n: float,
-    eps: float,
-    normalised: bool,
-    weighted: bool,
+    sums: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    terms: tuple[float, float, float, float],
+    flags: tuple[bool, bool],
     err: np.ndarray,
     ssd: np.ndarray,
 ) -> None:  # pragma: no cover - numba
     """:func:`finish_errors` into ``err`` and ``ssd``."""
+    energy, cross, first, factors = sums
+    sum_t, sum_tt, n, eps = terms
+    normalised, weighted = flags
     rows, cols = energy.shape
     mean_t = sum_t / n
     var_t = max(sum_tt / n - mean_t * mean_t, 0.0)  # x * x: what ** 2 compiles to (also unjitted)
@@ -159,27 +155,23 @@ def _finish_into(
 
 @kernel(nogil=True)
 def finish_errors(
-    energy: np.ndarray,
-    cross: np.ndarray,
-    first: np.ndarray,
-    factors: np.ndarray,
-    sum_t: float,
-    sum_tt: float,
-    n: float,
-    eps: float,
-    normalised: bool,
-    weighted: bool,
+    sums: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    terms: tuple[float, float, float, float],
+    flags: tuple[bool, bool],
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
     """The search error of every candidate position and its plain SSD, ``(P, Q)`` float64 each.
 
-    ``ssd = max(energy - 2 cross + sum_tt, 0)``; with ``normalised``, the error is ``ssd / (n (var_T +
-    var_E + eps))`` (``var_T`` from ``sum_t``, ``sum_tt``; ``var_E`` from ``energy`` and ``first``, the
-    masked sums of ``E^2`` and ``E``), else ``ssd``; with ``weighted``, times ``factors``. ``first`` and
-    ``factors`` are read only when asked for (pass any 2-D array otherwise).
+    ``sums = (energy, cross, first, factors)``, the ``(P, Q)`` fields; ``terms = (sum_t, sum_tt, n,
+    eps)``, the template's; ``flags = (normalised, weighted)``. ``ssd = max(energy - 2 cross + sum_tt,
+    0)``; with ``normalised``, the error is ``ssd / (n (var_T + var_E + eps))`` (``var_T`` from ``sum_t``,
+    ``sum_tt``; ``var_E`` from ``energy`` and ``first``, the masked sums of ``E^2`` and ``E``), else
+    ``ssd``; with ``weighted``, times ``factors``. ``first`` and ``factors`` are read only when asked for
+    (pass any 2-D array otherwise).
     """
-    ssd = np.empty(energy.shape, dtype=np.float64)
-    err = np.empty(energy.shape, dtype=np.float64)
-    _finish_into(energy, cross, first, factors, sum_t, sum_tt, n, eps, normalised, weighted, err, ssd)
+    shape = sums[0].shape
+    ssd = np.empty(shape, dtype=np.float64)
+    err = np.empty(shape, dtype=np.float64)
+    _finish_into(sums, terms, flags, err, ssd)
     return err, ssd
 
 
@@ -212,26 +204,23 @@ def candidates_within(errors: np.ndarray, tolerance: float) -> np.ndarray:  # pr
 
 @kernel(nogil=True, parallel=True)
 def search_many(
-    energy: np.ndarray,
-    first: np.ndarray,
-    which: np.ndarray,
-    cross: np.ndarray,
+    masks: tuple[np.ndarray, np.ndarray],
+    templates: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     factors: np.ndarray,
-    sum_t: np.ndarray,
-    sum_tt: np.ndarray,
-    n: np.ndarray,
-    eps: float,
-    normalised: bool,
-    weighted: bool,
-    tolerance: float,
+    settings: tuple[float, float],
+    flags: tuple[bool, bool],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
     """:func:`finish_errors` and :func:`candidates_within` of ``k`` templates at once (numba's threads).
 
-    ``energy``, ``first``: ``(u, P, Q)``, the masked sums of each mask; ``which`` (``k``): each template's
-    mask; ``cross``: ``(k, >= P, >= Q)``, each template's FFT correlation (the first ``P x Q`` read);
-    ``sum_t``, ``sum_tt``, ``n``: per template. Returns the errors and SSDs ``(k, P, Q)``, the candidates
-    ``(k, P Q)`` (row ``b``'s first ``counts[b]``) and ``counts``.
+    ``masks = (energy, first)``: ``(u, P, Q)``, the masked sums of each mask; ``templates = (which, cross,
+    sum_t, sum_tt, n)``: ``which`` (``k``) each template's mask, ``cross`` ``(k, >= P, >= Q)`` its FFT
+    correlation (the first ``P x Q`` read), the sums and weights per template; ``settings = (eps,
+    tolerance)``; ``flags = (normalised, weighted)``. Returns the errors and SSDs ``(k, P, Q)``, the
+    candidates ``(k, P Q)`` (row ``b``'s first ``counts[b]``) and ``counts``.
     """
+    energy, first = masks
+    which, cross, sum_t, sum_tt, n = templates
+    eps, tolerance = settings
     k = which.size
     _, rows, cols = energy.shape
     err = np.empty((k, rows, cols), dtype=np.float64)
@@ -240,20 +229,8 @@ def search_many(
     counts = np.zeros(k, dtype=np.int64)
     for b in prange(k):
         u = which[b]
-        _finish_into(
-            energy[u],
-            cross[b, :rows, :cols],
-            first[u],
-            factors,
-            sum_t[b],
-            sum_tt[b],
-            n[b],
-            eps,
-            normalised,
-            weighted,
-            err[b],
-            ssd[b],
-        )
+        sums = (energy[u], cross[b, :rows, :cols], first[u], factors)
+        _finish_into(sums, (sum_t[b], sum_tt[b], n[b], eps), flags, err[b], ssd[b])
         counts[b] = _candidates_into(err[b], tolerance, pools[b])
     return err, ssd, pools, counts
 
@@ -425,21 +402,20 @@ def template_terms_many(
 
 @kernel(nogil=True, parallel=True)
 def stitch_many(
-    image: np.ndarray,
-    source: np.ndarray,
-    rows: np.ndarray,
-    cols: np.ndarray,
-    regions: np.ndarray,
+    canvas: tuple[np.ndarray, np.ndarray],
+    places: tuple[np.ndarray, np.ndarray, np.ndarray],
     exemplar: np.ndarray,
-    pys: np.ndarray,
-    pxs: np.ndarray,
-    tops: np.ndarray,
-    lefts: np.ndarray,
+    choices: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> np.ndarray:  # pragma: no cover - numba
-    """Cut and paste ``k`` disjoint patches at once (numba's threads): patch ``b`` is the exemplar's at
-    ``(pys[b], pxs[b])``, cut against ``regions[b]`` (the output it covers, ``(k, w, w, C)``) by
-    :func:`raster_cut` with its ``tops[b]`` / ``lefts[b]`` strips and pasted by :func:`paste` at
-    ``rows[b]``, ``cols[b]``. Returns the new pixels' masks ``(k, w, w)``."""
+    """Cut and paste ``k`` disjoint patches at once (numba's threads). ``canvas = (image, source)``, written
+    in place; ``places = (rows, cols, regions)``: where each patch goes and the output it covers
+    (``(k, w, w, C)``); ``choices = (pys, pxs, tops, lefts)``: patch ``b`` is the exemplar's at ``(pys[b],
+    pxs[b])``, cut against ``regions[b]`` by :func:`raster_cut` with its ``tops[b]`` / ``lefts[b]``
+    strips and pasted by :func:`paste` at ``rows[b]``, ``cols[b]``. Returns the new pixels' masks
+    ``(k, w, w)``."""
+    image, source = canvas
+    rows, cols, regions = places
+    pys, pxs, tops, lefts = choices
     k, w = rows.shape
     masks = np.empty((k, w, w), dtype=np.bool_)
     for b in prange(k):

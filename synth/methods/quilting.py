@@ -228,18 +228,10 @@ def run_quilting(
         quick = [b for b in range(len(todo)) if fast and not strips[b].two_sided]
         new_masks: dict[int, np.ndarray] = {}
         if quick:
-            got = patch_kernels.stitch_many(
-                out,
-                source,
-                rows[quick],
-                cols[quick],
-                regions[quick],
-                ex,
-                np.array([chosen[b][0] for b in quick], dtype=np.int64),
-                np.array([chosen[b][1] for b in quick], dtype=np.int64),
-                np.array([strips[b].top for b in quick], dtype=np.int64),
-                np.array([strips[b].left for b in quick], dtype=np.int64),
-            )
+            picked = [(chosen[b][0], chosen[b][1], strips[b].top, strips[b].left) for b in quick]
+            choices = tuple(np.array(column, dtype=np.int64) for column in zip(*picked, strict=True))
+            places = (rows[quick], cols[quick], regions[quick])
+            got = patch_kernels.stitch_many((out, source), places, ex, choices)
             new_masks.update(zip(quick, got, strict=True))
         rest = [b for b in range(len(todo)) if b not in new_masks]
         if rest:

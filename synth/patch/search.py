@@ -163,9 +163,9 @@ class PatchSearcher:
         cross = sfft.irfft2(products, s=self.grid, axes=(1, 2), workers=threads)
         weighted = factors is not None
         f = np.ascontiguousarray(factors, dtype=np.float64) if weighted else np.ones((1, 1))
-        return kernels.search_many(
-            energy, first, which, cross, f, sum_t, sum_tt, n, self._eps, bool(normalised), weighted, tolerance
-        )
+        per_template = (which, cross, sum_t, sum_tt, n)
+        flags = (bool(normalised), weighted)
+        return kernels.search_many((energy, first), per_template, f, (self._eps, float(tolerance)), flags)
 
     def mask_weight(self, mask: np.ndarray) -> float:
         """``sum M`` over every channel: the number of known values of a 0/1 mask."""
@@ -204,9 +204,8 @@ class PatchSearcher:
         cross = self._correlate(self._spectra, mt)
         weighted = factors is not None
         f = np.ascontiguousarray(factors, dtype=np.float64) if weighted else np.ones((1, 1))
-        return kernels.finish_errors(
-            energy, cross, first, f, sum_t, sum_tt, n, self._eps, bool(normalised), weighted
-        )
+        terms = (float(sum_t), float(sum_tt), float(n), float(self._eps))
+        return kernels.finish_errors((energy, cross, first, f), terms, (bool(normalised), weighted))
 
     def _mask_sums(self, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``sum_u M(u) E(q + u)^2`` and ``sum_u M(u) E(q + u)`` at every ``q`` (cached per mask)."""

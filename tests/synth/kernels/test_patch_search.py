@@ -108,7 +108,7 @@ def test_gather_paste_and_stitch_many():
         want_src[at] = src
         masks.append(m)
     source = np.zeros((30, 30, 2), dtype=np.int32)
-    got = kernels.stitch_many(image, source, rows, cols, regions, ex, pys, pxs, tops, lefts)
+    got = kernels.stitch_many((image, source), (rows, cols, regions), ex, (pys, pxs, tops, lefts))
     assert np.array_equal(got, np.array(masks))
     assert np.array_equal(image, want) and np.array_equal(source, want_src)
 
