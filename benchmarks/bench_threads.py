@@ -38,6 +38,7 @@ CASES = {
     "kopf-64": ("solid-kopf", "64x64x64"),
     "kopf-128": ("solid-kopf", "128x128x128"),
     "chen-wang-64": ("solid-chen-wang", "64x64x64"),
+    "solid-wei-levoy-64": ("solid-wei-levoy", "64x64x64"),
     # The 2D methods (their own section, threads-2d): one line a case.
     "wei-levoy-512": ("wei-levoy", "512x512"),
     "tensor-512": ("tensor-constrained", "512x512"),
@@ -46,6 +47,8 @@ CASES = {
     "quilting-1024": ("quilting", "1024x1024"),
     "gaussian-patch-512": ("gaussian-patch", "512x512"),
     "feature-guided-512": ("feature-guided", "512x512"),
+    # random phase: FFTs of the output's size (scipy.fft on the job's threads)
+    "random-phase-1024": ("random-phase", "1024x1024"),
 }
 #: Methods that need a constraint image: a generated one of the output's size (undulating rings).
 CONSTRAINED = {"arbitrary-shape"}
