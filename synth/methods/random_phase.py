@@ -39,6 +39,7 @@ from texsynth.synth.api import MethodSpec, Progress, Result, register
 from texsynth.synth.evaluate.patches import copy_map, copy_share
 from texsynth.synth.methods.common import checked_progress
 from texsynth.synth.params import MethodParams, ui
+from texsynth.synth.threads import current_threads
 
 __all__ = ["RandomPhaseParams", "periodic_component", "random_phase_noise", "run_random_phase"]
 
@@ -109,10 +110,12 @@ def random_phase_noise(exemplar: np.ndarray, shape: tuple[int, int], rng: np.ran
     # float32 FFTs (complex64): half the time of float64 at 2048^2, and far below 8-bit output precision.
     spot = np.zeros((out_m, out_n, p3.shape[2]), dtype=np.float32)
     spot[:m, :n] = (p3 - mean) * np.sqrt(out_m * out_n / (m * n))
-    phase = sfft.rfft2(rng.standard_normal((out_m, out_n), dtype=np.float32))
+    # The job's threads share each 2D FFT's independent 1D transforms: the same bytes on any count.
+    workers = current_threads()
+    phase = sfft.rfft2(rng.standard_normal((out_m, out_n), dtype=np.float32), workers=workers)
     phase /= np.maximum(np.abs(phase), np.finfo(np.float32).tiny)
-    spectrum = sfft.rfft2(spot, axes=(0, 1)) * phase[..., None]
-    out = sfft.irfft2(spectrum, s=(out_m, out_n), axes=(0, 1))[: shape[0], : shape[1]] + mean
+    spectrum = sfft.rfft2(spot, axes=(0, 1), workers=workers) * phase[..., None]
+    out = sfft.irfft2(spectrum, s=(out_m, out_n), axes=(0, 1), workers=workers)[: shape[0], : shape[1]] + mean
     return out[..., 0] if p.ndim == 2 else out
 
 
