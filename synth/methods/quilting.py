@@ -49,6 +49,7 @@ from texsynth.synth.params import ui
 from texsynth.synth.patch.cut import error_surface, strips_cut_mask
 from texsynth.synth.patch.graphcut import graph_cut_mask
 from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, patch_rng
+from texsynth.synth.patch.memory import settle_heap, wave_bytes
 from texsynth.synth.patch.search import PatchSearcher
 from texsynth.synth.patch.usage import UsagePenalty
 from texsynth.synth.threads import current_threads, thread_map
@@ -245,7 +246,9 @@ def run_quilting(
         for run, got in zip(runs, thread_map(lambda r: place_run(r, factors), runs, threads), strict=True):
             placed.update(zip(run, got, strict=True))
 
-    for wave in layout.waves():
+    waves = layout.waves()
+    settle_heap(wave_bytes(max(map(len, waves)), searcher.grid, searcher.channels))
+    for wave in waves:
         factors = usage.factors() if params.usage_weight > 0 else None
         for n in wave:
             if patches[n][4] == "none":
