@@ -239,7 +239,7 @@ def search_many(
 
 #: :func:`search_many` on the calling thread alone: one chunk of a wave, several chunks at once on the
 #: job's Python threads (the same body; :func:`texsynth.synth.kernels.options.kernel` names it apart).
-search_many_serial = kernel(nogil=True)(search_many.py_func)
+search_many_serial = kernel(nogil=True)(getattr(search_many, "py_func", search_many))
 
 
 @kernel(nogil=True)
@@ -434,7 +434,7 @@ def stitch_many(
 
 
 #: :func:`stitch_many` on the calling thread alone (see :data:`search_many_serial`).
-stitch_many_serial = kernel(nogil=True)(stitch_many.py_func)
+stitch_many_serial = kernel(nogil=True)(getattr(stitch_many, "py_func", stitch_many))
 
 
 @kernel(nogil=True)
