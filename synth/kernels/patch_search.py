@@ -36,7 +36,9 @@ __all__ = [
     "paste",
     "raster_cut",
     "search_many",
+    "search_many_serial",
     "stitch_many",
+    "stitch_many_serial",
     "template_terms",
     "template_terms_many",
     "trace_cut",
@@ -235,6 +237,11 @@ def search_many(
     return err, ssd, pools, counts
 
 
+#: :func:`search_many` on the calling thread alone: one chunk of a wave, several chunks at once on the
+#: job's Python threads (the same body; :func:`texsynth.synth.kernels.options.kernel` names it apart).
+search_many_serial = kernel(nogil=True)(getattr(search_many, "py_func", search_many))
+
+
 @kernel(nogil=True)
 def gather(image: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     """``image[np.ix_(rows, cols)]``, a contiguous copy (``image``: ``(H, W, C)``)."""
@@ -424,6 +431,10 @@ def stitch_many(
         masks[b] = m
         paste(image, source, rows[b], cols[b], patch, m, pys[b], pxs[b])
     return masks
+
+
+#: :func:`stitch_many` on the calling thread alone (see :data:`search_many_serial`).
+stitch_many_serial = kernel(nogil=True)(getattr(stitch_many, "py_func", stitch_many))
 
 
 @kernel(nogil=True)

@@ -49,6 +49,7 @@ from texsynth.synth.params import ui
 from texsynth.synth.patch.cut import error_surface, strips_cut_mask
 from texsynth.synth.patch.graphcut import graph_cut_mask
 from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, patch_rng
+from texsynth.synth.patch.memory import settle_heap, wave_bytes
 from texsynth.synth.patch.search import PatchSearcher
 from texsynth.synth.patch.usage import UsagePenalty
 from texsynth.synth.threads import current_threads, thread_map
@@ -202,24 +203,25 @@ def run_quilting(
         patch_kernels.paste(out, source, rows, cols, np.ascontiguousarray(patch), new_mask, py, px)
         return new_mask
 
-    # The patches of a wave do not overlap: they are searched together (one FFT call for all, the
-    # rest in numba's threads), each drawn from its own random stream (seed, patch), then cut and pasted
-    # together, with the usage counts as they were when the wave began; then the wave's patches are counted.
+    # The patches of a wave do not overlap: the wave is split into one run of consecutive patches per
+    # thread, and each run is searched (its FFTs in one SciPy call), drawn (each patch from its own random
+    # stream, seed and patch), cut and pasted by one task, all its steps on that task's thread (the
+    # kernels and the FFTs release the GIL): a wave costs one hand-over between threads, not one per step.
+    # The usage counts are those of the wave's start; then the wave's patches are counted.
     threads = current_threads()
     normalised = params.error == "normalised"
     fast = params.blending == "boundary-cut"
 
-    def place_wave(todo: list[int], factors: np.ndarray | None) -> None:
-        """Search, draw, cut and paste the patches ``todo`` of one wave (each has known strips)."""
+    def place_run(todo: list[int], factors: np.ndarray | None) -> list[tuple[int, int, np.ndarray, float]]:
+        """Search, draw, cut and paste the patches ``todo`` of one wave (each has known strips), on the
+        calling thread; their regions are disjoint from those of the wave's other runs."""
         where = [layout.rows_cols(patches[n][2], patches[n][3]) for n in todo]
         rows = np.stack([r for r, _ in where])
         cols = np.stack([c for _, c in where])
         regions = patch_kernels.gather_many(out, rows, cols)
         strips = [layout.strips(patches[n][0], patches[n][1]) for n in todo]
         masks = [s.mask(w) for s in strips]
-        _, ssd, pools, counts = searcher.search_many(
-            regions, masks, normalised, factors, params.tolerance, threads
-        )
+        _, ssd, pools, counts = searcher.search_many(regions, masks, normalised, factors, params.tolerance, 1)
         chosen = []
         for b, n in enumerate(todo):
             choice = int(pools[b, patch_rng(base, n).integers(counts[b])])
@@ -231,16 +233,22 @@ def run_quilting(
             picked = [(chosen[b][0], chosen[b][1], strips[b].top, strips[b].left) for b in quick]
             choices = tuple(np.array(column, dtype=np.int64) for column in zip(*picked, strict=True))
             places = (rows[quick], cols[quick], regions[quick])
-            got = patch_kernels.stitch_many((out, source), places, ex, choices)
+            got = patch_kernels.stitch_many_serial((out, source), places, ex, choices)
             new_masks.update(zip(quick, got, strict=True))
-        rest = [b for b in range(len(todo)) if b not in new_masks]
-        if rest:
-            got = thread_map(lambda b: stitch(todo[b], chosen[b][0], chosen[b][1], regions[b]), rest, threads)
-            new_masks.update(zip(rest, got, strict=True))
-        for b, n in enumerate(todo):
-            placed[n] = (chosen[b][0], chosen[b][1], new_masks[b], chosen[b][2])
+        for b in range(len(todo)):
+            if b not in new_masks:
+                new_masks[b] = stitch(todo[b], chosen[b][0], chosen[b][1], regions[b])
+        return [(chosen[b][0], chosen[b][1], new_masks[b], chosen[b][2]) for b in range(len(todo))]
 
-    for wave in layout.waves():
+    def place_wave(todo: list[int], factors: np.ndarray | None) -> None:
+        """The patches ``todo`` of one wave, in one run per thread (:func:`place_run`)."""
+        runs = [part.tolist() for part in np.array_split(np.array(todo), min(threads, len(todo)))]
+        for run, got in zip(runs, thread_map(lambda r: place_run(r, factors), runs, threads), strict=True):
+            placed.update(zip(run, got, strict=True))
+
+    waves = layout.waves()
+    settle_heap(wave_bytes(max(map(len, waves)), searcher.grid, searcher.channels))
+    for wave in waves:
         factors = usage.factors() if params.usage_weight > 0 else None
         for n in wave:
             if patches[n][4] == "none":

@@ -121,7 +121,8 @@ class PatchSearcher:
         tolerance : float
             As :func:`candidates_within`.
         threads : int
-            Threads of the FFTs and of the per-template products.
+            Threads of the FFTs, the per-template products and the kernel; 1: all on the calling thread
+            (a chunk of a wave, several chunks searched at once on Python threads).
 
         Returns
         -------
@@ -165,7 +166,8 @@ class PatchSearcher:
         f = np.ascontiguousarray(factors, dtype=np.float64) if weighted else np.ones((1, 1))
         per_template = (which, cross, sum_t, sum_tt, n)
         flags = (bool(normalised), weighted)
-        return kernels.search_many((energy, first), per_template, f, (self._eps, float(tolerance)), flags)
+        finish = kernels.search_many if threads > 1 else kernels.search_many_serial
+        return finish((energy, first), per_template, f, (self._eps, float(tolerance)), flags)
 
     def mask_weight(self, mask: np.ndarray) -> float:
         """``sum M`` over every channel: the number of known values of a 0/1 mask."""

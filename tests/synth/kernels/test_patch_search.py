@@ -50,7 +50,7 @@ def test_search_many_is_one_template_at_a_time(channels):
     templates = rng.random((len(masks), w, w, channels))
     factors = 1 + rng.random(searcher.positions_shape)
     for normalised in (False, True):
-        for threads in (1, 2):
+        for threads in (1, 2):  # 1: the serial kernel, 2: the parallel one
             got = searcher.search_many(templates, masks, normalised, factors, 0.3, threads)
             err, ssd, pools, counts = got
             for b, mask in enumerate(masks):
@@ -81,7 +81,8 @@ def test_raster_cut_is_the_reference(seed, top, left):
     assert np.array_equal(kernels.raster_cut(e, top, left), raster_cut_reference(e, top, left))
 
 
-def test_gather_paste_and_stitch_many():
+@pytest.mark.parametrize("stitch", [kernels.stitch_many, kernels.stitch_many_serial])
+def test_gather_paste_and_stitch_many(stitch):
     rng = np.random.default_rng(5)
     w, channels = 8, 2
     image = rng.random((30, 30, channels))
@@ -108,7 +109,7 @@ def test_gather_paste_and_stitch_many():
         want_src[at] = src
         masks.append(m)
     source = np.zeros((30, 30, 2), dtype=np.int32)
-    got = kernels.stitch_many((image, source), (rows, cols, regions), ex, (pys, pxs, tops, lefts))
+    got = stitch((image, source), (rows, cols, regions), ex, (pys, pxs, tops, lefts))
     assert np.array_equal(got, np.array(masks))
     assert np.array_equal(image, want) and np.array_equal(source, want_src)
 
@@ -122,7 +123,19 @@ def test_usage_factors_are_the_numpy_ones():
         assert np.array_equal(u.factors(), u.factors_reference())
 
 
-NOGIL = "template_terms finish_errors candidates_within gather error_surface raster_cut paste usage_factors"
+NOGIL = (
+    "template_terms finish_errors candidates_within gather error_surface raster_cut paste usage_factors"
+    " gather_many template_terms_many search_many_serial stitch_many_serial"
+)
+
+
+@pytest.mark.skipif(numba.config.DISABLE_JIT, reason="no compiled kernels without the JIT")
+def test_serial_copies_are_compiled_apart():
+    """One body, two option sets: the serial copies have their own names (numba's cache keys by name)."""
+    for name in ("search_many", "stitch_many"):
+        parallel, serial = getattr(kernels, name), getattr(kernels, name + "_serial")
+        assert parallel.targetoptions.get("parallel") is True and "parallel" not in serial.targetoptions
+        assert serial.py_func.__name__ != parallel.py_func.__name__
 
 
 @pytest.mark.parametrize("name", NOGIL.split())
