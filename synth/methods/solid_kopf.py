@@ -273,8 +273,8 @@ class SolidKopfParams(SolidParams):
             details=(
                 "The exemplar-usage re-weighting's target per cell grows with the cell's fringe order "
                 "(structure-tensor coherence to the power 12) instead of being even: the optimisation "
-                "copies less from a crop's disordered core. 'auto': on when an exemplar is reported not "
-                "stationary (the stationarity diagnostics), else off (even usage, as before)."
+                "copies less from a crop's disordered core. 'auto' (with adapt_to_structure): on when an "
+                "exemplar is reported not stationary (the stationarity diagnostics), else off (even usage)."
             )
         ),
     )
@@ -628,7 +628,7 @@ def run_solid_kopf(
     loop = _KopfLoop(params, plan, run, iterations, period, phi)
     loop.start_length = length
     loop.order_usage = params.order_usage == "on" or (
-        params.order_usage == "auto" and _mixed(run.constrained())
+        params.order_usage == "auto" and params.adapt_to_structure and _mixed(run.constrained())
     )
     del phi  # the start read its coarsest level; the full-size float64 phase is not kept through the levels
     run_levels(plan, [iterations] * plan.levels, loop)

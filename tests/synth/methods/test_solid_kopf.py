@@ -475,3 +475,16 @@ def test_order_usage_auto_follows_the_stationarity_report() -> None:
     assert _mixed([onion])  # the ordered shell and the disordered core
     assert not _mixed([core]) and not _mixed([core, core])
     assert not _mixed([onion[:20, :20]])  # too small to judge
+
+
+def test_order_usage_is_reported_and_the_literal_schedule_keeps_even_usage() -> None:
+    from texsynth.synth.io.images import load_image
+
+    onion = np.asarray(load_image(REPO / "benchmarks" / "data" / "hrtem-onion-128.png", mode="grey"))
+    literal = {"adapt_to_structure": False, "levels": 2, "iterations": 1}
+    stats = [
+        synthesize("solid-kopf", onion, size=(16, 16, 16), params={**literal, **extra}, seed=1).stats
+        for extra in ({}, {"order_usage": "on"})
+    ]
+    assert stats[0]["order_usage"] is False  # 'auto' needs adapt_to_structure: the paper's even usage
+    assert stats[1]["order_usage"] is True
