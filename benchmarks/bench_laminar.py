@@ -9,7 +9,8 @@ docs/laminar.md from docs/laminar-benchmark.json without running anything.
    0.3): their mid-slices are the exemplars, the xy one for all planes ("one exemplar") or the three
    ("per plane"). Checked first: the truth's own slices against the exemplar(s)
    (:func:`texsynth.synth.evaluate.evaluate_volume`), and an independent 64^3 sample of the same material
-   (seeds 12-14) against the truth's slices: the floor of every measure.
+   (seeds 12-14) against the truth's slices: the floor of every measure (``--floor N``: the spread of N
+   such samples, printed).
 2. **The runs**: every method and setting of :data:`RUNS`, seeds 1-3, through
    :func:`texsynth.synth.api.synthesize`, with the process CPU time and the wall time; per axis, the volume's
    slices against the truth's slices of the same size
@@ -263,15 +264,54 @@ def calibrate(side: int = 128, period: float = 6.0) -> dict[str, Any]:
     }
 
 
+def floor_distribution(family: str = "onions", samples: int = 30, side: int = 64) -> dict[str, Any]:
+    """The floor's spread: ``samples`` independent ``side^3`` samples of ``family`` (seeds 12 on) against
+    the truth's blocks; per seed-axis tortuosity and length KS, their quantiles, the worst of each three
+    samples x three axes (a seeds 1-3 table's worst), and the fringes per slice."""
+    truth = truths()[family]
+    ref = truth_slices(truth, (side,) * 3)
+    tort: list[float] = []
+    length: list[float] = []
+    counts: list[int] = []
+    for seed in range(12, 12 + samples):
+        axes = evaluate_against_truth(ref, _maker(family)((side,) * 3, seed=seed))["axes"]
+        for block in axes.values():
+            tort.append(block["fringes"]["ks_tortuosity"]["statistic"])
+            length.append(block["fringes"]["ks_length"]["statistic"])
+            counts.append(block["fringes"]["output"]["count"])
+    worst = [max(tort[i : i + 9]) for i in range(0, len(tort) - 8, 9)]
+
+    def spread(values: list[float]) -> dict[str, float]:
+        q = np.quantile(values, [0.5, 0.9, 0.95])
+        share = float(np.mean(np.asarray(values) >= 0.15))
+        return {"median": q[0], "q90": q[1], "q95": q[2], "max": max(values), "share_ge_0.15": share}
+
+    return {
+        "family": family,
+        "samples": samples,
+        "tortuosity_ks": spread(tort),
+        "length_ks": spread(length),
+        "worst_of_9_tortuosity": worst,
+        "fringes_per_slice": float(np.mean(counts)) / side,
+        "truth_fringes_per_axis": [int(ref.stats[a].lengths.size) for a in ref.axes],
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid synthesis against known laminar answers")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
     parser.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
     parser.add_argument("--report", action="store_true", help="only rewrite docs/laminar.md from the results")
     parser.add_argument("--calibrate", action="store_true", help="only print the fitted lengths' tables")
+    parser.add_argument(
+        "--floor", type=int, default=0, help="only print the spread of N independent 64^3 onion samples"
+    )
     args = parser.parse_args(argv)
     if args.calibrate:
         print(json.dumps(calibrate()))
+        return 0
+    if args.floor:
+        print(json.dumps(floor_distribution(samples=args.floor), default=float))
         return 0
     if args.report:
         (DOCS / "laminar.md").write_text(report(json.loads(RESULTS.read_text())))

@@ -16,6 +16,7 @@ al., SIGGRAPH 2002 (k-coherence search). R. D. Urs et al., BMVC 2012 (the settin
 Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
 - histogram gain 64, not eq 4's 1 (:data:`HISTOGRAM_GAIN`): gain 1 let the volume collapse to flat grey;
 - exemplar-usage re-weighting (:data:`POSITION_GAIN`, after Chen & Wang): against laminar attractors;
+  on a crop that mixes order and disorder its target follows the local order (``order_usage``);
 - one rank remap of the finished volume (``histogram_matching``); ``stats['contrast_before_remap']``;
 - k-coherence search seeded by the coarser level, the k-d tree only at the very first iteration;
 - 4 iterations per level (the study: 10); a sparse grid of centres whose phase is drawn every iteration;
@@ -45,7 +46,8 @@ from texsynth.synth.analysis.orientation_histogram import (
     orientation_labels,
     usage_factors,
 )
-from texsynth.synth.analysis.tensor import mean_coherence
+from texsynth.synth.analysis.stationarity import stationarity
+from texsynth.synth.analysis.tensor import coherence, mean_coherence, structure_tensor
 from texsynth.synth.api import MethodSpec, Progress, Result, register
 from texsynth.synth.grid.scan import ScanOrder, scan_order
 from texsynth.synth.kernels.solid_search import (
@@ -119,6 +121,10 @@ UPDATE_BLOCKS_PER_SWEEP = 16
 #: Exemplar-usage re-weighting: gain, and cells per exemplar side (docs/solid.md, Departures).
 POSITION_GAIN = 1.0
 POSITION_CELLS = 16
+#: ``order_usage``: each cell's usage target is proportional to its mean coherence to this power
+#: (docs/solid.md: the onion crop's tortuosity KS 0.29 -> 0.26 at 2, 0.25 at 6, 0.22 at 12, 0.20 at 24
+#: with a worse orientation KL).
+ORDER_POWER = 12.0
 #: Default gain of the orientation-usage re-weighting (docs/solid.md, Departures; 0 = the paper).
 ORIENTATION_GAIN = 32.0
 #: Correlation length of the oriented start's crumples, in periods (docs/solid.md: the turbostratic stack's
@@ -259,6 +265,19 @@ class SolidKopfParams(SolidParams):
             )
         ),
     )
+    order_usage: Literal["auto", "on", "off"] = Field(
+        "auto",
+        description="Let ordered parts of the exemplar be used more than disordered ones; 'auto': only "
+        "when an exemplar mixes order and disorder.",
+        json_schema_extra=ui(
+            details=(
+                "The exemplar-usage re-weighting's target per cell grows with the cell's fringe order "
+                "(structure-tensor coherence to the power 12) instead of being even: the optimisation "
+                "copies less from a crop's disordered core. 'auto' (with adapt_to_structure): on when an "
+                "exemplar is reported not stationary (the stationarity diagnostics), else off (even usage)."
+            )
+        ),
+    )
     search: Literal["tree", "exact"] = Field(
         "tree",
         description="How matches are found: 'tree' tries a few likely places (fast), 'exact' every one "
@@ -278,23 +297,64 @@ class SolidKopfParams(SolidParams):
         return None if value == "auto" else value
 
 
-def _position_factors(match: np.ndarray, ex_shape: tuple[int, int]) -> np.ndarray:
+def _position_cell(ex_shape: tuple[int, int]) -> tuple[int, int, int]:
+    """Side of the usage cells of an exemplar of ``ex_shape``, and the cells per column and row."""
+    h, w = ex_shape
+    cell = max(2, min(h, w) // POSITION_CELLS)
+    return cell, (h + cell - 1) // cell, (w + cell - 1) // cell
+
+
+def _position_factors(
+    match: np.ndarray, ex_shape: tuple[int, int], target: np.ndarray | None = None
+) -> np.ndarray:
     """Weight factors ``1 / (1 + gain * max(0, u(c) / mean(u) - 1))`` of a plane's matched neighbourhoods.
 
     ``match`` holds the flat exemplar positions of the plane's matches; the exemplar is cut into about
     :data:`POSITION_CELLS` x :data:`POSITION_CELLS` square cells, ``u(c)`` counts the matches centred in
     cell ``c`` and ``mean(u)`` is over the cells used. A match in an over-used cell loses weight in
-    proportion to the excess (:data:`POSITION_GAIN`), as eq 4 does for grey levels.
+    proportion to the excess (:data:`POSITION_GAIN`), as eq 4 does for grey levels. With ``target``
+    (per cell, mean 1: :func:`_order_target`) the excess is ``u(c) / (mean(u) t(c)) - 1``, ``mean(u)``
+    over every cell: ordered cells may be used more than disordered ones (``order_usage``).
     """
-    h, w = ex_shape
-    cell = max(2, min(h, w) // POSITION_CELLS)
+    w = ex_shape[1]
+    cell, nr, nc = _position_cell(ex_shape)
     rows, cols = np.divmod(match, w)
-    nc = (w + cell - 1) // cell
     cells = (rows // cell) * nc + cols // cell
-    usage = np.bincount(cells, minlength=((h + cell - 1) // cell) * nc).astype(np.float64)
+    usage = np.bincount(cells, minlength=nr * nc).astype(np.float64)
+    if target is not None:
+        excess = np.maximum(0.0, usage[cells] / (max(float(usage.mean()), 1e-12) * target[cells]) - 1.0)
+        return (1.0 / (1.0 + POSITION_GAIN * excess)).astype(np.float32)
     mean = usage[usage > 0].mean() if np.any(usage > 0) else 1.0
     excess = np.maximum(0.0, usage[cells] / mean - 1.0)
     return (1.0 / (1.0 + POSITION_GAIN * excess)).astype(np.float32)
+
+
+#: Below this side (px) an exemplar is not judged for stationarity (three windows of 8 px).
+STATIONARITY_MIN_SIDE = 24
+
+
+def _mixed(images: list[np.ndarray]) -> bool:
+    """Whether one of ``images`` mixes order and disorder: reported not stationary by
+    :func:`texsynth.synth.analysis.stationarity.stationarity` (exemplars under 24 px are not judged)."""
+    return any(
+        min(im.shape[:2]) >= STATIONARITY_MIN_SIDE and not stationarity(im).stationary for im in images
+    )
+
+
+def _order_target(image: np.ndarray) -> np.ndarray:
+    """Per usage cell of ``image`` (:func:`_position_cell`, row-major), the usage target ``t(c)``
+    proportional to the cell's mean structure-tensor coherence (sigma_d 1, sigma_w 3) to the power
+    :data:`ORDER_POWER`, normalised to mean 1 over the cells (``order_usage``)."""
+    h, w = image.shape
+    cell, nr, nc = _position_cell((h, w))
+    coh = coherence(structure_tensor(np.ascontiguousarray(image, dtype=np.float32), 1.0, 3.0))
+    sums = np.zeros((nr * cell, nc * cell))
+    counts = np.zeros_like(sums)
+    sums[:h, :w], counts[:h, :w] = coh, 1.0
+    cells = sums.reshape(nr, cell, nc, cell).sum(axis=(1, 3))
+    cells /= np.maximum(counts.reshape(nr, cell, nc, cell).sum(axis=(1, 3)), 1.0)
+    target = np.maximum(cells.ravel(), 1e-3) ** ORDER_POWER
+    return target / target.mean()
 
 
 def _orientation_factors(
@@ -344,6 +404,7 @@ class _KopfLoop:
         self.pooled = np.zeros(0, dtype=np.float32)
         self.final = "average"  # the last step taken (``final_step``)
         self.start_length: float | None = None  # periods; set by the caller after a structured start
+        self.order_usage = False  # the usage target follows the exemplar's order (``order_usage``)
 
     def start_level(self, step: LevelStep) -> None:
         """Upsample the volume and the coherent sources (or draw them), and build the level's tables."""
@@ -376,6 +437,13 @@ class _KopfLoop:
                 if id(images[p]) not in known:
                     known[id(images[p])] = orientation_labels(images[p])
                 self.orient[p] = known[id(images[p])]
+        self.targets: dict[int, np.ndarray] = {}
+        if self.order_usage:
+            by_image: dict[int, np.ndarray] = {}
+            for p in active:
+                if id(images[p]) not in by_image:
+                    by_image[id(images[p])] = _order_target(images[p])
+                self.targets[p] = by_image[id(images[p])]
         self.pooled = np.concatenate([images[p].ravel() for p in active])
         self.hist = HistogramState.start(
             self.vol, self.pooled, HISTOGRAM_BINS, HISTOGRAM_GAIN if params.histogram_matching else 0.0
@@ -452,7 +520,9 @@ class _KopfLoop:
             count += b - a
         dense_sources(field.match[p], shape, plane, s, phase, self.images[p].shape, out=self.src[p])
         if POSITION_GAIN > 0:
-            field.weight[p, flat] *= _position_factors(field.match[p, flat], self.images[p].shape)
+            field.weight[p, flat] *= _position_factors(
+                field.match[p, flat], self.images[p].shape, self.targets.get(p)
+            )
         if params.orientation_gain > 0:
             field.weight[p, flat] *= _orientation_factors(
                 field.match[p, flat], self.orient[p], field.weight[p, flat], params.orientation_gain
@@ -512,6 +582,7 @@ class _KopfLoop:
                 "period": self.period if self.period > 0 else None,
                 # The structured start's sheet or crumple length (periods), fitted ('auto') or given.
                 "start_length": self.start_length,
+                "order_usage": self.order_usage,
             },
         )
 
@@ -556,6 +627,9 @@ def run_solid_kopf(
         phi = laminar_phase(plan.shapes[0], length * period, run.rng, periodic=params.periodic)
     loop = _KopfLoop(params, plan, run, iterations, period, phi)
     loop.start_length = length
+    loop.order_usage = params.order_usage == "on" or (
+        params.order_usage == "auto" and params.adapt_to_structure and _mixed(run.constrained())
+    )
     del phi  # the start read its coarsest level; the full-size float64 phase is not kept through the levels
     run_levels(plan, [iterations] * plan.levels, loop)
     return loop.result(seed)
@@ -563,7 +637,7 @@ def run_solid_kopf(
 
 #: The pilot's settings when its caller gives none (solid-chen-wang): those it was measured with before
 #: Kopf's structured starts changed (docs/solid.md), so that its choices do not move with Kopf's defaults.
-PILOT_SETTINGS: dict[str, object] = {"structure_length": 4.0, "final_step": "average"}
+PILOT_SETTINGS: dict[str, object] = {"structure_length": 4.0, "final_step": "average", "order_usage": "off"}
 #: Side of the pilot volumes of :func:`laminar_pilot` (two Kopf runs of about 0.5-1 s of CPU each).
 PILOT_SIDE = 32
 

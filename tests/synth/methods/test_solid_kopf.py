@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from tests.paths import SHARED_DATA
+from tests.paths import REPO, SHARED_DATA
 from texsynth.synth import InvalidInput, InvalidParameter
 from texsynth.synth.analysis.tensor import dominant_orientation, structure_tensor, wrap_angle
 from texsynth.synth.api import synthesize
@@ -438,3 +438,53 @@ def test_search_batches_do_not_change_the_volume(monkeypatch: pytest.MonkeyPatch
     batched = synthesize("solid-kopf", _soft(), size=SIZE, params=params, seed=2)
     assert whole.image.tobytes() == batched.image.tobytes()
     assert whole.stats["energy"] == batched.stats["energy"]
+
+
+def test_order_target_favours_the_ordered_cells_and_reweights_usage_by_it() -> None:
+    from texsynth.synth.io.patterns import grating
+    from texsynth.synth.methods.solid_kopf import POSITION_CELLS, _order_target, _position_factors
+
+    side = 4 * POSITION_CELLS  # cells of 4 x 4 pixels
+    image = grating((side, side), 0.3, 6.0).astype(np.float32)
+    noise = np.random.default_rng(0).random((side, side // 2)).astype(np.float32)
+    image[:, side // 2 :] = noise  # fringes on the left half, disorder on the right
+    target = _order_target(image).reshape(POSITION_CELLS, POSITION_CELLS)
+    assert abs(target.mean() - 1.0) < 1e-9
+    inner = slice(2, -2)
+    assert (
+        target[inner, 2 : POSITION_CELLS // 2 - 2].min()
+        > 10 * target[inner, POSITION_CELLS // 2 + 2 : -2].max()
+    )
+    # every cell used once: the ordered cells are under their target, the disordered ones over it
+    rows, cols = np.mgrid[0:side:4, 0:side:4]
+    match = (rows * side + cols).ravel().astype(np.int64)
+    f = _position_factors(match, (side, side), target.ravel()).reshape(POSITION_CELLS, POSITION_CELLS)
+    assert np.all(f[inner, 2 : POSITION_CELLS // 2 - 2] == 1.0)
+    assert np.all(f[inner, POSITION_CELLS // 2 + 2 : -2] < 0.1)
+    # without a target an even usage has no excess: no penalty (the stationary exemplars' bytes)
+    np.testing.assert_array_equal(_position_factors(match, (side, side)), 1.0)
+
+
+def test_order_usage_auto_follows_the_stationarity_report() -> None:
+    from texsynth.synth.io.images import load_image
+    from texsynth.synth.methods.solid_kopf import _mixed
+
+    data = REPO / "benchmarks" / "data"
+    onion = np.asarray(load_image(data / "hrtem-onion-128.png", mode="grey"), dtype=np.float32)
+    core = np.asarray(load_image(data / "hrtem-onion-core-128.png", mode="grey"), dtype=np.float32)
+    assert _mixed([onion])  # the ordered shell and the disordered core
+    assert not _mixed([core]) and not _mixed([core, core])
+    assert not _mixed([onion[:20, :20]])  # too small to judge
+
+
+def test_order_usage_is_reported_and_the_literal_schedule_keeps_even_usage() -> None:
+    from texsynth.synth.io.images import load_image
+
+    onion = np.asarray(load_image(REPO / "benchmarks" / "data" / "hrtem-onion-128.png", mode="grey"))
+    literal = {"adapt_to_structure": False, "levels": 2, "iterations": 1}
+    stats = [
+        synthesize("solid-kopf", onion, size=(16, 16, 16), params={**literal, **extra}, seed=1).stats
+        for extra in ({}, {"order_usage": "on"})
+    ]
+    assert stats[0]["order_usage"] is False  # 'auto' needs adapt_to_structure: the paper's even usage
+    assert stats[1]["order_usage"] is True
