@@ -23,8 +23,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - the histogram follows the update in blocks of ``max(4096, N / 16)`` voxels (parallel), not voxel by voxel;
 - the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10 its;
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
-- grey-level histogram only, 16 bins; 7x7 neighbourhoods (odd), smaller at coarse levels; neighbourhoods
-  fully inside the exemplar; the volume wraps (``periodic``) or is mirrored;
+- grey histogram, 16 bins; 7x7 neighbourhoods (smaller at coarse levels) inside the exemplar; wrap or mirror;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
   curved sheets (length fitted to the exemplars: ``structure_length``) for isotropic fringes, a crumpled
   stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep the random start;
