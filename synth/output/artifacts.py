@@ -239,13 +239,14 @@ def write_artifacts(
             used_bits=used,
             progress=progress,
         )
-        tell("drawing slices, cube and tensor images")
-        names += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
 
     def pictures() -> list[str]:
-        """The 2-D output's TIFF, and every run's tensor images and extra maps (names in order)."""
+        """A volume's slices, cube and mid-slice tensor images, the 2-D output's TIFF, and every run's
+        tensor images and extra maps (names in order)."""
         written = []
-        if not volume:
+        if volume:
+            written += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
+        else:
             save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
             tensors = (
                 result.tensor_field
@@ -267,18 +268,55 @@ def write_artifacts(
                 written.append(f"{key}.png")
         return written
 
-    # a 2-D run writes its pictures on a second thread while this one evaluates (both mostly NumPy,
-    # SciPy and zlib, which release the GIL; neither reads what the other makes)
+    # with two threads or more the pictures are drawn and written on a second thread while this one
+    # evaluates, writes metrics.json and draws the plots (mostly NumPy, SciPy and zlib, which release the
+    # GIL; neither reads what the other makes); their names keep their place in the list
+    at = len(names)
     pending = None
-    if volume:
-        names += pictures()
-    elif current_threads() > 1:
-        tell("writing output.tiff and the tensor images; evaluating")
+    if current_threads() > 1:
+        tell("drawing the pictures; evaluating")
         pending = _start(pictures)
     else:
-        tell("writing output.tiff and the tensor images")
+        tell(
+            "drawing slices, cube and tensor images"
+            if volume
+            else "writing output.tiff and the tensor images"
+        )
         names += pictures()
+    try:
+        metrics, plot_metrics, fringes = _evaluate(
+            folder, result, image, exemplar, exemplars, volume, depth, voxel_size, unit, tell, progress
+        )
+        names.append("metrics.json")
+        if plots:
+            names += _plots(folder, image, exemplar, exemplars, volume, plot_metrics, fringes, tell)
+    except BaseException:
+        if pending is not None:  # no file is written after the evaluation or the plots fail
+            with suppress(BaseException):
+                pending()
+        raise
+    if pending is not None:
+        names[at:at] = pending()
+    _write_manifest(folder, result, image, exemplar, exemplars, volume, voxel_size, unit, manifest, metrics)
+    names.append("manifest.json")
+    return names, metrics
 
+
+def _evaluate(
+    folder: Path,
+    result: Result,
+    image: np.ndarray,
+    exemplar: np.ndarray,
+    exemplars: Mapping[str, np.ndarray] | None,
+    volume: bool,
+    depth: InputBits | None,
+    voxel_size: float | tuple[float, float, float] | None,
+    unit: str,
+    tell: Callable[..., None],
+    progress: Callable[[str, float], None] | None,
+) -> tuple[dict[str, Any], dict[str, Any], Any]:
+    """Evaluate the output, write ``metrics.json``; return the metrics, those the plots read (as
+    evaluated) and the output's fringes (2-D)."""
     fringes = None
     shown, reason, presence = fringes_shown(exemplar)
     if volume:
@@ -291,17 +329,8 @@ def write_artifacts(
             evaluate_volume(targets, image, pixel_size=pixel_size, fringes=shown, progress=progress)
         )
     else:
-        if pending is None:
-            tell("evaluating")
-        try:
-            metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
-        except BaseException:
-            if pending is not None:  # no file is written after this call fails
-                with suppress(BaseException):
-                    pending()
-            raise
-    if pending is not None:
-        names += pending()
+        tell("evaluating")
+        metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
     plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
     status = {"shown": shown, "reason": reason, "presence": to_json_types(presence)}  # of the exemplar
     if isinstance(metrics.get("fringes"), dict):
@@ -319,18 +348,43 @@ def write_artifacts(
     if depth is not None:
         doc["input_bits"] = depth.as_json()
     atomic_write_json(folder / "metrics.json", doc)
-    names.append("metrics.json")
-    if plots:
-        tell("drawing the plots")
-        plot_dir = folder / "plots"
-        plot_dir.mkdir(exist_ok=True)
-        targets = exemplars if volume and exemplars is not None else exemplar
-        written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes)
-        if volume:
-            s2_plot = write_s2_plot(plot_metrics, plot_dir)
-            written += [s2_plot] if s2_plot is not None else []
-        names += sorted(f"plots/{Path(p).name}" for p in written)
+    return metrics, plot_metrics, fringes
 
+
+def _plots(
+    folder: Path,
+    image: np.ndarray,
+    exemplar: np.ndarray,
+    exemplars: Mapping[str, np.ndarray] | None,
+    volume: bool,
+    plot_metrics: dict[str, Any],
+    fringes: Any,
+    tell: Callable[..., None],
+) -> list[str]:
+    """Draw the comparison plots under ``plots/``; return their names (sorted)."""
+    tell("drawing the plots")
+    plot_dir = folder / "plots"
+    plot_dir.mkdir(exist_ok=True)
+    targets = exemplars if volume and exemplars is not None else exemplar
+    written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes)
+    if volume:
+        s2_plot = write_s2_plot(plot_metrics, plot_dir)
+        written += [s2_plot] if s2_plot is not None else []
+    return sorted(f"plots/{Path(p).name}" for p in written)
+
+
+def _write_manifest(
+    folder: Path,
+    result: Result,
+    image: np.ndarray,
+    exemplar: np.ndarray,
+    exemplars: Mapping[str, np.ndarray] | None,
+    volume: bool,
+    voxel_size: float | tuple[float, float, float] | None,
+    unit: str,
+    manifest: dict[str, Any] | None,
+    metrics: dict[str, Any],
+) -> None:
     doc = {
         **(manifest or {}),
         "method": result.method,
@@ -356,5 +410,3 @@ def write_artifacts(
         "versions": versions(),
     }
     atomic_write_json(folder / "manifest.json", doc)
-    names.append("manifest.json")
-    return names, metrics
