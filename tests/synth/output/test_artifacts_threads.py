@@ -1,6 +1,7 @@
 """The writer's two threads: a run's pictures (a 2-D output's or a volume's) are written while the
-evaluation, metrics.json and the plots are, with the same files, names and bytes as on one thread; nothing
-is written after the evaluation fails, a failed picture reaches the caller, and no thread is left running."""
+evaluation, metrics.json and the plots are, the caller then taking those left, with the same files, names
+and bytes as on one thread; nothing is written after the evaluation fails, a failed picture reaches the
+caller, and no thread is left running."""
 
 from __future__ import annotations
 
@@ -83,14 +84,20 @@ def test_a_volume_with_one_and_two_threads_writes_the_same_files(tmp_path: Path)
     _same_files(names["one"], names["two"], tmp_path)
 
 
-def test_the_plots_are_drawn_while_the_pictures_are(
+def test_the_plots_are_drawn_while_the_pictures_are_and_the_caller_takes_those_left(
     run: tuple, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    plotted = threading.Event()
+    plotted, helped = threading.Event(), threading.Event()
+    seen: list[str] = []
 
-    def pictures_after_the_plots(*args: object, **kwargs: object) -> list[str]:
-        # the main thread draws the plots without waiting for this thread: it must get there first
-        assert plotted.wait(30), "the plots waited for the pictures"
+    def pictures(*args: object, **kwargs: object) -> list[str]:
+        seen.append(threading.current_thread().name)
+        if threading.current_thread().name == "texsynth-pictures":
+            # the main thread draws the plots without waiting for this one, then takes a picture left
+            assert plotted.wait(30), "the plots waited for the pictures"
+            helped.wait(30)
+        else:
+            helped.set()
         return original_pictures(*args, **kwargs)
 
     def plots(*args: object, **kwargs: object) -> list[str]:
@@ -99,9 +106,11 @@ def test_the_plots_are_drawn_while_the_pictures_are(
         return out
 
     original_pictures, original_plots = artifacts._write_tensor_images, artifacts.write_plots
-    monkeypatch.setattr(artifacts, "_write_tensor_images", pictures_after_the_plots)
+    monkeypatch.setattr(artifacts, "_write_tensor_images", pictures)
     monkeypatch.setattr(artifacts, "write_plots", plots)
     names = _write(tmp_path / "two", run, 2)
+    assert "MainThread" in seen and "texsynth-pictures" in seen
+    monkeypatch.setattr(artifacts, "_write_tensor_images", original_pictures)
     assert names == _write(tmp_path / "one", run, 1)  # their names keep their place
     assert not [t for t in threading.enumerate() if t.name == "texsynth-pictures"]
 
