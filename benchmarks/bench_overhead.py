@@ -24,6 +24,7 @@ last outputs file by file (bytes; the JSON files without their clock fields).
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import statistics
@@ -55,10 +56,13 @@ STAGES = (
     "other",
 )
 
-#: Run in a child: ``argv[1]`` = a JSON list of the command's arguments. Prints the stages as JSON.
+#: Run in a child: ``argv[1]`` = a JSON list of the command's arguments, ``argv[2]`` = a file to write the
+#: main thread's stage changes to, or ``-``. Prints the stages as JSON.
 _PROBE = r"""
 import importlib._bootstrap as bootstrap, json, sys, threading, time
 MAIN = threading.main_thread()
+TIMED_PATH = sys.argv[2]  # where to write the timeline (JSON), else "-"
+TIMED = TIMED_PATH != "-"
 # CPU of a stage: on the main thread the process's (numba's workers work for it) less what the writer's
 # second thread spent meanwhile (its live clock while it is inside a stage); on that thread its own
 helpers, helpers_done = {}, [0.0]
@@ -78,12 +82,21 @@ def stack():
         local.stack = []
     return local.stack
 
+# the main thread's timeline: (wall, process CPU of every thread, the stage on top of its stack) at
+# every change of that stage; an interval's label is the one at its start
+TIMELINE = [] if TIMED else None
+
+def mark(st):
+    if TIMELINE is not None and threading.current_thread() is MAIN:
+        TIMELINE.append((time.perf_counter(), time.process_time(), st[-1][0] if st else "other"))
+
 def push(label):
     st = stack()
     if not st and threading.current_thread() is not MAIN:
         ident = threading.get_ident()
         helpers[ident] = (time.pthread_getcpuclockid(ident), time.thread_time())
     st.append([label, time.perf_counter(), cpu(), 0.0, 0.0])
+    mark(st)
 
 def pop():
     st = stack()
@@ -98,6 +111,7 @@ def pop():
     if st:
         st[-1][3] += w
         st[-1][4] += c
+    mark(st)
 
 def wrap(label, fn):
     def probe(*args, **kwargs):
@@ -143,7 +157,12 @@ def find_and_load(name, import_):
 def report():  # at exit (a quick exit runs atexit too): the process's own figures, as the last line
     pop()
     wall, spent = time.perf_counter() - T0, time.process_time() - C0
-    print(json.dumps({"stages": totals, "wall": wall, "cpu": spent}), flush=True)
+    mark([])
+    out = {"stages": totals, "wall": wall, "cpu": spent}
+    if TIMELINE is not None:  # a file: thousands of changes would fill the pipe the parent reads at the end
+        with open(TIMED_PATH, "w") as f:
+            json.dump([(w - T0, c, label) for w, c, label in TIMELINE], f)
+    print(json.dumps(out), flush=True)
 
 import atexit
 bootstrap._find_and_load = find_and_load
@@ -161,13 +180,23 @@ sys.exit(cli.main())
 
 def cases(threads: int) -> dict[str, tuple[str, str, str]]:
     """name -> (method, exemplar name, size): docs/quality.md's four photographs/micrograph, and laminar
-    HRTEM, for both pixel methods; ``solid-kopf`` 64^3 from the onion crop."""
+    HRTEM, for both pixel methods; ``solid-kopf`` 64^3 from the onion crop; ``tensor-constrained`` 512^2
+    and quilting 1024^2 from it."""
     out = {}
     for method, short in (("wei-levoy", "wl"), ("tensor-constrained", "tc")):
         for name in ("brick", "grass", "gravel", "hrtem-soot-128", "hrtem-onion-128"):
             out[f"{short}-{name}"] = (method, name, "256x256")
     out["kopf-onion"] = ("solid-kopf", "hrtem-onion-128", "64x64x64")
+    # issue 25's whole-command thread cases (the timeline's; not in the default table)
+    out["tc-512"] = ("tensor-constrained", "hrtem-onion-128", "512x512")
+    out["quilting-1024"] = ("quilting", "hrtem-onion-128", "1024x1024")
     return out
+
+
+#: The cases of the default table (the target's 256^2 rows and the volume).
+TABLE_CASES = ("wl-", "tc-brick", "tc-grass", "tc-gravel", "tc-hrtem", "kopf-onion")
+#: The cases of ``--timeline`` by default.
+TIMELINE_CASES = ("tc-hrtem-onion-128", "tc-512", "kopf-onion", "quilting-1024")
 
 
 def exemplar_files(folder: Path) -> dict[str, Path]:
@@ -201,12 +230,14 @@ def _env(tree: Path) -> dict[str, str]:
     return env
 
 
-def run_once(tree: Path, argv: list[str]) -> dict:
-    """One instrumented process: its stages (label -> [wall, CPU]), with 'start + exit' from outside."""
+def run_once(tree: Path, argv: list[str], timeline: bool = False) -> dict:
+    """One instrumented process: its stages (label -> [wall, CPU]), with 'start + exit' from outside;
+    with ``timeline``, also the main thread's stage changes (``timeline``: [(wall, CPU, stage)])."""
     load = os.getloadavg()[0]
+    changes = Path(tempfile.mkstemp(suffix=".json", prefix="texsynth-timeline-")[1]) if timeline else None
     start = time.perf_counter()
     proc = subprocess.Popen(
-        [sys.executable, "-c", _PROBE, json.dumps(argv)],
+        [sys.executable, "-c", _PROBE, json.dumps(argv), str(changes) if changes else "-"],
         cwd=tree,
         env=_env(tree),
         stdout=subprocess.PIPE,
@@ -222,7 +253,49 @@ def run_once(tree: Path, argv: list[str]) -> dict:
     cpu = usage.ru_utime + usage.ru_stime
     stages = {k: tuple(v) for k, v in inside["stages"].items()}
     stages["start + exit"] = (wall - inside["wall"], max(cpu - inside["cpu"], 0.0))
-    return {"stages": stages, "wall": wall, "cpu": cpu, "load": load}
+    run = {"stages": stages, "wall": wall, "cpu": cpu, "load": load}
+    if changes is not None:
+        run["timeline"] = json.loads(changes.read_text())
+        changes.unlink()
+    return run
+
+
+def segments(timeline: list, threads: int, least: float = 0.02) -> list[tuple[str, float, float, float]]:
+    """The main thread's stages in time order: ``(stage, start, wall, cores busy)``, consecutive intervals
+    of one stage joined, and intervals shorter than ``least`` seconds given to the stage around them
+    (imports inside a stage, a kernel's first call); 'cores busy' = the process's CPU (every thread) over
+    the wall: below ``threads``, a core stood idle (or another process had it)."""
+    merged: list[list] = []
+    for (w0, c0, label), (w1, c1, _) in itertools.pairwise(timeline):
+        if merged and (merged[-1][0] == label or w1 - w0 < least):
+            merged[-1][2] += w1 - w0
+            merged[-1][3] += c1 - c0
+        else:
+            merged.append([label, w0, w1 - w0, c1 - c0])
+    out: list[list] = []
+    for label, start, wall, cpu in merged:  # short pieces left between two long ones join the earlier
+        if out and (out[-1][0] == label or wall < least):
+            out[-1][2] += wall
+            out[-1][3] += cpu
+        else:
+            out.append([label, start, wall, cpu])
+    return [
+        (label, start, wall, min(cpu / wall, threads) if wall > 0 else 0.0) for label, start, wall, cpu in out
+    ]
+
+
+def timeline_table(name: str, run: dict, threads: int) -> str:
+    """One run's :func:`segments` as a Markdown table, with the core-seconds left idle per stage."""
+    rows = [
+        f"**{name}** ({threads} threads, whole {run['wall']:.2f} s wall, {run['cpu']:.2f} s CPU, load "
+        f"{run['load']:.1f}):",
+        "",
+        "| from (s) | stage | wall (s) | cores busy | idle core-s |",
+        "|---|---|---|---|---|",
+    ]
+    for label, start, wall, busy in segments(run["timeline"], threads):
+        rows.append(f"| {start:.2f} | {label} | {wall:.2f} | {busy:.2f} | {wall * (threads - busy):.2f} |")
+    return "\n".join(rows)
 
 
 #: What may differ between two runs of one command: when it ran and how long it took.
@@ -279,7 +352,12 @@ def summarise(runs: list[dict]) -> dict:
 
 
 def measure(
-    trees: dict[str, Path], names: list[str], runs: int, threads: int, json_path: Path | None
+    trees: dict[str, Path],
+    names: list[str],
+    runs: int,
+    threads: int,
+    json_path: Path | None,
+    timeline: bool = False,
 ) -> dict:
     """Every case on every tree, the trees alternated run by run (both see the same load)."""
     table = cases(threads)
@@ -299,7 +377,8 @@ def measure(
                 run_once(tree, [*argv, "--out", str(folder / f"{label}-warm")])
             for k in range(runs):
                 for label, tree in trees.items():
-                    done[label].append(run_once(tree, [*argv, "--out", str(folder / f"{label}-{k}")]))
+                    out = str(folder / f"{label}-{k}")
+                    done[label].append(run_once(tree, [*argv, "--out", out], timeline))
             same = None
             if len(trees) > 1:  # the last run of each tree: every file, byte for byte
                 folders = [folder / f"{label}-{runs - 1}" for label in trees]
@@ -308,6 +387,9 @@ def measure(
             for label in trees:
                 s = summarise(done[label])
                 s.update(method=method, exemplar=exemplar, size=size, differing=same)
+                if timeline:  # the run of median wall time
+                    ordered = sorted(done[label], key=lambda r: r["wall"])
+                    s["timeline_run"] = ordered[len(ordered) // 2]
                 results[label][name] = s
                 print(
                     f"{label} {name}: whole {s['wall']:.2f} s wall / {s['cpu']:.2f} s CPU; outside the "
@@ -366,9 +448,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline", type=Path, help="an earlier checkout, run alternately: 'before'")
     parser.add_argument("--json", type=Path, help="also write the figures here (after every case)")
     parser.add_argument("--no-write", action="store_true", help="print the table, leave docs/ alone")
+    parser.add_argument(
+        "--timeline",
+        action="store_true",
+        help="the main thread's stages in time order and how many cores were busy in each (default cases: "
+        f"{', '.join(TIMELINE_CASES)}); writes the overhead-timeline section",
+    )
     args = parser.parse_args(argv)
     known = cases(args.threads)
-    names = list(known) if args.cases == "all" else [c.strip() for c in args.cases.split(",") if c.strip()]
+    if args.cases == "all":
+        names = [c for c in known if c.startswith(TABLE_CASES)] if not args.timeline else list(TIMELINE_CASES)
+    else:
+        names = [c.strip() for c in args.cases.split(",") if c.strip()]
     unknown = [c for c in names if c not in known]
     if unknown:
         parser.error(f"unknown case {unknown[0]!r} (known: {', '.join(known)})")
@@ -378,12 +469,37 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--baseline {args.baseline}: not a texsynth checkout (no synth/cli)")
     print(machine())
     trees = {"after": ROOT, **({"before": args.baseline.resolve()} if args.baseline else {})}
-    results = measure(trees, names, args.runs, args.threads, args.json)
+    results = measure(trees, names, args.runs, args.threads, args.json, args.timeline)
+    if args.timeline:
+        table = timeline_report(results, args.threads)
+        print(table)
+        if not args.no_write:
+            write_section("overhead-timeline", table)
+        return 0
     table = report(results, args.threads)
     print(table)
     if not args.no_write:
         write_section("overhead-stages", table)
     return 0
+
+
+def timeline_report(results: dict, threads: int) -> str:
+    """The ``overhead-timeline`` section: one table per case (its run of median wall time)."""
+    after = results["after"]
+    runs = next(iter(after.values()))["runs"]
+    parts = [
+        "## Outside the synthesis, in time order (`python -m benchmarks.bench_overhead --timeline`)",
+        "",
+        f"One whole `texsynth synthesize METHOD --exemplar hrtem-onion-128.png --size S --seed 1 --threads "
+        f"{threads}` process per case (plots included; the run of median wall time of {runs}, after one "
+        "untimed run), probed as the stage table's: the main thread's stages in time order (pieces shorter "
+        "than 20 ms given to the stage around them), their wall time, and the process's CPU (every "
+        "thread) over it: 'cores busy' below the thread count means a core stood idle in that stage or "
+        f"another process had it (the load says which; {os.cpu_count()} cores here).",
+    ]
+    for s in after.values():
+        parts += ["", timeline_table(f"`{s['method']}` {s['size']}", s["timeline_run"], threads)]
+    return "\n".join(parts)
 
 
 if __name__ == "__main__":

@@ -19,13 +19,15 @@ fringe statistics only for an exemplar with lattice fringes
 (:func:`texsynth.synth.evaluate.glossary.fringes_shown`), else ``{"shown": false, "reason"}``. Every run also
 gets ``exemplar-coherence.png`` and
 ``exemplar-orientation.png``, the exemplar's own tensor images (the ``xy`` one's for per-plane
-exemplars). Every file is written atomically; with two threads or more a 2-D run's pictures are written on a
-second thread while the first evaluates (the same files and bytes).
+exemplars). Every file is written atomically; with two threads or more the pictures are written on a
+second thread while the first evaluates and draws the plots, then helps with what is left (the same
+files and bytes).
 """
 
 from __future__ import annotations
 
 import io
+import itertools
 import platform
 import threading
 from collections.abc import Callable, Mapping
@@ -75,27 +77,39 @@ def versions() -> dict[str, str]:
     }
 
 
-def _start(work: Callable[[], list[str]]) -> Callable[[], list[str]]:
-    """Run ``work`` on a new thread; the function returned waits for it and returns (or raises) its result."""
-    done: list[list[str]] = []
-    failed: list[BaseException] = []
+class _Pictures:
+    """The pictures' tasks (each writes its files and returns their names), taken in order one at a time by
+    a second thread (:meth:`start`) and, once it is done with its own work, by the caller (:meth:`finish`):
+    whichever branch ends first takes what is left. The names come back in the tasks' order."""
 
-    def run() -> None:
-        try:
-            done.append(work())
-        except BaseException as err:  # raised again in the waiting thread
-            failed.append(err)
+    def __init__(self, tasks: list[Callable[[], list[str]]]) -> None:
+        self.tasks = tasks
+        self.done: list[list[str]] = [[] for _ in tasks]
+        self.failed: list[BaseException] = []
+        self.ticket = itertools.count()  # next() on a count is atomic under the GIL
+        self.thread: threading.Thread | None = None
 
-    thread = threading.Thread(target=run, name="texsynth-pictures")
-    thread.start()
+    def _work(self) -> None:
+        while not self.failed and (k := next(self.ticket)) < len(self.tasks):
+            try:
+                self.done[k] = self.tasks[k]()
+            except BaseException as err:  # raised again in the calling thread
+                self.failed.append(err)
 
-    def wait() -> list[str]:
-        thread.join()
-        if failed:
-            raise failed[0]
-        return done[0]
+    def start(self) -> None:
+        self.thread = threading.Thread(target=self._work, name="texsynth-pictures")
+        self.thread.start()
 
-    return wait
+    def finish(self, help_out: bool = True) -> list[str]:
+        """Take the tasks left (unless ``help_out`` is false: the caller failed), wait for the second thread,
+        raise the first task's error or return every name in order."""
+        if help_out:
+            self._work()
+        if self.thread is not None:
+            self.thread.join()
+        if self.failed:
+            raise self.failed[0]
+        return [name for names in self.done for name in names]
 
 
 def _png(path: Path, rendering: np.ndarray) -> None:
@@ -239,46 +253,103 @@ def write_artifacts(
             used_bits=used,
             progress=progress,
         )
-        tell("drawing slices, cube and tensor images")
-        names += write_volume_images(folder, image, exemplars if exemplars is not None else exemplar)
 
-    def pictures() -> list[str]:
-        """The 2-D output's TIFF, and every run's tensor images and extra maps (names in order)."""
-        written = []
-        if not volume:
-            save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
-            tensors = (
-                result.tensor_field
-                if result.tensor_field is not None
-                else structure_tensor(image, mode="wrap")
-            )
-            written += _write_tensor_images(folder, "", np.asarray(tensors))
-        written += _write_tensor_images(folder, "exemplar-", structure_tensor(as_grey(exemplar, "exemplar")))
-        if constraint is not None:
-            written += _write_tensor_images(
-                folder, "constraint_", structure_tensor(np.asarray(constraint, np.float32))
-            )
-        for key, extra in sorted(result.extras.items()):
-            if key in ("coherence", "orientation"):  # already rendered above, with legends
-                continue
-            rendered = _render_extra(np.asarray(extra, dtype=np.float32), FIXED_RANGES.get(key))
-            if rendered is not None:
-                save_image(folder / f"{key}.png", rendered)
-                written.append(f"{key}.png")
-        return written
+    def tensor_images(prefix: str, tensors: Callable[[], np.ndarray]) -> Callable[[], list[str]]:
+        return lambda: _write_tensor_images(folder, prefix, np.asarray(tensors()))
 
-    # a 2-D run writes its pictures on a second thread while this one evaluates (both mostly NumPy,
-    # SciPy and zlib, which release the GIL; neither reads what the other makes)
-    pending = None
+    def extra(key: str, arr: np.ndarray) -> Callable[[], list[str]]:
+        def write() -> list[str]:
+            rendered = _render_extra(np.asarray(arr, dtype=np.float32), FIXED_RANGES.get(key))
+            if rendered is None:
+                return []
+            save_image(folder / f"{key}.png", rendered)
+            return [f"{key}.png"]
+
+        return write
+
+    # a volume's slices, cube and mid-slice tensor images, the 2-D output's TIFF and tensor images, and
+    # every run's exemplar (and constraint) tensor images and extra maps, in the order of their names
+    tasks: list[Callable[[], list[str]]] = []
     if volume:
-        names += pictures()
-    elif current_threads() > 1:
-        tell("writing output.tiff and the tensor images; evaluating")
-        pending = _start(pictures)
+        targets = exemplars if exemplars is not None else exemplar
+        tasks.append(lambda: write_volume_images(folder, image, targets))
     else:
-        tell("writing output.tiff and the tensor images")
-        names += pictures()
 
+        def tiff() -> list[str]:
+            save_image(folder / "output.tiff", image, bit_depth=16, used_bits=used)
+            return []
+
+        tasks.append(tiff)
+        tasks.append(
+            tensor_images(
+                "",
+                lambda: (
+                    result.tensor_field
+                    if result.tensor_field is not None
+                    else structure_tensor(image, mode="wrap")
+                ),
+            )
+        )
+    tasks.append(tensor_images("exemplar-", lambda: structure_tensor(as_grey(exemplar, "exemplar"))))
+    if constraint is not None:
+        tasks.append(
+            tensor_images("constraint_", lambda: structure_tensor(np.asarray(constraint, np.float32)))
+        )
+    for key, arr in sorted(result.extras.items()):
+        if key not in ("coherence", "orientation"):  # already rendered above, with legends
+            tasks.append(extra(key, arr))
+    pictures = _Pictures(tasks)
+
+    # with two threads or more the pictures are drawn and written on a second thread while this one
+    # evaluates, writes metrics.json and draws the plots, then takes the pictures left (mostly NumPy,
+    # SciPy and zlib, which release the GIL; neither reads what the other makes); their names keep their
+    # place in the list
+    at = len(names)
+    two = current_threads() > 1
+    if two:
+        tell("drawing the pictures; evaluating")
+        pictures.start()
+    else:
+        tell(
+            "drawing slices, cube and tensor images"
+            if volume
+            else "writing output.tiff and the tensor images"
+        )
+        names += pictures.finish()
+    try:
+        metrics, plot_metrics, fringes = _evaluate(
+            folder, result, image, exemplar, exemplars, volume, depth, voxel_size, unit, tell, progress
+        )
+        names.append("metrics.json")
+        if plots:
+            names += _plots(folder, image, exemplar, exemplars, volume, plot_metrics, fringes, tell)
+    except BaseException:
+        if two:  # no file is written after the evaluation or the plots fail
+            with suppress(BaseException):
+                pictures.finish(help_out=False)
+        raise
+    if two:
+        names[at:at] = pictures.finish()
+    _write_manifest(folder, result, image, exemplar, exemplars, volume, voxel_size, unit, manifest, metrics)
+    names.append("manifest.json")
+    return names, metrics
+
+
+def _evaluate(
+    folder: Path,
+    result: Result,
+    image: np.ndarray,
+    exemplar: np.ndarray,
+    exemplars: Mapping[str, np.ndarray] | None,
+    volume: bool,
+    depth: InputBits | None,
+    voxel_size: float | tuple[float, float, float] | None,
+    unit: str,
+    tell: Callable[..., None],
+    progress: Callable[[str, float], None] | None,
+) -> tuple[dict[str, Any], dict[str, Any], Any]:
+    """Evaluate the output, write ``metrics.json``; return the metrics, those the plots read (as
+    evaluated) and the output's fringes (2-D)."""
     fringes = None
     shown, reason, presence = fringes_shown(exemplar)
     if volume:
@@ -291,17 +362,8 @@ def write_artifacts(
             evaluate_volume(targets, image, pixel_size=pixel_size, fringes=shown, progress=progress)
         )
     else:
-        if pending is None:
-            tell("evaluating")
-        try:
-            metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
-        except BaseException:
-            if pending is not None:  # no file is written after this call fails
-                with suppress(BaseException):
-                    pending()
-            raise
-    if pending is not None:
-        names += pending()
+        tell("evaluating")
+        metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
     plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
     status = {"shown": shown, "reason": reason, "presence": to_json_types(presence)}  # of the exemplar
     if isinstance(metrics.get("fringes"), dict):
@@ -319,18 +381,43 @@ def write_artifacts(
     if depth is not None:
         doc["input_bits"] = depth.as_json()
     atomic_write_json(folder / "metrics.json", doc)
-    names.append("metrics.json")
-    if plots:
-        tell("drawing the plots")
-        plot_dir = folder / "plots"
-        plot_dir.mkdir(exist_ok=True)
-        targets = exemplars if volume and exemplars is not None else exemplar
-        written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes)
-        if volume:
-            s2_plot = write_s2_plot(plot_metrics, plot_dir)
-            written += [s2_plot] if s2_plot is not None else []
-        names += sorted(f"plots/{Path(p).name}" for p in written)
+    return metrics, plot_metrics, fringes
 
+
+def _plots(
+    folder: Path,
+    image: np.ndarray,
+    exemplar: np.ndarray,
+    exemplars: Mapping[str, np.ndarray] | None,
+    volume: bool,
+    plot_metrics: dict[str, Any],
+    fringes: Any,
+    tell: Callable[..., None],
+) -> list[str]:
+    """Draw the comparison plots under ``plots/``; return their names (sorted)."""
+    tell("drawing the plots")
+    plot_dir = folder / "plots"
+    plot_dir.mkdir(exist_ok=True)
+    targets = exemplars if volume and exemplars is not None else exemplar
+    written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes)
+    if volume:
+        s2_plot = write_s2_plot(plot_metrics, plot_dir)
+        written += [s2_plot] if s2_plot is not None else []
+    return sorted(f"plots/{Path(p).name}" for p in written)
+
+
+def _write_manifest(
+    folder: Path,
+    result: Result,
+    image: np.ndarray,
+    exemplar: np.ndarray,
+    exemplars: Mapping[str, np.ndarray] | None,
+    volume: bool,
+    voxel_size: float | tuple[float, float, float] | None,
+    unit: str,
+    manifest: dict[str, Any] | None,
+    metrics: dict[str, Any],
+) -> None:
     doc = {
         **(manifest or {}),
         "method": result.method,
@@ -356,5 +443,3 @@ def write_artifacts(
         "versions": versions(),
     }
     atomic_write_json(folder / "manifest.json", doc)
-    names.append("manifest.json")
-    return names, metrics

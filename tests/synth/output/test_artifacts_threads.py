@@ -1,5 +1,7 @@
-"""The writer's two threads: a 2-D run's pictures are written while the evaluation runs, with the same
-files, names and bytes as on one thread, and nothing written after the evaluation fails."""
+"""The writer's two threads: a run's pictures (a 2-D output's or a volume's) are written while the
+evaluation, metrics.json and the plots are, the caller then taking those left, with the same files, names
+and bytes as on one thread; nothing is written after the evaluation fails, a failed picture reaches the
+caller, and no thread is left running."""
 
 from __future__ import annotations
 
@@ -10,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from texsynth.synth.api import synthesize
-from texsynth.synth.io.patterns import undulating_laminae
+from texsynth.synth.api import Result, synthesize
+from texsynth.synth.io.patterns import gaussian_random_field, undulating_laminae
 from texsynth.synth.output import artifacts
 from texsynth.synth.threads import use_threads
 
@@ -42,11 +44,8 @@ def _write(folder: Path, run: tuple[np.ndarray, artifacts.Result], threads: int)
     return names
 
 
-def test_one_and_two_threads_write_the_same_files(run: tuple, tmp_path: Path) -> None:
-    one = _write(tmp_path / "one", run, 1)
-    two = _write(tmp_path / "two", run, 2)
+def _same_files(one: list[str], two: list[str], tmp_path: Path) -> None:
     assert one == two
-    assert "exemplar-coherence.png" in one and "constraint_orientation.png" in one
     on_disk = sorted(p.relative_to(tmp_path / "one").as_posix() for p in (tmp_path / "one").rglob("*.*"))
     assert sorted(one) == on_disk
     for name in one:
@@ -57,6 +56,76 @@ def test_one_and_two_threads_write_the_same_files(run: tuple, tmp_path: Path) ->
             )
         else:
             assert a.read_bytes() == b.read_bytes(), name
+
+
+def test_one_and_two_threads_write_the_same_files(run: tuple, tmp_path: Path) -> None:
+    one = _write(tmp_path / "one", run, 1)
+    two = _write(tmp_path / "two", run, 2)
+    assert "exemplar-coherence.png" in one and "constraint_orientation.png" in one
+    assert any(name.startswith("plots/") for name in one)
+    _same_files(one, two, tmp_path)
+
+
+def test_a_volume_with_one_and_two_threads_writes_the_same_files(tmp_path: Path) -> None:
+    volume = gaussian_random_field((12, 16, 20), (1.5, 3.0, 5.0), 0.4, seed=2)
+    planes = {
+        plane: gaussian_random_field((24, 24), scales, 0.4, seed=seed)
+        for plane, scales, seed in (("xy", (3.0, 5.0), 3), ("xz", (1.5, 5.0), 4), ("yz", (1.5, 3.0), 5))
+    }
+    result = Result(method="test", image=volume, params={}, seed=0, timings={"total": 1.0})
+    names = {}
+    for threads, folder in ((1, "one"), (2, "two")):
+        with use_threads(threads):
+            names[folder], _ = artifacts.write_artifacts(
+                tmp_path / folder, result, planes["xy"], exemplars=planes
+            )
+    assert names["one"][:3] == ["output.png", "output.tiff", "slices.png"]
+    assert names["one"].index("cube.png") < names["one"].index("metrics.json")
+    _same_files(names["one"], names["two"], tmp_path)
+
+
+def test_the_plots_are_drawn_while_the_pictures_are_and_the_caller_takes_those_left(
+    run: tuple, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    plotted, helped = threading.Event(), threading.Event()
+    seen: list[str] = []
+
+    def pictures(*args: object, **kwargs: object) -> list[str]:
+        seen.append(threading.current_thread().name)
+        if threading.current_thread().name == "texsynth-pictures":
+            # the main thread draws the plots without waiting for this one, then takes a picture left
+            assert plotted.wait(30), "the plots waited for the pictures"
+            helped.wait(30)
+        else:
+            helped.set()
+        return original_pictures(*args, **kwargs)
+
+    def plots(*args: object, **kwargs: object) -> list[str]:
+        out = original_plots(*args, **kwargs)
+        plotted.set()
+        return out
+
+    original_pictures, original_plots = artifacts._write_tensor_images, artifacts.write_plots
+    monkeypatch.setattr(artifacts, "_write_tensor_images", pictures)
+    monkeypatch.setattr(artifacts, "write_plots", plots)
+    names = _write(tmp_path / "two", run, 2)
+    assert "MainThread" in seen and "texsynth-pictures" in seen
+    monkeypatch.setattr(artifacts, "_write_tensor_images", original_pictures)
+    assert names == _write(tmp_path / "one", run, 1)  # their names keep their place
+    assert not [t for t in threading.enumerate() if t.name == "texsynth-pictures"]
+
+
+def test_a_failed_picture_reaches_the_caller_and_no_thread_is_left(
+    run: tuple, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def failing(*args: object, **kwargs: object) -> list[str]:
+        raise OSError("disk full while writing a picture")
+
+    monkeypatch.setattr(artifacts, "_write_tensor_images", failing)
+    with pytest.raises(OSError, match="disk full while writing a picture"):
+        _write(tmp_path / "run", run, 2)
+    assert not [t for t in threading.enumerate() if t.name == "texsynth-pictures"]
+    assert not (tmp_path / "run" / "manifest.json").exists()  # the manifest is the last file, not written
 
 
 def test_a_failed_evaluation_leaves_no_picture_being_written(
