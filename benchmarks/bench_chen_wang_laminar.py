@@ -31,6 +31,7 @@ from texsynth.synth.api import synthesize
 from texsynth.synth.evaluate import evaluate_volume
 from texsynth.synth.evaluate.truth import evaluate_against_truth, truth_slices
 from texsynth.synth.io import load_image
+from texsynth.synth.pixel.laminar import fitted_structure_length
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 DATA = Path(__file__).resolve().parent / "data"
@@ -73,6 +74,13 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onion crop", "position_weight=1", {"position_weight": 1.0}, 64),
     ("onion-core crop", "solve_radius=1", {"solve_radius": 1}, 64),
     ("onion-core crop", "position_weight=1", {"position_weight": 1.0}, 64),
+    # The sheet length's candidates (session cw5): fixed 3 periods, solid-kopf's fit, the fit at least 3.
+    ("onions", "structure_length=fitted", {"structure_length": "fitted"}, 64),
+    ("onions", "structure_length=fitted", {"structure_length": "fitted"}, 128),
+    ("onion crop", "structure_length=3", {"structure_length": 3.0}, 64),
+    ("onion crop", "structure_length=fitted", {"structure_length": "fitted"}, 64),
+    ("onion-core crop", "structure_length=3", {"structure_length": 3.0}, 64),
+    ("onion-core crop", "structure_length=fitted", {"structure_length": "fitted"}, 64),
 )
 
 
@@ -88,10 +96,25 @@ def _against_exemplar(exemplar: np.ndarray, volume: np.ndarray) -> dict[str, dic
     return head
 
 
+def _resolved(params: dict[str, Any], image: np.ndarray) -> dict[str, Any]:
+    """``params`` with ``structure_length='fitted'`` replaced by solid-kopf's fit to ``image`` (periods),
+    and ``'fitted>=3'`` by that fit, at least 3: candidates measured as numbers (a default's bytes)."""
+    length = params.get("structure_length")
+    if length not in ("fitted", "fitted>=3"):
+        return params
+    fit = fitted_structure_length([image])
+    return {**params, "structure_length": max(fit, 3.0) if length == "fitted>=3" else fit}
+
+
+def _seeds(text: str) -> list[int]:
+    """``'3'``: seeds 1-3; ``'2,3'``: those seeds."""
+    return [int(t) for t in text.split(",")] if "," in text else list(range(1, int(text) + 1))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid-chen-wang on laminar known answers and real crops")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
-    parser.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
+    parser.add_argument("--seeds", default="3", help="N: seeds 1..N (default 3); or a list, 2,3")
     parser.add_argument("--report", action="store_true", help="only print the table from the results")
     args = parser.parse_args(argv)
     saved: dict[str, Any] = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
@@ -108,24 +131,32 @@ def main(argv: list[str] | None = None) -> int:
                 image = np.ascontiguousarray(load_image(DATA / f"hrtem-{family.split()[0]}-128.png"))
                 planes = dict.fromkeys(("xy", "xz", "yz"), image)
             rows = []
-            for seed in range(1, args.seeds + 1):
+            for seed in _seeds(args.seeds):
                 cpu, wall = time.process_time(), time.perf_counter()
                 result = synthesize(
-                    "solid-chen-wang", exemplars=planes, size=(side,) * 3, params=params, seed=seed
+                    "solid-chen-wang",
+                    exemplars=planes,
+                    size=(side,) * 3,
+                    params=_resolved(params, planes["xy"]),
+                    seed=seed,
                 )
                 cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
                 if family in known:
                     axes = _head(evaluate_against_truth(ref, result.image)["summary"])
                 else:
                     axes = _against_exemplar(planes["xy"], result.image)
-                rows.append({"cpu": cpu, "wall": wall, "axes": axes})
+                length = result.stats.get("start_length")
+                rows.append({"seed": seed, "cpu": cpu, "wall": wall, "axes": axes, "start_length": length})
                 print(f"{key} seed {seed}: {cpu:.1f} s CPU, {wall:.1f} s wall", flush=True)
                 if seed == 1:
                     name = f"cw-{family.replace(' ', '-')}-{label.replace('=', '-')}-{side}"
                     _save(name, result.image, planes, f"solid-chen-wang {label} {side}^3, seed 1")
             # Re-read before writing: other runs of this script may have saved their rows meanwhile.
             saved = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-            saved[key] = rows
+            # Rows of other seeds stay (rows saved before session cw5 carry no seed: 1, 2, ... in order).
+            kept = {r.get("seed", i + 1): r for i, r in enumerate(saved.get(key, []))}
+            kept.update({r["seed"]: r for r in rows})
+            saved[key] = [kept[s] for s in sorted(kept)]
             RESULTS.write_text(json.dumps(saved, indent=1) + "\n")
     print(table(saved))
     return 0
