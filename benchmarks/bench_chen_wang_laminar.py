@@ -1,8 +1,8 @@
 """`solid-chen-wang` against the laminar known answers and the real onion crops (issue 24's table).
 
-Run: ``python -m benchmarks.bench_chen_wang_laminar [--only KEY] [--seeds N] [--report]``; results go to
-docs/chen-wang-laminar.json (rows kept between runs), the table is printed for docs/solid.md and the seed-1
-mid-slices and cube to docs/img/laminar-cw-*.png.
+Run: ``python -m benchmarks.bench_chen_wang_laminar [--only KEY] [--seeds N | --seeds 2,3] [--report]``;
+results go to docs/chen-wang-laminar.json (rows kept between runs, per seed), the table is printed for
+docs/solid.md and the seed-1 mid-slices and cube to docs/img/laminar-cw-*.png.
 
 Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbostratic stack, one exemplar,
 128^2 mid-slice of the 128^3 truth) at 64^3 and 128^3, the defaults and the paper's literal settings
@@ -10,7 +10,8 @@ Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbo
 (:func:`texsynth.synth.evaluate.truth.evaluate_against_truth`); the real crops
 ``benchmarks/data/hrtem-onion*-128.png`` against the exemplar
 (:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice); and the departures measured against
-their misses (``solve_radius``, ``position_weight``, ``structure_length``; none a default). Cells as in
+their misses (``solve_radius``, ``position_weight``; none a default) and the sheet length's candidates
+(``structure_length``: 4 periods, the default before session cw5; 3; solid-kopf's fit). Cells as in
 docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it
 misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
 """
@@ -74,7 +75,10 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onion crop", "position_weight=1", {"position_weight": 1.0}, 64),
     ("onion-core crop", "solve_radius=1", {"solve_radius": 1}, 64),
     ("onion-core crop", "position_weight=1", {"position_weight": 1.0}, 64),
-    # The sheet length's candidates (session cw5): fixed 3 periods, solid-kopf's fit, the fit at least 3.
+    # The sheet length's candidates (session cw5): 4 periods (the default before), fixed 3 (the onions'
+    # default since: kopf's fit 2.1 kept within 3-4), solid-kopf's fit (the crops: 4.4-4.7; default 4).
+    ("onions", "structure_length=4", {"structure_length": 4.0}, 64),
+    ("onions", "structure_length=4", {"structure_length": 4.0}, 128),
     ("onions", "structure_length=fitted", {"structure_length": "fitted"}, 64),
     ("onions", "structure_length=fitted", {"structure_length": "fitted"}, 128),
     ("onion crop", "structure_length=3", {"structure_length": 3.0}, 64),
