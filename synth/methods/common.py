@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
@@ -19,7 +19,6 @@ __all__ = [
     "SolidParams",
     "as_features",
     "checked_progress",
-    "laminar_start_fields",
 ]
 
 
@@ -274,34 +273,6 @@ class SolidParams(MethodParams):
         if value % 2 == 0:
             raise ValueError("neighbourhood_size must be odd")
         return value
-
-
-def laminar_start_fields() -> tuple[Any, Any]:
-    """Defaults and meaning of the solids' ``structure`` and ``structure_length`` fields (one text for both
-    methods): ``structure, structure_length = laminar_start_fields()`` in a parameter model."""
-    structure = Field(
-        "auto",
-        description="How the volume starts: 'laminar' from curved sheets at the exemplar's period, 'none' "
-        "from noise, 'auto' decides from the exemplar.",
-        json_schema_extra=ui(
-            details=(
-                "'laminar': start from a volume of curved sheets at the exemplar's period, on the levels "
-                "that keep the period (the structure first, Akl 2014 in 3D); 'none': the paper's random "
-                "start; 'auto': laminar when one isotropic exemplar serves the three planes and "
-                "adapt_to_structure is on, and it is fringed (mean coherence >= 0.6) or a small pilot "
-                "volume from each start says the sheets keep its coherence better (mean coherence "
-                "0.45-0.6)."
-            )
-        ),
-    )
-    length = Field(
-        4.0,
-        gt=0.0,
-        le=64.0,
-        description="How far the starting sheets run before they bend, in fringe periods.",
-        json_schema_extra=ui(unit="periods", details=("Curvature length of the laminar start, in periods.")),
-    )
-    return structure, length
 
 
 def as_features(image: np.ndarray) -> np.ndarray:

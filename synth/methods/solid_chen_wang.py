@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 from scipy import ndimage as ndi
 
 from texsynth.synth.analysis.orientation_histogram import (
@@ -59,15 +59,17 @@ from texsynth.synth.kernels.solid_kcoherence import (
     search_pass,
     solve_pass,
 )
-from texsynth.synth.methods.common import SolidParams, checked_progress, laminar_start_fields
+from texsynth.synth.methods.common import SolidParams, checked_progress
 from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH, laminar_pilot
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
     dominant_period,
+    fitted_structure_length,
     laminar_volume,
     level_phase,
     oriented_phase,
     plane_orientation,
+    resolved_length,
     sheet_normal,
     sheets,
     stack_period,
@@ -91,7 +93,12 @@ from texsynth.synth.pixel.solid import (
 )
 from texsynth.synth.pixel.synthesis import k_coherence_sets
 
-__all__ = ["SolidChenWangParams", "run_solid_chen_wang", "synthesize_solid_chen_wang"]
+__all__ = [
+    "SolidChenWangParams",
+    "chen_wang_structure_length",
+    "run_solid_chen_wang",
+    "synthesize_solid_chen_wang",
+]
 
 #: Radius (in slice pixels) of the window of voxels whose matches propose k-coherent candidates.
 _CANDIDATE_RADIUS = 1
@@ -117,6 +124,20 @@ ORIENTED_COARSE_ITERATIONS = 10
 #: 'auto' takes the oriented start when the exemplar's fringes keep their orientation at most this many
 #: periods (:func:`orientation_length`: the turbostratic stack 1.0, bent laminae 2.0-4.8; docs/solid.md).
 ORIENTED_MAX_LENGTH = 1.5
+#: The range of the fitted sheet length (periods; ``structure_length`` empty): shorter sheets break this
+#: method's shells into worms, longer ones (the real crops' fit, 4.4-4.7) lose their orientations
+#: (docs/solid.md, "The sheets' length for solid-chen-wang").
+MIN_STRUCTURE_LENGTH = 3.0
+MAX_STRUCTURE_LENGTH = 4.0
+
+
+def chen_wang_structure_length(images: list[np.ndarray]) -> float:
+    """The laminar start's sheet length (periods) when ``structure_length`` is empty: solid-kopf's fit to the
+    exemplars (:func:`texsynth.synth.pixel.laminar.fitted_structure_length`) kept within
+    :data:`MIN_STRUCTURE_LENGTH` - :data:`MAX_STRUCTURE_LENGTH`: the laminar truth's small onions 3 (fit
+    2.1), the real onion crops 4 (fit 4.4-4.7), the tests' three onions in 64 px 3.3."""
+    fit = fitted_structure_length(images)
+    return float(np.clip(fit, MIN_STRUCTURE_LENGTH, MAX_STRUCTURE_LENGTH))
 
 
 class SolidChenWangParams(SolidParams):
@@ -162,10 +183,23 @@ class SolidChenWangParams(SolidParams):
             )
         ),
     )
-    structure: Literal["auto", "none", "laminar", "oriented"]
-    structure_length: float
-    structure, structure_length = laminar_start_fields()
-    structure = Field(
+    structure_length: float | None = Field(
+        None,
+        gt=0.0,
+        le=64.0,
+        description="How far the starting sheets run before they bend, in fringe periods; empty (or "
+        "'auto'): fitted to the exemplars.",
+        json_schema_extra=ui(
+            unit="periods",
+            details=(
+                "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': solid-kopf's "
+                f"fit to the exemplars kept within {MIN_STRUCTURE_LENGTH:g}-{MAX_STRUCTURE_LENGTH:g} "
+                "periods (shorter sheets break this method's shells into worms, longer ones lose the "
+                "fringes' orientations)."
+            ),
+        ),
+    )
+    structure: Literal["auto", "none", "laminar", "oriented"] = Field(
         "auto",
         description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
         "(the paper); 'auto' picks by the exemplars.",
@@ -306,6 +340,12 @@ class SolidChenWangParams(SolidParams):
             )
         ),
     )
+
+    @field_validator("structure_length", mode="before")
+    @classmethod
+    def _auto_length(cls, value: object) -> object:
+        """``'auto'`` is the empty value: the length fitted to the exemplars."""
+        return None if value == "auto" else value
 
 
 # ------------------------------------------------------------------------------------------------ levels
@@ -553,6 +593,8 @@ class _Schedule:
     start: str = "none"
     period: float = 0.0
     stack_period: float = 0.0
+    #: The start's length (periods): the sheets' (laminar) or the crumples' (oriented); 0 without a start.
+    length: float = 0.0
 
     @property
     def laminar_start(self) -> bool:
@@ -593,13 +635,19 @@ class _Schedule:
                 coarse_iterations = LAMINAR_COARSE_ITERATIONS
         if coarse_iterations is None:
             coarse_iterations = iterations
-        period = stack = 0.0
+        period = stack = length = 0.0
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
         if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
             views = {p: np.asarray(exemplars[p]) for p in params.planes}
             stack = stack_period(views, sheet_normal({p: plane_orientation(im) for p, im in views.items()}))
-        return cls(iterations, coarse_iterations, orientation_gain, solve_radius, start, period, stack)
+            length = params.oriented_length
+        elif start == "laminar":
+            images = [np.asarray(exemplars[p]) for p in params.planes]
+            length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
+        return cls(
+            iterations, coarse_iterations, orientation_gain, solve_radius, start, period, stack, length
+        )
 
     def levels(self, levels: int) -> int:
         """At most ``levels``; with the laminar start, those that keep a 3 px period."""
@@ -645,6 +693,8 @@ class _ChenWangLoop:
             "period": (schedule.stack_period if schedule.start == "oriented" else schedule.period)
             if schedule.laminar_start
             else None,
+            # The start's length in periods (the sheets' fitted or given; the crumples'), None without one.
+            "start_length": schedule.length if schedule.laminar_start else None,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -675,7 +725,7 @@ class _ChenWangLoop:
                     plan.shapes[0],
                     views,
                     stack,
-                    params.oriented_length * stack,
+                    self.schedule.length * stack,
                     rng,
                     periodic=params.periodic,
                 )
@@ -684,7 +734,7 @@ class _ChenWangLoop:
                 start_volume = laminar_volume(
                     shape,
                     self.schedule.period / scale,
-                    params.structure_length * self.schedule.period / scale,
+                    self.schedule.length * self.schedule.period / scale,
                     values,
                     rng,
                     periodic=params.periodic,

@@ -275,6 +275,9 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"scan": "spiral"}}, InvalidParameter, "scan"),
         ({"params": {"structure": "stacked"}}, InvalidParameter, "structure"),
         ({"params": {"oriented_length": 0.0}}, InvalidParameter, "oriented_length"),
+        ({"params": {"structure_length": "long"}}, InvalidParameter, "structure_length"),
+        ({"params": {"structure_length": 0.0}}, InvalidParameter, "structure_length"),
+        ({"params": {"structure_length": 65.0}}, InvalidParameter, "structure_length"),
         ({"params": {"histogram": 1}}, InvalidParameter, "unknown parameter"),
         ({"params": {"planes": ["xy"]}}, InvalidParameter, "planes must be two or three distinct planes"),
         ({"params": {"planes": ["xy", "xy"]}}, InvalidParameter, "planes must be two or three distinct"),
@@ -428,3 +431,47 @@ def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotrop
     bent = undulating_laminae((128, 128), 7, 16, 128, noise=0.3)
     assert orientation_length(planes["xy"]) < ORIENTED_MAX_LENGTH < 3.0 < orientation_length(bent)
     assert _Schedule.resolve(SolidChenWangParams(), dict.fromkeys(PLANES, bent)).start == "none"
+
+
+def test_sheet_length_is_the_fit_within_three_to_four_periods_or_as_given() -> None:
+    """``structure_length`` empty (the default, or ``'auto'``) is solid-kopf's fit to the exemplars kept
+    within 3-4 periods (shorter sheets break the shells into worms, longer lose the orientations); the
+    length used is in the stats; a number is used as given; the random start has none, the oriented start
+    its crumples' length."""
+    from texsynth.synth.io.laminar import onion_volume, turbostratic_volume
+    from texsynth.synth.methods.solid_chen_wang import MAX_STRUCTURE_LENGTH, MIN_STRUCTURE_LENGTH, _Schedule
+    from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import fitted_structure_length
+
+    r, c = np.mgrid[0:64, 0:64].astype(np.float64)
+    shells = (0.5 + 0.4 * np.cos(2 * np.pi * np.hypot(r - 30.0, c - 34.0) / 6.0)).astype(np.float32)
+    small_onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
+    rng = np.random.default_rng(0)  # three onions in 64 px (tests/synth/pixel/test_laminar.py's shells)
+    d = np.min([np.hypot(r - y, c - x) for y, x in rng.uniform(0, 64, size=(3, 2))], axis=0)
+    three = np.clip(0.5 + 0.4 * np.cos(2 * np.pi * d / 6.0) + rng.normal(0, 0.05, d.shape), 0, 1)
+    three = three.astype(np.float32)
+    fits = [fitted_structure_length([im]) for im in (small_onions, three, shells)]
+    assert fits[0] < MIN_STRUCTURE_LENGTH < fits[1] < MAX_STRUCTURE_LENGTH < fits[2]
+    laminar = {"structure": "laminar"}
+    for image, want in (
+        (small_onions, MIN_STRUCTURE_LENGTH),
+        (three, fits[1]),
+        (shells, MAX_STRUCTURE_LENGTH),
+    ):
+        for empty in (None, "auto"):
+            params = SolidChenWangParams(**laminar, structure_length=empty)
+            assert _Schedule.resolve(params, dict.fromkeys(PLANES, image)).length == pytest.approx(want)
+    params = {**FAST, **laminar}
+    run = synthesize("solid-chen-wang", three, size=(16, 16, 16), params=params, seed=1)
+    assert run.stats["start_length"] == pytest.approx(fits[1])
+    assert run.params["structure_length"] is None  # the request as given; the stats say what was used
+    given = synthesize(
+        "solid-chen-wang", three, size=(16, 16, 16), params={**params, "structure_length": 2.5}, seed=1
+    )
+    assert given.stats["start_length"] == 2.5 and given.image.tobytes() != run.image.tobytes()
+    noise = synthesize("solid-chen-wang", shells, size=(16, 16, 16), params={**FAST, "structure": "none"})
+    assert noise.stats["start_length"] is None
+    stack = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))["xy"]
+    oriented = SolidChenWangParams(structure="oriented")
+    assert _Schedule.resolve(oriented, dict.fromkeys(PLANES, stack)).length == ORIENTED_LENGTH
