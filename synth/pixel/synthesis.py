@@ -70,6 +70,7 @@ __all__ = [
     "check_neighbourhoods_fit",
     "entry_weights",
     "k_coherence_sets",
+    "kset_points",
     "level_neighbourhood_size",
     "source_map_pyramid",
     "synthesize_source_map",
@@ -85,6 +86,11 @@ _PCA_SAMPLE = 4096
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
+#: Points per leaf of the k-coherence sets' k-d tree. Their queries (k + 1 neighbours in ``kset_dims`` = 8
+#: dimensions) cost most of the sets' time, and in 8 dimensions a leaf scanned whole beats descending:
+#: 64 instead of SciPy's 16 took a 128^2 exemplar's query (k = 10) from 0.33-0.35 to 0.25 s of CPU, the
+#: same neighbours in the same order (tested against the brute-force search; docs/benchmarks.md).
+_KSET_LEAF = 64
 #: Rows of a band of :func:`tensor_features` on the job's threads.
 _FEATURE_ROWS = 64
 #: A coarse level's neighbourhood side is at most its shorter side divided by this.
@@ -314,6 +320,30 @@ def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarr
     return np.concatenate(parts, axis=1)
 
 
+def kset_points(
+    embeds: Sequence[tuple[np.ndarray, float]],
+    size: int,
+    valid: np.ndarray,
+    mask: np.ndarray,
+    kset_size: int = 7,
+    kset_dims: int = 8,
+) -> np.ndarray:
+    """The points whose nearest neighbours make the k-coherence sets (:func:`k_coherence_sets`): one row
+    per valid, allowed exemplar position (raster order), its weighted square neighbourhood (side at most
+    ``kset_size``) projected on the first ``kset_dims`` principal axes, float64."""
+    ks = min(size, kset_size)
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    inside = mask[y0:y1, x0:x1].ravel() != 0
+    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
+    vectors = vectors[inside].astype(np.float64)
+    vectors -= vectors.mean(axis=0)
+    dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
+    # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
+    sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
+    _, eigvec = np.linalg.eigh(sample.T @ sample)
+    return vectors @ eigvec[:, ::-1][:, :dims]
+
+
 def k_coherence_sets(
     embeds: Sequence[tuple[np.ndarray, float]],
     size: int,
@@ -333,20 +363,12 @@ def k_coherence_sets(
     kset = np.full((h, w, k, 2), -1, dtype=np.int64)
     if k == 0:
         return kset
-    ks = min(size, kset_size)
     y0, y1, x0, x1 = (int(v) for v in valid)
     inside = mask[y0:y1, x0:x1].ravel() != 0
-    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
-    vectors = vectors[inside].astype(np.float64)
-    vectors -= vectors.mean(axis=0)
-    dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
-    # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
-    sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
-    _, eigvec = np.linalg.eigh(sample.T @ sample)
-    projected = vectors @ eigvec[:, ::-1][:, :dims]
+    projected = kset_points(embeds, size, valid, mask, kset_size, kset_dims)
     kk = min(k + 1, len(projected))
     # independent queries: the same answer on any number of workers
-    _, idx = cKDTree(projected).query(projected, k=kk, workers=current_threads())
+    _, idx = cKDTree(projected, leafsize=_KSET_LEAF).query(projected, k=kk, workers=current_threads())
     idx = idx.reshape(len(projected), kk)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]
