@@ -88,11 +88,6 @@ _PCA_SAMPLE = 4096
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
-#: Points per leaf of the k-coherence sets' k-d tree. Their queries (k + 1 neighbours in ``kset_dims`` = 8
-#: dimensions) cost most of the sets' time, and in 8 dimensions a leaf scanned whole beats descending:
-#: 64 instead of SciPy's 16 took a 128^2 exemplar's query (k = 10) from 0.33-0.35 to 0.25 s of CPU, the
-#: same neighbours in the same order (tested against the brute-force search; docs/benchmarks.md).
-_KSET_LEAF = 64
 #: Rows of a band of :func:`tensor_features` on the job's threads.
 _FEATURE_ROWS = 64
 #: A coarse level's neighbourhood side is at most its shorter side divided by this.
@@ -370,7 +365,7 @@ def k_coherence_sets(
     projected = kset_points(embeds, size, valid, mask, kset_size, kset_dims)
     kk = min(k + 1, len(projected))
     # independent queries: the same answer on any number of workers
-    _, idx = cKDTree(projected, leafsize=_KSET_LEAF).query(projected, k=kk, workers=current_threads())
+    _, idx = cKDTree(projected).query(projected, k=kk, workers=current_threads())
     idx = idx.reshape(len(projected), kk)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]

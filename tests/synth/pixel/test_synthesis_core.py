@@ -691,7 +691,7 @@ def test_tensor_features_in_bands_on_threads_give_the_bytes_of_one_call(metric: 
 
 
 def test_k_coherence_sets_are_the_exact_nearest_neighbours() -> None:
-    """The k-d tree (its leaf size tuned for speed) answers what a brute-force search answers: each
+    """The k-d tree answers what a brute-force search answers: each
     position's k nearest other positions of the projected neighbourhoods, nearest first."""
     from texsynth.synth.pixel.synthesis import k_coherence_sets, kset_points
 
