@@ -645,8 +645,9 @@ def _levels_body(
 
 
 # One body, compiled twice: on the calling thread, and with the levels' blocks on numba's pool.
-# Units of one level never read what another writes, so both give the same bytes.
-_levels_serial = kernel(_levels_body)
+# Units of one level never read what another writes, so both give the same bytes. The serial one lets
+# Python's lock go: the seam pass runs it while another thread makes the next pass's schedule.
+_levels_serial = kernel(nogil=True)(_levels_body)
 _levels_parallel = kernel(parallel=True)(_levels_body)
 
 #: Below this many positions per level on average, a pass runs on the calling thread: waking the pool
@@ -679,7 +680,7 @@ class Schedule(NamedTuple):
         return self.sched[self.units[self.starts[level]] : self.units[self.starts[level + 1]]]
 
 
-@kernel
+@kernel(nogil=True)
 def _schedule_kernel(order, H, W, offs):
     n = order.shape[0]
     # A position's level once placed; -1 before (and for positions the order leaves out), so that the

@@ -32,6 +32,7 @@ X. Tong et al., "Synthesis of bidirectional texture functions on arbitrary surfa
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
@@ -52,6 +53,7 @@ from texsynth.synth.kernels.pixel_search import (
     Histogram,
     Part,
     Pass,
+    Schedule,
     SearchState,
     candidate_capacity,
     conflict_offsets,
@@ -60,7 +62,7 @@ from texsynth.synth.kernels.pixel_search import (
     synthesize_levels,
     tile_schedule,
 )
-from texsynth.synth.threads import current_threads, thread_map
+from texsynth.synth.threads import current_threads, thread_map, use_threads
 
 __all__ = [
     "CandidateWindow",
@@ -70,6 +72,7 @@ __all__ = [
     "check_neighbourhoods_fit",
     "entry_weights",
     "k_coherence_sets",
+    "kset_points",
     "level_neighbourhood_size",
     "source_map_pyramid",
     "synthesize_source_map",
@@ -314,6 +317,30 @@ def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarr
     return np.concatenate(parts, axis=1)
 
 
+def kset_points(
+    embeds: Sequence[tuple[np.ndarray, float]],
+    size: int,
+    valid: np.ndarray,
+    mask: np.ndarray,
+    kset_size: int = 7,
+    kset_dims: int = 8,
+) -> np.ndarray:
+    """The points whose nearest neighbours make the k-coherence sets (:func:`k_coherence_sets`): one row
+    per valid, allowed exemplar position (raster order), its weighted square neighbourhood (side at most
+    ``kset_size``) projected on the first ``kset_dims`` principal axes, float64."""
+    ks = min(size, kset_size)
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    inside = mask[y0:y1, x0:x1].ravel() != 0
+    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
+    vectors = vectors[inside].astype(np.float64)
+    vectors -= vectors.mean(axis=0)
+    dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
+    # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
+    sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
+    _, eigvec = np.linalg.eigh(sample.T @ sample)
+    return vectors @ eigvec[:, ::-1][:, :dims]
+
+
 def k_coherence_sets(
     embeds: Sequence[tuple[np.ndarray, float]],
     size: int,
@@ -333,17 +360,9 @@ def k_coherence_sets(
     kset = np.full((h, w, k, 2), -1, dtype=np.int64)
     if k == 0:
         return kset
-    ks = min(size, kset_size)
     y0, y1, x0, x1 = (int(v) for v in valid)
     inside = mask[y0:y1, x0:x1].ravel() != 0
-    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
-    vectors = vectors[inside].astype(np.float64)
-    vectors -= vectors.mean(axis=0)
-    dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
-    # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
-    sample = vectors[:: max(1, len(vectors) // _PCA_SAMPLE)]
-    _, eigvec = np.linalg.eigh(sample.T @ sample)
-    projected = vectors @ eigvec[:, ::-1][:, :dims]
+    projected = kset_points(embeds, size, valid, mask, kset_size, kset_dims)
     kk = min(k + 1, len(projected))
     # independent queries: the same answer on any number of workers
     _, idx = cKDTree(projected).query(projected, k=kk, workers=current_threads())
@@ -525,22 +544,24 @@ def _search_seam(
     band: int,
     parts: _Parts,
     cand_offs: np.ndarray,
-    rng: np.random.Generator,
-) -> None:
+    seed_key: np.uint64,
+    ahead: Callable[[], Schedule] | None = None,
+) -> Schedule | None:
     """Search the first ``band`` columns again, row after row, with the full square ``parts``.
 
     A raster first pass run in tiles (:func:`texsynth.synth.kernels.pixel_search.tile_schedule`) leaves
     its first ``r`` columns without the end of the row above across the wrap, which a raster scan compares;
     once the pass is over every neighbour is there, on both sides. The driver passes ``band = 2 r``
-    (measured best on the bent laminae, docs/pixel.md, "Parallel passes"). A few positions (``band`` x
-    height), levels of one position or a few: on the calling thread.
+    (measured best on the bent laminae, docs/pixel.md, "Parallel passes"). The band is a chain (each
+    position touches the one before), searched on one thread; ``ahead`` (the next pass's schedule) runs
+    meanwhile on another of the job's threads, and its result is returned (computed after the seam on
+    one thread). Neither reads what the other writes: the bytes are the same either way.
     """
     H, W = shape
     band = min(band, W)
     if band <= 0:
-        return
+        return ahead() if ahead is not None else None
     kept = (state.cur, state.par, state.gui, state.cands, state.run)
-    order = (np.arange(H)[:, None] * W + np.arange(band)[None, :]).ravel().astype(np.int64)
     state.cur = state.cur._replace(
         offsets=parts.offsets, weight=parts.weight, entry_weights=parts.entry_weights
     )
@@ -550,15 +571,36 @@ def _search_seam(
     capacity = candidate_capacity(len(cand_offs), c.kset.shape[2], c.use_hint, c.n_random)
     state.cands = c._replace(cand_offs=cand_offs, capacity=max(c.capacity, capacity))
     counter = state.run.counter
-    schedule = schedule_levels(order, shape, conflict_offsets(parts.offsets, cand_offs), int(counter[0]))
+    conflicts = conflict_offsets(parts.offsets, cand_offs)
+    order, schedule = _seam_schedule(H, W, band, conflicts.tobytes())
+    schedule = schedule._replace(tag0=int(counter[0]))
     counter[0] += len(order) + 1
-    state.run = state.run._replace(
-        order=order, first_pass=False, seed_key=np.uint64(int(rng.integers(0, 2**63)))
-    )
+    state.run = state.run._replace(order=order, first_pass=False, seed_key=seed_key)
+    threads = current_threads()
+
+    def seam() -> None:
+        with use_threads(threads):  # whichever thread runs it: the job's count
+            synthesize_levels(state, schedule, 0, len(schedule.starts) - 1)
+
     try:
-        synthesize_levels(state, schedule, 0, len(schedule.starts) - 1)
+        if ahead is None:
+            seam()
+            return None
+        if threads < 2:
+            seam()
+            return ahead()
+        return thread_map(lambda job: job(), [seam, ahead], 2)[1]
     finally:
         state.cur, state.par, state.gui, state.cands, state.run = kept
+
+
+@functools.lru_cache(maxsize=8)
+def _seam_schedule(H: int, W: int, band: int, conflicts: bytes) -> tuple[np.ndarray, Schedule]:
+    """The seam's order (:func:`_search_seam`: the first ``band`` columns, row after row) and its schedule
+    (:func:`texsynth.synth.kernels.pixel_search.schedule_levels`), once per shape, band and conflict
+    offsets (every pass of every run shares them; nothing writes them)."""
+    order = (np.arange(H)[:, None] * W + np.arange(band)[None, :]).ravel().astype(np.int64)
+    return order, schedule_levels(order, (H, W), np.frombuffer(conflicts, dtype=np.int64).reshape(-1, 2))
 
 
 def synthesize_source_map(
@@ -742,11 +784,12 @@ def synthesize_source_map(
         )
         n = shape[0] * shape[1]
         started = initial is not None  # every position holds a source: no first (causal) pass
+        side = min(settings.refine_size or size, size)  # the square refinement passes' window
+        ref_offs = _nearest_first(neighbourhood_offsets(side, "square"), settings.falloff)
+        ahead: tuple[np.ndarray, Schedule] | None = None  # the next pass's order and schedule, if made
         for it in range(settings.iterations):
             refine = square_refinement and (it > 0 or started)
             if refine and it == (0 if started else 1):  # square refinement: the whole square, weighed as such
-                side = min(settings.refine_size or size, size)
-                ref_offs = _nearest_first(neighbourhood_offsets(side, "square"), settings.falloff)
                 w_ref, gui_ref, w_gui_ref = _part_weights(
                     ref_offs, n_par, unit, p_ref, guidance, gunit, gw_ref
                 )
@@ -760,12 +803,16 @@ def synthesize_source_map(
                 state.cands = state.cands._replace(cand_offs=all_cand_offs)
             first = it == 0 and not started
             tiled = not refine and settings.scan == "lexicographic"
-            order = None if tiled else scan_order(shape, "random" if refine else settings.scan, rng)
-            conflicts = conflict_offsets(state.cur.offsets, state.cands.cand_offs)
-            if order is None:  # a raster scan: tiles in waves (a raster scan on a torus is one chain)
-                schedule = tile_schedule(shape, conflicts, tag0=int(counter[0]))
+            if ahead is not None:  # made while the seam pass ran (its order drawn then, in turn)
+                order, schedule = ahead[0], ahead[1]._replace(tag0=int(counter[0]))
+                ahead = None
             else:
-                schedule = schedule_levels(order, shape, conflicts, int(counter[0]))
+                order = None if tiled else scan_order(shape, "random" if refine else settings.scan, rng)
+                conflicts = conflict_offsets(state.cur.offsets, state.cands.cand_offs)
+                if order is None:  # a raster scan: tiles in waves (a raster scan on a torus is one chain)
+                    schedule = tile_schedule(shape, conflicts, tag0=int(counter[0]))
+                else:
+                    schedule = schedule_levels(order, shape, conflicts, int(counter[0]))
             counter[0] += n + 1
             state.run = Pass(
                 order=schedule.sched if order is None else order,
@@ -790,7 +837,17 @@ def synthesize_source_map(
                     progress(label, span[0] + (span[1] - span[0]) * frac)
             if first and tiled:
                 seam = _seam_parts(size, settings.falloff, n_par, unit, p, guidance, gunit)
-                _search_seam(state, shape, 2 * (size // 2), seam, all_cand_offs, rng)
+                seam_key = np.uint64(int(rng.integers(0, 2**63)))
+                make_next, next_order = None, None
+                if square_refinement and it + 1 < settings.iterations:
+                    # The next pass is a random square pass: its order is the generator's next draw (as
+                    # when it is made at its turn), its schedule is made on another thread meanwhile.
+                    next_order = scan_order(shape, "random", rng)
+                    conflicts = conflict_offsets(ref_offs, all_cand_offs)
+                    make_next = functools.partial(schedule_levels, next_order, shape, conflicts)
+                made = _search_seam(state, shape, 2 * (size // 2), seam, all_cand_offs, seam_key, make_next)
+                if made is not None and next_order is not None:
+                    ahead = (next_order, made)
             report[f"level {level + 1} pass {it + 1}"] = float(np.mean(state.run.best_out))
         done_work += work[level]
         srcs[level] = src

@@ -688,3 +688,25 @@ def test_tensor_features_in_bands_on_threads_give_the_bytes_of_one_call(metric: 
         assert feats.shape == (300, 77, 4 if metric == "SO" else 3) and feats.flags.c_contiguous
         got.append((feats.tobytes(), code))
     assert got[0] == got[1] == got[2]
+
+
+def test_k_coherence_sets_are_the_exact_nearest_neighbours() -> None:
+    """The k-d tree answers what a brute-force search answers: each
+    position's k nearest other positions of the projected neighbourhoods, nearest first."""
+    from texsynth.synth.pixel.synthesis import k_coherence_sets, kset_points
+
+    feats = _rng_image((40, 44), seed=5)[..., None].astype(np.float32)
+    valid = np.array([3, 37, 3, 41], dtype=np.int64)
+    mask = np.ones(feats.shape[:2], dtype=np.uint8)
+    mask[10:14, 20:30] = 0
+    embeds = [(feats, 0.25)]
+    k = 6
+    kset = k_coherence_sets(embeds, 7, valid, k, mask, kset_size=7, kset_dims=5)
+    points = kset_points(embeds, 7, valid, mask, kset_size=7, kset_dims=5)
+    yy, xx = np.nonzero(mask[3:37, 3:41])
+    d = ((points[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    np.fill_diagonal(d, np.inf)
+    near = np.argsort(d, axis=1, kind="stable")[:, :k]
+    assert np.array_equal(kset[3 + yy, 3 + xx, :, 0], 3 + yy[near])
+    assert np.array_equal(kset[3 + yy, 3 + xx, :, 1], 3 + xx[near])
+    assert np.all(kset[10:14, 20:30] == -1)  # masked positions have no set
