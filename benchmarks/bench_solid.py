@@ -347,7 +347,7 @@ stay out) serves the three planes and is isotropic (coherence of its mean struct
 stack 0.87: those keep the paper's start and their bytes); `'laminar'` forces it, `'none'` is the paper. The
 period is the peak of the spectral shells' power between 3 px and a quarter of the exemplar.
 
-Measures (scratch scripts, /work/notes/sheets): per axis `xy / xz / yz`, the synthesized slices (every second)
+Measures (scratch scripts, not kept in the repository): per axis `xy / xz / yz`, the synthesized slices (every second)
 against the truth's slices cut into tiles of the synthesized slices' size (known answer), or against the
 exemplar's tiles (real crop), with `texsynth.synth.evaluate`'s per-image statistics pooled: mean coherence ratio,
 orientation KL, grey KL, KS of fringe length and tortuosity. 64^3 from 128^2. Known answer: a 128^3 onion
