@@ -325,7 +325,8 @@ def test_the_voxel_limit_and_the_threads_come_from_the_environment():
 
 
 def test_the_time_estimate_knows_the_threads(tmp_path):
-    """solid-wei-levoy 256^3: about 78 minutes on one thread (refused), 39 on two (refused), 20 on four."""
+    """solid-wei-levoy 256^3: about 78 minutes on one thread (refused), 41 on two (its measured 1.92x;
+    refused), 21 on four."""
     minutes = {}
     for threads in (1, 2, 4):
         client, _ = _client(Settings(data_dir=tmp_path / f"data{threads}", threads=threads))
@@ -341,7 +342,7 @@ def test_the_time_estimate_knows_the_threads(tmp_path):
             assert f"with {threads} thread" in r.json()["message"] and "GiB of memory" in r.json()["message"]
         else:
             assert r.status_code == 202, r.text
-    assert minutes[1] in (77, 78, 79) and minutes[2] in (38, 39, 40)
+    assert minutes[1] in (77, 78, 79) and minutes[2] in (40, 41, 42)
 
 
 # -- 2-D memory estimates, per method and measured (issue 25) ----------------------------------------
@@ -460,9 +461,9 @@ def test_the_time_estimate_follows_the_measured_speed_up_of_each_method():
     )
     four = one / estimate_seconds(1.6e-5, 512**3, 4, "solid-kopf")
     assert TWO_THREAD_SPEEDUP["solid-kopf"] < four < 4.0
-    # a method that does not scale gains nothing; one never measured counts a perfect speed-up
-    assert estimate_seconds(1e-6, 10**6, 2, "quilting") == pytest.approx(
-        estimate_seconds(1e-6, 10**6, 1, "quilting")
+    # a method that scales little gains little; one never measured counts a perfect speed-up
+    assert estimate_seconds(1e-6, 10**6, 1, "quilting") / estimate_seconds(1e-6, 10**6, 2, "quilting") == (
+        pytest.approx(TWO_THREAD_SPEEDUP["quilting"])
     )
     assert estimate_seconds(1e-6, 10**6, 4, "solid-from-elsewhere") == pytest.approx(0.25)
     assert parallel_fraction(1.84) == pytest.approx(2 * (1 - 1 / 1.84))
@@ -505,5 +506,5 @@ def test_a_512_cubed_solid_kopf_job_is_accepted_under_a_limit_its_estimate_fits(
     assert r.status_code == 422, r.text
     message = r.json()["message"]
     assert r.json()["field"] == "depth" and f"about {need / 2**30:.1f} GiB" in message
-    assert re.search(r"run about \d+ minutes with 2 threads \(.*measured 1\.84x of 2 threads", message)
+    assert re.search(r"run about \d+ minutes with 2 threads \(.*measured 1\.87x of 2 threads", message)
     assert service.store.count() == 0
