@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
@@ -19,6 +19,7 @@ __all__ = [
     "SolidParams",
     "as_features",
     "checked_progress",
+    "structure_fields",
 ]
 
 
@@ -273,6 +274,27 @@ class SolidParams(MethodParams):
         if value % 2 == 0:
             raise ValueError("neighbourhood_size must be odd")
         return value
+
+
+def structure_fields(structure_details: str, length_details: str) -> tuple[Any, Any]:
+    """The solids' ``structure`` and ``structure_length`` fields: one default, bounds and description for both
+    methods, each method's ``details`` (how its 'auto' decides): ``structure, structure_length =
+    structure_fields(...)`` in a parameter model."""
+    structure = Field(
+        "auto",
+        description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
+        "(the paper); 'auto' picks by the exemplars.",
+        json_schema_extra=ui(details=structure_details),
+    )
+    length = Field(
+        None,
+        gt=0.0,
+        le=64.0,
+        description="How far the starting sheets run before they bend, in fringe periods; empty (or "
+        "'auto'): fitted to the exemplars.",
+        json_schema_extra=ui(unit="periods", details=length_details),
+    )
+    return structure, length
 
 
 def as_features(image: np.ndarray) -> np.ndarray:

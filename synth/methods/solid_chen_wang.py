@@ -59,7 +59,7 @@ from texsynth.synth.kernels.solid_kcoherence import (
     search_pass,
     solve_pass,
 )
-from texsynth.synth.methods.common import SolidParams, checked_progress
+from texsynth.synth.methods.common import SolidParams, checked_progress, structure_fields
 from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH, laminar_pilot
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
@@ -183,38 +183,25 @@ class SolidChenWangParams(SolidParams):
             )
         ),
     )
-    structure_length: float | None = Field(
-        None,
-        gt=0.0,
-        le=64.0,
-        description="How far the starting sheets run before they bend, in fringe periods; empty (or "
-        "'auto'): fitted to the exemplars.",
-        json_schema_extra=ui(
-            unit="periods",
-            details=(
-                "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': solid-kopf's "
-                f"fit to the exemplars kept within {MIN_STRUCTURE_LENGTH:g}-{MAX_STRUCTURE_LENGTH:g} "
-                "periods (shorter sheets break this method's shells into worms, longer ones lose the "
-                "fringes' orientations)."
-            ),
+    structure_length: float | None
+    structure: Literal["auto", "none", "laminar", "oriented"]
+    structure, structure_length = structure_fields(
+        (
+            "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+            "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
+            "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations (as "
+            "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
+            "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
+            ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
+            "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes whose "
+            "fringes turn within 1.5 periods (a crumpled stack; bent laminae measured better from "
+            "noise); else 'none'."
         ),
-    )
-    structure: Literal["auto", "none", "laminar", "oriented"] = Field(
-        "auto",
-        description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
-        "(the paper); 'auto' picks by the exemplars.",
-        json_schema_extra=ui(
-            details=(
-                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
-                "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
-                "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations (as "
-                "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
-                "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
-                ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
-                "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes whose "
-                "fringes turn within 1.5 periods (a crumpled stack; bent laminae measured better from "
-                "noise); else 'none'."
-            )
+        (
+            "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': solid-kopf's "
+            f"fit to the exemplars kept within {MIN_STRUCTURE_LENGTH:g}-{MAX_STRUCTURE_LENGTH:g} "
+            "periods (shorter sheets break this method's shells into worms, longer ones lose the "
+            "fringes' orientations)."
         ),
     )
     oriented_length: float = Field(

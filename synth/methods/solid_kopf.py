@@ -58,7 +58,7 @@ from texsynth.synth.kernels.solid_search import (
     best_vote,
     irls_update,
 )
-from texsynth.synth.methods.common import SolidParams, checked_progress
+from texsynth.synth.methods.common import SolidParams, checked_progress, structure_fields
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
     ORIENTED_MAX_BEND,
@@ -171,35 +171,21 @@ class SolidKopfParams(SolidParams):
         ),
     )
     structure: Literal["auto", "none", "laminar", "oriented"]
-    structure_length: float | None = Field(
-        None,
-        gt=0.0,
-        le=64.0,
-        description="How far the starting sheets run before they bend, in fringe periods; empty (or "
-        "'auto'): fitted to the exemplars.",
-        json_schema_extra=ui(
-            unit="periods",
-            details=(
-                "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': the shortest "
-                "length whose sheets' slices are at least as coherent at the period's scale and at most as "
-                "curved as the exemplars (small onions get short sheets, large shells long ones)."
-            ),
+    structure_length: float | None
+    structure, structure_length = structure_fields(
+        (
+            "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
+            "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
+            "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations; "
+            "'none': the paper's random start; 'auto' (with adapt_to_structure): 'laminar' for one "
+            "isotropic exemplar on the three planes that is fringed (mean coherence >= 0.6) or chosen "
+            "by a small pilot (0.45-0.6), or for fringed isotropic per-plane exemplars; 'oriented' "
+            "for fringed exemplars of which one is anisotropic; else 'none'."
         ),
-    )
-    structure = Field(
-        "auto",
-        description="The volume's start: curved sheets, a crumpled stack fitted to the fringes, or noise "
-        "(the paper); 'auto' picks by the exemplars.",
-        json_schema_extra=ui(
-            details=(
-                "'laminar': start from a volume of curved sheets at the exemplar's period, on the "
-                "levels that keep the period (the structure first, Akl 2014 in 3D); 'oriented': from a "
-                "crumpled stack whose mean normal and spread fit the exemplars' fringe orientations; "
-                "'none': the paper's random start; 'auto' (with adapt_to_structure): 'laminar' for one "
-                "isotropic exemplar on the three planes that is fringed (mean coherence >= 0.6) or chosen "
-                "by a small pilot (0.45-0.6), or for fringed isotropic per-plane exemplars; 'oriented' "
-                "for fringed exemplars of which one is anisotropic; else 'none'."
-            )
+        (
+            "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': the shortest "
+            "length whose sheets' slices are at least as coherent at the period's scale and at most as "
+            "curved as the exemplars (small onions get short sheets, large shells long ones)."
         ),
     )
     oriented_length: float | None = Field(
