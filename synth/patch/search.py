@@ -264,20 +264,7 @@ class PatchSearcher:
         return self.errors(template, mask)[1]
 
     def ssd_reference(self, template: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """Masked SSD of ``template`` against every exemplar patch, in NumPy (:meth:`ssd`).
-
-        Parameters
-        ----------
-        template : ndarray, shape (w, w) or (w, w, C)
-            Values outside the mask are ignored.
-        mask : ndarray, shape (w, w) or (w, w, C)
-            Weights (0/1 for an overlap mask); a 2-D mask applies to every channel.
-
-        Returns
-        -------
-        ndarray, shape (h - w + 1, w_ex - w + 1)
-            The SSD at every top-left exemplar position, float64, >= 0.
-        """
+        """:meth:`ssd` in plain NumPy (same arguments and result): the reference its tests compare with."""
         m = self._weights(mask)
         t = np.asarray(template, dtype=np.float64)
         t = t[..., None] if t.ndim == 2 else t
