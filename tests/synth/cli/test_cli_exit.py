@@ -18,8 +18,6 @@ import pytest
 
 from tests.paths import REPO
 from texsynth.synth.cli import imports_without_gc, main
-from texsynth.synth.io import save_image
-from texsynth.synth.io.patterns import undulating_laminae
 
 
 def _program(code: str, *args: str) -> subprocess.CompletedProcess[str]:
@@ -33,13 +31,6 @@ def _program(code: str, *args: str) -> subprocess.CompletedProcess[str]:
         text=True,
         timeout=300,
     )
-
-
-@pytest.fixture(scope="module")
-def exemplar(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("ex") / "laminae.png"
-    save_image(path, undulating_laminae((40, 40), period=6, amplitude=4, wavelength=40))
-    return path
 
 
 def test_imports_without_gc_freezes_what_was_imported_and_turns_the_collector_back_on() -> None:

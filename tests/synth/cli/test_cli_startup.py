@@ -17,8 +17,6 @@ from pathlib import Path
 import pytest
 
 from tests.paths import REPO
-from texsynth.synth.io import save_image
-from texsynth.synth.io.patterns import undulating_laminae
 
 HEAVY = ("numpy", "numba", "scipy", "matplotlib", "pydantic", "skimage", "celery", "fastapi")
 
@@ -63,13 +61,6 @@ def test_cli_planes_are_the_engines() -> None:
     from texsynth.synth.cli.inputs import PLANES as CLI_PLANES
 
     assert CLI_PLANES == PLANES
-
-
-@pytest.fixture(scope="module")
-def exemplar(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("ex") / "laminae.png"
-    save_image(path, undulating_laminae((40, 40), period=6, amplitude=4, wavelength=40))
-    return path
 
 
 def test_synthesize_imports_one_method_and_no_matplotlib(exemplar: Path, tmp_path: Path) -> None:

@@ -13,18 +13,9 @@ from PIL import Image
 from texsynth.synth.cli import main
 from texsynth.synth.cli.synthesize import parse_size
 from texsynth.synth.errors import InvalidParameter
-from texsynth.synth.io import save_image
-from texsynth.synth.io.patterns import undulating_laminae
 from texsynth.synth.params import parse_assignments
 
 FAST = ["--set", "neighbourhood_size=5", "--set", "parent_size=3", "--no-plots"]
-
-
-@pytest.fixture(scope="module")
-def exemplar(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("ex") / "laminae.png"
-    save_image(path, undulating_laminae((40, 40), period=6, amplitude=4, wavelength=40))
-    return path
 
 
 def test_parse_size_and_assignments() -> None:
