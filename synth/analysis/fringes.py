@@ -32,6 +32,7 @@ analysis method to quantify carbon nanostructure", Combust. Flame 158(9) (2011) 
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -67,7 +68,7 @@ Polarity = Literal["dark", "bright"]
 _SQRT2 = float(np.sqrt(2.0))
 #: Branch pruning stops after this many rounds (each round removes the branches that are short
 #: *now*; a second round catches branches that appear when a junction dissolves).
-_PRUNE_ROUNDS = 4
+_PRUNE_ROUNDS = 4  # texsynth.synth.kernels.fringe_graph.PRUNE_ROUNDS (a test holds them equal)
 
 
 @dataclass(frozen=True)
@@ -252,7 +253,10 @@ def _index(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _prune_branches(skel: np.ndarray, min_length: float) -> np.ndarray:
-    """Remove branches (free end to junction) shorter than ``min_length``; returns a new skeleton."""
+    """Remove branches (free end to junction) shorter than ``min_length``; returns a new skeleton.
+
+    The plain reference of :func:`texsynth.synth.kernels.fringe_graph.skeleton_paths`'s pruning (tests).
+    """
     skel = skel.copy()
     for _ in range(_PRUNE_ROUNDS):
         rows, cols, index = _index(skel)
@@ -266,7 +270,8 @@ def _prune_branches(skel: np.ndarray, min_length: float) -> np.ndarray:
         seg = _components(n, src[inner], dst[inner])
         n_seg = int(seg.max()) + 1 if n else 0
         # a segment's length counts its own steps plus the step onto the junction
-        seg_len = np.bincount(seg[src[inner]], weights=wts[inner], minlength=n_seg)
+        # (astype: with no inner step at all, bincount gives integers and the += below would raise)
+        seg_len = np.bincount(seg[src[inner]], weights=wts[inner], minlength=n_seg).astype(np.float64)
         cross = junction[src] ^ junction[dst]
         outer = np.where(junction[src[cross]], dst[cross], src[cross])
         seg_len += np.bincount(seg[outer], weights=wts[cross], minlength=n_seg)
@@ -281,7 +286,7 @@ def _prune_branches(skel: np.ndarray, min_length: float) -> np.ndarray:
 
 
 def _measure(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """Break junctions and measure the pieces.
+    """Break junctions and measure the pieces (the plain reference of the kernel's measure; tests).
 
     Returns ``(labels_per_pixel, rows, cols, lengths, endpoint_pairs, n_loops)`` where
     ``labels_per_pixel`` gives each remaining skeleton pixel its path's id (-1 for removed or loop
@@ -323,6 +328,27 @@ def _measure(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     remap[path_ids] = np.arange(len(path_ids))
     pixel_path = np.where(pixel_path >= 0, remap[np.maximum(pixel_path, 0)], -1)
     return pixel_path, rows, cols, lengths, pairs, n_loops
+
+
+#: Above this many pixels a skeleton is measured by the numba kernel even when numba is not yet loaded
+#: (its first use in a process costs about 0.3 s; a 64^2 skeleton costs 2 ms in NumPy, 0.1 ms in the kernel).
+_KERNEL_PIXELS = 1 << 18
+
+
+def _skeleton_paths(
+    skel: np.ndarray, min_length: float, prune: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """Prune and measure: :func:`texsynth.synth.kernels.fringe_graph.skeleton_paths` (nogil, one call), or
+    its plain reference (:func:`_prune_branches`, :func:`_measure`) where numba is not loaded yet and the
+    image is small. The two give the same results (tested), so the choice never changes a metric."""
+    prune = bool(prune and min_length > 0)
+    if "numba" in sys.modules or skel.size >= _KERNEL_PIXELS:
+        from texsynth.synth.kernels.fringe_graph import skeleton_paths
+
+        return skeleton_paths(np.ascontiguousarray(skel), float(min_length), prune)
+    if prune:
+        skel = _prune_branches(skel, min_length)
+    return (skel, *_measure(skel))
 
 
 def extract_fringes(
@@ -453,9 +479,7 @@ def measure_skeleton(
         raise InvalidParameter("min_length", min_length, "must be a finite number of pixels >= 0")
     if pixel_size is not None:
         _check_positive("pixel_size", pixel_size)
-    if prune and min_length > 0:
-        skel = _prune_branches(skel, min_length)
-    pixel_path, rows, cols, lengths, pairs, n_loops = _measure(skel)
+    skel, pixel_path, rows, cols, lengths, pairs, n_loops = _skeleton_paths(skel, min_length, prune)
 
     # a one-pixel piece has length 0 and is never a fringe
     keep = (lengths >= min_length) & (lengths > 0)
