@@ -32,21 +32,27 @@ from __future__ import annotations
 
 import inspect
 import math
+import sys
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
 import numpy as np
 
-from texsynth.synth.analysis.fringes import MIN_LENGTH, Fringes, extract_fringes, fringe_summary
+from texsynth.synth.analysis.fringes import (
+    MIN_LENGTH,
+    Fringes,
+    extract_fringes,
+    extract_fringes_stack,
+    fringe_summary,
+)
 from texsynth.synth.analysis.tensor import (
     coherence,
     orientation_histogram,
     structure_direction,
-    structure_tensor,
+    structure_tensor_stack,
     tensor_dissimilarity,
 )
 from texsynth.synth.colour import to_grey
@@ -394,29 +400,47 @@ class ImageStats:
 
 
 def image_stats(grey: np.ndarray, settings: MeasureSettings) -> ImageStats:
-    tensors = structure_tensor(grey, settings.sigma_d, settings.sigma_w)
-    energy = float((tensors[..., 0] + tensors[..., 2]).sum(dtype=np.float64))
-    hist, _ = orientation_histogram(tensors, bins=settings.orientation_bins, weight="energy")
-    coh = coherence(tensors)
-    coh_counts, _ = np.histogram(coh, bins=settings.coherence_bins, range=(0.0, 1.0))
+    return stack_stats(grey[None], settings)[0]
+
+
+def stack_stats(greys: np.ndarray, settings: MeasureSettings) -> list[ImageStats]:
+    """:func:`image_stats` of each grey image of a stack ``(N, H, W)`` (float64), the same bits: the
+    filters run on the whole stack (:func:`~texsynth.synth.analysis.tensor.structure_tensor_stack`,
+    :func:`~texsynth.synth.analysis.fringes.extract_fringes_stack`), the histograms and sums image by
+    image."""
+    all_tensors = structure_tensor_stack(greys, settings.sigma_d, settings.sigma_w)
     if settings.fringes:
-        fr = extract_fringes(grey, pixel_size=settings.pixel_size, **settings.fringe_options)
-        lengths, tortuosity, loops = fr.lengths, fr.tortuosity, fr.n_loops
+        extracted: list[Fringes | None] = list(
+            extract_fringes_stack(greys, pixel_size=settings.pixel_size, **settings.fringe_options)
+        )
     else:
-        fr, lengths, tortuosity, loops = None, np.zeros(0), np.zeros(0), 0
-    return ImageStats(
-        grey=grey_histogram(grey, settings.grey_bins),
-        orientation=hist * energy,
-        coherence=coh_counts.astype(np.float64),
-        coherence_sum=float(coh.sum(dtype=np.float64)),
-        tensor_sum=tensors.reshape(-1, 3).sum(axis=0, dtype=np.float64),
-        n_pixels=grey.size,
-        lengths=lengths,
-        tortuosity=tortuosity,
-        n_loops=loops,
-        fringe_area=grey.size,
-        extracted=fr,
-    )
+        extracted = [None] * len(greys)
+    out = []
+    for grey, tensors, fr in zip(greys, all_tensors, extracted, strict=True):
+        energy = float((tensors[..., 0] + tensors[..., 2]).sum(dtype=np.float64))
+        hist, _ = orientation_histogram(tensors, bins=settings.orientation_bins, weight="energy")
+        coh = coherence(tensors)
+        coh_counts, _ = np.histogram(coh, bins=settings.coherence_bins, range=(0.0, 1.0))
+        if fr is not None:
+            lengths, tortuosity, loops = fr.lengths, fr.tortuosity, fr.n_loops
+        else:
+            lengths, tortuosity, loops = np.zeros(0), np.zeros(0), 0
+        out.append(
+            ImageStats(
+                grey=grey_histogram(grey, settings.grey_bins),
+                orientation=hist * energy,
+                coherence=coh_counts.astype(np.float64),
+                coherence_sum=float(coh.sum(dtype=np.float64)),
+                tensor_sum=tensors.reshape(-1, 3).sum(axis=0, dtype=np.float64),
+                n_pixels=grey.size,
+                lengths=lengths,
+                tortuosity=tortuosity,
+                n_loops=loops,
+                fringe_area=grey.size,
+                extracted=fr,
+            )
+        )
+    return out
 
 
 def _normalised(h: np.ndarray) -> list[float]:
@@ -479,7 +503,7 @@ def _ks_2samp_exact(data1: np.ndarray, data2: np.ndarray) -> tuple[float, float]
         return None
     try:
         with np.errstate(invalid="raise", over="raise"):
-            prob = _ks_prob_outside_square(n1, h) if n1 == n2 else _ks_outer_prob_inside(n1, n2, g, h)
+            prob = _ks_prob_outside_square(n1, h) if n1 == n2 else _outer_prob_inside(n1, n2, g, h)
     except (FloatingPointError, OverflowError):
         return None
     if not 0 <= prob <= 1:
@@ -500,9 +524,20 @@ def _ks_prob_outside_square(n: int, h: int) -> float:
     return 2 * p
 
 
+def _outer_prob_inside(m: int, n: int, g: int, h: int) -> float:
+    """:func:`_ks_outer_prob_inside` by its nogil kernel (:mod:`texsynth.synth.kernels.ks_exact`, the same
+    bits) once numba is loaded, else by the Python loop (numba's start-up costs more than the loop saves)."""
+    if "numba" in sys.modules:
+        from texsynth.synth.kernels.ks_exact import ks_outer_prob_inside
+
+        return float(ks_outer_prob_inside(int(m), int(n), int(g), int(h)))
+    return _ks_outer_prob_inside(m, n, g, h)
+
+
 def _ks_outer_prob_inside(m: int, n: int, g: int, h: int) -> float:
     """Share of lattice paths leaving ``|x/m - y/n| < h / lcm(m, n)``: scipy's
-    ``_compute_outer_prob_inside_method`` (Hodges' inside method for ``1 - p``, Viehmann's recursion)."""
+    ``_compute_outer_prob_inside_method`` (Hodges' inside method for ``1 - p``, Viehmann's recursion).
+    The plain reference of :func:`texsynth.synth.kernels.ks_exact.ks_outer_prob_inside`."""
     if m < n:
         m, n = n, m
     mg, ng = m // g, n // g
@@ -1008,32 +1043,46 @@ def evaluate_volume(
         )
 
 
-def _slice_stats(s: np.ndarray, settings: MeasureSettings) -> tuple[ImageStats, dict[str, Any]]:
-    """One slice's statistics and moments (the slice in float64, one at a time per thread)."""
-    grey = s.astype(np.float64)
-    stats = image_stats(grey, settings)
-    stats.extracted = None  # each slice's fringe objects: unused here, 100s of MB at 512^3
-    return stats, moments(grey)
+def _chunk_stats(chunk: np.ndarray, settings: MeasureSettings) -> list[tuple[ImageStats, dict[str, Any]]]:
+    """Each slice's statistics and moments, for a run of slices ``(n, h, w)`` (one float64 copy of it)."""
+    greys = np.array(chunk, dtype=np.float64)
+    out = []
+    for grey, stats in zip(greys, stack_stats(greys, settings), strict=True):
+        stats.extracted = None  # each slice's fringe objects: unused here, 100s of MB at 512^3
+        out.append((stats, moments(grey)))
+    return out
 
 
-#: Slices handed to the evaluation's threads ahead of the one being pooled (bounds the float64 copies).
-SLICES_AHEAD = 4
+#: Pixels of the slices one task of the volume's evaluation takes (a run of 32 slices of 64^2, 2 of
+#: 256^2, one of 512^2): long filter calls that release the GIL, a bounded float64 copy per thread.
+CHUNK_PIXELS = 1 << 17
+#: Tasks handed to the evaluation's threads ahead of the one being pooled, per thread.
+CHUNKS_AHEAD = 2
 
 
-def _map_slices(function: Callable[[np.ndarray], Any], slices: Sequence[np.ndarray]) -> Iterator[Any]:
-    """``function`` of each slice, in order: on the work's threads (:func:`current_threads`) when it has
+def _chunks(n: int, pixels: int, threads: int) -> list[range]:
+    """Runs of consecutive slice numbers ``0 .. n - 1``: at most :data:`CHUNK_PIXELS` pixels each (one
+    slice at least) and, with several threads, at least two runs per thread to balance them."""
+    size = max(1, CHUNK_PIXELS // max(pixels, 1))
+    if threads > 1:
+        size = min(size, max(1, -(-n // (2 * threads))))
+    return [range(i, min(n, i + size)) for i in range(0, n, size)]
+
+
+def _map_chunks(function: Callable[[Any], Any], tasks: Sequence[Any]) -> Iterator[Any]:
+    """``function`` of each task, in order: on the work's threads (:func:`current_threads`) when it has
     several. Each slice's answer depends on that slice alone and the caller pools them in order, so the
-    results do not depend on the thread count; the NumPy and SciPy filters inside release the GIL. At
-    most ``threads * SLICES_AHEAD`` slices are in flight."""
+    results do not depend on the thread count (nor on how the slices are cut into tasks); the filters and
+    the fringe kernel inside release the GIL. At most ``threads * CHUNKS_AHEAD`` tasks are in flight."""
     threads = current_threads()
-    if threads < 2 or len(slices) < 2:
-        yield from map(function, slices)
+    if threads < 2 or len(tasks) < 2:
+        yield from map(function, tasks)
         return
-    ahead = threads * SLICES_AHEAD
+    ahead = threads * CHUNKS_AHEAD
     with ThreadPoolExecutor(max_workers=threads) as pool:
         pending: deque[Future[Any]] = deque()
-        for s in slices:
-            pending.append(pool.submit(function, s))
+        for task in tasks:
+            pending.append(pool.submit(function, task))
             if len(pending) >= ahead:
                 yield pending.popleft().result()
         while pending:
@@ -1104,19 +1153,31 @@ def _evaluate_volume(
     per_axis: dict[str, Any] = {}
     pooled_axes: list[ImageStats] = []
     values_axes: list[np.ndarray] = []
-    total = sum(len(range(0, vol.shape[a], slice_step)) for a in axes)
+    # every axis's runs of slices in one queue, so that the threads do not wait at the end of an axis
+    threads = current_threads()
+    views = {axis: np.moveaxis(vol, axis, 0)[::slice_step] for axis in axes}
+    tasks = [
+        (axis, views[axis][run.start : run.stop])
+        for axis in axes
+        for run in _chunks(len(views[axis]), views[axis][0].size, threads)
+    ]
+    total = sum(len(v) for v in views.values())
+    results: dict[int, list[tuple[ImageStats, dict[str, Any]]]] = {axis: [] for axis in axes}
     done = 0
+    measured = _map_chunks(lambda task: (task[0], _chunk_stats(task[1], settings)), tasks)
     for axis in axes:
+        while len(results[axis]) < len(views[axis]):
+            got_axis, got = next(measured)
+            results[got_axis].extend(got)
+            done += len(got)
+            if progress is not None and (done // 16 > (done - len(got)) // 16 or done == total):
+                progress("evaluating the volume's slices", done / total)
         ex = planes[PLANES[axis]]
         ref = ref_stats[id(ex)]
-        slices = list(np.moveaxis(vol, axis, 0)[::slice_step])
-        slice_stats, slice_moments = [], []
-        for stats, slice_moment in _map_slices(partial(_slice_stats, settings=settings), slices):
-            slice_stats.append(stats)
-            slice_moments.append(slice_moment)
-            done += 1
-            if progress is not None and (done % 16 == 0 or done == total):
-                progress("evaluating the volume's slices", done / total)
+        slices = list(views[axis])
+        slice_stats = [stats for stats, _ in results[axis]]
+        slice_moments = [moment for _, moment in results[axis]]
+        results[axis] = []
         pooled = ImageStats.pool(slice_stats)
         pooled_moments = volume_moments if volume_moments is not None else moments(slices)
         block = compare_stats(ref, pooled, ref_moments[id(ex)], pooled_moments, settings)
