@@ -148,3 +148,26 @@ def test_soot_fringes_are_plausible():
     assert 0.5 <= s["median_length_nm"] <= 1.5
     assert s["share_tortuous"] < 0.2
     assert TORTUOUS == 1.5
+
+
+def test_stack_extraction_is_the_extraction_of_each_image() -> None:
+    """extract_fringes_stack filters the whole stack at once: every image's fringes as extract_fringes
+    gives them alone, with both filters and a fixed threshold, and the same errors."""
+    from texsynth.synth.analysis.fringes import extract_fringes_stack
+
+    rng = np.random.default_rng(2)
+    yy, xx = np.mgrid[0:40, 0:48].astype(np.float64)
+    waves = [np.cos(2 * np.pi * (xx + k * yy / 5) / 7) for k in range(5)]
+    stack = np.stack([0.5 + 0.4 * w + rng.normal(0, 0.05, xx.shape) for w in waves])
+    for options in ({}, {"filter": "dog", "background": 2.5}, {"threshold": 0.02, "min_length": 4.0}):
+        together = extract_fringes_stack(stack, **options)
+        assert sum(f.count for f in together) > 10
+        for image, fr in zip(stack, together, strict=True):
+            alone = extract_fringes(image, **options)
+            for name in ("lengths", "tortuosity", "endpoints", "labels", "binary"):
+                assert np.array_equal(getattr(fr, name), getattr(alone, name)), name
+            assert fr.n_loops == alone.n_loops
+    with pytest.raises(InvalidInput, match="grey"):
+        extract_fringes_stack(stack[0])
+    with pytest.raises(InvalidParameter, match="threshold"):
+        extract_fringes_stack(stack, threshold="mean")

@@ -415,3 +415,19 @@ def test_mean_coherence_of_stripes_noise_and_rgb() -> None:
     assert mean_coherence(stripes) > 0.95 > ORIENTED_COHERENCE > mean_coherence(noise)
     rgb = np.repeat(stripes[..., None], 3, axis=2)
     assert mean_coherence(rgb) == pytest.approx(mean_coherence(stripes), abs=1e-6)
+
+
+def test_stack_tensor_is_each_image_tensor_bit_for_bit() -> None:
+    from texsynth.synth.analysis.tensor import structure_tensor_stack
+
+    rng = np.random.default_rng(4)
+    stack = ndi.gaussian_filter(rng.random((6, 33, 41)), 1.2)
+    for dtype in (np.float64, np.float32):
+        for mode in ("reflect", "wrap"):
+            got = structure_tensor_stack(stack.astype(dtype), 1.0, 2.0, mode=mode)
+            want = np.stack([structure_tensor(s.astype(dtype), 1.0, 2.0, mode=mode) for s in stack])
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+    with pytest.raises(InvalidParameter, match="images"):
+        structure_tensor_stack(stack[0])
+    with pytest.raises(InvalidParameter, match="sigma_w"):
+        structure_tensor_stack(stack, 1.0, float("inf"))

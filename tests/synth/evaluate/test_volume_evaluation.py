@@ -149,16 +149,50 @@ def test_cli_per_plane_table_json_and_errors(tmp_path, capsys):
     assert "per-plane exemplars are for volumes" in capsys.readouterr().err
 
 
-def test_slices_evaluated_on_threads_give_the_same_metrics():
-    """The slices' statistics run on the work's threads (in order): the same JSON with 1 and 2 threads,
-    fringes included, and the progress still counts every slice once, in order."""
+def _wavy_volume() -> np.ndarray:
     z, y, x = np.mgrid[0:20, 0:24, 0:28].astype(np.float32)
     rng = np.random.default_rng(0)
     vol = 0.5 + 0.4 * np.cos(2 * np.pi * (x + 0.5 * y + 2 * np.sin(z / 5)) / 6) + rng.normal(0, 0.03, x.shape)
-    vol = np.clip(vol, 0.0, 1.0).astype(np.float32)
+    return np.clip(vol, 0.0, 1.0).astype(np.float32)
+
+
+def test_slices_evaluated_on_threads_give_the_same_metrics(monkeypatch):
+    """The slices' statistics run on the work's threads (in order): the same JSON with 1, 2 and 4 threads
+    (4 for the evaluation's own pool: numba's is capped at this machine's cores), fringes included, and the
+    progress still counts every slice once, in order."""
+    from texsynth.synth.evaluate import measures
+
+    vol = _wavy_volume()
     seen: list[float] = []
     one = evaluate_volume(vol[10], vol, threads=1)
     two = evaluate_volume(vol[10], vol, threads=2, progress=lambda _stage, f: seen.append(f))
+    monkeypatch.setattr(measures, "current_threads", lambda: 4)
+    four = evaluate_volume(vol[10], vol, threads=2)
     assert one["axes"]["0"]["fringes"]["output"]["count"] > 0  # the fringe analysis ran on the threads too
     assert json.dumps(one, sort_keys=True) == json.dumps(two, sort_keys=True)
+    assert json.dumps(one, sort_keys=True) == json.dumps(four, sort_keys=True)
     assert seen == sorted(seen) and seen[-1] == 1.0
+
+
+@pytest.mark.parametrize("chunk_pixels", [1, 700, 1 << 30])
+def test_runs_of_slices_give_the_metrics_of_one_slice_at_a_time(monkeypatch, chunk_pixels):
+    """The slices are measured in runs (stack filters); however the runs are cut (one slice each, a few,
+    a whole axis), every slice's statistics and so the JSON are those of the images one at a time."""
+    from texsynth.synth.evaluate import measures
+
+    vol = _wavy_volume()
+    settings = measures.MeasureSettings()
+    for axis in (0, 1, 2):
+        view = np.moveaxis(vol, axis, 0)
+        runs = measures._chunk_stats(view, settings)
+        for k, (stats, moment) in enumerate(runs):
+            grey = view[k].astype(np.float64)
+            alone = measures.image_stats(grey, settings)
+            for name in ("grey", "orientation", "coherence", "tensor_sum", "lengths", "tortuosity"):
+                assert np.array_equal(getattr(stats, name), getattr(alone, name)), (axis, k, name)
+            assert (stats.coherence_sum, stats.n_loops) == (alone.coherence_sum, alone.n_loops)
+            assert moment == measures.moments(grey)
+    reference = evaluate_volume(vol[10], vol, threads=2)
+    monkeypatch.setattr(measures, "CHUNK_PIXELS", chunk_pixels)
+    cut = evaluate_volume(vol[10], vol, threads=2)
+    assert json.dumps(cut, sort_keys=True) == json.dumps(reference, sort_keys=True)

@@ -46,4 +46,3 @@ def test_morton_order_known_answer() -> None:
 def test_random_scan_needs_a_generator() -> None:
     with pytest.raises(InvalidParameter, match="seeded"):
         scan_order((4, 4), "random")
-

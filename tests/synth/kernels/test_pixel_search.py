@@ -182,4 +182,3 @@ def test_kernel_matches_reference_with_falloff_and_square_refinement(search: str
         settings=settings,
         seed=7,
     )
-
