@@ -37,6 +37,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -1043,6 +1044,10 @@ def evaluate_volume(
         )
 
 
+def _exemplar_stats(ex: np.ndarray, settings: MeasureSettings) -> tuple[ImageStats, dict[str, Any]]:
+    return image_stats(ex, settings), moments(ex)
+
+
 def _chunk_stats(chunk: np.ndarray, settings: MeasureSettings) -> list[tuple[ImageStats, dict[str, Any]]]:
     """Each slice's statistics and moments, for a run of slices ``(n, h, w)`` (one float64 copy of it)."""
     greys = np.array(chunk, dtype=np.float64)
@@ -1142,36 +1147,52 @@ def _evaluate_volume(
             "volume", f"volume of shape {vol.shape} is too small to evaluate (< {MIN_SIDE} voxels)"
         )
 
-    # one exemplar's statistics are computed once, however many planes it serves
-    ref_stats: dict[int, ImageStats] = {}
-    ref_moments: dict[int, dict[str, Any]] = {}
-    for ex in planes.values():
-        if id(ex) not in ref_stats:
-            ref_stats[id(ex)], ref_moments[id(ex)] = image_stats(ex, settings), moments(ex)
-    # with every slice taken, each axis pools every voxel once: the moments are the volume's
-    volume_moments = moments(vol) if slice_step == 1 else None
-    per_axis: dict[str, Any] = {}
-    pooled_axes: list[ImageStats] = []
-    values_axes: list[np.ndarray] = []
-    # every axis's runs of slices in one queue, so that the threads do not wait at the end of an axis
+    # one queue for the threads: each exemplar's statistics (once, however many planes it serves), the
+    # volume's moments (with every slice taken, each axis pools every voxel once: they are the volume's),
+    # every axis's runs of slices, then S2; taken in that order, each axis compared as soon as its slices
+    # are in, so the threads do not wait at the end of an axis
     threads = current_threads()
     views = {axis: np.moveaxis(vol, axis, 0)[::slice_step] for axis in axes}
-    tasks = [
-        (axis, views[axis][run.start : run.stop])
+    jobs: list[tuple[str, Any, Callable[[], Any]]] = [
+        ("exemplar", key, partial(_exemplar_stats, ex, settings))
+        for key, ex in {id(ex): ex for ex in planes.values()}.items()
+    ]
+    if slice_step == 1:
+        jobs.append(("moments", None, partial(moments, vol)))
+    jobs += [
+        ("slices", axis, partial(_chunk_stats, views[axis][run.start : run.stop], settings))
         for axis in axes
         for run in _chunks(len(views[axis]), views[axis][0].size, threads)
     ]
+    if s2:
+        jobs.append(("s2", None, partial(_s2_comparisons, planes, vol, threshold, bool(s2_periodic))))
+    ref_stats: dict[int, ImageStats] = {}
+    ref_moments: dict[int, dict[str, Any]] = {}
+    volume_moments: dict[str, Any] | None = None
+    correlations: dict[str, Any] = {}
+    per_axis: dict[str, Any] = {}
+    pooled_axes: list[ImageStats] = []
+    values_axes: list[np.ndarray] = []
     total = sum(len(v) for v in views.values())
     results: dict[int, list[tuple[ImageStats, dict[str, Any]]]] = {axis: [] for axis in axes}
     done = 0
-    measured = _map_chunks(lambda task: (task[0], _chunk_stats(task[1], settings)), tasks)
-    for axis in axes:
-        while len(results[axis]) < len(views[axis]):
-            got_axis, got = next(measured)
-            results[got_axis].extend(got)
-            done += len(got)
-            if progress is not None and (done // 16 > (done - len(got)) // 16 or done == total):
-                progress("evaluating the volume's slices", done / total)
+    for (kind, key, _), value in zip(jobs, _map_chunks(lambda job: job[2](), jobs), strict=True):
+        if kind == "exemplar":
+            ref_stats[key], ref_moments[key] = value
+            continue
+        if kind == "moments":
+            volume_moments = value
+            continue
+        if kind == "s2":
+            correlations = value
+            continue
+        axis = key
+        results[axis].extend(value)
+        done += len(value)
+        if progress is not None and (done // 16 > (done - len(value)) // 16 or done == total):
+            progress("evaluating the volume's slices", done / total)
+        if len(results[axis]) < len(views[axis]):
+            continue
         ex = planes[PLANES[axis]]
         ref = ref_stats[id(ex)]
         slices = list(views[axis])
@@ -1211,7 +1232,6 @@ def _evaluate_volume(
     result: dict[str, Any] = {"kind": "volume", "settings": record, "isotropic": isotropic}
     if s2:
         record["s2"] = _s2_settings(threshold, bool(s2_periodic))
-        correlations = _s2_comparisons(planes, vol, threshold, bool(s2_periodic))
         for axis in axes:
             plane = PLANES[axis]
             block = per_axis[str(axis)]
