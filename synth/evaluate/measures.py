@@ -1018,9 +1018,9 @@ def evaluate_volume(
     (``(D, W)``), along axis 2 ``volume[:, :, k]`` (``(D, H)``): the first image axis of a slice is
     always the lower volume axis. Pooling is described in the module docstring. With per-plane
     exemplars, ``overall`` compares the pooled slices of all axes with the pooled exemplars of their
-    planes (each exemplar weighted by its pixel count). Time: a 64^3 volume with per-plane
-    exemplars took 3.2 s with fringes and about 1 s without on an idle core of the project's machine
-    (6.3 s and 2.2 s with the two cores shared five ways); ``S2`` itself takes under 0.1 s.
+    planes (each exemplar weighted by its pixel count). The slices are measured in runs on the work's
+    threads, with the same results whatever the thread count; times in docs/benchmarks.md ("A volume's
+    evaluation on both cores").
     """
     with use_threads(threads):
         return _evaluate_volume(
