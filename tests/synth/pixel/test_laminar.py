@@ -11,6 +11,7 @@ from texsynth.synth.analysis.tensor import mean_coherence
 from texsynth.synth.api import synthesize
 from texsynth.synth.io.laminar import turbostratic_volume
 from texsynth.synth.output.volume import mid_slices
+from texsynth.synth.pixel import laminar
 from texsynth.synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
@@ -185,6 +186,29 @@ def test_pilot_picks_the_start_that_keeps_the_exemplar_coherence() -> None:
     exemplar = load_image(crop)
     assert laminar_pilot(exemplar)
     assert laminar_pilot(exemplar)
+
+
+def test_the_centred_field_cuts_a_small_volume_at_any_length() -> None:
+    """A field whose Gaussian is half a 32-voxel side (the pilot's 29 px sheets): its mean outweighs the
+    waves and the zero level misses the volume for some seeds (inside share 0 or 1); centred, about half
+    of every draw is inside. ``centred=False`` is the field as before (solid-chen-wang's bytes)."""
+    shape, sigma = (32, 32, 32), 14.6
+    before = [
+        float((laminar._smooth_field(shape, sigma, np.random.default_rng(k)) > 0).mean()) for k in range(8)
+    ]
+    centred = [
+        float((laminar._smooth_field(shape, sigma, np.random.default_rng(k), centred=True) > 0).mean())
+        for k in range(8)
+    ]
+    assert min(before) == 0.0 or max(before) == 1.0
+    assert all(0.4 < share < 0.6 for share in centred), centred
+    field = laminar._smooth_field(shape, sigma, np.random.default_rng(3), centred=True)
+    assert abs(float(field.mean())) < 1e-9 and float(field.std()) == pytest.approx(1.0)
+    a = laminar_volume((16, 16, 16), 6.0, 24.0, np.arange(50.0), np.random.default_rng(5))
+    b = laminar_volume((16, 16, 16), 6.0, 24.0, np.arange(50.0), np.random.default_rng(5), centred=False)
+    assert a.tobytes() == b.tobytes()
+    phi = laminar_phase(shape, 29.0, np.random.default_rng(0), centred=True)
+    assert 0.3 < float((phi > 0).mean()) < 0.7  # sheets on both sides of the zero level
 
 
 def test_plane_orientation_of_a_grating() -> None:
