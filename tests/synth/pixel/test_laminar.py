@@ -211,6 +211,36 @@ def test_the_centred_field_cuts_a_small_volume_at_any_length() -> None:
     assert 0.3 < float((phi > 0).mean()) < 0.7  # sheets on both sides of the zero level
 
 
+def test_solid_kopf_pilot_weighs_a_laminar_volume_with_sheets(monkeypatch) -> None:
+    """solid-kopf's pilot (the real onion crop, in the pilot's band) builds its laminar 32^3 volume from a
+    centred field: about half of it inside the zero level, not all (the degenerate diagonal stack of
+    session 13); solid-chen-wang's pilot (no settings) keeps the field as before. The choice is recorded
+    in the stats of the run as before."""
+    from pathlib import Path
+
+    from texsynth.synth.io import load_image
+    from texsynth.synth.methods import solid_kopf
+
+    exemplar = load_image(Path(__file__).resolve().parents[3] / "benchmarks" / "data" / "hrtem-onion-128.png")
+    shares: list[tuple[int, float]] = []
+    smooth = laminar._smooth_field
+
+    def recorded(shape, sigma, rng, *, centred=False):  # type: ignore[no-untyped-def]
+        field = smooth(shape, sigma, rng, centred=centred)
+        shares.append((shape[0], float((field > 0).mean())))
+        return field
+
+    monkeypatch.setattr(laminar, "_smooth_field", recorded)
+    assert solid_kopf.laminar_pilot(exemplar, {"structure_length": None}, centred=solid_kopf.CENTRED_START)
+    assert shares == [(solid_kopf.PILOT_SIDE, pytest.approx(0.5, abs=0.1))]
+    shares.clear()
+    assert solid_kopf.laminar_pilot(exemplar)  # solid-chen-wang's: the field as before, wholly inside
+    assert shares == [(solid_kopf.PILOT_SIDE, 1.0)]
+    shares.clear()
+    run = synthesize("solid-kopf", exemplar, size=(16, 16, 16), params={"levels": 1, "iterations": 1}, seed=1)
+    assert run.stats["laminar_start"] and [side for side, _ in shares] == [32, 16]
+
+
 def test_plane_orientation_of_a_grating() -> None:
     r, c = np.mgrid[0:64, 0:64].astype(np.float64)
     angle = np.radians(30.0)
