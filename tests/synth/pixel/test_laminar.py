@@ -214,8 +214,8 @@ def test_the_centred_field_cuts_a_small_volume_at_any_length() -> None:
 def test_solid_kopf_pilot_weighs_a_laminar_volume_with_sheets(monkeypatch) -> None:
     """solid-kopf's pilot (the real onion crop, in the pilot's band) builds its laminar 32^3 volume from a
     centred field: about half of it inside the zero level, not all (the degenerate diagonal stack of
-    session 13); solid-chen-wang's pilot (no settings) keeps the field as before. The choice is recorded
-    in the stats of the run as before."""
+    session 13); the pilot without ``centred`` (solid-chen-wang's call) keeps the field as before. The
+    choice is recorded in the stats of the run as before, whose own start is centred too."""
     from pathlib import Path
 
     from texsynth.synth.io import load_image
@@ -234,11 +234,12 @@ def test_solid_kopf_pilot_weighs_a_laminar_volume_with_sheets(monkeypatch) -> No
     assert solid_kopf.laminar_pilot(exemplar, {"structure_length": None}, centred=solid_kopf.CENTRED_START)
     assert shares == [(solid_kopf.PILOT_SIDE, pytest.approx(0.5, abs=0.1))]
     shares.clear()
-    assert solid_kopf.laminar_pilot(exemplar)  # solid-chen-wang's: the field as before, wholly inside
+    assert solid_kopf.laminar_pilot(exemplar)  # uncentred (solid-chen-wang's call): as before, wholly inside
     assert shares == [(solid_kopf.PILOT_SIDE, 1.0)]
     shares.clear()
     run = synthesize("solid-kopf", exemplar, size=(16, 16, 16), params={"levels": 1, "iterations": 1}, seed=1)
     assert run.stats["laminar_start"] and [side for side, _ in shares] == [32, 16]
+    assert 0.35 < shares[1][1] < 0.65
 
 
 def test_plane_orientation_of_a_grating() -> None:
