@@ -10,7 +10,8 @@ docs/laminar.md from docs/laminar-benchmark.json without running anything.
    ("per plane"). Checked first: the truth's own slices against the exemplar(s)
    (:func:`texsynth.synth.evaluate.evaluate_volume`), and an independent 64^3 sample of the same material
    (seeds 12-14) against the truth's slices: the floor of every measure (``--floor N``: the spread of N
-   such samples, printed).
+   such samples, printed). ``--pilot 32`` prints ``solid-kopf``'s pilot on the real crops (``--uncentred``:
+   the start field as before).
 2. **The runs**: every method and setting of :data:`RUNS`, seeds 1-3, through
    :func:`texsynth.synth.api.synthesize`, with the process CPU time and the wall time; per axis, the volume's
    slices against the truth's slices of the same size
@@ -297,6 +298,77 @@ def floor_distribution(family: str = "onions", samples: int = 30, side: int = 64
     }
 
 
+#: The real exemplars the pilot is asked about (``--pilot``): this checkout's crops and the shared soot.
+PILOT_EXEMPLARS = (
+    DOCS.parent / "benchmarks" / "data" / "hrtem-onion-128.png",
+    DOCS.parent / "benchmarks" / "data" / "hrtem-onion-core-128.png",
+    DOCS.parent.parent / "shared" / "data" / "hrtem-soot-128.png",
+    DOCS.parent.parent / "shared" / "data" / "hrtem-soot-256.png",
+)
+
+
+def pilot_table(sides: tuple[int, ...] = (32,), centred: bool = True) -> list[dict[str, Any]]:
+    """``solid-kopf``'s pilot on the real exemplars: mean coherence, whether it is in the pilot's band, and
+    at each side the random and laminar volumes' coherence ratios (seed 0, the pilot's own measure) and
+    the laminar start field's share inside its zero level (1.0 or 0.0: a degenerate, one-sided start)."""
+    from texsynth.synth.analysis.tensor import mean_coherence
+    from texsynth.synth.colour import to_grey
+    from texsynth.synth.io import load_image
+    from texsynth.synth.methods import solid_kopf
+    from texsynth.synth.pixel import laminar
+
+    shares: list[float] = []
+    smooth = laminar._smooth_field
+
+    def recorded(shape, sigma, rng, *, centred=False):  # type: ignore[no-untyped-def]
+        field = smooth(shape, sigma, rng, centred=centred)
+        shares.append(float((field > 0).mean()))
+        return field
+
+    rows = []
+    laminar._smooth_field = recorded  # type: ignore[assignment]
+    try:
+        for path in PILOT_EXEMPLARS:
+            if not path.exists():
+                continue
+            image = np.ascontiguousarray(to_grey(np.asarray(load_image(path), dtype=np.float32)))
+            fringed = mean_coherence(image)
+            band = (
+                laminar.mean_tensor_coherence(image) < laminar.ISOTROPIC_MAX
+                and laminar.PILOT_COHERENCE <= fringed < laminar.START_COHERENCE
+            )
+            row: dict[str, Any] = {"exemplar": path.name, "coherence": fringed, "pilot": band}
+            for side in sides if band else ():
+                ratios = {}
+                for structure in ("none", "laminar"):
+                    shares.clear()
+                    params = solid_kopf.SolidKopfParams(structure=structure, structure_length=None)
+                    volume = solid_kopf._run_solid_kopf(
+                        image,
+                        size=(side,) * 3,
+                        params=params,
+                        seed=0,
+                        progress=lambda *_, **__: None,
+                        constraint=None,
+                        exemplars=None,
+                        centred=centred,
+                    ).image
+                    ratios[structure] = solid_kopf.slice_coherence(volume) / max(fringed, 1e-6)
+                row[str(side)] = {
+                    "random": ratios["none"],
+                    "laminar": ratios["laminar"],
+                    "inside": shares[0],
+                    "choice": "laminar"
+                    if abs(np.log(ratios["laminar"])) < abs(np.log(ratios["none"]))
+                    else "random",
+                }
+            rows.append(row)
+            print(json.dumps(row, default=float), flush=True)
+    finally:
+        laminar._smooth_field = smooth  # type: ignore[assignment]
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid synthesis against known laminar answers")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
@@ -306,7 +378,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--floor", type=int, default=0, help="only print the spread of N independent 64^3 onion samples"
     )
+    parser.add_argument(
+        "--pilot",
+        type=int,
+        action="append",
+        default=[],
+        help="only print solid-kopf's pilot on the real exemplars at this side (repeatable; e.g. 32)",
+    )
+    parser.add_argument(
+        "--uncentred", action="store_true", help="with --pilot: the laminar field as before (not centred)"
+    )
     args = parser.parse_args(argv)
+    if args.pilot:
+        pilot_table(tuple(args.pilot), centred=not args.uncentred)
+        return 0
     if args.calibrate:
         print(json.dumps(calibrate()))
         return 0

@@ -25,8 +25,9 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
 - grey histogram, 16 bins; 7x7 neighbourhoods (smaller at coarse levels) inside the exemplar; wrap or mirror;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
-  curved sheets (length fitted to the exemplars: ``structure_length``) for isotropic fringes, a crumpled
-  stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep the random start;
+  curved sheets (a centred field; length fitted to the exemplars: ``structure_length``) for isotropic
+  fringes, a crumpled stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep
+  the random start;
 - after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 
@@ -572,6 +573,11 @@ class _KopfLoop:
         )
 
 
+#: The laminar start's random field is centred (:func:`laminar_phase`): its mean, which outweighs the few
+#: waves a long sheet length leaves in a small volume, no longer puts the zero level outside most of it.
+CENTRED_START = True
+
+
 def run_solid_kopf(
     exemplar: np.ndarray,
     *,
@@ -583,13 +589,39 @@ def run_solid_kopf(
     exemplars: dict[str, np.ndarray] | None = None,
 ) -> Result:
     """Synthesize a ``size = (D, H, W)`` volume whose slices in ``params.planes`` match their exemplars."""
+    return _run_solid_kopf(
+        exemplar,
+        size=size,
+        params=params,
+        seed=seed,
+        progress=progress,
+        constraint=constraint,
+        exemplars=exemplars,
+        centred=CENTRED_START,
+    )
+
+
+def _run_solid_kopf(
+    exemplar: np.ndarray,
+    *,
+    size: tuple[int, int, int],
+    params: SolidKopfParams,
+    seed: int,
+    progress: Progress,
+    constraint: np.ndarray | None,
+    exemplars: dict[str, np.ndarray] | None,
+    centred: bool,
+) -> Result:
+    """:func:`run_solid_kopf`, the laminar start's field ``centred`` or not (:func:`laminar_phase`)."""
     run = SolidRun.start(exemplar, exemplars, params.planes, seed, checked_progress(progress))
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
     plan_levels(run.views, size, 1, params.neighbourhood_size)  # names bad exemplars before choosing a start
     period, phi, length = 0.0, None, None
-    pilot = partial(laminar_pilot, settings={"structure_length": params.structure_length})
+    pilot = partial(
+        laminar_pilot, settings={"structure_length": params.structure_length}, centred=CENTRED_START
+    )
     kind = start_kind(
         params.structure, run.views, params.planes, params.adapt_to_structure, pilot, ORIENTED_MAX_BEND
     )
@@ -609,7 +641,9 @@ def run_solid_kopf(
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
     if period > 0 and phi is None:
         length = resolved_length(params.structure_length, partial(fitted_structure_length, run.constrained()))
-        phi = laminar_phase(plan.shapes[0], length * period, run.rng, periodic=params.periodic)
+        phi = laminar_phase(
+            plan.shapes[0], length * period, run.rng, periodic=params.periodic, centred=centred
+        )
     loop = _KopfLoop(params, plan, run, iterations, period, phi)
     loop.start_length = length
     loop.order_usage = params.order_usage == "on" or (
@@ -627,22 +661,34 @@ PILOT_SETTINGS: dict[str, object] = {"structure_length": 4.0, "final_step": "ave
 PILOT_SIDE = 32
 
 
-def laminar_pilot(exemplar: np.ndarray, settings: dict[str, object] | None = None) -> bool:
+def laminar_pilot(
+    exemplar: np.ndarray, settings: dict[str, object] | None = None, *, centred: bool = False
+) -> bool:
     """Whether the laminar start keeps ``exemplar``'s coherence better than the random start.
 
     Two ``PILOT_SIDE^3`` volumes (defaults but ``settings``, else :data:`PILOT_SETTINGS`; seed 0; one
     from each start) are synthesized, and the start whose slices' mean coherence over the exemplar's
     (``log`` ratio) is nearer 1 wins: on short-fringed
     exemplars the random start gives blobs (real onion crops 0.64-0.74x) and the sheets can be too
-    ordered (soot-128 1.54x); docs/solid.md, "The laminar start, chosen by a pilot".
+    ordered (soot-128 1.54x); docs/solid.md, "The laminar start, chosen by a pilot". ``centred``: the
+    laminar volume's field centred (:func:`laminar_phase`; solid-kopf's own pilot): uncentred, the
+    pilot's 29 px sheets leave a 32^3 field wholly inside its zero level, and the "laminar" volume is
+    one diagonal stack (docs/solid.md, "The pilot's laminar volume mended").
     """
     target = mean_coherence(exemplar)
     gaps = {}
     pinned = settings if settings is not None else PILOT_SETTINGS
     for structure in ("none", "laminar"):
         params = SolidKopfParams(structure=structure, **pinned)  # type: ignore[arg-type]
-        volume = run_solid_kopf(
-            exemplar, size=(PILOT_SIDE,) * 3, params=params, seed=0, progress=lambda *_, **__: None
+        volume = _run_solid_kopf(
+            exemplar,
+            size=(PILOT_SIDE,) * 3,
+            params=params,
+            seed=0,
+            progress=lambda *_, **__: None,
+            constraint=None,
+            exemplars=None,
+            centred=centred,
         ).image
         ratio = slice_coherence(volume) / max(target, 1e-6)
         gaps[structure] = abs(np.log(max(ratio, 1e-6)))

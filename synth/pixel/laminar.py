@@ -200,9 +200,17 @@ def structure_levels(period: float, levels: int) -> int:
     return used
 
 
-def _smooth_field(shape: tuple[int, int, int], sigma: float, rng: np.random.Generator) -> np.ndarray:
-    """White noise low-passed by a Gaussian of ``sigma`` voxels, periodic (FFT), unit variance."""
+def _smooth_field(
+    shape: tuple[int, int, int], sigma: float, rng: np.random.Generator, *, centred: bool = False
+) -> np.ndarray:
+    """White noise low-passed by a Gaussian of ``sigma`` voxels, periodic (FFT), unit variance.
+
+    ``centred`` removes the field's mean (its zero-frequency term): when ``sigma`` nears the side, the mean
+    outweighs the few waves left and the zero level misses most of the volume (docs/solid.md).
+    """
     spectrum = np.fft.rfftn(rng.standard_normal(shape))
+    if centred:
+        spectrum[0, 0, 0] = 0.0
     fz, fy, fx = np.fft.fftfreq(shape[0]), np.fft.fftfreq(shape[1]), np.fft.rfftfreq(shape[2])
     # the same sums and products as on whole meshgrids, broadcast and in place (memory: issue 25)
     low_pass = fz[:, None, None] ** 2 + fy[None, :, None] ** 2 + fx[None, None, :] ** 2
@@ -216,16 +224,22 @@ def _smooth_field(shape: tuple[int, int, int], sigma: float, rng: np.random.Gene
 
 
 def laminar_phase(
-    shape: tuple[int, int, int], length: float, rng: np.random.Generator, *, periodic: bool = True
+    shape: tuple[int, int, int],
+    length: float,
+    rng: np.random.Generator,
+    *,
+    periodic: bool = True,
+    centred: bool = False,
 ) -> np.ndarray:
     """The phase ``phi`` (voxels): signed distance to the zero level of a smooth random field.
 
     The field (periodic) has Gaussian correlation of ``sigma = length / 2`` voxels; the distance is the
     exact Euclidean distance transform (computed on a wrapped margin of ``length`` voxels so that a
     periodic volume stays periodic) and smoothed by a Gaussian of 1 voxel, which removes the staircase
-    of the voxel surface while keeping ``|grad phi|`` about 1.
+    of the voxel surface while keeping ``|grad phi|`` about 1. ``centred``: the field's mean removed
+    (:func:`_smooth_field`), so that the zero level cuts the volume however long the sheets.
     """
-    field = _smooth_field(shape, max(length, 1.0) / 2.0, rng)
+    field = _smooth_field(shape, max(length, 1.0) / 2.0, rng, centred=centred)
     margin = int(np.ceil(min(length, max(shape))))
     padded = np.pad(field, margin, mode="wrap")
     inside = padded > 0
@@ -286,12 +300,14 @@ def laminar_volume(
     rng: np.random.Generator,
     *,
     periodic: bool = True,
+    centred: bool = False,
 ) -> np.ndarray:
     """Sheets ``cos(2 pi phi / period)`` of :func:`laminar_phase`, grey levels rank-mapped onto ``values``.
 
     Returns ``(D, H, W)`` float32; its histogram is that of ``values`` (the exemplar's pixels).
+    ``centred``: as :func:`laminar_phase` (off: the bytes before it existed).
     """
-    return sheets(laminar_phase(shape, length, rng, periodic=periodic), period, values)
+    return sheets(laminar_phase(shape, length, rng, periodic=periodic, centred=centred), period, values)
 
 
 def level_phase(phi: np.ndarray, level: int) -> np.ndarray:

@@ -11,6 +11,7 @@ from texsynth.synth.analysis.tensor import mean_coherence
 from texsynth.synth.api import synthesize
 from texsynth.synth.io.laminar import turbostratic_volume
 from texsynth.synth.output.volume import mid_slices
+from texsynth.synth.pixel import laminar
 from texsynth.synth.pixel.laminar import (
     dominant_period,
     laminar_phase,
@@ -185,6 +186,60 @@ def test_pilot_picks_the_start_that_keeps_the_exemplar_coherence() -> None:
     exemplar = load_image(crop)
     assert laminar_pilot(exemplar)
     assert laminar_pilot(exemplar)
+
+
+def test_the_centred_field_cuts_a_small_volume_at_any_length() -> None:
+    """A field whose Gaussian is half a 32-voxel side (the pilot's 29 px sheets): its mean outweighs the
+    waves and the zero level misses the volume for some seeds (inside share 0 or 1); centred, about half
+    of every draw is inside. ``centred=False`` is the field as before (solid-chen-wang's bytes)."""
+    shape, sigma = (32, 32, 32), 14.6
+    before = [
+        float((laminar._smooth_field(shape, sigma, np.random.default_rng(k)) > 0).mean()) for k in range(8)
+    ]
+    centred = [
+        float((laminar._smooth_field(shape, sigma, np.random.default_rng(k), centred=True) > 0).mean())
+        for k in range(8)
+    ]
+    assert min(before) == 0.0 or max(before) == 1.0
+    assert all(0.4 < share < 0.6 for share in centred), centred
+    field = laminar._smooth_field(shape, sigma, np.random.default_rng(3), centred=True)
+    assert abs(float(field.mean())) < 1e-9 and float(field.std()) == pytest.approx(1.0)
+    a = laminar_volume((16, 16, 16), 6.0, 24.0, np.arange(50.0), np.random.default_rng(5))
+    b = laminar_volume((16, 16, 16), 6.0, 24.0, np.arange(50.0), np.random.default_rng(5), centred=False)
+    assert a.tobytes() == b.tobytes()
+    phi = laminar_phase(shape, 29.0, np.random.default_rng(0), centred=True)
+    assert 0.3 < float((phi > 0).mean()) < 0.7  # sheets on both sides of the zero level
+
+
+def test_solid_kopf_pilot_weighs_a_laminar_volume_with_sheets(monkeypatch) -> None:
+    """solid-kopf's pilot (the real onion crop, in the pilot's band) builds its laminar 32^3 volume from a
+    centred field: about half of it inside the zero level, not all (the degenerate diagonal stack of
+    session 13); the pilot without ``centred`` (solid-chen-wang's call) keeps the field as before. The
+    choice is recorded in the stats of the run as before, whose own start is centred too."""
+    from pathlib import Path
+
+    from texsynth.synth.io import load_image
+    from texsynth.synth.methods import solid_kopf
+
+    exemplar = load_image(Path(__file__).resolve().parents[3] / "benchmarks" / "data" / "hrtem-onion-128.png")
+    shares: list[tuple[int, float]] = []
+    smooth = laminar._smooth_field
+
+    def recorded(shape, sigma, rng, *, centred=False):  # type: ignore[no-untyped-def]
+        field = smooth(shape, sigma, rng, centred=centred)
+        shares.append((shape[0], float((field > 0).mean())))
+        return field
+
+    monkeypatch.setattr(laminar, "_smooth_field", recorded)
+    assert solid_kopf.laminar_pilot(exemplar, {"structure_length": None}, centred=solid_kopf.CENTRED_START)
+    assert shares == [(solid_kopf.PILOT_SIDE, pytest.approx(0.5, abs=0.1))]
+    shares.clear()
+    assert solid_kopf.laminar_pilot(exemplar)  # uncentred (solid-chen-wang's call): as before, wholly inside
+    assert shares == [(solid_kopf.PILOT_SIDE, 1.0)]
+    shares.clear()
+    run = synthesize("solid-kopf", exemplar, size=(16, 16, 16), params={"levels": 1, "iterations": 1}, seed=1)
+    assert run.stats["laminar_start"] and [side for side, _ in shares] == [32, 16]
+    assert 0.35 < shares[1][1] < 0.65
 
 
 def test_plane_orientation_of_a_grating() -> None:
