@@ -27,7 +27,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
-  pilot decides; ``shells='centres'``: nested around random centres), solid-kopf's crumpled stack
+  pilot decides; around random centres when the fitted length is below 3 periods), solid-kopf's crumpled stack
   (``'oriented'``) for one crumpled anisotropic exemplar.
 """
 
@@ -249,15 +249,17 @@ class SolidChenWangParams(SolidParams):
             "fringes' orientations)."
         ),
     )
-    shells: Literal["surfaces", "centres"] = Field(
-        "surfaces",
+    shells: Literal["auto", "surfaces", "centres"] = Field(
+        "auto",
         description="The laminar start's sheets: parallel to the surfaces of a smooth random field, or "
-        "nested around random centres (carbon onions).",
+        "nested around random centres (carbon onions); automatic: chosen from the exemplar.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
                 "length; 'centres': spherical shells around random centres "
-                f"{CENTRE_SPACING:g} sheet lengths apart (closed onion shells). Only with the laminar start."
+                f"{CENTRE_SPACING:g} sheet lengths apart (closed onion shells); 'auto': 'centres' when "
+                f"solid-kopf's fitted sheet length is below {MIN_STRUCTURE_LENGTH:g} periods (many small "
+                "onions) and structure_length is empty, else 'surfaces'. Only with the laminar start."
             )
         ),
     )
@@ -639,6 +641,8 @@ class _Schedule:
     stack_period: float = 0.0
     #: The start's length (periods): the sheets' (laminar) or the crumples' (oriented); 0 without a start.
     length: float = 0.0
+    #: The laminar start's sheets: 'surfaces' or 'centres' (``shells``); None without the laminar start.
+    shells: str | None = None
 
     @property
     def laminar_start(self) -> bool:
@@ -680,6 +684,7 @@ class _Schedule:
         if coarse_iterations is None:
             coarse_iterations = iterations
         period = stack = length = 0.0
+        shells = None
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
         if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
@@ -689,8 +694,21 @@ class _Schedule:
         elif start == "laminar":
             images = [np.asarray(exemplars[p]) for p in params.planes]
             length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
+            shells = params.shells
+            if shells == "auto":  # the fit asks for sheets shorter than the surfaces hold: onions
+                fitted = params.structure_length is None
+                short = fitted and fitted_structure_length(images) < MIN_STRUCTURE_LENGTH
+                shells = "centres" if short else "surfaces"
         return cls(
-            iterations, coarse_iterations, orientation_gain, solve_radius, start, period, stack, length
+            iterations,
+            coarse_iterations,
+            orientation_gain,
+            solve_radius,
+            start,
+            period,
+            stack,
+            length,
+            shells,
         )
 
     def levels(self, levels: int) -> int:
@@ -740,7 +758,7 @@ class _ChenWangLoop:
             # The start's length in periods (the sheets' fitted or given; the crumples'), None without one.
             "start_length": schedule.length if schedule.laminar_start else None,
             # The laminar start's sheets ('surfaces' or 'centres'), None without it.
-            "shells": params.shells if schedule.start == "laminar" else None,
+            "shells": schedule.shells,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -776,7 +794,7 @@ class _ChenWangLoop:
                     periodic=params.periodic,
                 )
                 start_volume = sheets(level_phase(phi, step.level), stack / scale, values)
-            elif params.shells == "centres":  # onions: shells around random centres
+            elif self.schedule.shells == "centres":  # onions: shells around random centres
                 spacing = CENTRE_SPACING * self.schedule.length * self.schedule.period / scale
                 phase = centre_phase(shape, spacing, rng, periodic=params.periodic)
                 start_volume = sheets(phase, self.schedule.period / scale, values)
