@@ -251,8 +251,8 @@ class SolidChenWangParams(SolidParams):
     )
     shells: Literal["auto", "surfaces", "centres"] = Field(
         "auto",
-        description="The laminar start's sheets: parallel to the surfaces of a smooth random field, or "
-        "nested around random centres (carbon onions); automatic: chosen from the exemplar.",
+        description="Shape of the starting sheets: along the surfaces of a smooth random field, or shells "
+        "around random centres (onions); automatic: from the exemplar.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
