@@ -11,7 +11,8 @@ Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbo
 ``benchmarks/data/hrtem-onion*-128.png`` against the exemplar
 (:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice); and the departures measured against
 their misses (``solve_radius``, ``position_weight``; none a default) and the sheet length's candidates
-(``structure_length``: 4 periods, the default before session cw5; 3; solid-kopf's fit). Cells as in
+(``structure_length``: 4 periods, the default before session cw5; 3; 2.5; solid-kopf's fit) and the shells
+around random centres (``shells='centres'``, session cw6). Cells as in
 docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it
 misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
 """
@@ -85,6 +86,13 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onion crop", "structure_length=fitted", {"structure_length": "fitted"}, 64),
     ("onion-core crop", "structure_length=3", {"structure_length": 3.0}, 64),
     ("onion-core crop", "structure_length=fitted", {"structure_length": "fitted"}, 64),
+    # Session cw6: the onions' last 64^3 misses. Shells around random centres (opt-in, not a default: the
+    # crops do not gain) and a shorter sheet (2.5 periods: fewer closed shells); docs/solid.md.
+    ("onions", "shells=centres", {"shells": "centres"}, 64),
+    ("onions", "shells=centres", {"shells": "centres"}, 128),
+    ("onion crop", "shells=centres", {"shells": "centres"}, 64),
+    ("onion-core crop", "shells=centres", {"shells": "centres"}, 64),
+    ("onions", "structure_length=2.5", {"structure_length": 2.5}, 64),
 )
 
 

@@ -27,7 +27,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
-  pilot decides), solid-kopf's crumpled stack (``'oriented'``) for one crumpled anisotropic exemplar.
+  pilot decides; around random centres when the fitted length is below 3 periods), solid-kopf's crumpled stack
+  (``'oriented'``) for one crumpled anisotropic exemplar.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 from scipy import ndimage as ndi
+from scipy.spatial import cKDTree
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -95,6 +97,7 @@ from texsynth.synth.pixel.synthesis import k_coherence_sets
 
 __all__ = [
     "SolidChenWangParams",
+    "centre_phase",
     "chen_wang_structure_length",
     "run_solid_chen_wang",
     "synthesize_solid_chen_wang",
@@ -129,6 +132,48 @@ ORIENTED_MAX_LENGTH = 1.5
 #: (docs/solid.md, "The sheets' length for solid-chen-wang").
 MIN_STRUCTURE_LENGTH = 3.0
 MAX_STRUCTURE_LENGTH = 4.0
+#: ``shells='centres'``: the onions' centres are this many sheet lengths apart (one centre per cube of that
+#: side; the onion truth at 3 periods: 4.5 periods, docs/solid.md, session cw6).
+CENTRE_SPACING = 1.5
+
+
+def centre_phase(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
+) -> np.ndarray:
+    """The phase of nested spherical shells (voxels): the distance to the nearest of random centres.
+
+    One centre per ``spacing**3`` voxels (at least one), uniform in the volume; with ``periodic`` the
+    distance wraps at the volume's sides (a k-d tree with the volume as its box).
+    Returns ``(D, H, W)`` float64.
+    """
+    dims = np.asarray(shape, dtype=np.float64)
+    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
+    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
+    if periodic:  # the box is half-open: a centre drawn at the far side exactly wraps to 0
+        centres = np.where(centres >= dims, 0.0, centres)
+    tree = cKDTree(centres, boxsize=dims if periodic else None)
+    grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
+    distance, _ = tree.query(grid.reshape(-1, 3))
+    return distance.reshape(shape)
+
+
+def centre_phase_reference(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
+) -> np.ndarray:
+    """:func:`centre_phase` by brute force over the centres (the plain reference of the tests)."""
+    dims = np.asarray(shape, dtype=np.float64)
+    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
+    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
+    axes = [np.arange(n_, dtype=np.float64) for n_ in shape]
+    best = np.full(shape, np.inf)
+    for centre in centres:
+        d = [np.abs(axes[i] - centre[i]) for i in range(3)]
+        if periodic:
+            d = [np.minimum(d[i], dims[i] - d[i]) for i in range(3)]
+        np.minimum(
+            best, d[0][:, None, None] ** 2 + d[1][None, :, None] ** 2 + d[2][None, None, :] ** 2, out=best
+        )
+    return np.sqrt(best)
 
 
 def chen_wang_structure_length(images: list[np.ndarray]) -> float:
@@ -202,6 +247,20 @@ class SolidChenWangParams(SolidParams):
             f"fit to the exemplars kept within {MIN_STRUCTURE_LENGTH:g}-{MAX_STRUCTURE_LENGTH:g} "
             "periods (shorter sheets break this method's shells into worms, longer ones lose the "
             "fringes' orientations)."
+        ),
+    )
+    shells: Literal["auto", "surfaces", "centres"] = Field(
+        "auto",
+        description="Shape of the starting sheets: along the surfaces of a smooth random field, or shells "
+        "around random centres (onions); automatic: from the exemplar.",
+        json_schema_extra=ui(
+            details=(
+                "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
+                "length; 'centres': spherical shells around random centres "
+                f"{CENTRE_SPACING:g} sheet lengths apart (closed onion shells); 'auto': 'centres' when "
+                f"solid-kopf's fitted sheet length is below {MIN_STRUCTURE_LENGTH:g} periods (many small "
+                "onions) and structure_length is empty, else 'surfaces'. Only with the laminar start."
+            )
         ),
     )
     oriented_length: float = Field(
@@ -582,6 +641,8 @@ class _Schedule:
     stack_period: float = 0.0
     #: The start's length (periods): the sheets' (laminar) or the crumples' (oriented); 0 without a start.
     length: float = 0.0
+    #: The laminar start's sheets: 'surfaces' or 'centres' (``shells``); None without the laminar start.
+    shells: str | None = None
 
     @property
     def laminar_start(self) -> bool:
@@ -623,6 +684,7 @@ class _Schedule:
         if coarse_iterations is None:
             coarse_iterations = iterations
         period = stack = length = 0.0
+        shells = None
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
         if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
@@ -632,8 +694,21 @@ class _Schedule:
         elif start == "laminar":
             images = [np.asarray(exemplars[p]) for p in params.planes]
             length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
+            shells = params.shells
+            if shells == "auto":  # the fit asks for sheets shorter than the surfaces hold: onions
+                fitted = params.structure_length is None
+                short = fitted and fitted_structure_length(images) < MIN_STRUCTURE_LENGTH
+                shells = "centres" if short else "surfaces"
         return cls(
-            iterations, coarse_iterations, orientation_gain, solve_radius, start, period, stack, length
+            iterations,
+            coarse_iterations,
+            orientation_gain,
+            solve_radius,
+            start,
+            period,
+            stack,
+            length,
+            shells,
         )
 
     def levels(self, levels: int) -> int:
@@ -682,6 +757,8 @@ class _ChenWangLoop:
             else None,
             # The start's length in periods (the sheets' fitted or given; the crumples'), None without one.
             "start_length": schedule.length if schedule.laminar_start else None,
+            # The laminar start's sheets ('surfaces' or 'centres'), None without it.
+            "shells": schedule.shells,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -717,6 +794,10 @@ class _ChenWangLoop:
                     periodic=params.periodic,
                 )
                 start_volume = sheets(level_phase(phi, step.level), stack / scale, values)
+            elif self.schedule.shells == "centres":  # onions: shells around random centres
+                spacing = CENTRE_SPACING * self.schedule.length * self.schedule.period / scale
+                phase = centre_phase(shape, spacing, rng, periodic=params.periodic)
+                start_volume = sheets(phase, self.schedule.period / scale, values)
             else:
                 start_volume = laminar_volume(
                     shape,

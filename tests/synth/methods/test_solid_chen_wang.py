@@ -275,6 +275,7 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"scan": "spiral"}}, InvalidParameter, "scan"),
         ({"params": {"structure": "stacked"}}, InvalidParameter, "structure"),
         ({"params": {"oriented_length": 0.0}}, InvalidParameter, "oriented_length"),
+        ({"params": {"shells": "rings"}}, InvalidParameter, "shells"),
         ({"params": {"structure_length": "long"}}, InvalidParameter, "structure_length"),
         ({"params": {"structure_length": 0.0}}, InvalidParameter, "structure_length"),
         ({"params": {"structure_length": 65.0}}, InvalidParameter, "structure_length"),
@@ -475,3 +476,94 @@ def test_sheet_length_is_the_fit_within_three_to_four_periods_or_as_given() -> N
     stack = mid_slices(turbostratic_volume((48, 48, 48), crumple=0.1, noise=0.1, seed=4))["xy"]
     oriented = SolidChenWangParams(structure="oriented")
     assert _Schedule.resolve(oriented, dict.fromkeys(PLANES, stack)).length == ORIENTED_LENGTH
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_centre_phase_is_the_distance_to_the_nearest_centre(periodic: bool) -> None:
+    """``centre_phase`` (k-d tree) equals its brute-force reference, wrapped at the sides when periodic;
+    one centre per ``spacing**3`` voxels, each at distance 0 from itself."""
+    from texsynth.synth.methods.solid_chen_wang import centre_phase, centre_phase_reference
+
+    shape = (12, 16, 20)
+    got = centre_phase(shape, 6.0, np.random.default_rng(5), periodic=periodic)
+    want = centre_phase_reference(shape, 6.0, np.random.default_rng(5), periodic=periodic)
+    assert got.shape == shape and np.allclose(got, want, atol=1e-9)
+    assert got.min() < 0.9  # a centre lies within a voxel's half-diagonal of a grid point
+    if periodic:  # no voxel is farther from a centre than half the box's diagonal
+        assert got.max() <= 0.5 * np.sqrt(12**2 + 16**2 + 20**2) + 1e-9
+    one = centre_phase(shape, 100.0, np.random.default_rng(1), periodic=False)  # a single centre
+    (cz, cy, cx) = np.unravel_index(np.argmin(one), shape)
+    z, y, x = np.indices(shape)
+    assert (
+        np.corrcoef(one.ravel(), np.sqrt((z - cz) ** 2 + (y - cy) ** 2 + (x - cx) ** 2).ravel())[0, 1] > 0.99
+    )
+
+
+def test_centre_shells_start_from_onions_only_with_the_laminar_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``shells='centres'``: the laminar start's sheets are the shells of :func:`centre_phase`, its centres
+    ``CENTRE_SPACING`` sheet lengths apart at the coarsest level; the volume differs from the surfaces'
+    start, the same seed gives the same bytes, and without the laminar start the option changes nothing."""
+    import texsynth.synth.methods.solid_chen_wang as cw
+
+    calls: list[tuple[tuple[int, ...], float]] = []
+    real = cw.centre_phase
+
+    def spy(shape, spacing, rng, *, periodic=True):
+        calls.append((tuple(shape), spacing))
+        return real(shape, spacing, rng, periodic=periodic)
+
+    monkeypatch.setattr(cw, "centre_phase", spy)
+    ex = undulating_laminae((48, 48), period=6.0, amplitude=4.0, wavelength=24.0, noise=0.05, seed=0)
+    params = {**FAST, "structure": "laminar", "structure_length": 3.0}
+    runs = {
+        shells: synthesize(
+            "solid-chen-wang", ex, size=(16, 16, 16), params={**params, "shells": shells}, seed=2
+        )
+        for shells in ("surfaces", "centres")
+    }
+    assert len(calls) == 1  # the coarsest level only, and only for 'centres'
+    shape, spacing = calls[0]
+    stats = runs["centres"].stats
+    scale = 2 ** (stats["levels"] - 1)
+    assert shape == (16 // scale,) * 3
+    assert stats["shells"] == "centres" and runs["surfaces"].stats["shells"] == "surfaces"
+    assert spacing == pytest.approx(cw.CENTRE_SPACING * 3.0 * stats["period"] / scale)
+    assert runs["centres"].image.tobytes() != runs["surfaces"].image.tobytes()
+    again = synthesize(
+        "solid-chen-wang", ex, size=(16, 16, 16), params={**params, "shells": "centres"}, seed=2
+    )
+    assert again.image.tobytes() == runs["centres"].image.tobytes()
+    noise = [
+        synthesize(
+            "solid-chen-wang", ex, size=(12, 12, 12), params={**FAST, "structure": "none", "shells": s}
+        )
+        for s in ("surfaces", "centres")
+    ]
+    assert noise[0].image.tobytes() == noise[1].image.tobytes() and noise[1].stats["shells"] is None
+
+
+def test_auto_shells_are_centres_for_many_small_onions_only() -> None:
+    """``shells='auto'`` (the default) takes the centres when solid-kopf's fitted sheet length is below
+    ``MIN_STRUCTURE_LENGTH`` (the laminar truth's small onions) and the length is left to the fit; the
+    surfaces for longer fits (three onions in 64 px, one big onion), a given length, or when asked; no
+    shells without the laminar start."""
+    from texsynth.synth.io.laminar import onion_volume
+    from texsynth.synth.methods.solid_chen_wang import MIN_STRUCTURE_LENGTH, SolidChenWangParams, _Schedule
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import fitted_structure_length
+
+    r, c = np.mgrid[0:64, 0:64].astype(np.float64)
+    one = (0.5 + 0.4 * np.cos(2 * np.pi * np.hypot(r - 30.0, c - 34.0) / 6.0)).astype(np.float32)
+    small = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
+    assert fitted_structure_length([small]) < MIN_STRUCTURE_LENGTH < fitted_structure_length([one])
+
+    def shells(image: np.ndarray, **params: object) -> str | None:
+        return _Schedule.resolve(SolidChenWangParams(**params), dict.fromkeys(PLANES, image)).shells
+
+    assert shells(small, structure="laminar") == "centres"
+    assert shells(small, structure="laminar", structure_length="auto") == "centres"
+    assert shells(small, structure="laminar", structure_length=3.0) == "surfaces"
+    assert shells(small, structure="laminar", shells="surfaces") == "surfaces"
+    assert shells(one, structure="laminar") == "surfaces"
+    assert shells(one, structure="laminar", shells="centres") == "centres"
+    assert shells(small, structure="none") is None
