@@ -27,7 +27,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
-  pilot decides; around random centres when the fitted length is below 3 periods), solid-kopf's crumpled stack
+  pilot decides; or, opt-in, shells around random centres), solid-kopf's crumpled stack
   (``'oriented'``) for one crumpled anisotropic exemplar.
 """
 
@@ -249,17 +249,17 @@ class SolidChenWangParams(SolidParams):
             "fringes' orientations)."
         ),
     )
-    shells: Literal["auto", "surfaces", "centres"] = Field(
-        "auto",
+    shells: Literal["surfaces", "centres"] = Field(
+        "surfaces",
         description="Shape of the starting sheets: along the surfaces of a smooth random field, or shells "
-        "around random centres (onions); automatic: from the exemplar.",
+        "around random centres (a material of many small onions).",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
                 "length; 'centres': spherical shells around random centres "
-                f"{CENTRE_SPACING:g} sheet lengths apart (closed onion shells); 'auto': 'centres' when "
-                f"solid-kopf's fitted sheet length is below {MIN_STRUCTURE_LENGTH:g} periods (many small "
-                "onions) and structure_length is empty, else 'surfaces'. Only with the laminar start."
+                f"{CENTRE_SPACING:g} sheet lengths apart (closed onion shells: opt-in, for a material made "
+                "of many small onions; a single particle's crop measures worse with it). Only with the "
+                "laminar start."
             )
         ),
     )
@@ -695,10 +695,6 @@ class _Schedule:
             images = [np.asarray(exemplars[p]) for p in params.planes]
             length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
             shells = params.shells
-            if shells == "auto":  # the fit asks for sheets shorter than the surfaces hold: onions
-                fitted = params.structure_length is None
-                short = fitted and fitted_structure_length(images) < MIN_STRUCTURE_LENGTH
-                shells = "centres" if short else "surfaces"
         return cls(
             iterations,
             coarse_iterations,
