@@ -85,6 +85,14 @@ SearchKind = Literal["exact", "kcoherence"]
 _CANDIDATE_RADIUS = 1
 #: Rows of the sample that estimates the principal axes (the axes, not the projection, are sampled).
 _PCA_SAMPLE = 4096
+#: Leaf size of the k-d tree that first searches the k-coherence sets (SciPy's default is 16): larger
+#: leaves cut the query of 8-D neighbourhoods by a quarter (docs/benchmarks.md, "Threads: 1 -> 2, 2D
+#: methods", session 14); rows whose answer a tie could change are searched again in the default tree.
+_KSET_LEAF = 64
+#: Below this ``k`` the default tree alone is as fast (its one query against two).
+_KSET_FAST_MIN_K = 3
+#: Relative gap under which two neighbours' distances count as tied (far above float64's rounding).
+_KSET_TIE = 1e-9
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
@@ -364,9 +372,7 @@ def k_coherence_sets(
     inside = mask[y0:y1, x0:x1].ravel() != 0
     projected = kset_points(embeds, size, valid, mask, kset_size, kset_dims)
     kk = min(k + 1, len(projected))
-    # independent queries: the same answer on any number of workers
-    _, idx = cKDTree(projected).query(projected, k=kk, workers=current_threads())
-    idx = idx.reshape(len(projected), kk)
+    idx = _nearest_points(projected, kk, k >= _KSET_FAST_MIN_K)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]
     idx = np.take_along_axis(idx, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k]
@@ -379,6 +385,30 @@ def k_coherence_sets(
     kset[y0 + rows, x0 + cols, : idx.shape[1], 0] = ys
     kset[y0 + rows, x0 + cols, : idx.shape[1], 1] = xs
     return kset
+
+
+def _nearest_points(points: np.ndarray, kk: int, fast: bool = True) -> np.ndarray:
+    """Each point's ``kk`` nearest points (itself among them), nearest first: ``(n, kk)`` indices, exactly
+    as SciPy's default k-d tree gives them (``cKDTree(points).query(points, kk)``), ties included.
+
+    The tree's answer is unique wherever the ``kk + 1`` smallest distances of a row are all different:
+    then any exact search finds those ``kk`` points in that order. With ``fast``, a tree of larger leaves
+    (:data:`_KSET_LEAF`) finds ``kk + 1`` neighbours of every point; the rows with two of those distances
+    within :data:`_KSET_TIE` of each other (duplicate or mirrored neighbourhoods: flat or binary exemplars)
+    are searched again in the default tree, where its order among equal distances is the one the
+    k-coherence sets always had. Queries are independent: the same answer on any number of workers.
+    """
+    n = len(points)
+    workers = current_threads()
+    if not fast or kk >= n:
+        return cKDTree(points).query(points, k=kk, workers=workers)[1].reshape(n, kk)
+    dist, idx = cKDTree(points, leafsize=_KSET_LEAF).query(points, k=kk + 1, workers=workers)
+    tied = ~np.all(np.diff(dist, axis=1) > _KSET_TIE * dist[:, 1:], axis=1)
+    idx = np.ascontiguousarray(idx[:, :kk])
+    again = np.flatnonzero(tied)
+    if len(again):
+        idx[again] = cKDTree(points).query(points[again], k=kk, workers=workers)[1].reshape(-1, kk)
+    return idx
 
 
 def _level_mask(

@@ -710,3 +710,29 @@ def test_k_coherence_sets_are_the_exact_nearest_neighbours() -> None:
     assert np.array_equal(kset[3 + yy, 3 + xx, :, 0], 3 + yy[near])
     assert np.array_equal(kset[3 + yy, 3 + xx, :, 1], 3 + xx[near])
     assert np.all(kset[10:14, 20:30] == -1)  # masked positions have no set
+
+
+@pytest.mark.parametrize("data", ["smooth", "duplicates", "grid"])
+def test_nearest_points_fast_path_is_the_default_trees_answer(data: str) -> None:
+    """The large-leaf tree with the tied rows searched again gives SciPy's default tree's indices, row
+    for row and in the same order, also where many distances are equal (duplicated points, points on
+    an integer grid, each once: many neighbours at the same distance, where the trees order ties
+    differently)."""
+    from scipy.spatial import cKDTree
+
+    from texsynth.synth.pixel import synthesis as core
+
+    rng = np.random.default_rng(11)
+    if data == "smooth":
+        points = rng.normal(size=(3000, 8))
+    elif data == "duplicates":
+        points = np.repeat(rng.normal(size=(300, 8)), rng.integers(1, 20, size=300), axis=0)
+    else:
+        points = rng.permutation(np.indices((7, 7, 7, 7)).reshape(4, -1).T).astype(np.float64)
+    for kk in (3, 11):
+        want = cKDTree(points).query(points, k=kk)[1]
+        fast = cKDTree(points, leafsize=core._KSET_LEAF).query(points, k=kk)[1]
+        got = core._nearest_points(points, kk)
+        assert np.array_equal(got, want)
+        if data != "smooth":  # the case the second search is for: the larger leaves order ties otherwise
+            assert not np.array_equal(fast, want)
