@@ -339,8 +339,21 @@ def kset_points(
     ks = min(size, kset_size)
     y0, y1, x0, x1 = (int(v) for v in valid)
     inside = mask[y0:y1, x0:x1].ravel() != 0
-    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
-    vectors = vectors[inside].astype(np.float64)
+    every = bool(inside.all())
+    r = ks // 2
+    # The weighted square neighbourhoods (:func:`_square_vectors`, times the square root of each weight,
+    # in float64) written straight into one array: the same values as building, weighing, joining and
+    # selecting them one after the other, without four whole copies.
+    vectors = np.empty((int(inside.sum()), sum(ks * ks * e.shape[-1] for e, _ in embeds)), dtype=np.float64)
+    col = 0
+    for e, wt in embeds:
+        scale = np.sqrt(wt)
+        channels = e.shape[-1]
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                block = e[y0 + dy : y1 + dy, x0 + dx : x1 + dx].reshape(-1, channels)
+                np.multiply(block if every else block[inside], scale, out=vectors[:, col : col + channels])
+                col += channels
     vectors -= vectors.mean(axis=0)
     dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
     # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
@@ -375,10 +388,9 @@ def k_coherence_sets(
     idx = _nearest_points(projected, kk, k >= _KSET_FAST_MIN_K)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]
-    idx = np.take_along_axis(idx, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k]
-    idx = np.where(
-        np.take_along_axis(is_self, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k], -1, idx
-    )
+    others_first = np.argsort(is_self, axis=1, kind="stable")
+    idx = np.take_along_axis(idx, others_first, axis=1)[:, :k]
+    idx = np.where(np.take_along_axis(is_self, others_first, axis=1)[:, :k], -1, idx)
     rows, cols = np.divmod(np.flatnonzero(inside), x1 - x0)
     ys = np.where(idx >= 0, y0 + rows[idx], -1)
     xs = np.where(idx >= 0, x0 + cols[idx], -1)
