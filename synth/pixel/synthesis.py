@@ -314,7 +314,8 @@ def _valid_region(
 
 
 def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarray:
-    """Square neighbourhoods (flattened) of every valid position: ``(n_valid, size*size*C)``."""
+    """Square neighbourhoods (flattened) of every valid position: ``(n_valid, size*size*C)``; the plain
+    form of what :func:`kset_points` writes (tests compare them)."""
     r = size // 2
     y0, y1, x0, x1 = (int(v) for v in valid)
     parts = [

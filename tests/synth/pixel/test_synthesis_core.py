@@ -736,3 +736,27 @@ def test_nearest_points_fast_path_is_the_default_trees_answer(data: str) -> None
         assert np.array_equal(got, want)
         if data != "smooth":  # the case the second search is for: the larger leaves order ties otherwise
             assert not np.array_equal(fast, want)
+
+
+@pytest.mark.parametrize("holes", [False, True])
+def test_kset_points_are_the_plain_weighted_neighbourhoods_bit_for_bit(holes: bool) -> None:
+    """kset_points writes each embedding's square neighbourhoods, times the square root of its weight, into
+    one array: the same float64 values, bit for bit, as weighing, joining and selecting them one copy after
+    the other (the sets, and so the bytes of every output, depend on them)."""
+    from texsynth.synth.pixel import synthesis as core
+
+    pixels = _rng_image((40, 44), seed=2)[..., None].astype(np.float32)
+    tensors = np.random.default_rng(3).normal(size=(40, 44, 3)).astype(np.float32)
+    embeds = [(pixels, 0.2391258691254927), (tensors, 0.00142571254244501)]
+    valid = np.array([3, 37, 3, 41], dtype=np.int64)
+    mask = np.ones(pixels.shape[:2], dtype=np.uint8)
+    if holes:
+        mask[10:14, 20:30] = 0
+    inside = mask[3:37, 3:41].ravel() != 0
+    plain = np.concatenate([np.sqrt(w) * core._square_vectors(e, 7, valid) for e, w in embeds], axis=1)
+    plain = plain[inside].astype(np.float64)
+    plain -= plain.mean(axis=0)
+    sample = plain[:: max(1, len(plain) // core._PCA_SAMPLE)]
+    want = plain @ np.linalg.eigh(sample.T @ sample)[1][:, ::-1][:, :8]
+    got = core.kset_points(embeds, 9, valid, mask, kset_size=7, kset_dims=8)
+    assert got.dtype == np.float64 and np.array_equal(got, want)
