@@ -85,6 +85,14 @@ SearchKind = Literal["exact", "kcoherence"]
 _CANDIDATE_RADIUS = 1
 #: Rows of the sample that estimates the principal axes (the axes, not the projection, are sampled).
 _PCA_SAMPLE = 4096
+#: Leaf size of the k-d tree that first searches the k-coherence sets (SciPy's default is 16): larger
+#: leaves cut the query of 8-D neighbourhoods by a quarter (docs/benchmarks.md, "Threads: 1 -> 2, 2D
+#: methods", session 14); rows whose answer a tie could change are searched again in the default tree.
+_KSET_LEAF = 64
+#: Below this ``k`` the default tree alone is as fast (its one query against two).
+_KSET_FAST_MIN_K = 3
+#: Relative gap under which two neighbours' distances count as tied (far above float64's rounding).
+_KSET_TIE = 1e-9
 #: Progress is reported about this many times per pass.
 _CHUNKS_PER_PASS = 64
 _COHERENCE_FLOOR = 1e-3
@@ -306,7 +314,8 @@ def _valid_region(
 
 
 def _square_vectors(feats: np.ndarray, size: int, valid: np.ndarray) -> np.ndarray:
-    """Square neighbourhoods (flattened) of every valid position: ``(n_valid, size*size*C)``."""
+    """Square neighbourhoods (flattened) of every valid position: ``(n_valid, size*size*C)``; the plain
+    form of what :func:`kset_points` writes (tests compare them)."""
     r = size // 2
     y0, y1, x0, x1 = (int(v) for v in valid)
     parts = [
@@ -331,8 +340,21 @@ def kset_points(
     ks = min(size, kset_size)
     y0, y1, x0, x1 = (int(v) for v in valid)
     inside = mask[y0:y1, x0:x1].ravel() != 0
-    vectors = np.concatenate([np.sqrt(wt) * _square_vectors(e, ks, valid) for e, wt in embeds], axis=1)
-    vectors = vectors[inside].astype(np.float64)
+    every = bool(inside.all())
+    r = ks // 2
+    # The weighted square neighbourhoods (:func:`_square_vectors`, times the square root of each weight,
+    # in float64) written straight into one array: the same values as building, weighing, joining and
+    # selecting them one after the other, without four whole copies.
+    vectors = np.empty((int(inside.sum()), sum(ks * ks * e.shape[-1] for e, _ in embeds)), dtype=np.float64)
+    col = 0
+    for e, wt in embeds:
+        scale = np.sqrt(wt)
+        channels = e.shape[-1]
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                block = e[y0 + dy : y1 + dy, x0 + dx : x1 + dx].reshape(-1, channels)
+                np.multiply(block if every else block[inside], scale, out=vectors[:, col : col + channels])
+                col += channels
     vectors -= vectors.mean(axis=0)
     dims = min(kset_dims, vectors.shape[1], vectors.shape[0])
     # Principal axes from the covariance of a fixed, evenly spaced sample of rows (deterministic).
@@ -364,21 +386,42 @@ def k_coherence_sets(
     inside = mask[y0:y1, x0:x1].ravel() != 0
     projected = kset_points(embeds, size, valid, mask, kset_size, kset_dims)
     kk = min(k + 1, len(projected))
-    # independent queries: the same answer on any number of workers
-    _, idx = cKDTree(projected).query(projected, k=kk, workers=current_threads())
-    idx = idx.reshape(len(projected), kk)
+    idx = _nearest_points(projected, kk, k >= _KSET_FAST_MIN_K)
     # Drop each position itself (wherever the tree put it among equal distances), keep k others.
     is_self = idx == np.arange(len(projected))[:, None]
-    idx = np.take_along_axis(idx, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k]
-    idx = np.where(
-        np.take_along_axis(is_self, np.argsort(is_self, axis=1, kind="stable"), axis=1)[:, :k], -1, idx
-    )
+    others_first = np.argsort(is_self, axis=1, kind="stable")
+    idx = np.take_along_axis(idx, others_first, axis=1)[:, :k]
+    idx = np.where(np.take_along_axis(is_self, others_first, axis=1)[:, :k], -1, idx)
     rows, cols = np.divmod(np.flatnonzero(inside), x1 - x0)
     ys = np.where(idx >= 0, y0 + rows[idx], -1)
     xs = np.where(idx >= 0, x0 + cols[idx], -1)
     kset[y0 + rows, x0 + cols, : idx.shape[1], 0] = ys
     kset[y0 + rows, x0 + cols, : idx.shape[1], 1] = xs
     return kset
+
+
+def _nearest_points(points: np.ndarray, kk: int, fast: bool = True) -> np.ndarray:
+    """Each point's ``kk`` nearest points (itself among them), nearest first: ``(n, kk)`` indices, exactly
+    as SciPy's default k-d tree gives them (``cKDTree(points).query(points, kk)``), ties included.
+
+    The tree's answer is unique wherever the ``kk + 1`` smallest distances of a row are all different:
+    then any exact search finds those ``kk`` points in that order. With ``fast``, a tree of larger leaves
+    (:data:`_KSET_LEAF`) finds ``kk + 1`` neighbours of every point; the rows with two of those distances
+    within :data:`_KSET_TIE` of each other (duplicate or mirrored neighbourhoods: flat or binary exemplars)
+    are searched again in the default tree, where its order among equal distances is the one the
+    k-coherence sets always had. Queries are independent: the same answer on any number of workers.
+    """
+    n = len(points)
+    workers = current_threads()
+    if not fast or kk >= n:
+        return cKDTree(points).query(points, k=kk, workers=workers)[1].reshape(n, kk)
+    dist, idx = cKDTree(points, leafsize=_KSET_LEAF).query(points, k=kk + 1, workers=workers)
+    tied = ~np.all(np.diff(dist, axis=1) > _KSET_TIE * dist[:, 1:], axis=1)
+    idx = np.ascontiguousarray(idx[:, :kk])
+    again = np.flatnonzero(tied)
+    if len(again):
+        idx[again] = cKDTree(points).query(points[again], k=kk, workers=workers)[1].reshape(-1, kk)
+    return idx
 
 
 def _level_mask(

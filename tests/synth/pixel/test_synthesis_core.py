@@ -710,3 +710,53 @@ def test_k_coherence_sets_are_the_exact_nearest_neighbours() -> None:
     assert np.array_equal(kset[3 + yy, 3 + xx, :, 0], 3 + yy[near])
     assert np.array_equal(kset[3 + yy, 3 + xx, :, 1], 3 + xx[near])
     assert np.all(kset[10:14, 20:30] == -1)  # masked positions have no set
+
+
+@pytest.mark.parametrize("data", ["smooth", "duplicates", "grid"])
+def test_nearest_points_fast_path_is_the_default_trees_answer(data: str) -> None:
+    """The large-leaf tree with the tied rows searched again gives SciPy's default tree's indices, row
+    for row and in the same order, also where many distances are equal (duplicated points, points on
+    an integer grid, each once: many neighbours at the same distance, where the trees order ties
+    differently)."""
+    from scipy.spatial import cKDTree
+
+    from texsynth.synth.pixel import synthesis as core
+
+    rng = np.random.default_rng(11)
+    if data == "smooth":
+        points = rng.normal(size=(3000, 8))
+    elif data == "duplicates":
+        points = np.repeat(rng.normal(size=(300, 8)), rng.integers(1, 20, size=300), axis=0)
+    else:
+        points = rng.permutation(np.indices((7, 7, 7, 7)).reshape(4, -1).T).astype(np.float64)
+    for kk in (3, 11):
+        want = cKDTree(points).query(points, k=kk)[1]
+        fast = cKDTree(points, leafsize=core._KSET_LEAF).query(points, k=kk)[1]
+        got = core._nearest_points(points, kk)
+        assert np.array_equal(got, want)
+        if data != "smooth":  # the case the second search is for: the larger leaves order ties otherwise
+            assert not np.array_equal(fast, want)
+
+
+@pytest.mark.parametrize("holes", [False, True])
+def test_kset_points_are_the_plain_weighted_neighbourhoods_bit_for_bit(holes: bool) -> None:
+    """kset_points writes each embedding's square neighbourhoods, times the square root of its weight, into
+    one array: the same float64 values, bit for bit, as weighing, joining and selecting them one copy after
+    the other (the sets, and so the bytes of every output, depend on them)."""
+    from texsynth.synth.pixel import synthesis as core
+
+    pixels = _rng_image((40, 44), seed=2)[..., None].astype(np.float32)
+    tensors = np.random.default_rng(3).normal(size=(40, 44, 3)).astype(np.float32)
+    embeds = [(pixels, 0.2391258691254927), (tensors, 0.00142571254244501)]
+    valid = np.array([3, 37, 3, 41], dtype=np.int64)
+    mask = np.ones(pixels.shape[:2], dtype=np.uint8)
+    if holes:
+        mask[10:14, 20:30] = 0
+    inside = mask[3:37, 3:41].ravel() != 0
+    plain = np.concatenate([np.sqrt(w) * core._square_vectors(e, 7, valid) for e, w in embeds], axis=1)
+    plain = plain[inside].astype(np.float64)
+    plain -= plain.mean(axis=0)
+    sample = plain[:: max(1, len(plain) // core._PCA_SAMPLE)]
+    want = plain @ np.linalg.eigh(sample.T @ sample)[1][:, ::-1][:, :8]
+    got = core.kset_points(embeds, 9, valid, mask, kset_size=7, kset_dims=8)
+    assert got.dtype == np.float64 and np.array_equal(got, want)
