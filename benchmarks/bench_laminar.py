@@ -65,13 +65,30 @@ KOPF_PAPER = {
     "structure": "none",
     "final_step": "average",
 }
+#: Chen & Wang's and the study's literal settings (5 levels, 10 iterations, Hilbert, 7x7, k = 15) with none of
+#: the departures this project measured better: no laminar start, no laminae schedule, no orientation
+#: re-weighting, the solver on the voxel's own matches, no final remap. The solver's consensus and the
+#: grey-level histogram stay: without them the discrete solver is speckled or flat (docs/solid.md).
+CHEN_WANG_PAPER: dict[str, Any] = {
+    "adapt_to_structure": False,
+    "structure": "none",
+    "levels": 5,
+    "iterations": 10,
+    "orientation_gain": 0.0,
+    "solve_radius": 0,
+    "grey_remap": False,
+    "scan": "hilbert",
+}
 #: (method, label, params, side, modes)
 RUNS: tuple[tuple[str, str, dict[str, Any], int, tuple[str, ...]], ...] = (
     ("solid-kopf", "defaults", {}, 64, ("one", "planes")),
     ("solid-kopf", "paper", KOPF_PAPER, 64, ("one", "planes")),
     ("solid-kopf", "final-average", {"final_step": "average"}, 64, ("one",)),
     ("solid-chen-wang", "defaults", {}, 64, ("one", "planes")),
+    ("solid-chen-wang", "paper", CHEN_WANG_PAPER, 64, ("one", "planes")),
     ("solid-kopf", "defaults", {}, 128, ("one",)),
+    ("solid-chen-wang", "defaults", {}, 128, ("one",)),
+    ("solid-chen-wang", "paper", CHEN_WANG_PAPER, 128, ("one",)),
 )
 
 
