@@ -36,13 +36,14 @@ from PIL import Image
 
 from benchmarks._report import machine
 from texsynth.synth.api import synthesize
-from texsynth.synth.evaluate import evaluate_volume
+from texsynth.synth.evaluate import evaluate_pair, evaluate_volume
 from texsynth.synth.evaluate.truth import TruthSlices, evaluate_against_truth, truth_slices
 from texsynth.synth.io.laminar import onion_volume, turbostratic_volume
 from texsynth.synth.output.volume import cube_image, mid_slices, slices_image
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 RESULTS = DOCS / "laminar-benchmark.json"
+CROP_FLOOR = DOCS / "laminar-crop-floor.json"
 TRUTH_SIDE = 128
 TRUTH_SEED = 11
 AXES = ("0", "1", "2")
@@ -386,6 +387,130 @@ def pilot_table(sides: tuple[int, ...] = (32,), centred: bool = True) -> list[di
     return rows
 
 
+#: The real crops whose floor at the slice size ``--crop-floor`` measures, and that size.
+CROPS = ("hrtem-onion-128.png", "hrtem-onion-core-128.png")
+CROP_BLOCK = 64
+#: Blocks one axis of a 64^3 volume pools in the crops' evaluation (every second slice).
+CROP_POOL = 32
+
+
+def _pooled_against(exemplar: np.ndarray, blocks: np.ndarray) -> dict[str, float | None]:
+    """``blocks`` ``(n, s, s)`` pooled as one axis's slices against the whole ``exemplar``: the measures of
+    the crops' volume rows (:func:`texsynth.synth.evaluate.evaluate_volume`, axis 0 only); one 2-D image
+    by :func:`texsynth.synth.evaluate.evaluate_pair` (the 2D line's own measure)."""
+    if blocks.ndim == 2:
+        block = evaluate_pair(exemplar, blocks)
+        summary = block["summary"]
+    else:
+        metrics = evaluate_volume(exemplar, np.ascontiguousarray(blocks), axes=(0,), s2=False)
+        block, summary = metrics["axes"]["0"], metrics["summary"]["per_axis"]["0"]
+    head = {key: summary.get(key) for key, *_ in MEASURES}
+    coh = block["structure"]["coherence_mean"]
+    head["coherence_ratio"] = coh["output"] / coh["exemplar"]
+    head["contrast"] = block["moments"]["output"]["std"] / block["moments"]["exemplar"]["std"]
+    return head
+
+
+def _grid_blocks(image: np.ndarray, side: int, stride: int) -> np.ndarray:
+    starts = [range(0, n - side + 1, stride) for n in image.shape]
+    return np.stack([image[i : i + side, j : j + side] for i in starts[0] for j in starts[1]])
+
+
+def _random_blocks(image: np.ndarray, side: int, count: int, rng: np.random.Generator) -> np.ndarray:
+    i = rng.integers(0, image.shape[0] - side + 1, count)
+    j = rng.integers(0, image.shape[1] - side + 1, count)
+    return np.stack([image[a : a + side, b : b + side] for a, b in zip(i, j, strict=True)])
+
+
+def _spread_rows(rows: list[dict[str, float | None]]) -> dict[str, dict[str, float]]:
+    """Per measure: the mean over the draws, their 90% quantile and the farthest from target."""
+    out = {}
+    for key, _, low, _high in MEASURES:
+        values = np.array([r[key] for r in rows if r[key] is not None], dtype=np.float64)
+        far = values[np.argmax(np.abs(values - 1.0))] if low > 0 else values.max()
+        out[key] = {"mean": float(values.mean()), "q90": float(np.quantile(values, 0.9)), "worst": float(far)}
+    return out
+
+
+def crop_floor(draws: int = 20, seeds: tuple[int, ...] = (1, 2, 3), stride: int = 8) -> dict[str, Any]:
+    """What an ideal answer scores at the slice size the crops' volumes are measured at.
+
+    A 64^3 volume's slices (64^2) are compared with the whole 128^2 crop; here the slices are replaced by
+    64^2 blocks of an ideal answer, pooled as one axis's slices are: the crop's own blocks (every position
+    on a ``stride`` grid, pooled at once; and ``draws`` draws of :data:`CROP_POOL` random positions) and
+    the blocks of ``tensor-constrained``'s 256^2 output of the crop (the 2D reference line; seeds
+    ``seeds``: its whole output, then :data:`CROP_POOL` random blocks per draw), each against the whole
+    crop. Nothing is synthesized by a solid method; ``draws`` random draws use the generator seeded 0.
+    """
+    from texsynth.synth.io import load_image
+
+    out: dict[str, Any] = {}
+    for name in CROPS:
+        path = DOCS.parent / "benchmarks" / "data" / name
+        crop = np.ascontiguousarray(load_image(path, mode="grey"), dtype=np.float32)
+        rng = np.random.default_rng(0)
+        row: dict[str, Any] = {
+            "grid": _pooled_against(crop, _grid_blocks(crop, CROP_BLOCK, stride)),
+            "random": _spread_rows(
+                [
+                    _pooled_against(crop, _random_blocks(crop, CROP_BLOCK, CROP_POOL, rng))
+                    for _ in range(draws)
+                ]
+            ),
+        }
+        print(f"{name}: the crop's blocks done", flush=True)
+        whole, blocks = [], []
+        for seed in seeds:
+            image = synthesize("tensor-constrained", crop, size=(256, 256), seed=seed).image
+            grey = np.ascontiguousarray(image if image.ndim == 2 else image.mean(axis=2), dtype=np.float32)
+            whole.append(_pooled_against(crop, grey))
+            draws_per_seed = max(1, draws // len(seeds))
+            blocks += [
+                _pooled_against(crop, _random_blocks(grey, CROP_BLOCK, CROP_POOL, rng))
+                for _ in range(draws_per_seed)
+            ]
+        row["counts"] = {
+            "grid": len(_grid_blocks(crop, CROP_BLOCK, stride)),
+            "stride": stride,
+            "random": draws,
+            "2d blocks": len(blocks),
+            "2d whole": len(whole),
+        }
+        row["2d whole"] = _spread_rows(whole)
+        row["2d blocks"] = _spread_rows(blocks)
+        out[name] = row
+        print(json.dumps({name: row}, default=float), flush=True)
+    return out
+
+
+def crop_floor_table(floor: dict[str, Any]) -> str:
+    """The markdown table of :func:`crop_floor` (docs/solid.md): means over the draws, the 90% quantile and
+    the worst draw in brackets; the grid row is one pooled value."""
+    keys = ("coherence_ratio", "orientation_kl", "fringe_ks_length", "fringe_ks_tortuosity", "grey_kl")
+    lines = [
+        "| crop | 64^2 blocks of | coherence ratio | orientation KL | length KS | tortuosity KS | grey KL |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, row in floor.items():
+        n = row["counts"]
+        labels = {
+            "grid": f"the crop, every {n['stride']} px ({n['grid']} pooled)",
+            "random": f"the crop, {CROP_POOL} at random ({n['random']} draws)",
+            "2d blocks": f"`tensor-constrained` 256^2, {CROP_POOL} at random ({n['2d blocks']} draws)",
+            "2d whole": f"`tensor-constrained` 256^2 whole ({n['2d whole']} seeds)",
+        }
+        for kind, label in labels.items():
+            cells = []
+            for key in keys:
+                value = row[kind][key]
+                if isinstance(value, dict):
+                    cells.append(f"{value['mean']:.2f} ({value['q90']:.2f}, {value['worst']:.2f})")
+                else:
+                    cells.append(_fmt(value))
+            lines.append(f"| {name.removesuffix('.png')} | {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid synthesis against known laminar answers")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
@@ -403,11 +528,21 @@ def main(argv: list[str] | None = None) -> int:
         help="only print solid-kopf's pilot on the real exemplars at this side (repeatable; e.g. 32)",
     )
     parser.add_argument(
+        "--crop-floor",
+        action="store_true",
+        help="only measure the real crops' floor at 64^2 slices (the crop's and the 2D line's blocks)",
+    )
+    parser.add_argument(
         "--uncentred", action="store_true", help="with --pilot: the laminar field as before (not centred)"
     )
     args = parser.parse_args(argv)
     if args.pilot:
         pilot_table(tuple(args.pilot), centred=not args.uncentred)
+        return 0
+    if args.crop_floor:
+        floor = crop_floor()
+        CROP_FLOOR.write_text(json.dumps(floor, indent=1) + "\n")
+        print(crop_floor_table(floor))
         return 0
     if args.calibrate:
         print(json.dumps(calibrate()))
