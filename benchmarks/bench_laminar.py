@@ -11,7 +11,8 @@ docs/laminar.md from docs/laminar-benchmark.json without running anything.
    (:func:`texsynth.synth.evaluate.evaluate_volume`), and an independent 64^3 sample of the same material
    (seeds 12-14) against the truth's slices: the floor of every measure (``--floor N``: the spread of N
    such samples, printed). ``--pilot 32`` prints ``solid-kopf``'s pilot on the real crops (``--uncentred``:
-   the start field as before).
+   the start field as before). ``--crop-floor``: what an ideal answer scores on the real crops at the
+   volumes' 64^2 slice size (:func:`crop_floor`; docs/laminar-crop-floor.json, docs/solid.md).
 2. **The runs**: every method and setting of :data:`RUNS`, seeds 1-3, through
    :func:`texsynth.synth.api.synthesize`, with the process CPU time and the wall time; per axis, the volume's
    slices against the truth's slices of the same size
@@ -620,9 +621,10 @@ measure, the volume's slices against the truth's slices of the same size
 **x** when it misses its target: coherence ratio and contrast (std ratio) 0.85-1.15, orientation KL
 < 0.10, fringe length and tortuosity KS < 0.15, grey KL < 0.05. CPU s is the process CPU time of
 `texsynth.synth.api.synthesize` (both cores), wall s its wall time, median over the seeds (the first seed of a
-method can include numba's compilation: `solid-chen-wang` 25.6 s CPU for seed 1 against 8.8-9.1 s for
-seeds 2-3 on onions). The machine was shared with four other sessions (load 6-14 on 2 cores): wall
-times are 2-4x the CPU times and say little; CPU times are comparable between rows.
+method can include numba's compilation or cache loading: `solid-chen-wang` 19.8 s CPU for seed 1 against
+4.6-5.3 s for seeds 2-3 on onions). The rows were measured by several sessions on 2 shared cores (loads
+from 2 to 25, said in the notes below): wall times say little, CPU times compare best between rows of one
+session.
 """
 
 
@@ -643,14 +645,20 @@ def report(saved: dict[str, Any]) -> str:
             parts.append(
                 f"Truth, {key.split(',')[0]}: mid-slices above the exemplar, and the cube.\n\n{pic}\n"
             )
-    parts.append("## Today's solids (the baseline)\n\n" + table(saved["runs"]) + "\n")
+    parts.append(
+        "## The solids\n\nEvery `solid-chen-wang` row was re-run in session lam24; the notes below say "
+        "when the `solid-kopf` rows were (its `paper` rows are the baseline's).\n\n"
+        + table(saved["runs"])
+        + "\n"
+    )
     parts.append("### Pictures (seed 1): mid-slices above their exemplars, and the cube\n")
     for key, pic in saved["pictures"].items():
         if not key.endswith("truth"):
             parts.append(f"{key}:\n\n{pic}\n")
     parts.append(NOTES)
     parts.append(
-        f"_Measured {time.strftime('%Y-%m-%d')} on {machine()}; the machine was shared (load 3-7)._\n"
+        f"_Written {time.strftime('%Y-%m-%d')} on {machine()}; the machine was shared (each session's load "
+        "in its note)._\n"
     )
     return "\n".join(parts)
 
@@ -666,8 +674,8 @@ at 64^3 and 128^3; per plane every seed-axis too; one exemplar at 64^3 the worst
 (0.19), length KS 0.13 / 0.11 / 0.09 (0.19), tortuosity KS 0.22 / 0.14 / 0.23 (0.29); 128^3 seed 1 length KS
 0.18, tortuosity KS 0.17. The onions' `final-average` row was re-run too. The turbostratic rows are
 unchanged (same bytes: its oriented start keeps crumples of 2 periods; a fitted 2.53 measured tortuosity KS
-0.08 / 0.13 / 0.13 (0.24)). The `paper` and `solid-chen-wang` rows are from before (their settings do not
-fit the length).
+0.08 / 0.13 / 0.13 (0.24)). The `paper` rows are from before (their settings do not fit the length); the
+`solid-chen-wang` rows were re-run in session lam24 (above).
 
 ## The oriented start and the last step (issue 24, `solid-kopf`)
 
