@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.bench_laminar import AXES, _cells, _head, _save, exemplars, truths
+from benchmarks.bench_laminar import AXES, CHEN_WANG_PAPER, _cells, _head, _save, exemplars, truths
 from texsynth.synth.api import synthesize
 from texsynth.synth.evaluate import evaluate_volume
 from texsynth.synth.evaluate.truth import evaluate_against_truth, truth_slices
@@ -38,20 +38,6 @@ from texsynth.synth.pixel.laminar import fitted_structure_length
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 DATA = Path(__file__).resolve().parent / "data"
 RESULTS = DOCS / "chen-wang-laminar.json"
-#: The study's literal settings (5 levels, 10 iterations, Hilbert, 7x7, k = 15) with none of the
-#: departures this project measured better: no laminar start, no laminae schedule, no orientation
-#: re-weighting, the solver on the voxel's own matches, no final remap. The solver's consensus and the
-#: grey-level histogram stay: without them the discrete solver is speckled or flat (docs/solid.md).
-CHEN_WANG_PAPER: dict[str, Any] = {
-    "adapt_to_structure": False,
-    "structure": "none",
-    "levels": 5,
-    "iterations": 10,
-    "orientation_gain": 0.0,
-    "solve_radius": 0,
-    "grey_remap": False,
-    "scan": "hilbert",
-}
 #: (family, label, params, side)
 RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onions", "defaults", {}, 64),
