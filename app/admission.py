@@ -96,16 +96,16 @@ VOLUME_MEMORY_DEFAULT: tuple[int, int] = (
 #: estimate takes the fraction ``f = 2 (1 - 1 / s)`` of the work as parallel (Amdahl) and the rest as
 #: serial; a method missing here is taken to scale perfectly (``s = 2``: a lower bound of its time).
 TWO_THREAD_SPEEDUP: dict[str, float] = {
-    "arbitrary-shape": 1.47,
-    "feature-guided": 1.02,
-    "gaussian-patch": 1.05,
-    "quilting": 1.24,
-    "random-phase": 1.56,
+    "arbitrary-shape": 1.75,
+    "feature-guided": 1.01,
+    "gaussian-patch": 1.04,
+    "quilting": 1.31,
+    "random-phase": 1.61,
     "solid-chen-wang": 1.67,
-    "solid-kopf": 1.87,
-    "solid-wei-levoy": 1.92,
-    "tensor-constrained": 1.62,
-    "wei-levoy": 1.73,
+    "solid-kopf": 1.89,
+    "solid-wei-levoy": 1.88,
+    "tensor-constrained": 1.71,
+    "wei-levoy": 1.72,
 }
 #: Exemplars up to this many pixels are always accepted, whatever the output's size.
 SMALL_EXEMPLAR = 512 * 512

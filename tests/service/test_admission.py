@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from tests.service.test_tokens import ALICE, BOB, A, _client, finish, submit
-from texsynth.app.admission import estimate_memory
+from texsynth.app.admission import TWO_THREAD_SPEEDUP, estimate_memory
 from texsynth.jobs.config import Settings
 
 
@@ -506,5 +506,6 @@ def test_a_512_cubed_solid_kopf_job_is_accepted_under_a_limit_its_estimate_fits(
     assert r.status_code == 422, r.text
     message = r.json()["message"]
     assert r.json()["field"] == "depth" and f"about {need / 2**30:.1f} GiB" in message
-    assert re.search(r"run about \d+ minutes with 2 threads \(.*measured 1\.87x of 2 threads", message)
+    measured = re.escape(f"measured {TWO_THREAD_SPEEDUP['solid-kopf']:.2f}x of 2 threads")
+    assert re.search(r"run about \d+ minutes with 2 threads \(.*" + measured, message)
     assert service.store.count() == 0
