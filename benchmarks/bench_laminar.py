@@ -358,21 +358,10 @@ def pilot_table(sides: tuple[int, ...] = (32,), centred: bool = True) -> list[di
             )
             row: dict[str, Any] = {"exemplar": path.name, "coherence": fringed, "pilot": band}
             for side in sides if band else ():
-                ratios = {}
-                for structure in ("none", "laminar"):
-                    shares.clear()
-                    params = solid_kopf.SolidKopfParams(structure=structure, structure_length=None)
-                    volume = solid_kopf._run_solid_kopf(
-                        image,
-                        size=(side,) * 3,
-                        params=params,
-                        seed=0,
-                        progress=lambda *_, **__: None,
-                        constraint=None,
-                        exemplars=None,
-                        centred=centred,
-                    ).image
-                    ratios[structure] = solid_kopf.slice_coherence(volume) / max(fringed, 1e-6)
+                shares.clear()  # the random start draws no field: the laminar start's is the first
+                ratios = solid_kopf.pilot_ratios(
+                    image, {"structure_length": None}, side=side, centred=centred
+                )
                 row[str(side)] = {
                     "random": ratios["none"],
                     "laminar": ratios["laminar"],

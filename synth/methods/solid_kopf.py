@@ -675,14 +675,28 @@ def laminar_pilot(
     pilot's 29 px sheets leave a 32^3 field wholly inside its zero level, and the "laminar" volume is
     one diagonal stack (docs/solid.md, "The pilot's laminar volume mended").
     """
+    ratios = pilot_ratios(exemplar, settings, centred=centred)
+    gaps = {structure: abs(np.log(max(ratio, 1e-6))) for structure, ratio in ratios.items()}
+    return gaps["laminar"] < gaps["none"]
+
+
+def pilot_ratios(
+    exemplar: np.ndarray,
+    settings: dict[str, object] | None = None,
+    *,
+    side: int = PILOT_SIDE,
+    centred: bool = False,
+) -> dict[str, float]:
+    """The pilot's measure (:func:`laminar_pilot`): for each start (``'none'``, ``'laminar'``), the mean
+    slice coherence of a ``side^3`` volume (seed 0) over the exemplar's."""
     target = mean_coherence(exemplar)
-    gaps = {}
     pinned = settings if settings is not None else PILOT_SETTINGS
+    ratios = {}
     for structure in ("none", "laminar"):
         params = SolidKopfParams(structure=structure, **pinned)  # type: ignore[arg-type]
         volume = _run_solid_kopf(
             exemplar,
-            size=(PILOT_SIDE,) * 3,
+            size=(side,) * 3,
             params=params,
             seed=0,
             progress=lambda *_, **__: None,
@@ -690,9 +704,8 @@ def laminar_pilot(
             exemplars=None,
             centred=centred,
         ).image
-        ratio = slice_coherence(volume) / max(target, 1e-6)
-        gaps[structure] = abs(np.log(max(ratio, 1e-6)))
-    return gaps["laminar"] < gaps["none"]
+        ratios[structure] = slice_coherence(volume) / max(target, 1e-6)
+    return ratios
 
 
 def _slice_step(volume: np.ndarray) -> int:
