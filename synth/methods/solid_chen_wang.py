@@ -10,8 +10,7 @@ copies the candidate exemplar pixel of least ``fit + consensus * (e - mu)^2`` ti
 histogram** factor; every voxel is an exemplar pixel). Coarse to fine
 (:func:`texsynth.synth.pixel.solid.run_levels`);
 :mod:`texsynth.synth.kernels.solid_kcoherence` has the formulas. One exemplar per plane for anisotropic
-materials;
-``planes=('xz', 'yz')`` for laminae (ALGORITHMS.md, section 4).
+materials; ``planes=('xz', 'yz')`` for laminae (ALGORITHMS.md, section 4).
 
 References: J. Chen, B. Wang, "High quality solid texture synthesis using position and index histogram
 matching", The Visual Computer 26(4):253-262, 2010. J. Kopf et al., "Solid texture synthesis from 2D

@@ -25,9 +25,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
 - grey histogram, 16 bins; 7x7 neighbourhoods (smaller at coarse levels) inside the exemplar; wrap or mirror;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
-  curved sheets (a centred field; length fitted to the exemplars: ``structure_length``) for isotropic
-  fringes, a crumpled stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep
-  the random start;
+  curved sheets (a centred field; length fitted: ``structure_length``) for isotropic fringes, a crumpled
+  stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep the random start;
 - after a structured start the last step copies the best match's pixel (``final_step``), not the average.
 """
 
