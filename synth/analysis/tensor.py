@@ -79,6 +79,14 @@ def _float_image(image: np.ndarray) -> np.ndarray:
     return arr.astype(np.float32)
 
 
+def _check_scales(sigma_d: float, sigma_w: float) -> None:
+    """Both filter scales positive and finite (``not value > 0`` alone lets ``inf`` through, which scipy
+    turns into an OverflowError)."""
+    for name, value in (("sigma_d", sigma_d), ("sigma_w", sigma_w)):
+        if not (np.isfinite(value) and value > 0):
+            raise InvalidParameter(name, value, "must be a positive, finite number of pixels")
+
+
 def structure_tensor(
     image: np.ndarray,
     sigma_d: float = 1.0,
@@ -115,10 +123,7 @@ def structure_tensor(
     img = _float_image(image)
     if img.ndim not in (2, 3):
         raise InvalidParameter("image", f"shape {img.shape}", "must be (H, W) or (H, W, C)")
-    for name, value in (("sigma_d", sigma_d), ("sigma_w", sigma_w)):
-        # ``not value > 0`` alone lets ``inf`` through, which scipy turns into an OverflowError.
-        if not (np.isfinite(value) and value > 0):
-            raise InvalidParameter(name, value, "must be a positive, finite number of pixels")
+    _check_scales(sigma_d, sigma_w)
     channels = img[..., None] if img.ndim == 2 else img
     out = np.zeros((*channels.shape[:2], 3), dtype=img.dtype)
     for c in range(channels.shape[2]):
@@ -149,9 +154,7 @@ def structure_tensor_stack(
     img = _float_image(images)
     if img.ndim != 3:
         raise InvalidParameter("images", f"shape {img.shape}", "must be a stack of grey images (N, H, W)")
-    for name, value in (("sigma_d", sigma_d), ("sigma_w", sigma_w)):
-        if not (np.isfinite(value) and value > 0):
-            raise InvalidParameter(name, value, "must be a positive, finite number of pixels")
+    _check_scales(sigma_d, sigma_w)
     ix = ndi.gaussian_filter(img, sigma_d, order=(0, 1), mode=mode, axes=(1, 2))
     iy = -ndi.gaussian_filter(img, sigma_d, order=(1, 0), mode=mode, axes=(1, 2))
     out = np.zeros((*img.shape, 3), dtype=img.dtype)
