@@ -13,7 +13,8 @@ docs/laminar.md from docs/laminar-benchmark.json without running anything.
    such samples, printed). ``--pilot 32`` prints ``solid-kopf``'s pilot on the real crops (``--uncentred``:
    the start field as before). ``--crop-floor``: what an ideal answer scores on the real crops at the
    volumes' 64^2 slice size (:func:`crop_floor`; docs/laminar-crop-floor.json, docs/solid.md), and the
-   2D reference line docs/laminar.md shows (:func:`reference_table`).
+   2D reference line docs/laminar.md shows (:func:`reference_table`). ``--shells-pilot 32``: would a pilot
+   pick ``solid-chen-wang``'s better shells (:func:`shells_pilot`)?
 2. **The runs**: every method and setting of :data:`RUNS`, seeds 1-3, through
    :func:`texsynth.synth.api.synthesize`, with the process CPU time and the wall time; per axis, the volume's
    slices against the truth's slices of the same size
@@ -90,7 +91,7 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int, tuple[str, ...]], ...] = (
     ("solid-chen-wang", "defaults", {}, 64, ("one", "planes")),
     ("solid-chen-wang", "paper", CHEN_WANG_PAPER, 64, ("one", "planes")),
     ("solid-kopf", "defaults", {}, 128, ("one",)),
-    ("solid-chen-wang", "defaults", {}, 128, ("one",)),
+    ("solid-chen-wang", "defaults", {}, 128, ("one", "planes")),
     ("solid-chen-wang", "paper", CHEN_WANG_PAPER, 128, ("one",)),
 )
 
@@ -378,6 +379,133 @@ def pilot_table(sides: tuple[int, ...] = (32,), centred: bool = True) -> list[di
     return rows
 
 
+#: The measures of the shells' pilot and their targets (the score: each measure over its target, summed).
+SHELLS_SCORED = (
+    ("orientation_kl", 0.10),
+    ("fringe_ks_length", 0.15),
+    ("fringe_ks_tortuosity", 0.15),
+    ("grey_kl", 0.05),
+)
+SHELLS_RESULTS = DOCS / "laminar-shells-pilot.json"
+
+
+def _against_planes(planes: dict[str, np.ndarray], volume: np.ndarray) -> dict[str, dict[str, float | None]]:
+    """The volume's slices (every second) against the exemplars, with the coherence ratio and contrast
+    (as ``bench_chen_wang_laminar``'s real-crop rows, per plane)."""
+    metrics = evaluate_volume(planes, volume, slice_step=2, s2=False)
+    head = _head(metrics["summary"])
+    for a in AXES:
+        block = metrics["axes"][a]
+        coh = block["structure"]["coherence_mean"]
+        head[a]["coherence_ratio"] = coh["output"] / coh["exemplar"]
+        head[a]["contrast"] = block["moments"]["output"]["std"] / block["moments"]["exemplar"]["std"]
+    return head
+
+
+def shells_score(axes: dict[str, dict[str, float | None]]) -> float:
+    """Issue 24's measures in target units, summed per axis and averaged over the axes: ``|log|`` of the
+    coherence ratio over ``log 1.15``, then each of :data:`SHELLS_SCORED` over its target (a missing KS,
+    no fringes, counts 1)."""
+    per_axis = []
+    for m in axes.values():
+        score = abs(np.log(max(float(m["coherence_ratio"] or 1e-6), 1e-6))) / np.log(1.15)
+        score += sum((m[key] if m[key] is not None else 1.0) / target for key, target in SHELLS_SCORED)
+        per_axis.append(score)
+    return float(np.mean(per_axis))
+
+
+def shells_pilot(pilot_side: int, seeds: tuple[int, ...], side: int = 64) -> dict[str, Any]:
+    """``solid-chen-wang``'s two laminar starts, ``shells='surfaces'`` (the default) and ``'centres'``, on
+    every exemplar set that takes the laminar start: a pilot as solid-kopf's (one ``pilot_side^3`` volume
+    per start, seed 0, its slices scored against the EXEMPLARS, :func:`shells_score`) beside the full
+    ``side^3`` runs (``seeds``; the truths' sets against the truth's slices, the real exemplars against
+    themselves, every second slice), with the same score. Would a pilot pick the better start?"""
+    from texsynth.synth.colour import to_grey
+    from texsynth.synth.io import load_image
+
+    known = truths()
+    sets: dict[str, tuple[dict[str, np.ndarray], TruthSlices | None]] = {
+        "onions, one exemplar": (
+            exemplars(known["onions"], "one"),
+            truth_slices(known["onions"], (side,) * 3),
+        ),
+        "onions, per plane": (
+            exemplars(known["onions"], "planes"),
+            truth_slices(known["onions"], (side,) * 3),
+        ),
+    }
+    for path in PILOT_EXEMPLARS:
+        if path.exists():
+            image = np.ascontiguousarray(to_grey(np.asarray(load_image(path), dtype=np.float32)))
+            sets[path.stem] = (dict.fromkeys(("xy", "xz", "yz"), image), None)
+    out: dict[str, Any] = {}
+    for name, (planes, ref) in sets.items():
+        row: dict[str, Any] = {}
+        for shells in ("surfaces", "centres"):
+            params = {"shells": shells}
+            pilot = synthesize(
+                "solid-chen-wang", exemplars=planes, size=(pilot_side,) * 3, params=params, seed=0
+            )
+            if pilot.stats["start"] != "laminar":
+                row = {"start": pilot.stats["start"]}
+                break
+            cell: dict[str, Any] = {"pilot": shells_score(_against_planes(planes, pilot.image))}
+            runs = []
+            for seed in seeds:
+                cpu = time.process_time()
+                image = synthesize(
+                    "solid-chen-wang", exemplars=planes, size=(side,) * 3, params=params, seed=seed
+                ).image
+                cpu = time.process_time() - cpu
+                axes = (
+                    _head(evaluate_against_truth(ref, image)["summary"])
+                    if ref is not None
+                    else _against_planes(planes, image)
+                )
+                runs.append({"seed": seed, "cpu": cpu, "axes": axes, "score": shells_score(axes)})
+                if seed == 1:  # the slices only (the cubes add little here)
+                    tag = f"{name.replace(', ', '-').replace(' ', '-')}-{shells}-{side}"
+                    title = f"solid-chen-wang shells={shells} {side}^3, seed 1"
+                    Image.fromarray(slices_image(image, planes, title=title)).save(
+                        DOCS / "img" / f"laminar-shells-{tag}-slices.png"
+                    )
+            cell["runs"] = runs
+            row[shells] = cell
+        out[name] = row
+        print(
+            name,
+            json.dumps({k: v.get("pilot") if isinstance(v, dict) else v for k, v in row.items()}),
+            flush=True,
+        )
+    return {"pilot_side": pilot_side, "side": side, "seeds": list(seeds), "sets": out}
+
+
+def shells_table(saved: dict[str, Any]) -> str:
+    """The markdown table of :func:`shells_pilot`: per set and start, the pilot's score, the full runs'
+    score (mean and worst seed), their measures (cells as the runs' table) and the pilot's choice."""
+    lines = [
+        f"| exemplar | start | pilot {saved['pilot_side']}^3 score | {saved['side']}^3 score, mean (worst) "
+        "| coherence ratio | orient. KL | length KS | tortuosity KS | grey KL | CPU s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, row in saved["sets"].items():
+        if "start" in row:
+            lines.append(f"| {name} | {row['start']} start: no shells | | | | | | | | |")
+            continue
+        pick = min(("surfaces", "centres"), key=lambda s: row[s]["pilot"])
+        best = min(("surfaces", "centres"), key=lambda s: np.mean([r["score"] for r in row[s]["runs"]]))
+        for shells in ("surfaces", "centres"):
+            runs = row[shells]["runs"]
+            scores = [r["score"] for r in runs]
+            marks = (" **pilot**" if shells == pick else "") + (" (better)" if shells == best else "")
+            cpu = statistics.median(r["cpu"] for r in runs)
+            lines.append(
+                f"| {name} | {shells}{marks} | {row[shells]['pilot']:.2f} | {np.mean(scores):.2f} "
+                f"({max(scores):.2f}) | " + " | ".join(_cells(runs)[:5]) + f" | {cpu:.1f} |"
+            )
+    return "\n".join(lines)
+
+
 #: The real crops whose floor at the slice size ``--crop-floor`` measures, and that size.
 CROPS = ("hrtem-onion-128.png", "hrtem-onion-core-128.png")
 CROP_BLOCK = 64
@@ -561,7 +689,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--uncentred", action="store_true", help="with --pilot: the laminar field as before (not centred)"
     )
+    parser.add_argument(
+        "--shells-pilot",
+        type=int,
+        default=0,
+        help="only compare solid-chen-wang's shells (surfaces, centres): a pilot at this side against "
+        "the full 64^3 runs (--seeds), every laminar-start exemplar set",
+    )
     args = parser.parse_args(argv)
+    if args.shells_pilot:
+        shells = shells_pilot(args.shells_pilot, tuple(range(1, args.seeds + 1)))
+        SHELLS_RESULTS.write_text(json.dumps(shells, indent=1) + "\n")
+        print(shells_table(shells))
+        return 0
     if args.pilot:
         pilot_table(tuple(args.pilot), centred=not args.uncentred)
         return 0
@@ -671,10 +811,9 @@ def report(saved: dict[str, Any]) -> str:
                 f"Truth, {key.split(',')[0]}: mid-slices above the exemplar, and the cube.\n\n{pic}\n"
             )
     parts.append(
-        "## The solids\n\nEvery `solid-chen-wang` row was re-run in session lam24; the notes below say "
-        "when the `solid-kopf` rows were (its `paper` rows are the baseline's).\n\n"
-        + table(saved["runs"])
-        + "\n"
+        "## The solids\n\nEvery `solid-chen-wang` row was re-run in session lam24 (the per-plane "
+        "turbostratic ones in cw7); the notes below say when the `solid-kopf` rows were (its `paper` rows "
+        "are the baseline's).\n\n" + table(saved["runs"]) + "\n"
     )
     parts.append("### Pictures (seed 1): mid-slices above their exemplars, and the cube\n")
     for key, pic in saved["pictures"].items():
@@ -762,11 +901,21 @@ sessions cw3-cw6.
   64^3 coherence 1.03, orientation KL <= 0.03, length KS <= 0.06, tortuosity KS 0.05-0.10 (0.151, seed 2
   xy); 128^3 every seed-axis met (tortuosity KS <= 0.08). Crumpled sheets like the exemplar's. 64^3 in 14 s
   of CPU (was 40 s: the oriented start takes 2 levels x 5); 128^3 85-102 s.
-- **Turbostratic, per plane: missed, as before.** `'auto'` takes the oriented start only when one exemplar
-  serves the three planes (`_crumpled_stack`), so per plane the stack starts from noise with the laminae
-  schedule (5 levels x 10, radius 1, orientation gain 32): straight sheets (picture), orientation KL
-  0.11-0.14 (0.23) and tortuosity KS 0.26-0.32 (0.34) on every seed-axis, in 25 s of CPU (over issue 24's 20
-  s). `solid-kopf`'s `'auto'` starts this row from its oriented stack and meets every target here.
+- **Turbostratic, per plane: the oriented start per plane too (session cw7).** Session lam24 measured
+  this row missed: `'auto'` took the oriented start only when one exemplar serves the three planes, so per
+  plane the stack started from noise with the laminae schedule: straight sheets, orientation KL 0.11-0.14
+  (0.23) and tortuosity KS 0.26-0.32 (0.34) on every seed-axis, in 25 s of CPU. `_crumpled_stack` now
+  measures per-plane exemplars too (their `orientation_length`s, weighted by each plane's anisotropy as
+  `solid-kopf`'s `exemplar_bend`; this stack 1.05-1.12 periods, per-plane bent sheets 2.2: those keep the
+  random start). 64^3 seeds 1-3 (load 1-2): coherence 1.03, orientation KL <= 0.03, length KS <= 0.05,
+  tortuosity KS 0.05-0.11 (**0.17**, seed 1 xz; the one-exemplar row's worst 0.151), grey KL 0.00, in
+  9-10 s of CPU (seed 1 32 s: numba's compilation in a fresh process). 128^3 seeds 1-2: every seed-axis
+  met (tortuosity KS <= 0.14), 75-82 s of CPU. Crumpled sheets like the exemplars' on every plane (pictures).
+- **Onions: a pilot between the two shells measured, not adopted (session cw7).** A 32^3 pilot per start
+  scored against the exemplars (`--shells-pilot 32`) picks `shells='centres'` on every laminar-start set:
+  better on the onion truth, a tie on the onion crop, worse on the onion core and clearly worse on
+  soot-256 (docs/solid.md, "`solid-chen-wang`: the oriented start per plane, and a pilot for the shells").
+  The onion rows above keep the surfaces start and their bytes.
 - **The paper's settings: worms on onions, straight sheets on the stack.** Onions 64^3 coherence 0.78-0.84
   (one exemplar, worst 0.76) and 0.78-0.80 per plane, length KS 0.25-0.32 on every seed-axis (fringes too
   short), one exemplar orientation KL up to 0.19 (xz); tortuosity KS 0.07-0.14 (0.15 once). The slices are
@@ -778,9 +927,9 @@ sessions cw3-cw6.
   0.23 on xz (worms between flat grey patches); the stack orientation KL 0.08-0.14, length KS 0.13-0.16
   (three seed-axes at 0.153-0.155), tortuosity KS 0.26-0.34 (too straight).
 - **Time** (process CPU, median of seeds 1-3): onions 64^3 5.3-5.7 s (the first `solid-chen-wang` run of the
-  process 19.8 s: numba), stack 14 s one exemplar and 25 s per plane, paper 12-22 s; 128^3 onions 33 s,
-  stack 101 s; the paper's 128^3 83-94 s. Within 20 s at 64^3 but for the per-plane stack (25 s) and the
-  paper's settings on per-plane onions (22 s).
+  process 19.8 s: numba), stack 14 s one exemplar and 25 s per plane (10 s since session cw7), paper 12-22
+  s; 128^3 onions 33 s, stack 101 s; the paper's 128^3 83-94 s. Within 20 s at 64^3 but for the paper's
+  settings on per-plane onions (22 s).
 
 ## The sheets' length fitted to the exemplar (issue 24, `solid-kopf`, session kopf4)
 

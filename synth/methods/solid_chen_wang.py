@@ -27,7 +27,7 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
   pilot decides; or, opt-in, shells around random centres), solid-kopf's crumpled stack
-  (``'oriented'``) for one crumpled anisotropic exemplar.
+  (``'oriented'``) for crumpled anisotropic exemplars (one, or per plane).
 """
 
 from __future__ import annotations
@@ -237,9 +237,9 @@ class SolidChenWangParams(SolidParams):
             "solid-kopf); 'none': the paper's random start; 'auto' (with adapt_to_structure): "
             "'laminar' for one isotropic exemplar on the three planes that is fringed (mean coherence "
             ">= 0.6) or chosen by a small pilot (0.45-0.6), or for fringed isotropic per-plane "
-            "exemplars; 'oriented' for one fringed anisotropic exemplar on the three planes whose "
-            "fringes turn within 1.5 periods (a crumpled stack; bent laminae measured better from "
-            "noise); else 'none'."
+            "exemplars; 'oriented' for fringed anisotropic exemplars on the three planes (one, or per "
+            "plane) whose fringes turn within 1.5 periods (a crumpled stack; bent laminae measured "
+            "better from noise); else 'none'."
         ),
         (
             "Curvature length of the laminar start, in periods (0-64]; empty or 'auto': solid-kopf's "
@@ -619,12 +619,25 @@ def orientation_length(image: np.ndarray) -> float:
 
 
 def _crumpled_stack(exemplars: Mapping[str, np.ndarray], planes: tuple[str, ...]) -> bool:
-    """Whether 'auto' takes the oriented start: one laminar exemplar (:func:`is_laminar`) on the three planes
-    whose fringes turn within :data:`ORIENTED_MAX_LENGTH` periods (:func:`orientation_length`), as the stack's
-    crumples do."""
+    """Whether 'auto' takes the oriented start: laminar exemplars (:func:`is_laminar`) on the three planes
+    whose fringes turn within :data:`ORIENTED_MAX_LENGTH` periods (:func:`orientation_length`), as the
+    stack's crumples do.
+
+    One exemplar for every plane is measured once; per-plane exemplars by their lengths' mean weighted by
+    each plane's anisotropy (:func:`texsynth.synth.pixel.laminar.plane_orientation`, as solid-kopf's
+    :func:`texsynth.synth.pixel.laminar.exemplar_bend`: a plane nearly parallel to the sheets shows contour
+    bands, not fringes). Per-plane bent sheets (2.2 periods) keep the random start (docs/solid.md).
+    """
     images = [np.asarray(exemplars[p]) for p in planes]
-    one = len(images) == 3 and all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:])
-    return one and is_laminar(images[:1]) and orientation_length(images[0]) <= ORIENTED_MAX_LENGTH
+    if len(images) != 3:  # two views: not measured with the oriented start but on bent laminae (worse)
+        return False
+    if all(im is images[0] or np.array_equal(im, images[0]) for im in images[1:]):
+        return is_laminar(images[:1]) and orientation_length(images[0]) <= ORIENTED_MAX_LENGTH
+    if not is_laminar(images):
+        return False
+    weights = [max(plane_orientation(im)[1], 1e-3) for im in images]
+    length = float(np.average([orientation_length(im) for im in images], weights=weights))
+    return length <= ORIENTED_MAX_LENGTH
 
 
 @dataclass(frozen=True)

@@ -379,12 +379,14 @@ def test_solve_radius_defaults_to_one_for_laminae_only() -> None:
     assert literal.stats["solve_radius"] == 0
 
 
-def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotropic_exemplar() -> None:
+def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_crumpled_stacks() -> None:
     """Per-plane slices of sheets normal to (1, 1, 1): the oriented start (solid-kopf's crumpled stack) gives
     each plane its orientation and the stack's spacing. 'auto' takes it, with its short schedule, for one
-    crumpled anisotropic exemplar on the three planes (the same bytes as asking for it), not for per-plane
-    exemplars, bent laminae (measured better from noise) nor noise."""
+    crumpled anisotropic exemplar on the three planes and for a crumpled stack's three per-plane slices (the
+    same bytes as asking for it), not for bent laminae, one exemplar or per plane (measured better from
+    noise), two views, nor noise."""
     from texsynth.synth.io.laminar import turbostratic_volume
+    from texsynth.synth.io.patterns import laminae_volume
     from texsynth.synth.methods.solid_chen_wang import (
         ORIENTED_COARSE_ITERATIONS,
         ORIENTED_ITERATIONS,
@@ -409,7 +411,22 @@ def test_oriented_start_keeps_a_tilted_stack_and_auto_takes_it_for_one_anisotrop
         got = dominant_orientation(structure_tensor(np.take(res.image, 12, axis=axis)))
         want = dominant_orientation(structure_tensor(planes[plane]))
         assert abs(wrap_angle(got - want)) < np.radians(15), plane
-    assert _Schedule.resolve(SolidChenWangParams(), planes).start == "none"
+    per_plane = _Schedule.resolve(SolidChenWangParams(), planes)
+    assert (per_plane.start, per_plane.iterations) == ("oriented", ORIENTED_ITERATIONS)
+    auto, asked = (
+        synthesize(
+            "solid-chen-wang", exemplars=planes, size=(16, 16, 16), params={**small, "structure": s}, seed=3
+        )
+        for s in ("auto", "oriented")
+    )
+    assert auto.stats["start"] == "oriented" and auto.image.tobytes() == asked.image.tobytes()
+    # Per-plane bent sheets (laminae across two planes, contour bands on xy) keep the random start.
+    sheets = laminae_volume((128, 128, 128), (1.0, 0.0, 0.0), 7, 6, 64, noise=0.2, seed=1)
+    bent_planes = {"xy": sheets[64], "xz": sheets[:, 64, :], "yz": sheets[:, :, 64]}
+    assert _Schedule.resolve(SolidChenWangParams(), bent_planes).start == "none"
+    # Two views of the stack: not measured with the oriented start, so 'auto' keeps the random start.
+    two = SolidChenWangParams(planes=("xz", "yz"))
+    assert _Schedule.resolve(two, dict.fromkeys(PLANES, planes["xy"])).start == "none"
     one = dict.fromkeys(PLANES, planes["xy"])
     schedule = _Schedule.resolve(SolidChenWangParams(), one)
     assert (schedule.start, schedule.iterations, schedule.coarse_iterations) == (
