@@ -581,6 +581,18 @@ def _search_block(
                     delta[labs[1, idx]] = 0
 
 
+@kernel(inline="always")
+def _block_edge(units, a, z, target):
+    """The unit boundary of ``a:z`` (an index ``i`` of ``units``) whose position count is nearest to
+    ``target``, the later one on a tie: blocks split there hold as nearly equal shares of a level's
+    positions as whole units allow (with 2 blocks, the best split). Non-decreasing in ``target``, so
+    consecutive edges never cross; which block runs a unit does not change the bytes."""
+    i = a + np.searchsorted(units[a : z + 1], target)
+    if i > a and target - units[i - 1] < units[i] - target:
+        i -= 1
+    return i
+
+
 def _levels_body(
     level_lo,
     level_hi,
@@ -613,8 +625,8 @@ def _levels_body(
         first = units[a]
         total = units[z] - first
         for b in prange(nb):  # blocks of whole units holding about as many positions each
-            lo = a + np.searchsorted(units[a : z + 1], first + (b * total) // nb)
-            hi = a + np.searchsorted(units[a : z + 1], first + ((b + 1) * total) // nb)
+            lo = _block_edge(units, a, z, first + (b * total) // nb)
+            hi = _block_edge(units, a, z, first + ((b + 1) * total) // nb)
             if lo < hi:
                 _search_block(
                     sched,

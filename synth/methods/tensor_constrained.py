@@ -50,10 +50,12 @@ from texsynth.synth.params import ui
 from texsynth.synth.pixel.synthesis import (
     Guidance,
     check_neighbourhoods_fit,
+    sets_ahead,
     source_map_pyramid,
     synthesize_source_map,
     tensor_features,
 )
+from texsynth.synth.threads import current_threads
 
 __all__ = [
     "TensorConstrainedParams",
@@ -410,24 +412,12 @@ def run_tensor_constrained(
     t0 = time.perf_counter()
     s_in = structure_tensor(exemplar, params.sigma_d, params.sigma_w)
     params = params.resolved(s_in)
-    # Half the work estimate each: the structure stage runs on more levels, the texture on richer data.
-    s_out, src_structure, stats_structure = synthesize_tensor_field(
-        s_in, size, params, seed=seed, progress=report, span=(0.0, 0.5)
-    )
-    t1 = time.perf_counter()
+    # The texture stage's exemplar side first: its coarsest k-coherence sets depend on nothing else
+    # (nor on the structure stage), so with 2 threads or more they are made during the structure stage.
     levels = params.texture_levels
     gui_code = tensor_features(s_in, params.metric)[1]
     gui_ex = [tensor_features(t, params.metric)[0] for t in gaussian_pyramid(s_in, levels)]
-    gui_out = [tensor_features(t, params.metric)[0] for t in gaussian_pyramid(s_out, levels, mode="wrap")]
-    hints = source_map_pyramid(src_structure, levels)
-    guidance = Guidance(
-        out_levels=gui_out,
-        ex_levels=gui_ex,
-        metric=gui_code,
-        weight=1.0 - params.p,
-        size=params.neighbourhood_size,
-        hint_levels=hints,
-    )
+    ex_levels = gaussian_pyramid(as_features(exemplar), levels)
     settings = params.search_settings(
         size=params.neighbourhood_size,
         levels=levels,
@@ -436,8 +426,31 @@ def run_tensor_constrained(
         histogram_weight=params.texture_histogram_weight,
         refine_p=params.refinement_p,
     )
+    guide = {
+        "ex_levels": gui_ex,
+        "metric": gui_code,
+        "weight": 1.0 - params.p,
+        "size": params.neighbourhood_size,
+    }
+    sets = None
+    if current_threads() > 1:
+        sets = sets_ahead(
+            ex_levels, settings, p=params.p, guidance=Guidance(out_levels=(), **guide), seed=seed + 1
+        )
+    # Half the work estimate each: the structure stage runs on more levels, the texture on richer data.
+    try:
+        s_out, src_structure, stats_structure = synthesize_tensor_field(
+            s_in, size, params, seed=seed, progress=report, span=(0.0, 0.5)
+        )
+    except BaseException:
+        if sets is not None:  # not left running behind an error (or a cancelled job)
+            sets()
+        raise
+    t1 = time.perf_counter()
+    gui_out = [tensor_features(t, params.metric)[0] for t in gaussian_pyramid(s_out, levels, mode="wrap")]
+    guidance = Guidance(out_levels=gui_out, hint_levels=source_map_pyramid(src_structure, levels), **guide)
     srcs, stats_texture = synthesize_source_map(
-        gaussian_pyramid(as_features(exemplar), levels),
+        ex_levels,
         level_shapes(size, levels),
         settings,
         p=params.p,
@@ -446,6 +459,7 @@ def run_tensor_constrained(
         progress=report,
         stage="texture",
         span=(0.5, 1.0),
+        coarsest_sets=sets,
     )
     src = srcs[0]
     image = exemplar[src[..., 0], src[..., 1]].astype(np.float32)

@@ -33,6 +33,7 @@ X. Tong et al., "Synthesis of bidirectional texture functions on arbitrary surfa
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
@@ -74,6 +75,7 @@ __all__ = [
     "k_coherence_sets",
     "kset_points",
     "level_neighbourhood_size",
+    "sets_ahead",
     "source_map_pyramid",
     "synthesize_source_map",
     "tensor_features",
@@ -440,6 +442,146 @@ def _level_mask(
     return mask
 
 
+class _Level(NamedTuple):
+    """What a level's search needs before its sources: :func:`_level_setup`."""
+
+    ex: np.ndarray
+    par_ex: np.ndarray
+    has_parent: bool
+    size: int
+    offs: np.ndarray
+    cur_offs: np.ndarray
+    par_offs: np.ndarray
+    valid: np.ndarray
+    unit: float
+    gui_ex: np.ndarray
+    gunit: float
+    n_par: int
+    w_pix: float
+    gui_offs: np.ndarray
+    w_gui: float
+    mask: np.ndarray
+
+
+def _level_setup(
+    level: int,
+    ex_levels: Sequence[np.ndarray],
+    settings: SearchSettings,
+    metric: int,
+    p: float,
+    guidance: Guidance | None,
+    rng: np.random.Generator,
+    ex_masks: Sequence[np.ndarray] | None,
+) -> _Level:
+    """A level's neighbourhoods, valid region, typical distances (the level's first draws of ``rng``),
+    part weights and mask: everything :func:`synthesize_source_map` sets up before the level's sources.
+    Reads the exemplar side only (``guidance.ex_levels``, not its output levels)."""
+    levels = settings.levels
+    ex = np.ascontiguousarray(ex_levels[level], dtype=np.float32)
+    has_parent = level < levels - 1
+    par_ex = (
+        np.ascontiguousarray(ex_levels[level + 1], dtype=np.float32)
+        if has_parent
+        else _empty_features(ex.shape[2])
+    )
+    # The finest level keeps the requested size (too large is the user's error, said clearly).
+    size = settings.size if level == 0 else level_neighbourhood_size(settings.size, ex.shape[:2])
+    parent_size = level_neighbourhood_size(settings.parent_size, par_ex.shape[:2]) if has_parent else 1
+    offs = neighbourhood_offsets(size, settings.shape)
+    # Periodic: the kernel holds the whole square; the first pass compares its synthesized
+    # positions (``offs``'s entries inside a lexicographic scan), the refinement passes all of it.
+    cur_offs = neighbourhood_offsets(size, "square") if settings.periodic else offs
+    cur_offs = _nearest_first(cur_offs, settings.falloff)
+    par_offs = parent_offsets(parent_size) if has_parent else np.zeros((0, 2), np.int32)
+    valid = _valid_region(
+        ex.shape[:2], size // 2, (par_ex.shape[:2], parent_size // 2) if has_parent else None, level
+    )
+    unit = _typical_distance(ex, metric, settings.alpha, rng)
+    if guidance is not None:
+        gui_ex = np.ascontiguousarray(guidance.ex_levels[level], dtype=np.float32)
+        gunit = _typical_distance(gui_ex, guidance.metric, settings.alpha, rng)
+    else:
+        gui_ex = _empty_features(3)
+        gunit = 1.0
+    n_par = len(par_offs) if has_parent else 0
+    w_pix, gui_offs, w_gui = _part_weights(offs, n_par, unit, p, guidance, gunit)
+    mask = _level_mask(ex_masks, level, ex.shape[:2], valid)
+    return _Level(
+        ex,
+        par_ex,
+        has_parent,
+        size,
+        offs,
+        cur_offs,
+        par_offs,
+        valid,
+        unit,
+        gui_ex,
+        gunit,
+        n_par,
+        w_pix,
+        gui_offs,
+        w_gui,
+        mask,
+    )
+
+
+def _level_sets(lv: _Level, settings: SearchSettings, metric: int, guidance: Guidance | None) -> np.ndarray:
+    """A level's k-coherence sets (:func:`k_coherence_sets`; an empty array for the exact search)."""
+    if settings.search == "exact":
+        return np.full((1, 1, 0, 2), -1, np.int64)
+    embeds = [(_euclidean_embedding(lv.ex, metric), lv.w_pix)]
+    if guidance is not None:
+        embeds.append((_euclidean_embedding(lv.gui_ex, guidance.metric), lv.w_gui))
+    return k_coherence_sets(
+        embeds, lv.size, lv.valid, settings.k, lv.mask, settings.kset_size, settings.kset_dims
+    )
+
+
+def sets_ahead(
+    ex_levels: Sequence[np.ndarray],
+    settings: SearchSettings,
+    *,
+    metric: int = METRIC_SSD,
+    p: float = 1.0,
+    guidance: Guidance | None = None,
+    seed: int = 0,
+    ex_masks: Sequence[np.ndarray] | None = None,
+) -> Callable[[], np.ndarray]:
+    """Start the coarsest level's k-coherence sets of a later :func:`synthesize_source_map` (same
+    arguments) on a thread of their own; return the call that waits for them (for its ``coarsest_sets``).
+
+    They depend on the exemplar and the seed only (the level's typical distances are the run's first
+    draws), so a caller with other work first (``tensor-constrained``'s structure stage) overlaps them
+    with it: the sets' query and projections release Python's lock and fill the cores that work leaves
+    idle. One thread (the k-d tree's ``workers``): the same sets as on any number. The output's guidance
+    levels are not read (``guidance.out_levels`` may be empty).
+    """
+    box: list = []
+
+    def work() -> None:
+        try:
+            with use_threads(1):
+                rng = np.random.default_rng(seed)
+                lv = _level_setup(
+                    settings.levels - 1, ex_levels, settings, metric, p, guidance, rng, ex_masks
+                )
+                box.append(_level_sets(lv, settings, metric, guidance))
+        except BaseException as err:  # raised again by the waiting call
+            box.append(err)
+
+    thread = threading.Thread(target=work, name="texsynth-sets", daemon=True)
+    thread.start()
+
+    def result() -> np.ndarray:
+        thread.join()
+        if isinstance(box[0], BaseException):
+            raise box[0]
+        return box[0]
+
+    return result
+
+
 def _initial_sources(
     shape: tuple[int, int],
     valid: np.ndarray,
@@ -663,6 +805,7 @@ def synthesize_source_map(
     histogram: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
     window: CandidateWindow | None = None,
     initial: Sequence[np.ndarray] | None = None,
+    coarsest_sets: Callable[[], np.ndarray] | None = None,
 ) -> tuple[list[np.ndarray], SynthesisReport]:
     """Synthesize source maps for every pyramid level, coarsest first; return them finest first.
 
@@ -697,6 +840,9 @@ def synthesize_source_map(
         its map instead of random sources (or its parent's), and with ``settings.refine_square`` every
         pass, the first included, is a square refinement pass (the whole square, random order), since
         every position already holds a source.
+    coarsest_sets : callable, optional
+        Returns the coarsest level's k-coherence sets, made ahead by :func:`sets_ahead` from the same
+        exemplar levels, settings, metric, ``p``, guidance exemplar levels, seed and masks.
     """
     levels = settings.levels
     if len(ex_levels) != levels or len(out_shapes) != levels:
@@ -720,57 +866,29 @@ def synthesize_source_map(
     stamp = np.zeros((current_threads(), stamp_size), dtype=np.int64)  # one row per block of a level
     counter = np.zeros(1, dtype=np.int64)
     for level in range(levels - 1, -1, -1):
-        ex = np.ascontiguousarray(ex_levels[level], dtype=np.float32)
+        lv = _level_setup(level, ex_levels, settings, metric, p, guidance, rng, ex_masks)
+        ex, par_ex, has_parent, size, _, cur_offs, par_offs, valid = lv[:8]
+        unit, gui_ex, gunit, n_par, w_pix, gui_offs, w_gui, mask = lv[8:]
         shape = tuple(out_shapes[level])
-        has_parent = level < levels - 1
-        par_ex = (
-            np.ascontiguousarray(ex_levels[level + 1], dtype=np.float32)
-            if has_parent
-            else _empty_features(ex.shape[2])
-        )
-        # The finest level keeps the requested size (too large is the user's error, said clearly).
-        size = settings.size if level == 0 else level_neighbourhood_size(settings.size, ex.shape[:2])
-        parent_size = level_neighbourhood_size(settings.parent_size, par_ex.shape[:2]) if has_parent else 1
-        offs = neighbourhood_offsets(size, settings.shape)
-        # Periodic: the kernel holds the whole square; the first pass compares its synthesized
-        # positions (``offs``'s entries inside a lexicographic scan), the refinement passes all of it.
-        cur_offs = neighbourhood_offsets(size, "square") if settings.periodic else offs
-        cur_offs = _nearest_first(cur_offs, settings.falloff)
-        par_offs = parent_offsets(parent_size) if has_parent else np.zeros((0, 2), np.int32)
-        valid = _valid_region(
-            ex.shape[:2], size // 2, (par_ex.shape[:2], parent_size // 2) if has_parent else None, level
-        )
-        unit = _typical_distance(ex, metric, settings.alpha, rng)
         if guidance is not None:
             gui_out = np.ascontiguousarray(guidance.out_levels[level], dtype=np.float32)
-            gui_ex = np.ascontiguousarray(guidance.ex_levels[level], dtype=np.float32)
-            gunit = _typical_distance(gui_ex, guidance.metric, settings.alpha, rng)
             hint = guidance.hint_levels[level] if guidance.hint_levels is not None else None
         else:
-            gui_out = gui_ex = _empty_features(3)
-            gunit = 1.0
+            gui_out = gui_ex
             hint = None
-
-        n_par = len(par_offs) if has_parent else 0
-        w_pix, gui_offs, w_gui = _part_weights(offs, n_par, unit, p, guidance, gunit)
         # Refinement passes may weigh eq 13 otherwise (``refine_p``); None keeps the first pass's weights.
         p_ref, gw_ref = (p, None)
         if settings.refine_p is not None:
             p_ref, gw_ref = settings.refine_p, 1.0 - settings.refine_p
-        mask = _level_mask(ex_masks, level, ex.shape[:2], valid)
         src = _initial_sources(shape, valid, mask, srcs[level + 1] if has_parent else None, rng)
         if initial is not None:
             src = np.ascontiguousarray(initial[level], dtype=np.int64).copy()
         exact = settings.search == "exact"
-        embeds = [(_euclidean_embedding(ex, metric), w_pix)]
-        if guidance is not None:
-            embeds.append((_euclidean_embedding(gui_ex, guidance.metric), w_gui))
         k = 0 if exact else settings.k
-        kset = (
-            k_coherence_sets(embeds, size, valid, k, mask, settings.kset_size, settings.kset_dims)
-            if not exact
-            else np.full((1, 1, 0, 2), -1, np.int64)
-        )
+        if coarsest_sets is not None and level == levels - 1:
+            kset = coarsest_sets()  # made ahead by :func:`sets_ahead`, from the same inputs
+        else:
+            kset = _level_sets(lv, settings, metric, guidance)
         par_out = (
             np.ascontiguousarray(ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]])
             if has_parent

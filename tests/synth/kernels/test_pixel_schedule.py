@@ -14,6 +14,7 @@ import pytest
 from tests.synth.search_cases import _rng_image
 from texsynth.synth.grid.neighbourhood import neighbourhood_offsets
 from texsynth.synth.kernels.pixel_search import (
+    _block_edge,
     _offset_runs,
     _unit_levels_kernel,
     _unit_levels_reference,
@@ -181,3 +182,25 @@ def test_histogram_counts_follow_every_change() -> None:
     src = s.cands.src
     expect = np.bincount(s.hist.labels[(src[..., 0] * 24 + src[..., 1]).ravel()], minlength=len(s.hist.count))
     np.testing.assert_array_equal(s.hist.count, expect)
+
+
+def _block_edge_reference(units: np.ndarray, a: int, z: int, target: int) -> int:
+    """The boundary ``a..z`` whose position count is nearest to ``target``, the later one on a tie."""
+    gaps = [abs(int(units[i]) - target) for i in range(a, z + 1)]
+    return a + max(i for i, g in enumerate(gaps) if g == min(gaps))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_edges_split_a_level_as_evenly_as_whole_units_allow(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    units = np.concatenate([[0], np.cumsum(rng.integers(1, 120, size=40))]).astype(np.int64)
+    for a, z in [(0, 40), (3, 4), (5, 17), (10, 40)]:
+        first, total = int(units[a]), int(units[z] - units[a])
+        for nb in (1, 2, 3, 4):
+            edges = [int(_block_edge(units, a, z, first + (b * total) // nb)) for b in range(nb + 1)]
+            want = [_block_edge_reference(units, a, z, first + (b * total) // nb) for b in range(nb + 1)]
+            assert edges == want
+            assert edges[0] == a and edges[-1] == z and edges == sorted(edges)
+            if nb == 2:  # the best split of whole units into two contiguous blocks
+                best = min(max(int(units[i] - first), int(units[z] - units[i])) for i in range(a, z + 1))
+                assert max(int(units[edges[1]] - first), int(units[z] - units[edges[1]])) == best

@@ -33,6 +33,7 @@ from texsynth.synth.pixel.synthesis import (
     Guidance,
     SearchSettings,
     entry_weights,
+    sets_ahead,
     synthesize_source_map,
     tensor_features,
 )
@@ -760,3 +761,48 @@ def test_kset_points_are_the_plain_weighted_neighbourhoods_bit_for_bit(holes: bo
     want = plain @ np.linalg.eigh(sample.T @ sample)[1][:, ::-1][:, :8]
     got = core.kset_points(embeds, 9, valid, mask, kset_size=7, kset_dims=8)
     assert got.dtype == np.float64 and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("guided", [False, True])
+def test_sets_made_ahead_are_the_sets_the_run_makes(guided: bool) -> None:
+    """:func:`sets_ahead` on its own thread gives the coarsest level's k-coherence sets bit for bit, and a
+    run handed them gives the same source maps as one that makes them itself."""
+    rng = np.random.default_rng(3)
+    ex = [rng.random((32, 32, 1), dtype=np.float32), rng.random((16, 16, 1), dtype=np.float32)]
+    settings = SearchSettings(size=5, levels=2, iterations=2, k=3)
+    guidance = None
+    if guided:
+        tens = [rng.random((32, 32, 3), dtype=np.float32), rng.random((16, 16, 3), dtype=np.float32)]
+        guidance = Guidance(out_levels=(), ex_levels=tens, metric=METRIC_SSD, weight=0.4, size=5)
+    kept: dict[int, np.ndarray] = {}
+    out = [rng.random((24, 24, 3), dtype=np.float32), rng.random((12, 12, 3), dtype=np.float32)]
+    guide = replace(guidance, out_levels=out) if guidance is not None else None
+
+    def run(sets=None):
+        return synthesize_source_map(
+            ex,
+            [(24, 24), (12, 12)],
+            settings,
+            p=0.6,
+            guidance=guide,
+            seed=9,
+            coarsest_sets=sets,
+            on_level_done=lambda level, state: kept.setdefault(level, state.cands.kset.copy()),
+        )[0]
+
+    plain = run()
+    made = kept.pop(1)
+    kept.clear()
+    ahead = sets_ahead(ex, settings, p=0.6, guidance=guidance, seed=9)
+    sets = ahead()
+    assert sets.dtype == made.dtype and np.array_equal(sets, made)
+    assert (sets >= 0).any()
+    handed = run(lambda: sets)
+    assert all(np.array_equal(a, b) for a, b in zip(plain, handed, strict=True))
+
+
+def test_an_error_while_making_sets_ahead_is_raised_by_the_wait() -> None:
+    ex = [np.zeros((6, 6, 1), dtype=np.float32)]  # no 9 x 9 neighbourhood fits
+    wait = sets_ahead(ex, SearchSettings(size=9, levels=1), seed=1)
+    with pytest.raises(InvalidParameter, match="neighbourhood_size"):
+        wait()
