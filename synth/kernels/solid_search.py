@@ -314,7 +314,7 @@ def candidate_differences(vectors: np.ndarray, candidates: np.ndarray) -> np.nda
     vec = np.ascontiguousarray(vectors, dtype=np.float32)
     cand = np.ascontiguousarray(candidates, dtype=np.int64)
     out = np.empty((cand.shape[0], cand.shape[1], vec.shape[1]), dtype=np.float32)
-    with _threads_for(out.size // 64):
+    with _threads_for(out.size // 64):  # about 64 differences a microsecond
         _candidate_differences_kernel(vec, cand, out)
     return out
 
