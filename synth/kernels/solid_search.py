@@ -52,6 +52,8 @@ __all__ = [
     "SliceGeometry",
     "best_vote",
     "best_vote_reference",
+    "candidate_differences",
+    "candidate_differences_reference",
     "gather_slices",
     "gather_slices_reference",
     "histogram_bin",
@@ -60,6 +62,8 @@ __all__ = [
     "kcoherence_candidates_reference",
     "kcoherence_search",
     "kcoherence_search_reference",
+    "merge_remap",
+    "merge_remap_reference",
     "nearest_exact",
     "nearest_exact_reference",
     "rerank",
@@ -288,6 +292,36 @@ def rerank_reference(
         j = int(np.argmin(d))
         idx[m], d2[m] = cands[j], d[j]
     return idx, d2
+
+
+@kernel(parallel=True)
+def _candidate_differences_kernel(vectors, candidates, out):
+    last = vectors.shape[0] - 1
+    for m in prange(candidates.shape[0]):
+        for c in range(candidates.shape[1]):
+            e = min(candidates[m, c], last)
+            for j in range(vectors.shape[1]):
+                out[m, c, j] = vectors[e, j] - vectors[m, j]
+
+
+def candidate_differences(vectors: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """``vectors[min(candidates, P - 1)] - vectors[:, None, :]``, ``(M, C, K)`` float32, on the job's threads.
+
+    ``vectors`` ``(P, K)`` float32 (``M <= P`` rows have candidates), ``candidates`` ``(M, C)`` int64
+    (``P`` for "no neighbour", as SciPy's k-d tree answers). Each entry is one float32 subtraction, as
+    NumPy's, so the bytes are :func:`candidate_differences_reference`'s; the array is NumPy's own.
+    """
+    vec = np.ascontiguousarray(vectors, dtype=np.float32)
+    cand = np.ascontiguousarray(candidates, dtype=np.int64)
+    out = np.empty((cand.shape[0], cand.shape[1], vec.shape[1]), dtype=np.float32)
+    with _threads_for(out.size // 64):  # about 64 differences a microsecond
+        _candidate_differences_kernel(vec, cand, out)
+    return out
+
+
+def candidate_differences_reference(vectors: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """Plain NumPy :func:`candidate_differences`."""
+    return vectors[np.minimum(candidates, len(vectors) - 1)] - vectors[: len(candidates), None, :]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -539,6 +573,54 @@ def kcoherence_search_reference(
         j = int(np.argmin(d))
         pos[m], d2[m] = cands[j], d[j]
     return pos, d2
+
+
+# ---------------------------------------------------------------------------------------------
+# The final rank remap (histogram specification)
+
+
+@kernel(inline="always")
+def _sorts_before(a, b):
+    """``a`` comes strictly before ``b`` in NumPy's sort order (NaN last)."""
+    return a < b or (b != b and a == a)
+
+
+@kernel
+def _merge_remap_kernel(values, left, right, offset, ref, out):
+    n = values.shape[0]
+    size = ref.shape[0]
+    i = 0
+    j = 0
+    for r in range(n):
+        if j >= right.shape[0] or (
+            i < left.shape[0] and not _sorts_before(values[offset + right[j]], values[left[i]])
+        ):
+            p = left[i]
+            i += 1
+        else:
+            p = offset + right[j]
+            j += 1
+        out[p] = ref[(r * size) // n]
+
+
+def merge_remap(
+    values: np.ndarray, left: np.ndarray, right: np.ndarray, ref: np.ndarray, out: np.ndarray
+) -> None:
+    """``out[p_r] = ref[r * len(ref) // N]`` for the voxel ``p_r`` of rank ``r`` among ``values`` (N,).
+
+    ``left`` and ``right`` are the stable argsorts of ``values[:len(left)]`` and of the rest (local
+    indices); merging them, ties to ``left``, gives the stable argsort of the whole (one order only), so
+    :func:`merge_remap_reference`'s bytes. ``ref`` is sorted; ``out`` is ``values``' float32 shape.
+    """
+    _merge_remap_kernel(values, left, right, len(left), ref, out)
+
+
+def merge_remap_reference(values: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Plain NumPy :func:`merge_remap`: one stable argsort of the whole, then the remap."""
+    out = np.empty_like(values)
+    ranks = np.argsort(values, kind="stable")
+    out[ranks] = ref[(np.arange(values.size, dtype=np.int64) * ref.size) // values.size]
+    return out
 
 
 # ---------------------------------------------------------------------------------------------

@@ -268,3 +268,50 @@ def test_thread_map_works_in_a_forked_child_after_the_parent_used_it() -> None:
     ctx = multiprocessing.get_context("fork")
     with ctx.Pool(1) as pool:
         assert pool.apply_async(thread_map, (abs, [-4, -5, -6], 2)).get(timeout=60) == [4, 5, 6]
+
+
+# solid-kopf's serial parts put on the threads (issue 25, branch kwhole25): the pilot's and the final step's
+# slice coherence (stacks of slices on the threads), the final rank remap sorted in two halves (forced at
+# every size), the k-coherence sets' differences; with 1, 2 and 4 threads in a process whose pools have 4.
+_KOPF_STARTS = """
+import hashlib, json
+import texsynth.synth.kernels.solid_search as k
+import texsynth.synth.pixel.solid as solid
+from texsynth.synth.api import synthesize
+from texsynth.synth.methods.solid_kopf import pilot_ratios
+from texsynth.synth.io.patterns import undulating_laminae
+
+k.PARALLEL_MIN_ITEMS = 0
+solid.SPLIT_SORT = 0
+ex = undulating_laminae((40, 40), period=6.0, amplitude=4.0, wavelength=32.0, noise=0.1, seed=0)
+cases = {
+    "laminar-auto-final": {"structure": "laminar", "final_step": "auto", "levels": 2},
+    "laminar-best": {"structure": "laminar", "final_step": "best", "levels": 2},
+}
+out = {}
+for name, params in cases.items():
+    digests = []
+    for threads in (1, 2, 4):
+        solid._BUILT.clear()  # the exemplar tables built anew at each count
+        r = synthesize("solid-kopf", ex, size=(16, 16, 16), seed=2, params=params, threads=threads)
+        digests.append(hashlib.sha256(r.image.tobytes() + r.stats["final_step"].encode()).hexdigest())
+    out[name] = digests
+from texsynth.synth.threads import use_threads
+pilots = []
+for threads in (1, 2, 4):
+    with use_threads(threads):
+        pilots.append(repr(sorted(pilot_ratios(ex, side=16).items())))
+out["pilot"] = pilots
+print(json.dumps(out))
+"""
+
+
+def test_kopf_starts_and_remap_give_the_same_bytes_with_one_two_and_four_threads() -> None:
+    env = {**os.environ, "NUMBA_NUM_THREADS": "4"}
+    done = subprocess.run(
+        [sys.executable, "-c", _KOPF_STARTS], env=env, capture_output=True, text=True, check=True
+    )
+    digests = json.loads(done.stdout.strip().splitlines()[-1])
+    assert len(digests) == 3
+    differ = {name: d for name, d in digests.items() if len(set(d)) != 1}
+    assert not differ, f"bytes depend on the thread count: {differ}"

@@ -488,3 +488,22 @@ def test_order_usage_is_reported_and_the_literal_schedule_keeps_even_usage() -> 
     ]
     assert stats[0]["order_usage"] is False  # 'auto' needs adapt_to_structure: the paper's even usage
     assert stats[1]["order_usage"] is True
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize(("shape", "step"), [((20, 17, 23), 4), ((9, 12, 10), 3), ((5, 6, 7), 8)])
+def test_slice_coherence_in_stacks_is_the_per_slice_mean(shape, step: int, threads: int) -> None:
+    """The stacked, threaded measure (the pilot's and the final step's) equals one ``mean_coherence``
+    call per slice exactly, on a non-cubic volume (each axis's slices have their own shape)."""
+    from texsynth.synth.methods.solid_kopf import slice_coherence, slice_coherence_reference
+    from texsynth.synth.threads import use_threads
+
+    rng = np.random.default_rng(4)
+    z, _, x = np.mgrid[0 : shape[0], 0 : shape[1], 0 : shape[2]]
+    vol = (0.5 + 0.4 * np.sin(0.7 * x + 0.3 * z) + 0.1 * rng.random(shape)).astype(np.float32)
+    with use_threads(threads):
+        got = slice_coherence(vol, step)
+        got64 = slice_coherence(vol.astype(np.float64), step)
+    assert got == slice_coherence_reference(vol, step)
+    assert got64 == slice_coherence_reference(vol.astype(np.float64), step)
+    assert 0.0 < got < 1.0

@@ -14,11 +14,15 @@ from texsynth.synth.kernels.solid_search import (
     PackedExemplars,
     best_vote,
     best_vote_reference,
+    candidate_differences,
+    candidate_differences_reference,
     gather_slices,
     gather_slices_reference,
     irls_update,
     irls_update_reference,
     kcoherence_search_reference,
+    merge_remap,
+    merge_remap_reference,
     nearest_exact,
     nearest_exact_reference,
     rerank,
@@ -428,3 +432,33 @@ def test_exemplar_tables_are_kept_by_content() -> None:
     np.testing.assert_array_equal(first.image, before)
     with pytest.raises(InvalidInput, match="exemplar_xz"):
         exemplar_neighbourhoods(img, 31, role="exemplar_xz")
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_candidate_differences_equal_reference(monkeypatch, threads: int) -> None:
+    """The k-coherence sets' differences (every row on the pool), "no neighbour" (P) read as the last row."""
+    import texsynth.synth.kernels.solid_search as kernels
+    from texsynth.synth.threads import use_threads
+
+    rng = np.random.default_rng(8)
+    vectors = rng.random((300, 25), dtype=np.float32)
+    candidates = rng.integers(0, 301, size=(280, 9))  # 300 = no neighbour
+    monkeypatch.setattr(kernels, "PARALLEL_MIN_ITEMS", 0)
+    with use_threads(threads):
+        got = candidate_differences(vectors, candidates)
+    want = candidate_differences_reference(vectors, candidates)
+    assert got.dtype == np.float32 and got.shape == (280, 9, 25)
+    assert got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("half", [0, 1, 37, 90, 100])
+def test_merge_remap_of_two_sorted_halves_equals_one_stable_sort(half: int) -> None:
+    rng = np.random.default_rng(9)
+    values = (np.round(rng.random(100) * 8) / 8).astype(np.float32)  # many ties
+    values[[5, 60]] = np.nan
+    ref = np.sort(rng.random(37).astype(np.float32))
+    out = np.empty_like(values)
+    left = np.argsort(values[:half], kind="stable")
+    right = np.argsort(values[half:], kind="stable")
+    merge_remap(values, left, right, ref, out)
+    assert out.tobytes() == merge_remap_reference(values, ref).tobytes()

@@ -23,6 +23,7 @@ from texsynth.synth.pixel.solid import (
     plane_centres,
     upsample_plane_sources,
 )
+from texsynth.synth.threads import use_threads
 
 
 def _match_histogram_definition(vol: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -34,24 +35,34 @@ def _match_histogram_definition(vol: np.ndarray, values: np.ndarray) -> np.ndarr
     return out.reshape(vol.shape)
 
 
-@pytest.mark.parametrize("slab", [1, 7, 1000, 1 << 20])
-def test_match_histogram_in_slabs_is_the_whole_volume_remap(monkeypatch, slab: int) -> None:
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("split", [0, 1 << 30])
+def test_match_histogram_in_halves_is_the_whole_volume_remap(monkeypatch, threads: int, split: int) -> None:
+    """Sorted in two halves and merged (split 0) or in one sort: the bytes of one stable argsort."""
     rng = np.random.default_rng(11)
     vol = np.round(rng.random((9, 10, 11), dtype=np.float32) * 20) / 20  # ties: the stable order decides
+    vol.ravel()[[3, 500, 501, 900]] = [np.nan, np.nan, -0.0, 0.0]  # NumPy's order: NaN last, -0 == 0
     values = rng.beta(0.5, 0.5, 777).astype(np.float32)
-    monkeypatch.setattr(solid, "RANK_SLAB", slab)
-    np.testing.assert_array_equal(match_histogram(vol, values), _match_histogram_definition(vol, values))
+    monkeypatch.setattr(solid, "SPLIT_SORT", split)
+    with use_threads(threads):
+        got = match_histogram(vol, values)
+    np.testing.assert_array_equal(got, _match_histogram_definition(vol, values))
+    assert got.tobytes() == _match_histogram_definition(vol, values).tobytes()
+    vol64 = vol.astype(np.float64)  # solid-chen-wang's volume may be float64: kept as it is
+    with use_threads(threads):
+        assert match_histogram(vol64, values).dtype == np.float64
 
 
-def test_match_histogram_holds_no_whole_volume_index_arrays(monkeypatch) -> None:
-    """Traced peak of the remap of a 2^21-voxel volume in slabs of 2^16: the argsort (8 bytes a voxel), the
-    output (4) and one slab, 12.4 bytes a voxel; the whole-volume quantile indices made it 24."""
-    monkeypatch.setattr(solid, "RANK_SLAB", 1 << 16)
+def test_match_histogram_holds_no_whole_volume_index_arrays() -> None:
+    """Traced peak of the remap of a 2^21-voxel volume sorted in two halves: their ranks (8 bytes a voxel)
+    and the output (4), 12.x bytes a voxel; the whole-volume quantile indices made it 24."""
     vol = np.random.default_rng(0).random((128, 128, 128), dtype=np.float32)
     values = np.linspace(0, 1, 5000, dtype=np.float32)
+    match_histogram(vol[:8], values)  # the merge kernel loaded before tracing
     tracemalloc.start()
     try:
-        match_histogram(vol, values)
+        with use_threads(2):
+            match_histogram(vol, values)
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -98,8 +109,6 @@ def test_an_exemplar_too_large_for_int32_positions_is_refused_naming_it(monkeypa
 
 
 def test_the_signed_distance_is_the_same_serial_and_on_two_threads(monkeypatch) -> None:
-    from texsynth.synth.threads import use_threads
-
     inside = laminar._smooth_field((20, 22, 24), 3.0, np.random.default_rng(2)) > 0
     with use_threads(2):
         parallel = laminar._signed_distance(inside)
