@@ -180,8 +180,8 @@ sys.exit(cli.main())
 
 def cases(threads: int) -> dict[str, tuple[str, str, str]]:
     """name -> (method, exemplar name, size): docs/quality.md's four photographs/micrograph, and laminar
-    HRTEM, for both pixel methods; ``solid-kopf`` 64^3 from the onion crop; ``tensor-constrained`` 512^2
-    and quilting 1024^2 from it."""
+    HRTEM, for both pixel methods; ``solid-kopf`` 64^3 from the onion crop; ``tensor-constrained`` 512^2,
+    quilting 1024^2, ``gaussian-patch`` and ``feature-guided`` 256^2 from it."""
     out = {}
     for method, short in (("wei-levoy", "wl"), ("tensor-constrained", "tc")):
         for name in ("brick", "grass", "gravel", "hrtem-soot-128", "hrtem-onion-128"):
@@ -190,6 +190,9 @@ def cases(threads: int) -> dict[str, tuple[str, str, str]]:
     # issue 25's whole-command thread cases (the timeline's; not in the default table)
     out["tc-512"] = ("tensor-constrained", "hrtem-onion-128", "512x512")
     out["quilting-1024"] = ("quilting", "hrtem-onion-128", "1024x1024")
+    # the other patch methods' (issue 25's imports: what each method loads before its synthesis)
+    out["gaussian-patch-256"] = ("gaussian-patch", "hrtem-onion-128", "256x256")
+    out["feature-guided-256"] = ("feature-guided", "hrtem-onion-128", "256x256")
     return out
 
 

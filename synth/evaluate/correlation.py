@@ -29,7 +29,7 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy import fft, integrate, special
+from scipy import fft
 
 from texsynth.synth.errors import InvalidInput, InvalidParameter
 
@@ -349,6 +349,8 @@ def level_cut_s2(lags: np.ndarray, correlation_length: float, volume_fraction: f
     >>> round(float(level_cut_s2([0.0], 3.0, 0.5)[0]), 6)
     0.5
     """
+    from scipy import integrate, special  # here only: they load scipy.optimize, which no command needs
+
     r = np.asarray(lags, dtype=np.float64)
     if not (math.isfinite(correlation_length) and correlation_length > 0):
         raise InvalidParameter(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
@@ -11,7 +11,9 @@ from texsynth.synth.api import PLANES, Progress
 from texsynth.synth.grid.neighbourhood import Shape
 from texsynth.synth.grid.scan import ScanOrder
 from texsynth.synth.params import MethodParams, ui
-from texsynth.synth.pixel.synthesis import SearchSettings
+
+if TYPE_CHECKING:  # the pixel driver, imported by the pixel methods that use it (not by the patch methods)
+    from texsynth.synth.pixel.synthesis import SearchSettings
 
 __all__ = [
     "NeighbourhoodParams",
@@ -211,6 +213,8 @@ class NeighbourhoodParams(MethodParams):
         self, *, size: int, levels: int, iterations: int, alpha: float = 0.5, **search: float | None
     ) -> SearchSettings:
         """The driver's settings from these parameters; ``search`` overrides internal knobs (k-set size)."""
+        from texsynth.synth.pixel.synthesis import SearchSettings
+
         return SearchSettings(
             size=size,
             shape=self.neighbourhood,

@@ -25,6 +25,7 @@ from texsynth.synth.analysis.feature_matching import (
     thin_correspondences,
     unmatched_penalty,
 )
+from texsynth.synth.analysis.feature_matching import _window_sums as window_sums
 from texsynth.synth.errors import InvalidInput, InvalidParameter
 
 
@@ -319,3 +320,30 @@ def test_reverse_weight_bad_values_are_named(bad):
     context = context_features(mask[:8, :8], tangent[:8, :8])
     with pytest.raises(InvalidParameter, match="reverse_weight"):
         matching_cost(context, index, (0, 0), reverse_weight=bad)
+
+
+@pytest.mark.parametrize(
+    ("image_shape", "window_shape", "density"),
+    [
+        ((128, 128), (40, 40), 0.1),  # a feature map and an L-shaped context's bounding window
+        ((127, 93), (33, 17), 0.5),
+        ((256, 256), (64, 64), 1.0),  # every pixel a feature: the largest counts
+        ((50, 60), (50, 7), 0.3),  # the window as tall as the image: one row of offsets
+        ((31, 29), (1, 1), 0.2),
+    ],
+)
+def test_window_sums_round_to_scipy_signals_counts(image_shape, window_shape, density):
+    """The region counts' correlation (FFT on the image's grid) gives, rounded, SciPy's integers."""
+    from scipy.signal import correlate
+
+    rng = np.random.default_rng(sum(image_shape) + sum(window_shape))
+    image = (rng.random(image_shape) < density).astype(np.float64)
+    window = (rng.random(window_shape) < 0.6).astype(np.float64)
+    ours = window_sums(image, window)
+    theirs = correlate(image, window, mode="valid")
+    assert ours.shape == theirs.shape
+    assert np.array_equal(np.rint(ours).astype(np.int64), np.rint(theirs).astype(np.int64))
+    assert np.max(np.abs(ours - np.rint(ours))) < 1e-6  # counts, far from a rounding boundary
+    r, c = rng.integers(0, theirs.shape[0]), rng.integers(0, theirs.shape[1])
+    h, w = window_shape
+    assert round(ours[r, c]) == int(np.sum(image[r : r + h, c : c + w] * window))

@@ -163,3 +163,77 @@ def test_solid_params_still_check_their_planes() -> None:
     assert SolidParams(planes=("yz", "xz")).planes == ("xz", "yz")
     with pytest.raises(ValidationError, match="planes"):
         SolidParams(planes=("xy", "xy"))
+
+
+#: Not needed by any method before its synthesis: the plots' library, the service, and SciPy's signal
+#: processing, optimisation and integration (``scipy.signal`` alone loads ``scipy.stats``,
+#: ``scipy.optimize`` and ``scipy.interpolate``: 0.1-0.2 s of a command's single-threaded start).
+NOT_BEFORE_ANY_SYNTHESIS = ("matplotlib", "fastapi", "celery", "redis", "scipy.signal")
+#: The pixel driver and its kernels, which the patch methods do not run.
+PIXEL_DRIVER = ("texsynth.synth.pixel.synthesis", "texsynth.synth.kernels.pixel_search")
+NO_STATS = ("scipy.stats", "scipy.optimize", "scipy.integrate", "scipy.interpolate")
+
+
+@pytest.mark.parametrize(
+    ("method", "size", "absent"),
+    [
+        ("tensor-constrained", "32x32", (*NO_STATS, "texsynth.synth.kernels.patch_search")),
+        ("quilting", "64x64", (*NO_STATS, *PIXEL_DRIVER, "texsynth.synth.pixel.solid")),
+        ("gaussian-patch", "64x64", (*NO_STATS, *PIXEL_DRIVER)),
+        ("solid-kopf", "16x16x16", (*NO_STATS, "texsynth.synth.kernels.patch_search")),
+        # skimage.restoration's bilateral filter (its feature map) does load scipy.stats
+        ("feature-guided", "64x64", PIXEL_DRIVER),
+    ],
+)
+def test_what_a_command_imports_before_its_synthesis(
+    method: str, size: str, absent: tuple[str, ...], exemplar: Path, tmp_path: Path
+) -> None:
+    """The modules of a ``texsynth synthesize`` process when its synthesis starts (the command's own
+    path: parsing, the method's module, the writer, the inputs), stopped there."""
+    loaded = _fresh(
+        """
+        import json, os, sys
+        import texsynth.synth.api as api
+
+        def stop(*args, **kwargs):  # the synthesis starts: what is loaded, then out
+            print(json.dumps(sorted(sys.modules)), flush=True)
+            os._exit(0)
+
+        api.synthesize = stop  # before the pipeline imports it
+        from texsynth.synth.cli import main
+        main(["synthesize", sys.argv[1], "--exemplar", sys.argv[2], "--size", sys.argv[3],
+              "--out", sys.argv[4], "--seed", "1"])
+        raise SystemExit("the synthesis never started")
+        """,
+        method,
+        str(exemplar),
+        size,
+        str(tmp_path / "run"),
+    )
+    assert f"texsynth.synth.methods.{method.replace('-', '_')}" in loaded  # stopped at the right place
+    assert "texsynth.synth.output.artifacts" in loaded
+    unwanted = NOT_BEFORE_ANY_SYNTHESIS + absent
+    assert [m for m in loaded if m in unwanted or m.startswith(("texsynth.app", "texsynth.jobs"))] == []
+
+
+def test_the_s2_comparison_imports_no_optimiser() -> None:
+    """A volume's evaluation compares ``S2`` curves (FFT) without ``scipy.integrate`` and
+    ``scipy.optimize`` (0.05-0.1 s); the level-cut model that needs them still loads them itself."""
+    found = _fresh(
+        """
+        import json, sys
+        import numpy as np
+        from texsynth.synth.evaluate.correlation import compare_s2, image_s2, level_cut_s2, volume_s2
+
+        rng = np.random.default_rng(0)
+        exemplar, volume = rng.random((24, 24)), rng.random((12, 12, 12))
+        s2 = volume_s2(volume)
+        compare_s2(image_s2(exemplar)["row"], s2["z"])
+        before = [m for m in ("scipy.integrate", "scipy.optimize") if m in sys.modules]
+        value = float(level_cut_s2(np.array([0.0]), 3.0, 0.25)[0])
+        print(json.dumps({"before": before, "value": value, "after": "scipy.integrate" in sys.modules}))
+        """
+    )
+    assert found["before"] == []
+    assert found["value"] == pytest.approx(0.25)  # S2(0) is the volume fraction
+    assert found["after"]
