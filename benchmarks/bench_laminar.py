@@ -10,11 +10,12 @@ docs/laminar.md from docs/laminar-benchmark.json without running anything.
    ("per plane"). Checked first: the truth's own slices against the exemplar(s)
    (:func:`texsynth.synth.evaluate.evaluate_volume`), and an independent 64^3 sample of the same material
    (seeds 12-14) against the truth's slices: the floor of every measure (``--floor N``: the spread of N
-   such samples, printed). ``--pilot 32`` prints ``solid-kopf``'s pilot on the real crops (``--uncentred``:
-   the start field as before). ``--crop-floor``: what an ideal answer scores on the real crops at the
-   volumes' 64^2 slice size (:func:`crop_floor`; docs/laminar-crop-floor.json, docs/solid.md), and the
-   2D reference line docs/laminar.md shows (:func:`reference_table`). ``--shells-pilot 32``: would a pilot
-   pick ``solid-chen-wang``'s better shells (:func:`shells_pilot`)?
+   such samples, printed; ``--family turbostratic`` for the stack). ``--pilot 32`` prints ``solid-kopf``'s
+   pilot on the real crops (``--uncentred``: the start field as before). ``--crop-floor``: what an ideal
+   answer scores on the real crops at the volumes' 64^2 slice size (:func:`crop_floor`;
+   docs/laminar-crop-floor.json, docs/solid.md), and the 2D reference line docs/laminar.md shows
+   (:func:`reference_table`). ``--shells-pilot 32``: would a pilot pick ``solid-chen-wang``'s better shells
+   (:func:`shells_pilot`)?
 2. **The runs**: every method and setting of :data:`RUNS`, seeds 1-3, through
    :func:`texsynth.synth.api.synthesize`, with the process CPU time and the wall time; per axis, the volume's
    slices against the truth's slices of the same size
@@ -286,21 +287,51 @@ def calibrate(side: int = 128, period: float = 6.0) -> dict[str, Any]:
     }
 
 
+#: The truths ``--floor`` can measure: the first is the default.
+FLOOR_FAMILIES = ("onions", "turbostratic")
+
+
+def _measure_spread(values: list[float], low: float, high: float) -> dict[str, float]:
+    """Mean, quantiles, extremes and the share of ``values`` outside ``[low, high]`` (a target's miss)."""
+    array = np.asarray(values, dtype=np.float64)
+    q = np.quantile(array, [0.5, 0.9, 0.95])
+    return {
+        "mean": float(array.mean()),
+        "median": float(q[0]),
+        "q90": float(q[1]),
+        "q95": float(q[2]),
+        "min": float(array.min()),
+        "max": float(array.max()),
+        "share_missed": float(np.mean((array < low) | (array > high))),
+    }
+
+
 def floor_distribution(family: str = "onions", samples: int = 30, side: int = 64) -> dict[str, Any]:
     """The floor's spread: ``samples`` independent ``side^3`` samples of ``family`` (seeds 12 on) against
-    the truth's blocks; per seed-axis tortuosity and length KS, their quantiles, the worst of each three
-    samples x three axes (a seeds 1-3 table's worst), and the fringes per slice."""
-    truth = truths()[family]
+    the truth's blocks, measured as the runs are (one reference per truth: the runs' one exemplar and per
+    plane rows use the same blocks); per seed-axis tortuosity and length KS, their quantiles, the worst of
+    each three samples x three axes (a seeds 1-3 table's worst), the fringes per slice, and under
+    ``measures`` every measure of :data:`MEASURES` with the share of seed-axes that miss its target."""
+    if family not in FLOOR_FAMILIES:
+        raise ValueError(f"family: {family!r} is not one of {', '.join(FLOOR_FAMILIES)}")
+    if samples < 1:
+        raise ValueError(f"samples: {samples} must be at least 1")
+    truth = _maker(family)((TRUTH_SIDE,) * 3, seed=TRUTH_SEED)  # the same bytes as truths()[family]
     ref = truth_slices(truth, (side,) * 3)
     tort: list[float] = []
     length: list[float] = []
     counts: list[int] = []
+    per_measure: dict[str, list[float]] = {key: [] for key, *_ in MEASURES}
     for seed in range(12, 12 + samples):
-        axes = evaluate_against_truth(ref, _maker(family)((side,) * 3, seed=seed))["axes"]
-        for block in axes.values():
+        metrics = evaluate_against_truth(ref, _maker(family)((side,) * 3, seed=seed))
+        head = _head(metrics["summary"])
+        for a, block in metrics["axes"].items():
             tort.append(block["fringes"]["ks_tortuosity"]["statistic"])
             length.append(block["fringes"]["ks_length"]["statistic"])
             counts.append(block["fringes"]["output"]["count"])
+            for key in per_measure:
+                if head[a][key] is not None:
+                    per_measure[key].append(float(head[a][key]))
     worst = [max(tort[i : i + 9]) for i in range(0, len(tort) - 8, 9)]
 
     def spread(values: list[float]) -> dict[str, float]:
@@ -316,6 +347,11 @@ def floor_distribution(family: str = "onions", samples: int = 30, side: int = 64
         "worst_of_9_tortuosity": worst,
         "fringes_per_slice": float(np.mean(counts)) / side,
         "truth_fringes_per_axis": [int(ref.stats[a].lengths.size) for a in ref.axes],
+        "measures": {
+            key: {"target": [low, high], "seed_axes": len(per_measure[key])}
+            | (_measure_spread(per_measure[key], low, high) if per_measure[key] else {})
+            for key, _, low, high in MEASURES
+        },
     }
 
 
@@ -672,7 +708,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", action="store_true", help="only rewrite docs/laminar.md from the results")
     parser.add_argument("--calibrate", action="store_true", help="only print the fitted lengths' tables")
     parser.add_argument(
-        "--floor", type=int, default=0, help="only print the spread of N independent 64^3 onion samples"
+        "--floor", type=int, default=0, help="only print the spread of N independent 64^3 truth samples"
+    )
+    parser.add_argument(
+        "--family",
+        choices=FLOOR_FAMILIES,
+        default=None,
+        help="with --floor: the truth whose samples are measured (default onions)",
     )
     parser.add_argument(
         "--pilot",
@@ -697,6 +739,8 @@ def main(argv: list[str] | None = None) -> int:
         "the full 64^3 runs (--seeds), every laminar-start exemplar set",
     )
     args = parser.parse_args(argv)
+    if args.family is not None and not args.floor:
+        parser.error("--family: only with --floor N")
     if args.shells_pilot:
         shells = shells_pilot(args.shells_pilot, tuple(range(1, args.seeds + 1)))
         SHELLS_RESULTS.write_text(json.dumps(shells, indent=1) + "\n")
@@ -714,7 +758,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(calibrate()))
         return 0
     if args.floor:
-        print(json.dumps(floor_distribution(samples=args.floor), default=float))
+        family = args.family or FLOOR_FAMILIES[0]
+        print(json.dumps(floor_distribution(family, samples=args.floor), default=float))
         return 0
     if args.report:
         (DOCS / "laminar.md").write_text(report(json.loads(RESULTS.read_text())))
