@@ -28,9 +28,16 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.bench_laminar import AXES, CHEN_WANG_PAPER, _cells, _head, _save, exemplars, truths
+from benchmarks.bench_laminar import (
+    CHEN_WANG_PAPER,
+    _cells,
+    _head,
+    _save,
+    against_exemplars,
+    exemplars,
+    truths,
+)
 from texsynth.synth.api import synthesize
-from texsynth.synth.evaluate import evaluate_volume
 from texsynth.synth.evaluate.truth import evaluate_against_truth, truth_slices
 from texsynth.synth.io import load_image
 from texsynth.synth.pixel.laminar import fitted_structure_length
@@ -82,18 +89,6 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
 )
 
 
-def _against_exemplar(exemplar: np.ndarray, volume: np.ndarray) -> dict[str, dict[str, float | None]]:
-    """The volume's slices (every second) against the exemplar, with the coherence ratio and contrast."""
-    metrics = evaluate_volume(exemplar, volume, slice_step=2, s2=False)
-    head = _head(metrics["summary"])
-    for a in AXES:
-        block = metrics["axes"][a]
-        coh = block["structure"]["coherence_mean"]
-        head[a]["coherence_ratio"] = coh["output"] / coh["exemplar"]
-        head[a]["contrast"] = block["moments"]["output"]["std"] / block["moments"]["exemplar"]["std"]
-    return head
-
-
 def _resolved(params: dict[str, Any], image: np.ndarray) -> dict[str, Any]:
     """``params`` with ``structure_length='fitted'`` replaced by solid-kopf's fit to ``image`` (periods),
     and ``'fitted>=3'`` by that fit, at least 3: candidates measured as numbers (a default's bytes)."""
@@ -142,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
                 if family in known:
                     axes = _head(evaluate_against_truth(ref, result.image)["summary"])
                 else:
-                    axes = _against_exemplar(planes["xy"], result.image)
+                    axes = against_exemplars(planes["xy"], result.image)
                 length = result.stats.get("start_length")
                 rows.append({"seed": seed, "cpu": cpu, "wall": wall, "axes": axes, "start_length": length})
                 print(f"{key} seed {seed}: {cpu:.1f} s CPU, {wall:.1f} s wall", flush=True)

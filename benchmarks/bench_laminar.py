@@ -120,16 +120,33 @@ def _head(summary: dict[str, Any]) -> dict[str, dict[str, float | None]]:
     return {a: {key: summary["per_axis"][a].get(key) for key, *_ in MEASURES} for a in AXES}
 
 
-def _truth_against_exemplar(truth: np.ndarray, planes: dict[str, np.ndarray]) -> dict[str, Any]:
-    """The truth's own slices against the exemplar(s), with the coherence ratio and contrast per axis."""
-    ex = planes["xy"] if all(planes[p] is planes["xy"] for p in planes) else planes
-    metrics = evaluate_volume(ex, truth, s2=False)
+def _with_ratios(metrics: dict[str, Any]) -> dict[str, dict[str, float | None]]:
+    """:func:`_head` of an ``evaluate_volume`` result, with each axis's coherence ratio and contrast (the
+    output's over the exemplar's structure-tensor coherence and grey standard deviation)."""
     head = _head(metrics["summary"])
     for a in AXES:
         block = metrics["axes"][a]
         coh = block["structure"]["coherence_mean"]
         head[a]["coherence_ratio"] = coh["output"] / coh["exemplar"]
         head[a]["contrast"] = block["moments"]["output"]["std"] / block["moments"]["exemplar"]["std"]
+    return head
+
+
+def against_exemplars(
+    reference: np.ndarray | dict[str, np.ndarray], volume: np.ndarray
+) -> dict[str, dict[str, float | None]]:
+    """The volume's slices (every second) against the exemplar, or the exemplars per plane, with the
+    coherence ratio and contrast per axis (the real crops' and the pilots' rows)."""
+    return _with_ratios(evaluate_volume(reference, volume, slice_step=2, s2=False))
+
+
+def _truth_against_exemplar(truth: np.ndarray, planes: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The truth's own slices against the exemplar(s), with the coherence ratio and contrast per axis."""
+    ex = planes["xy"] if all(planes[p] is planes["xy"] for p in planes) else planes
+    metrics = evaluate_volume(ex, truth, s2=False)
+    head = _with_ratios(metrics)
+    for a in AXES:
+        block = metrics["axes"][a]
         for key in ("ks_length", "ks_tortuosity"):  # one exemplar holds few fringes: is the KS significant?
             head[a][f"{key}_p"] = block["fringes"][key]["pvalue"]
         head[a]["fringes"] = block["fringes"]["exemplar"]["count"]
@@ -425,19 +442,6 @@ SHELLS_SCORED = (
 SHELLS_RESULTS = DOCS / "laminar-shells-pilot.json"
 
 
-def _against_planes(planes: dict[str, np.ndarray], volume: np.ndarray) -> dict[str, dict[str, float | None]]:
-    """The volume's slices (every second) against the exemplars, with the coherence ratio and contrast
-    (as ``bench_chen_wang_laminar``'s real-crop rows, per plane)."""
-    metrics = evaluate_volume(planes, volume, slice_step=2, s2=False)
-    head = _head(metrics["summary"])
-    for a in AXES:
-        block = metrics["axes"][a]
-        coh = block["structure"]["coherence_mean"]
-        head[a]["coherence_ratio"] = coh["output"] / coh["exemplar"]
-        head[a]["contrast"] = block["moments"]["output"]["std"] / block["moments"]["exemplar"]["std"]
-    return head
-
-
 def shells_score(axes: dict[str, dict[str, float | None]]) -> float:
     """Issue 24's measures in target units, summed per axis and averaged over the axes: ``|log|`` of the
     coherence ratio over ``log 1.15``, then each of :data:`SHELLS_SCORED` over its target (a missing KS,
@@ -485,7 +489,7 @@ def shells_pilot(pilot_side: int, seeds: tuple[int, ...], side: int = 64) -> dic
             if pilot.stats["start"] != "laminar":
                 row = {"start": pilot.stats["start"]}
                 break
-            cell: dict[str, Any] = {"pilot": shells_score(_against_planes(planes, pilot.image))}
+            cell: dict[str, Any] = {"pilot": shells_score(against_exemplars(planes, pilot.image))}
             runs = []
             for seed in seeds:
                 cpu = time.process_time()
@@ -496,7 +500,7 @@ def shells_pilot(pilot_side: int, seeds: tuple[int, ...], side: int = 64) -> dic
                 axes = (
                     _head(evaluate_against_truth(ref, image)["summary"])
                     if ref is not None
-                    else _against_planes(planes, image)
+                    else against_exemplars(planes, image)
                 )
                 runs.append({"seed": seed, "cpu": cpu, "axes": axes, "score": shells_score(axes)})
                 if seed == 1:  # the slices only (the cubes add little here)
