@@ -32,8 +32,10 @@ X. Tong et al., "Synthesis of bidirectional texture functions on arbitrary surfa
 
 from __future__ import annotations
 
+import copy
 import functools
 import threading
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
@@ -598,7 +600,7 @@ def _initial_sources(
     allowed[y0:y1, x0:x1] = mask[y0:y1, x0:x1] != 0
     positions = np.argwhere(allowed)
     H, W = shape
-    pick = positions[rng.integers(0, len(positions), size=H * W)].reshape(H, W, 2)
+    pick = positions[_source_draws(shape, len(positions), rng)].reshape(H, W, 2)
     if parent_src is None:
         return np.ascontiguousarray(pick, dtype=np.int64)
     yy, xx = np.mgrid[0:H, 0:W]
@@ -609,6 +611,114 @@ def _initial_sources(
     bad = ~allowed[src[..., 0], src[..., 1]]
     src[bad] = pick[bad]
     return np.ascontiguousarray(src, dtype=np.int64)
+
+
+def _source_draws(shape: tuple[int, int], allowed: int, rng: np.random.Generator) -> np.ndarray:
+    """The draws of :func:`_initial_sources`: an index among the ``allowed`` positions per output position."""
+    return rng.integers(0, allowed, size=int(shape[0]) * int(shape[1]))
+
+
+def _pass_draws(
+    settings: SearchSettings, shape: tuple[int, int], started: bool, rng: np.random.Generator
+) -> None:
+    """Draw from ``rng`` what :func:`synthesize_source_map`'s passes over one level draw, in their order
+    (scan orders, pass keys, the seam's key and the next pass's order), and nothing else: the generator is
+    then where the next level's set-up finds it. The ahead sets (:class:`_AheadSets`) replay a run with it;
+    ``tests/synth/pixel/test_ahead_sets.py`` checks that every level's prediction holds."""
+    square_refinement = settings.periodic or settings.refine_square
+    ahead = False
+    for it in range(settings.iterations):
+        refine = square_refinement and (it > 0 or started)
+        tiled = not refine and settings.scan == "lexicographic"
+        if ahead:
+            ahead = False
+        elif not tiled:
+            scan_order(shape, "random" if refine else settings.scan, rng)
+        rng.integers(0, 2**63)
+        if it == 0 and not started and tiled:
+            rng.integers(0, 2**63)
+            if square_refinement and it + 1 < settings.iterations:
+                scan_order(shape, "random", rng)
+                ahead = True
+
+
+class _AheadSets:
+    """The k-coherence sets of every level below the coarsest, made from the start of a run on a thread of
+    their own while the coarser levels set up, load their kernels and run their passes (which leave a core
+    idle at small sizes).
+
+    A level's sets depend on its set-up (:func:`_level_setup`), whose typical distances are drawn from the
+    run's generator after every draw of the coarser levels. A copy of the generator replays those draws
+    (:func:`_level_setup`, :func:`_source_draws`, :func:`_pass_draws`) to set each level up ahead; the run
+    takes a level's sets only when its own generator is then in exactly the state the copy was in (the
+    same draws, the same set-up, the same sets), and makes them itself otherwise. One thread (the k-d
+    tree's ``workers``): the same sets as on any number. Stopped between levels once the run no longer
+    needs them (its finest level taken, or the run ended by an error: its object is then dropped).
+    """
+
+    def __init__(
+        self,
+        ex_levels: Sequence[np.ndarray],
+        out_shapes: Sequence[tuple[int, int]],
+        settings: SearchSettings,
+        metric: int,
+        p: float,
+        guidance: Guidance | None,
+        rng: np.random.Generator,
+        ex_masks: Sequence[np.ndarray] | None,
+        started: bool,
+    ) -> None:
+        levels = settings.levels
+        self.states: dict[int, dict] = {}
+        self.sets: dict[int, np.ndarray | BaseException] = {}
+        self.ready = {level: threading.Event() for level in range(levels - 1)}
+        stop = self.stop = threading.Event()
+        twin = copy.deepcopy(rng)  # the run's generator as it is now, before any of its draws
+        states, sets, ready = self.states, self.sets, self.ready
+
+        def work() -> None:
+            try:
+                with use_threads(1):
+                    made: list[tuple[int, _Level]] = []
+                    lv = _level_setup(levels - 1, ex_levels, settings, metric, p, guidance, twin, ex_masks)
+                    for level in range(levels - 1, 0, -1):  # the coarser levels' draws, replayed
+                        shape = (int(out_shapes[level][0]), int(out_shapes[level][1]))
+                        _source_draws(shape, _allowed_count(lv.valid, lv.mask), twin)
+                        _pass_draws(settings, shape, started, twin)
+                        states[level - 1] = twin.bit_generator.state
+                        lv = _level_setup(level - 1, ex_levels, settings, metric, p, guidance, twin, ex_masks)
+                        made.append((level - 1, lv))
+                    for level, lv in made:
+                        if stop.is_set():
+                            break
+                        sets[level] = _level_sets(lv, settings, metric, guidance)
+                        ready[level].set()
+            except BaseException as err:  # the run makes the sets itself (and meets the error there)
+                for level in ready:
+                    sets.setdefault(level, err)
+            finally:
+                for event in ready.values():
+                    event.set()
+
+        self.thread = threading.Thread(target=work, name="texsynth-sets-ahead", daemon=True)
+        self.thread.start()
+        weakref.finalize(self, stop.set)
+
+    def take(self, level: int, state: dict) -> np.ndarray | None:
+        """Level ``level``'s sets, if the run's generator was in ``state`` before its set-up, as predicted."""
+        self.ready[level].wait()
+        if level == 0:
+            self.stop.set()
+        sets = self.sets.get(level)
+        if self.states.get(level) != state or not isinstance(sets, np.ndarray):
+            return None
+        return sets
+
+
+def _allowed_count(valid: np.ndarray, mask: np.ndarray) -> int:
+    """How many exemplar positions :func:`_initial_sources` draws from (valid and allowed by ``mask``)."""
+    y0, y1, x0, x1 = (int(v) for v in valid)
+    return int(np.count_nonzero(mask[y0:y1, x0:x1]))
 
 
 def _histogram_state(
@@ -848,6 +958,11 @@ def synthesize_source_map(
     if len(ex_levels) != levels or len(out_shapes) != levels:
         raise InvalidParameter("levels", levels, "exemplar and output pyramids must have that many levels")
     rng = np.random.default_rng(seed)
+    finer_sets = None  # the finer levels' k-coherence sets, made meanwhile on another thread
+    if levels > 1 and settings.search != "exact" and settings.k > 0 and current_threads() > 1:
+        finer_sets = _AheadSets(
+            ex_levels, out_shapes, settings, metric, p, guidance, rng, ex_masks, initial is not None
+        )
     cand_offs = neighbourhood_offsets(2 * _CANDIDATE_RADIUS + 1, "square")
     cand_offs = all_cand_offs = np.ascontiguousarray(np.vstack([[0, 0], cand_offs]), dtype=np.int32)
     square_refinement = settings.periodic or settings.refine_square
@@ -866,6 +981,7 @@ def synthesize_source_map(
     stamp = np.zeros((current_threads(), stamp_size), dtype=np.int64)  # one row per block of a level
     counter = np.zeros(1, dtype=np.int64)
     for level in range(levels - 1, -1, -1):
+        drawn = rng.bit_generator.state if finer_sets is not None and level < levels - 1 else None
         lv = _level_setup(level, ex_levels, settings, metric, p, guidance, rng, ex_masks)
         ex, par_ex, has_parent, size, _, cur_offs, par_offs, valid = lv[:8]
         unit, gui_ex, gunit, n_par, w_pix, gui_offs, w_gui, mask = lv[8:]
@@ -888,7 +1004,9 @@ def synthesize_source_map(
         if coarsest_sets is not None and level == levels - 1:
             kset = coarsest_sets()  # made ahead by :func:`sets_ahead`, from the same inputs
         else:
-            kset = _level_sets(lv, settings, metric, guidance)
+            kset = finer_sets.take(level, drawn) if finer_sets is not None and drawn is not None else None
+            if kset is None:
+                kset = _level_sets(lv, settings, metric, guidance)
         par_out = (
             np.ascontiguousarray(ex_levels[level + 1][srcs[level + 1][..., 0], srcs[level + 1][..., 1]])
             if has_parent
