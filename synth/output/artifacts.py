@@ -27,7 +27,6 @@ files and bytes).
 from __future__ import annotations
 
 import io
-import itertools
 import platform
 import threading
 from collections.abc import Callable, Mapping
@@ -80,29 +79,54 @@ def versions() -> dict[str, str]:
 class _Pictures:
     """The pictures' tasks (each writes its files and returns their names), taken in order one at a time by
     a second thread (:meth:`start`) and, once it is done with its own work, by the caller (:meth:`finish`):
-    whichever branch ends first takes what is left. The names come back in the tasks' order."""
+    whichever branch ends first takes what is left. Tasks may be added while they run (:meth:`add`: the
+    plots' encodings); the second thread waits for more until :meth:`finish`. The names come back in the
+    tasks' order."""
 
     def __init__(self, tasks: list[Callable[[], list[str]]]) -> None:
         self.tasks = tasks
         self.done: list[list[str]] = [[] for _ in tasks]
         self.failed: list[BaseException] = []
-        self.ticket = itertools.count()  # next() on a count is atomic under the GIL
+        self.next = 0  # the next task to take
+        self.closed = False  # no more tasks will be added
+        self.cond = threading.Condition()
         self.thread: threading.Thread | None = None
 
-    def _work(self) -> None:
-        while not self.failed and (k := next(self.ticket)) < len(self.tasks):
+    def add(self, task: Callable[[], object]) -> None:
+        """Queue ``task`` (whatever it returns, it names no file here)."""
+        with self.cond:
+            self.tasks.append(lambda: (task(), [])[1])
+            self.done.append([])
+            self.cond.notify()
+
+    def _take(self, wait: bool) -> int | None:
+        with self.cond:
+            while not self.failed and self.next >= len(self.tasks) and wait and not self.closed:
+                self.cond.wait()
+            if self.failed or self.next >= len(self.tasks):
+                return None
+            self.next += 1
+            return self.next - 1
+
+    def _work(self, wait: bool = False) -> None:
+        while (k := self._take(wait)) is not None:
             try:
                 self.done[k] = self.tasks[k]()
             except BaseException as err:  # raised again in the calling thread
-                self.failed.append(err)
+                with self.cond:
+                    self.failed.append(err)
+                    self.cond.notify_all()
 
     def start(self) -> None:
-        self.thread = threading.Thread(target=self._work, name="texsynth-pictures")
+        self.thread = threading.Thread(target=self._work, args=(True,), name="texsynth-pictures")
         self.thread.start()
 
     def finish(self, help_out: bool = True) -> list[str]:
-        """Take the tasks left (unless ``help_out`` is false: the caller failed), wait for the second thread,
-        raise the first task's error or return every name in order."""
+        """Take the tasks left (unless ``help_out`` is false: the caller failed), wait for the second thread
+        (which ends the tasks queued), raise the first task's error or return every name in order."""
+        with self.cond:
+            self.closed = True
+            self.cond.notify_all()
         if help_out:
             self._work()
         if self.thread is not None:
@@ -321,8 +345,9 @@ def write_artifacts(
             folder, result, image, exemplar, exemplars, volume, depth, voxel_size, unit, tell, progress
         )
         names.append("metrics.json")
-        if plots:
-            names += _plots(folder, image, exemplar, exemplars, volume, plot_metrics, fringes, tell)
+        if plots:  # with two threads, the charts are encoded and written with the pictures
+            submit = pictures.add if two else None
+            names += _plots(folder, image, exemplar, exemplars, volume, plot_metrics, fringes, tell, submit)
     except BaseException:
         if two:  # no file is written after the evaluation or the plots fail
             with suppress(BaseException):
@@ -393,13 +418,15 @@ def _plots(
     plot_metrics: dict[str, Any],
     fringes: Any,
     tell: Callable[..., None],
+    submit: Callable[[Callable[[], object]], None] | None = None,
 ) -> list[str]:
-    """Draw the comparison plots under ``plots/``; return their names (sorted)."""
+    """Draw the comparison plots under ``plots/``; return their names (sorted). With ``submit``, each
+    chart's encoding and writing is handed to it (:func:`texsynth.synth.output.plots.write_plots`)."""
     tell("drawing the plots")
     plot_dir = folder / "plots"
     plot_dir.mkdir(exist_ok=True)
     targets = exemplars if volume and exemplars is not None else exemplar
-    written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes)
+    written = write_plots(targets, image, plot_metrics, plot_dir, fringes=fringes, submit=submit)
     if volume:
         s2_plot = write_s2_plot(plot_metrics, plot_dir)
         written += [s2_plot] if s2_plot is not None else []

@@ -33,7 +33,7 @@ M. L. Botero et al., Carbon 96 (2016) 459-473 (fringe overlays).
 from __future__ import annotations
 
 import textwrap
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -116,14 +116,22 @@ def _fringe_title(name: str, fringes: Fringes) -> str:
     )
 
 
-def _save(chart: Chart, path: Path, dpi: int = 100) -> Path:
-    """Write ``chart`` as a PNG; drawn for 100 dpi, resampled for another ``dpi``."""
+#: Runs a chart's encoding and writing somewhere else (another thread) instead of here.
+Submit = Callable[[Callable[[], object]], None]
+
+
+def _save(chart: Chart, path: Path, dpi: int = 100, submit: Submit | None = None) -> Path:
+    """Write ``chart`` as a PNG; drawn for 100 dpi, resampled for another ``dpi``. With ``submit``, the
+    PNG is encoded and written by the job handed to it (the same bytes), and the path returned at once."""
     if dpi != 100:
         image = chart.to_image()
         size = (max(1, round(image.width * dpi / 100)), max(1, round(image.height * dpi / 100)))
         chart.image = image.resize(size, Image.Resampling.LANCZOS).resize(
             (size[0] * 2, size[1] * 2), Image.Resampling.NEAREST
         )
+    if submit is not None:
+        submit(lambda: chart.save(path))
+        return Path(path)
     return chart.save(path)
 
 
@@ -405,6 +413,7 @@ def write_plots(
     *,
     dpi: int = 100,
     fringes: Mapping[str, Fringes] | None = None,
+    submit: Submit | None = None,
 ) -> list[Path]:
     """Write the comparison plots of an evaluation as PNG files.
 
@@ -425,6 +434,10 @@ def write_plots(
         The fringes of the exemplar and of the (2-D) output when the caller already extracted them
         with the metrics' settings (:func:`texsynth.synth.evaluate.measures.evaluate_pair_fringes`); else they
         are extracted here.
+    submit : callable, optional
+        Takes each chart's encoding and writing (a job without arguments) to run elsewhere, e.g. on another
+        thread while the next chart is drawn (:func:`texsynth.synth.output.artifacts.write_artifacts`); the
+        caller then waits for those jobs. Default: each chart is written here before the next is drawn.
 
     Returns
     -------
@@ -435,13 +448,13 @@ def write_plots(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [
-        _save(_grey_chart(metrics), out / "grey_histogram.png", dpi),
-        _save(_orientation_chart(metrics), out / "orientation_rose.png", dpi),
+        _save(_grey_chart(metrics), out / "grey_histogram.png", dpi, submit),
+        _save(_orientation_chart(metrics), out / "orientation_rose.png", dpi, submit),
     ]
     fringe_chart = _fringe_chart(metrics)
     if fringe_chart is None:
         return paths
-    paths.append(_save(fringe_chart, out / "fringe_distributions.png", dpi))
+    paths.append(_save(fringe_chart, out / "fringe_distributions.png", dpi, submit))
     settings = metrics.get("settings", {})
     options = dict(settings.get("fringe_options") or {})
     pixel_size = settings.get("pixel_size_nm")
@@ -472,5 +485,5 @@ def write_plots(
             from texsynth.synth.analysis.fringes import extract_fringes
 
             fr = extract_fringes(img, pixel_size=pixel_size, **options)
-        paths.append(_save(_overlay_chart(img, fr, _fringe_title(label, fr)), out / fname))
+        paths.append(_save(_overlay_chart(img, fr, _fringe_title(label, fr)), out / fname, submit=submit))
     return paths

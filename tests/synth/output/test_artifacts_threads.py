@@ -151,3 +151,39 @@ def test_a_failed_evaluation_leaves_no_picture_being_written(
     assert seen == {"texsynth-pictures"}  # the pictures were on the second thread ...
     assert not [t for t in threading.enumerate() if t.name == "texsynth-pictures"]  # ... and it ended
     assert (tmp_path / "run" / "exemplar-orientation.png").is_file()  # the thread had finished its work
+
+
+def test_with_two_threads_the_charts_are_encoded_as_pictures_tasks(
+    run: tuple, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every chart is drawn on the calling thread and handed to the pictures' queue to be encoded and
+    written (by whichever thread takes it): as many charts saved as plot files, each once."""
+    from texsynth.synth.output.chart import Chart
+
+    saved: list[tuple[str, str]] = []
+    original = Chart.save
+
+    def save(self: Chart, path: str | Path) -> Path:
+        saved.append((Path(path).name, threading.current_thread().name))
+        return original(self, path)
+
+    monkeypatch.setattr(Chart, "save", save)
+    queued: list[object] = []
+    add = artifacts._Pictures.add
+    monkeypatch.setattr(artifacts._Pictures, "add", lambda self, task: (queued.append(task), add(self, task)))
+    names = _write(tmp_path / "two", run, 2)
+    plots = sorted(n.removeprefix("plots/") for n in names if n.startswith("plots/"))
+    assert sorted(name for name, _ in saved) == plots and len(queued) == len(plots)
+    assert all((tmp_path / "two" / "plots" / name).is_file() for name in plots)
+
+
+def test_a_task_added_while_the_second_thread_waits_is_run_once() -> None:
+    ran: list[str] = []
+    first_done = threading.Event()
+    pictures = artifacts._Pictures([lambda: (ran.append("first"), first_done.set(), ["a.png"])[2]])
+    pictures.start()
+    assert first_done.wait(30)
+    pictures.add(lambda: ran.append(threading.current_thread().name))  # the second thread is waiting
+    assert pictures.finish() == ["a.png"]
+    assert ran[0] == "first" and len(ran) == 2
+    assert not [t for t in threading.enumerate() if t.name == "texsynth-pictures"]
