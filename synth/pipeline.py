@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from texsynth.synth.api import PLANES, Progress, Result, synthesize
+from texsynth.synth.api import PLANES, Progress, Result, find_method, synthesize
 from texsynth.synth.errors import InvalidInput
 from texsynth.synth.io import ImageSource, InputBits, load_image_bits, sample_bits
-from texsynth.synth.threads import use_threads
+from texsynth.synth.threads import current_threads, use_threads
 
 __all__ = ["INPUT_ROLES", "Inputs", "Outcome", "load_inputs", "synthesize_to_folder"]
 
@@ -133,11 +133,16 @@ def _synthesize_to_folder(
     max_output: int | None,
     voxel_unit: str = "nm",
 ) -> Outcome:
-    from texsynth.synth.output.artifacts import (
-        write_artifacts,  # deferred: evaluation and plots only when writing
+    from texsynth.synth.output.artifacts import (  # deferred: evaluation and plots only when writing
+        ExemplarAhead,
+        write_artifacts,
     )
 
     planes = {plane: images[f"exemplar_{plane}"] for plane in PLANES if f"exemplar_{plane}" in images}
+    spec = find_method(method)
+    ahead = None  # a 2-D run's exemplar analysis and pictures, made while it is synthesized
+    if spec is not None and spec.output_ndim == 2 and "exemplar" in images and current_threads() > 1:
+        ahead = ExemplarAhead(images["exemplar"], images.get("constraint"))
     started = time.time()
     result = synthesize(
         method,
@@ -169,5 +174,6 @@ def _synthesize_to_folder(
         voxel_size=voxel_size,
         unit=voxel_unit,
         progress=progress,
+        ahead=ahead,
     )
     return Outcome(result, files, metrics)

@@ -38,7 +38,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -69,6 +69,7 @@ __all__ = [
     "PLANES",
     "PLANE_AXES",
     "WINDOW",
+    "ExemplarSide",
     "ImageStats",
     "MeasureSettings",
     "as_grey",
@@ -77,6 +78,7 @@ __all__ = [
     "evaluate_pair",
     "evaluate_pair_fringes",
     "evaluate_volume",
+    "exemplar_side",
     "grey_histogram",
     "image_stats",
     "kl_divergence",
@@ -790,21 +792,50 @@ def evaluate_pair_fringes(
 
     Returns ``(metrics, {'exemplar': Fringes, 'output': Fringes})`` (no fringes with
     ``fringes=False``), so that the fringe overlays (:func:`texsynth.synth.output.plots.write_plots`) reuse
-    them instead of extracting them a second time.
+    them instead of extracting them a second time. ``exemplar_side``: the exemplar's half made ahead
+    (:func:`exemplar_side`), used when made from this very array with the same options.
     """
+    threads = options.pop("threads", None)
+    side = options.pop("exemplar_side", None)
+    settings = MeasureSettings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
+    with use_threads(threads):
+        return _evaluate_pair(exemplar, output, settings, side)
+
+
+class ExemplarSide(NamedTuple):
+    """The exemplar's half of :func:`evaluate_pair_fringes` (:func:`exemplar_side`), made before the output
+    exists (while it is synthesized) and handed to it: its grey image, statistics and moments."""
+
+    exemplar: np.ndarray  # the array it was made from (the one handed to the evaluation)
+    settings: MeasureSettings
+    grey: np.ndarray
+    stats: ImageStats
+    moments: dict[str, float | None]
+
+
+def exemplar_side(exemplar: np.ndarray, **options: Any) -> ExemplarSide:
+    """The exemplar's statistics of :func:`evaluate_pair_fringes` with the same ``options`` (``threads``
+    too), for its ``exemplar_side``: the same values as it computes itself."""
     threads = options.pop("threads", None)
     settings = MeasureSettings(**{**options, "fringe_options": dict(options.get("fringe_options") or {})})
     with use_threads(threads):
-        return _evaluate_pair(exemplar, output, settings)
+        grey = as_grey(exemplar, "exemplar")
+        return ExemplarSide(exemplar, settings, grey, image_stats(grey, settings), moments(grey))
 
 
 def _evaluate_pair(
-    exemplar: np.ndarray, output: np.ndarray, settings: MeasureSettings
+    exemplar: np.ndarray, output: np.ndarray, settings: MeasureSettings, side: ExemplarSide | None = None
 ) -> tuple[dict[str, Any], dict[str, Fringes]]:
-    ex = as_grey(exemplar, "exemplar")
+    """:func:`evaluate_pair`'s work; with ``side`` made from this exemplar and settings, its half is not
+    computed again."""
+    if side is not None and side.exemplar is exemplar and side.settings == settings:
+        ex, ex_stats, ex_moments = side.grey, side.stats, side.moments
+    else:
+        ex = as_grey(exemplar, "exemplar")
+        ex_stats, ex_moments = image_stats(ex, settings), moments(ex)
     out = as_grey(output, "output")
-    ex_stats, out_stats = image_stats(ex, settings), image_stats(out, settings)
-    block = compare_stats(ex_stats, out_stats, moments(ex), moments(out), settings)
+    out_stats = image_stats(out, settings)
+    block = compare_stats(ex_stats, out_stats, ex_moments, moments(out), settings)
     result = {
         "kind": "pair",
         "settings": settings.record(),

@@ -42,7 +42,13 @@ from texsynth.synth.analysis.stationarity import exemplar_diagnostics
 from texsynth.synth.analysis.tensor import coherence, structure_direction, structure_tensor
 from texsynth.synth.api import Result
 from texsynth.synth.evaluate.glossary import fringes_shown, headline
-from texsynth.synth.evaluate.measures import as_grey, evaluate_pair_fringes, evaluate_volume, to_json_types
+from texsynth.synth.evaluate.measures import (
+    as_grey,
+    evaluate_pair_fringes,
+    evaluate_volume,
+    exemplar_side,
+    to_json_types,
+)
 from texsynth.synth.io import (
     InputBits,
     array_to_unit,
@@ -55,9 +61,9 @@ from texsynth.synth.io import (
 from texsynth.synth.output.plots import write_plots, write_s2_plot
 from texsynth.synth.output.render import coherence_image, orientation_image
 from texsynth.synth.output.volume import write_volume_images
-from texsynth.synth.threads import current_threads
+from texsynth.synth.threads import current_threads, use_threads
 
-__all__ = ["versions", "write_artifacts"]
+__all__ = ["ExemplarAhead", "versions", "write_artifacts"]
 
 
 def versions() -> dict[str, str]:
@@ -136,21 +142,71 @@ class _Pictures:
         return [name for names in self.done for name in names]
 
 
-def _png(path: Path, rendering: np.ndarray) -> None:
+def _png_bytes(rendering: np.ndarray) -> bytes:
     if rendering.dtype == np.uint8:  # already quantised: encoded as it is (the bytes a float round trip gave)
         buf = io.BytesIO()
         Image.fromarray(rendering).save(buf, format="PNG")
-        atomic_write_bytes(path, buf.getvalue())
-        return
-    atomic_write_bytes(path, image_to_png_bytes(rendering))
+        return buf.getvalue()
+    return image_to_png_bytes(rendering)
+
+
+def _tensor_pngs(tensors: np.ndarray) -> list[bytes]:
+    """The PNG files of a tensor field's coherence and orientation images."""
+    coh = coherence(tensors)
+    return [
+        _png_bytes(coherence_image(coh, legend=True)),
+        _png_bytes(orientation_image(structure_direction(tensors), coherence=coh, legend=True)),
+    ]
+
+
+def _tensor_names(prefix: str) -> list[str]:
+    return [f"{prefix}coherence.png", f"{prefix}orientation.png"]
 
 
 def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list[str]:
-    names = [f"{prefix}coherence.png", f"{prefix}orientation.png"]
-    coh = coherence(tensors)
-    _png(folder / names[0], coherence_image(coh, legend=True))
-    _png(folder / names[1], orientation_image(structure_direction(tensors), coherence=coh, legend=True))
+    names = _tensor_names(prefix)
+    for name, data in zip(names, _tensor_pngs(tensors), strict=True):
+        atomic_write_bytes(folder / name, data)
     return names
+
+
+class ExemplarAhead:
+    """What the artifacts of a 2-D run need of its exemplar (and constraint) alone, made on a thread of its
+    own while the output is synthesized (:func:`texsynth.synth.pipeline.synthesize_to_folder`), for
+    :func:`write_artifacts`' ``ahead``: whether fringes are shown, the exemplar's diagnostics, its half of
+    the evaluation (:func:`texsynth.synth.evaluate.measures.exemplar_side`, the evaluation kernels' first
+    calls with it) and its tensor images (and the constraint's), encoded. Nothing is written until
+    :func:`write_artifacts` writes it; the values are those it would compute (one thread: numba's
+    kernels give the same bytes on any number)."""
+
+    def __init__(self, exemplar: np.ndarray, constraint: np.ndarray | None = None) -> None:
+        self.source, self.constraint = exemplar, constraint
+        self.values: dict[str, Any] = {}
+        self.thread = threading.Thread(target=self._work, name="texsynth-exemplar", daemon=True)
+        self.thread.start()
+
+    def _work(self) -> None:
+        try:
+            with use_threads(1):
+                ex = _unit(self.source, "exemplar")
+                shown = fringes_shown(ex)
+                self.values["exemplar"] = ex
+                self.values["fringes_shown"] = shown
+                self.values["side"] = exemplar_side(ex, fringes=shown[0])
+                self.values["diagnostics"] = exemplar_diagnostics({"exemplar": ex})
+                self.values["exemplar-"] = _tensor_pngs(structure_tensor(as_grey(ex, "exemplar")))
+                if self.constraint is not None:
+                    tensors = structure_tensor(np.asarray(self.constraint, np.float32))
+                    self.values["constraint_"] = _tensor_pngs(tensors)
+        except BaseException:  # what is missing the writer computes itself (and meets the error there)
+            return
+
+    def result(self, exemplar: np.ndarray, constraint: np.ndarray | None) -> dict[str, Any]:
+        """The values made, once made, if made from ``exemplar`` and ``constraint`` (these objects)."""
+        self.thread.join()
+        if exemplar is not self.source or constraint is not self.constraint:
+            return {}
+        return self.values
 
 
 #: Extra maps rendered on a fixed scale ``(black, white)`` instead of their own min-max, so that maps of
@@ -199,6 +255,7 @@ def write_artifacts(
     voxel_size: float | tuple[float, float, float] | None = None,
     unit: str = "nm",
     progress: Callable[[str, float], None] | None = None,
+    ahead: ExemplarAhead | None = None,
 ) -> tuple[list[str], dict[str, Any]]:
     """Write all artifacts of ``result`` into ``folder``; return their names and the metrics.
 
@@ -237,6 +294,9 @@ def write_artifacts(
     progress : callable ``(stage, fraction)``, optional
         Told each stage (writing the output, its pictures, the evaluation, the plots) and, for a
         volume, how far the TIFF stack and the slices' evaluation are: minutes at 512^3.
+    ahead : ExemplarAhead, optional
+        What a 2-D run needs of this ``exemplar`` and ``constraint`` alone, made while the output was
+        synthesized (the same files and bytes; ignored for a volume or other arrays).
 
     Returns
     -------
@@ -253,7 +313,8 @@ def write_artifacts(
     tell("writing output.png")
     image = np.asarray(result.image, dtype=np.float32)
     volume = image.ndim == 3 and image.shape[-1] != 3
-    exemplar = _unit(exemplar, "exemplar")
+    made = ahead.result(exemplar, constraint) if ahead is not None and not volume else {}
+    exemplar = made["exemplar"] if "exemplar" in made else _unit(exemplar, "exemplar")
     if exemplars is not None:
         exemplars = {plane: _unit(ex, f"exemplar_{plane}") for plane, ex in exemplars.items()}
     depth = input_bits if input_bits is not None else result.input_bits
@@ -279,6 +340,15 @@ def write_artifacts(
         )
 
     def tensor_images(prefix: str, tensors: Callable[[], np.ndarray]) -> Callable[[], list[str]]:
+        if prefix in made:  # encoded while the output was synthesized
+
+            def write() -> list[str]:
+                names = _tensor_names(prefix)
+                for name, data in zip(names, made[prefix], strict=True):
+                    atomic_write_bytes(folder / name, data)
+                return names
+
+            return write
         return lambda: _write_tensor_images(folder, prefix, np.asarray(tensors()))
 
     def extra(key: str, arr: np.ndarray) -> Callable[[], list[str]]:
@@ -342,7 +412,7 @@ def write_artifacts(
         names += pictures.finish()
     try:
         metrics, plot_metrics, fringes = _evaluate(
-            folder, result, image, exemplar, exemplars, volume, depth, voxel_size, unit, tell, progress
+            folder, result, image, exemplar, exemplars, volume, depth, voxel_size, unit, tell, progress, made
         )
         names.append("metrics.json")
         if plots:  # with two threads, the charts are encoded and written with the pictures
@@ -372,11 +442,12 @@ def _evaluate(
     unit: str,
     tell: Callable[..., None],
     progress: Callable[[str, float], None] | None,
+    made: Mapping[str, Any],
 ) -> tuple[dict[str, Any], dict[str, Any], Any]:
     """Evaluate the output, write ``metrics.json``; return the metrics, those the plots read (as
-    evaluated) and the output's fringes (2-D)."""
+    evaluated) and the output's fringes (2-D). ``made``: the exemplar's values made ahead (2-D)."""
     fringes = None
-    shown, reason, presence = fringes_shown(exemplar)
+    shown, reason, presence = made["fringes_shown"] if "fringes_shown" in made else fringes_shown(exemplar)
     if volume:
         pixel_size = None
         if voxel_size is not None and unit.strip() == "nm" and len(set(np.broadcast_to(voxel_size, 3))) == 1:
@@ -388,7 +459,9 @@ def _evaluate(
         )
     else:
         tell("evaluating")
-        metrics, fringes = evaluate_pair_fringes(exemplar, image, fringes=shown)
+        metrics, fringes = evaluate_pair_fringes(
+            exemplar, image, fringes=shown, exemplar_side=made.get("side")
+        )
     plot_metrics = dict(metrics)  # the plots read the metrics as evaluated
     status = {"shown": shown, "reason": reason, "presence": to_json_types(presence)}  # of the exemplar
     if isinstance(metrics.get("fringes"), dict):
@@ -401,7 +474,7 @@ def _evaluate(
         if volume and exemplars is not None
         else {"exemplar": exemplar}
     )
-    metrics["exemplar"] = exemplar_diagnostics(roles)
+    metrics["exemplar"] = made["diagnostics"] if "diagnostics" in made else exemplar_diagnostics(roles)
     doc = {"metrics": metrics, "stats": to_json_types(result.stats), "timings": to_json_types(result.timings)}
     if depth is not None:
         doc["input_bits"] = depth.as_json()

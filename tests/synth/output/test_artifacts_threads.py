@@ -187,3 +187,63 @@ def test_a_task_added_while_the_second_thread_waits_is_run_once() -> None:
     assert pictures.finish() == ["a.png"]
     assert ran[0] == "first" and len(ran) == 2
     assert not [t for t in threading.enumerate() if t.name == "texsynth-pictures"]
+
+
+def test_the_exemplar_made_ahead_gives_the_same_files_and_spares_its_work(
+    run: tuple, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """:class:`ExemplarAhead` (made while the output is synthesized): the same files and bytes as without,
+    and the writer neither analyses the exemplar nor draws its tensor images or the constraint's again."""
+    exemplar, result = run
+    with use_threads(2):
+        ahead = artifacts.ExemplarAhead(exemplar, exemplar)
+        assert ahead.result(exemplar, exemplar).keys() == {
+            "exemplar",
+            "fringes_shown",
+            "side",
+            "diagnostics",
+            "exemplar-",
+            "constraint_",
+        }
+    names = _write(tmp_path / "one", run, 1)
+    calls: list[str] = []
+    for name in ("fringes_shown", "exemplar_diagnostics", "_write_tensor_images"):
+        original = getattr(artifacts, name)
+        monkeypatch.setattr(
+            artifacts, name, lambda *a, _n=name, _f=original, **k: (calls.append(_n), _f(*a, **k))[1]
+        )
+    with use_threads(2):
+        two, _ = artifacts.write_artifacts(
+            tmp_path / "two", result, exemplar, exemplar, {"job": "x"}, ahead=ahead
+        )
+    assert calls == ["_write_tensor_images"]  # the output's own tensor images only
+    _same_files(names, two, tmp_path)
+
+
+def test_an_exemplar_made_ahead_from_another_array_is_not_used(run: tuple, tmp_path: Path) -> None:
+    exemplar, result = run
+    other = np.ascontiguousarray(exemplar[::-1])
+    ahead = artifacts.ExemplarAhead(other)
+    assert ahead.result(exemplar, None) == {}
+    names = _write(tmp_path / "one", run, 1)
+    with use_threads(2):
+        two, _ = artifacts.write_artifacts(
+            tmp_path / "two", result, exemplar, exemplar, {"job": "x"}, ahead=ahead
+        )
+    _same_files(names, two, tmp_path)
+
+
+def test_exemplar_side_is_the_evaluations_own_half() -> None:
+    from texsynth.synth.evaluate.measures import evaluate_pair_fringes, exemplar_side
+
+    exemplar = undulating_laminae((40, 40), period=6, amplitude=4, wavelength=40)
+    output = undulating_laminae((48, 56), period=6, amplitude=3, wavelength=30)
+    plain = evaluate_pair_fringes(exemplar, output, fringes=True)[0]
+    side = exemplar_side(exemplar, fringes=True)
+    handed, handed_fringes = evaluate_pair_fringes(exemplar, output, fringes=True, exemplar_side=side)
+    assert json.dumps(plain, sort_keys=True) == json.dumps(handed, sort_keys=True)
+    assert handed_fringes["exemplar"] is side.stats.extracted  # taken, not made again
+    other = evaluate_pair_fringes(exemplar, output, fringes=False, exemplar_side=side)[0]  # other settings
+    assert json.dumps(other, sort_keys=True) == json.dumps(
+        evaluate_pair_fringes(exemplar, output, fringes=False)[0], sort_keys=True
+    )
