@@ -130,6 +130,7 @@ PATCHES = {
     "texsynth.synth.io": [("save_image", "output PNG/TIFF"), ("save_volume", "output PNG/TIFF"),
                           ("atomic_write_json", "JSON files")],
     "texsynth.synth.output.artifacts": [("_write_tensor_images", "tensor images"),
+        ("_tensor_pngs", "tensor images"), ("exemplar_side", "evaluation"),
         ("structure_tensor", "tensor images"), ("write_volume_images", "tensor images"),
         ("fringes_shown", "exemplar analysis"), ("exemplar_diagnostics", "exemplar analysis"),
         ("evaluate_pair_fringes", "evaluation"), ("evaluate_volume", "evaluation"),

@@ -141,8 +141,15 @@ def _synthesize_to_folder(
     planes = {plane: images[f"exemplar_{plane}"] for plane in PLANES if f"exemplar_{plane}" in images}
     spec = find_method(method)
     ahead = None  # a 2-D run's exemplar analysis and pictures, made while it is synthesized
+    report = progress
     if spec is not None and spec.output_ndim == 2 and "exemplar" in images and current_threads() > 1:
         ahead = ExemplarAhead(images["exemplar"], images.get("constraint"))
+
+        def report(stage: str, fraction: float) -> None:  # started once the passes have begun
+            ahead.start()
+            if progress is not None:
+                progress(stage, fraction)
+
     started = time.time()
     result = synthesize(
         method,
@@ -150,7 +157,7 @@ def _synthesize_to_folder(
         size=size,
         params=params,
         seed=seed,
-        progress=progress,
+        progress=report,
         constraint=images.get("constraint"),
         exemplars=planes or None,
         max_output=max_output,

@@ -172,7 +172,8 @@ def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list
 
 class ExemplarAhead:
     """What the artifacts of a 2-D run need of its exemplar (and constraint) alone, made on a thread of its
-    own while the output is synthesized (:func:`texsynth.synth.pipeline.synthesize_to_folder`), for
+    own while the output is synthesized (:func:`texsynth.synth.pipeline.synthesize_to_folder` starts it at the
+    synthesis' first progress report: after its first kernel calls, which hold Python's lock), for
     :func:`write_artifacts`' ``ahead``: whether fringes are shown, the exemplar's diagnostics, its half of
     the evaluation (:func:`texsynth.synth.evaluate.measures.exemplar_side`, the evaluation kernels' first
     calls with it) and its tensor images (and the constraint's), encoded. Nothing is written until
@@ -183,7 +184,11 @@ class ExemplarAhead:
         self.source, self.constraint = exemplar, constraint
         self.values: dict[str, Any] = {}
         self.thread = threading.Thread(target=self._work, name="texsynth-exemplar", daemon=True)
-        self.thread.start()
+
+    def start(self) -> None:
+        """Start making the values (once; :meth:`result` without a start gives none)."""
+        if self.thread.ident is None:
+            self.thread.start()
 
     def _work(self) -> None:
         try:
@@ -203,6 +208,8 @@ class ExemplarAhead:
 
     def result(self, exemplar: np.ndarray, constraint: np.ndarray | None) -> dict[str, Any]:
         """The values made, once made, if made from ``exemplar`` and ``constraint`` (these objects)."""
+        if self.thread.ident is None:
+            return {}
         self.thread.join()
         if exemplar is not self.source or constraint is not self.constraint:
             return {}

@@ -80,3 +80,45 @@ def test_wei_levoy_refuses_per_plane_exemplars(planes, tmp_path, capsys):
     argv = ["synthesize", "wei-levoy", "--exemplar-xy", str(planes["xy"]), "--out", str(tmp_path / "o")]
     assert main(argv) == 2
     assert "exemplar_xy: method 'wei-levoy' takes one exemplar, not one per plane" in capsys.readouterr().err
+
+
+def test_a_2d_run_on_two_threads_takes_its_exemplar_work_made_during_the_synthesis(tmp_path, monkeypatch):
+    """synthesize_to_folder starts ExemplarAhead at the synthesis' first progress report and the writer
+    takes all of it; the files are those of one thread (the JSON files but for their clocks)."""
+    from texsynth.synth.io.patterns import undulating_laminae
+    from texsynth.synth.output import artifacts
+    from texsynth.synth.pipeline import synthesize_to_folder
+
+    taken: list[set[str]] = []
+    result = artifacts.ExemplarAhead.result
+
+    def spy(self, exemplar, constraint):
+        values = result(self, exemplar, constraint)
+        taken.append(set(values))
+        return values
+
+    monkeypatch.setattr(artifacts.ExemplarAhead, "result", spy)
+    exemplar = undulating_laminae((40, 40), period=6, amplitude=4, wavelength=40)
+    files = {}
+    for threads in (1, 2):
+        outcome = synthesize_to_folder(
+            "wei-levoy",
+            {"exemplar": exemplar},
+            tmp_path / str(threads),
+            size=(48, 48),
+            seed=2,
+            threads=threads,
+        )
+        files[threads] = outcome.files
+    assert taken == [{"exemplar", "fringes_shown", "side", "diagnostics", "exemplar-"}]  # two threads only
+    assert files[1] == files[2]
+    for name in files[1]:
+        a, b = (tmp_path / str(t) / name for t in (1, 2))
+        if name.endswith(".json"):
+            clock = ("timings", "started", "finished")
+            da, db = (json.loads(p.read_text()) for p in (a, b))
+            assert {k: v for k, v in da.items() if k not in clock} == {
+                k: v for k, v in db.items() if k not in clock
+            }
+        else:
+            assert a.read_bytes() == b.read_bytes(), name

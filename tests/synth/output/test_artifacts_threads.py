@@ -197,6 +197,8 @@ def test_the_exemplar_made_ahead_gives_the_same_files_and_spares_its_work(
     exemplar, result = run
     with use_threads(2):
         ahead = artifacts.ExemplarAhead(exemplar, exemplar)
+        assert ahead.result(exemplar, exemplar) == {}  # not started: nothing made
+        ahead.start()
         assert ahead.result(exemplar, exemplar).keys() == {
             "exemplar",
             "fringes_shown",
@@ -224,6 +226,7 @@ def test_an_exemplar_made_ahead_from_another_array_is_not_used(run: tuple, tmp_p
     exemplar, result = run
     other = np.ascontiguousarray(exemplar[::-1])
     ahead = artifacts.ExemplarAhead(other)
+    ahead.start()
     assert ahead.result(exemplar, None) == {}
     names = _write(tmp_path / "one", run, 1)
     with use_threads(2):
