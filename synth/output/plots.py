@@ -447,14 +447,31 @@ def write_plots(
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    fringe_chart = _fringe_chart(metrics)
+    # the fringe overlays first: the largest pictures, whose encoding (with ``submit``, on another thread)
+    # then runs while the charts are drawn; the paths keep their order
+    overlays = (
+        [] if fringe_chart is None else _fringe_overlays(exemplar, output, metrics, out, fringes, submit)
+    )
     paths = [
         _save(_grey_chart(metrics), out / "grey_histogram.png", dpi, submit),
         _save(_orientation_chart(metrics), out / "orientation_rose.png", dpi, submit),
     ]
-    fringe_chart = _fringe_chart(metrics)
     if fringe_chart is None:
         return paths
     paths.append(_save(fringe_chart, out / "fringe_distributions.png", dpi, submit))
+    return paths + overlays
+
+
+def _fringe_overlays(
+    exemplar: np.ndarray | Mapping[str, np.ndarray],
+    output: np.ndarray,
+    metrics: Mapping[str, Any],
+    out: Path,
+    fringes: Mapping[str, Fringes] | None,
+    submit: Submit | None,
+) -> list[Path]:
+    """:func:`write_plots`' ``fringes_exemplar.png`` and ``fringes_output.png``."""
     settings = metrics.get("settings", {})
     options = dict(settings.get("fringe_options") or {})
     pixel_size = settings.get("pixel_size_nm")
@@ -475,6 +492,7 @@ def write_plots(
         out_img = out_img[mid]
         name = f"volume slice {mid} along axis 0"
     out_grey = _as_grey(out_img, "output")
+    paths = []
     for key, label, img, fname in (
         ("exemplar", "exemplar", ex, "fringes_exemplar.png"),
         ("output", name, out_grey, "fringes_output.png"),
