@@ -19,9 +19,10 @@ fringe statistics only for an exemplar with lattice fringes
 (:func:`texsynth.synth.evaluate.glossary.fringes_shown`), else ``{"shown": false, "reason"}``. Every run also
 gets ``exemplar-coherence.png`` and
 ``exemplar-orientation.png``, the exemplar's own tensor images (the ``xy`` one's for per-plane
-exemplars). Every file is written atomically; with two threads or more the pictures are written on a
-second thread while the first evaluates and draws the plots, then helps with what is left (the same
-files and bytes).
+exemplars). Every file is written atomically; with two threads or more the pictures (and the charts'
+encodings) are written on a second thread while the first evaluates and draws the plots, then helps with
+what is left, and a 2-D run's exemplar work may be made during its synthesis (:class:`ExemplarAhead`):
+the same files and bytes.
 """
 
 from __future__ import annotations
