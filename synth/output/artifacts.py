@@ -185,11 +185,14 @@ class ExemplarAhead:
         self.source, self.constraint = exemplar, constraint
         self.values: dict[str, Any] = {}
         self.thread = threading.Thread(target=self._work, name="texsynth-exemplar", daemon=True)
+        self.lock = threading.Lock()
 
     def start(self) -> None:
-        """Start making the values (once; :meth:`result` without a start gives none)."""
-        if self.thread.ident is None:
-            self.thread.start()
+        """Start making the values (once, from whichever thread first asks; :meth:`result` without a start
+        gives none)."""
+        with self.lock:
+            if self.thread.ident is None:
+                self.thread.start()
 
     def _work(self) -> None:
         try:
@@ -209,8 +212,9 @@ class ExemplarAhead:
 
     def result(self, exemplar: np.ndarray, constraint: np.ndarray | None) -> dict[str, Any]:
         """The values made, once made, if made from ``exemplar`` and ``constraint`` (these objects)."""
-        if self.thread.ident is None:
-            return {}
+        with self.lock:
+            if self.thread.ident is None:
+                return {}
         self.thread.join()
         if exemplar is not self.source or constraint is not self.constraint:
             return {}
