@@ -80,7 +80,9 @@ def single_threaded_blas() -> None:
     the scheduler's latency: 69 us a level against 26 us of work). :data:`OMP_SPIN_DEFAULT` spins of about
     100 us bridge those gaps and still let a thread sleep through a serial stretch:
     ``tensor-constrained`` 512^2 at 2 threads 2.83 -> 2.34 s whole, with less CPU (4.18 -> 3.92 s: no
-    sleep and wake-up per loop), and less CPU under load 3 too (docs/benchmarks.md, session 16).
+    sleep and wake-up per loop). When other processes want both cores (load 3.5-6) the spin costs 0-9% more
+    CPU (docs/benchmarks.md, "Threads: 1 -> 2, 2D methods", session 16); ``GOMP_SPINCOUNT=0`` restores
+    the plain passive wait.
     """
     os.environ.setdefault(BLAS_THREADS, "1")
     os.environ.setdefault(OMP_WAIT, "passive")
