@@ -76,13 +76,13 @@ def single_threaded_blas() -> None:
     passive (docs/benchmarks.md, "Threads"). Same bytes either way.
 
     Sleeping at once costs the other way: a pixel pass is hundreds of short parallel loops (a level of
-    tiles each, about 1 ms), and a thread woken from sleep for each came 45-55 us late (a futex wake and
-    the scheduler's latency: 69 us a level against 26 us of work). :data:`OMP_SPIN_DEFAULT` spins of about
-    100 us bridge those gaps and still let a thread sleep through a serial stretch:
-    ``tensor-constrained`` 512^2 at 2 threads 2.83 -> 2.34 s whole, with less CPU (4.18 -> 3.92 s: no
-    sleep and wake-up per loop). When other processes want both cores (load 3.5-6) the spin costs 0-9% more
-    CPU (docs/benchmarks.md, "Threads: 1 -> 2, 2D methods", session 16); ``GOMP_SPINCOUNT=0`` restores
-    the plain passive wait.
+    tiles each, about 1 ms), and a thread woken from sleep for each came late (a futex wake and the
+    scheduler's latency: 69 us a level against 26 us of work in a bare loop; 35-75 us a level with blocks
+    of the passes' size). :data:`OMP_SPIN_DEFAULT` spins of about 100 us bridge those gaps and still let a
+    thread sleep through a serial stretch: 0.04-0.09 s of a 2-thread ``tensor-constrained`` 512^2 run
+    (1,165 levels). When other processes want both cores (load 3.5-6) the spin costs up to 12% more CPU
+    (docs/benchmarks.md, "Threads: 1 -> 2, 2D methods", session 16); ``GOMP_SPINCOUNT=0`` restores the
+    plain passive wait.
     """
     os.environ.setdefault(BLAS_THREADS, "1")
     os.environ.setdefault(OMP_WAIT, "passive")
