@@ -11,7 +11,9 @@ tiles in waves; random). 'others' is the CPU of every other thread: numba's pool
 workers and helper threads alive at the stage's end (a thread that ended inside the stage is not
 counted: the sets made ahead, :func:`texsynth.synth.pixel.synthesis.sets_ahead`, show in the total
 only). With 2 threads a stage whose 'others' is near zero ran on one core; 'calling' against
-'others' in the passes is their balance. Prints a table; writes nothing.
+'others' in the passes is their balance; 'idle' is threads x wall less both (a quiet machine's waits: at
+barriers, on one thread; OpenMP's short spin, ``GOMP_SPINCOUNT``, counts as CPU); the passes' parallel
+levels (one barrier each) and balance (positions per thread over the biggest block's). Prints a table.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import argparse
 import collections
 import functools
 import hashlib
+import itertools
 import os
 import threading
 import time
@@ -75,7 +78,10 @@ class StageClock:
 
     def __init__(self) -> None:
         self.me = str(threading.get_native_id())
-        self.rows: dict[str, list[float]] = collections.defaultdict(lambda: [0.0, 0.0, 0.0, 0.0])
+        #: wall, CPU calling thread, CPU others, calls; for the passes: parallel levels, their positions,
+        #: the positions of each level's biggest block (:func:`_blocks_of`)
+        self.rows: dict[str, list[float]] = collections.defaultdict(lambda: [0.0] * 7)
+        self.threads = 1
         self._stack: list[list[float]] = []
         self._stage = "synthesis"
 
@@ -103,6 +109,9 @@ class StageClock:
                 row[1] += mine - inner[1]
                 row[2] += others - inner[2]
                 row[3] += 1
+                if name == "synthesize_levels":
+                    for i, v in enumerate(_blocks_of(args[1], args[2], args[3], self.threads)):
+                        row[4 + i] += v
                 if self._stack:
                     for i, v in enumerate((wall, mine, others)):
                         self._stack[-1][i] += v
@@ -121,6 +130,34 @@ class StageClock:
         return f"passes: {self._stage} {h}x{w} {kind}"
 
 
+def _blocks_of(schedule: Any, lo: int, hi: int, blocks: int) -> tuple[int, int, int]:
+    """Levels ``lo:hi`` of ``schedule`` as the kernel runs them on ``blocks`` threads: the levels run in
+    parallel, their positions and the sum over them of the biggest block's positions (whole units split
+    at the boundary nearest each share, as ``_block_edge``; positions / blocks / that = the balance)."""
+    import numpy as np
+
+    from texsynth.synth.kernels.pixel_search import PARALLEL_MIN_LEVEL
+
+    units, starts = schedule.units, schedule.starts
+    span = int(units[starts[hi]] - units[starts[lo]])
+    if blocks < 2 or span < PARALLEL_MIN_LEVEL * max(1, hi - lo):
+        return 0, 0, 0
+    positions = biggest = 0
+    for level in range(lo, hi):
+        a, z = int(starts[level]), int(starts[level + 1])
+        first, total = int(units[a]), int(units[z] - units[a])
+        edges = []
+        for b in range(blocks + 1):
+            target = first + (b * total) // blocks
+            i = a + int(np.searchsorted(units[a : z + 1], target))
+            if i > a and target - units[i - 1] < units[i] - target:
+                i -= 1
+            edges.append(int(units[i]))
+        positions += total
+        biggest += max(e1 - e0 for e0, e1 in itertools.pairwise(edges))
+    return hi - lo, positions, biggest
+
+
 def measure(method: str, size: int, threads: int, runs: int, exemplar: Path) -> tuple[str, dict, float]:
     """Per-stage rows (summed over ``runs``), the output digest and the whole synthesis' figures."""
     import importlib
@@ -129,6 +166,7 @@ def measure(method: str, size: int, threads: int, runs: int, exemplar: Path) -> 
     from texsynth.synth.io import load_image
 
     clock = StageClock()
+    clock.threads = threads
     for module_name, names in STAGES.items():
         module = importlib.import_module(module_name)
         for name in names:
@@ -167,17 +205,26 @@ def main(argv: list[str] | None = None) -> None:
     print(
         f"{args.method} {args.size}^2, {args.threads} threads, {args.runs} runs,"
         f" load {load0:.1f} -> {load1:.1f}, output {digest}; per run: wall {t['wall']:.3f} s,"
-        f" CPU calling thread {t['calling']:.3f} s, other threads {t['others']:.3f} s"
+        f" CPU calling thread {t['calling']:.3f} s, other threads {t['others']:.3f} s,"
+        f" idle {args.threads * t['wall'] - t['calling'] - t['others']:.3f} core-s"
     )
-    print("| stage | calls | wall (s) | CPU calling thread (s) | CPU other threads (s) |")
-    print("|---|---|---|---|---|")
+    print(
+        "| stage | calls | wall (s) | CPU calling thread (s) | CPU other threads (s) | idle (core-s)"
+        " | parallel levels | balance |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     n = args.runs
-    for label, (wall, mine, others, calls) in sorted(
+    for label, (wall, mine, others, calls, levels, positions, biggest) in sorted(
         found["rows"].items(), key=lambda kv: -kv[1][1] - kv[1][2]
     ):
         if mine + others < 0.001 * n and wall < 0.001 * n:
             continue
-        print(f"| {label} | {int(calls) // n} | {wall / n:.3f} | {mine / n:.3f} | {others / n:.3f} |")
+        idle = args.threads * wall - mine - others
+        balance = f"{positions / args.threads / biggest:.3f}" if biggest else ""
+        print(
+            f"| {label} | {int(calls) // n} | {wall / n:.3f} | {mine / n:.3f} | {others / n:.3f}"
+            f" | {idle / n:.3f} | {int(levels) // n or ''} | {balance} |"
+        )
 
 
 if __name__ == "__main__":
