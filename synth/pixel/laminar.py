@@ -486,17 +486,16 @@ def period_coherence(image: np.ndarray, period: float | None = None) -> float:
     return float(c[m : c.shape[0] - m, m : c.shape[1] - m].mean())
 
 
-def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
-    """The median radius of curvature (periods) of the fringes where they are the more coherent half.
+def _fringe_turn(img: np.ndarray, p: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The fringes' signed turn ``d theta / d s`` (radians per px), their normal angle ``theta`` in ``(x,
+    y) = (column, -row)`` axes, the tensor coherence, and the border (two periods) the measures leave out.
 
     The orientation field of the structure tensor (Gaussian derivatives of 1 px, integration of half a
     period: the pixel noise averages out, a ring of two periods keeps its turn) is differentiated along
-    the fringes: ``kappa = |d theta / d s|`` from the doubled-angle unit field ``u``, ``kappa = |u x
-    (t . grad) u| / 2`` with ``t`` the fringe tangent; the median over the pixels of above-median
-    coherence (the fringes, not the gaps between onions) is inverted. A border of two periods is left out.
+    the fringe tangent ``t = (-sin theta, cos theta)``: ``d theta / d s = (u x (t . grad) u) / 2`` with
+    ``u`` the doubled-angle unit field. Flipping ``theta`` by ``pi`` flips ``t`` and the turn's sign
+    together, so the centre of curvature ``x - n / turn`` (``n`` the normal) is well defined.
     """
-    img = np.asarray(to_grey(image), dtype=np.float64)
-    p = dominant_period(img) if period is None else float(period)
     t = structure_tensor(img, 1.0, p / 2.0).astype(np.float64)
     a, b, c = t[..., 0], t[..., 1], t[..., 2]
     z = (a - c) + 2j * b  # doubled angle of the gradient in (x, y) = (column, -row) axes
@@ -508,9 +507,22 @@ def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
     d_col = [np.gradient(f, axis=1) for f in (u.real, u.imag)]
     # along t = (tx, ty) in (x, y): d/ds = tx d/dcol - ty d/drow
     dr, di = (tx * dc - ty * dr_ for dc, dr_ in zip(d_col, d_row, strict=True))
-    kappa = 0.5 * np.abs(u.real * di - u.imag * dr)
+    turn = 0.5 * (u.real * di - u.imag * dr)
     coh = mag / np.maximum(a + c, 1e-12)
     m = min(int(np.ceil(2.0 * p)), (min(img.shape) - 1) // 4)
+    return turn, theta, coh, m
+
+
+def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
+    """The median radius of curvature (periods) of the fringes where they are the more coherent half.
+
+    ``kappa = |d theta / d s|`` of :func:`_fringe_turn`; the median over the pixels of above-median
+    coherence (the fringes, not the gaps between onions) is inverted. A border of two periods is left out.
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    turn, _, coh, m = _fringe_turn(img, p)
+    kappa = np.abs(turn)
     kappa, coh = (
         kappa[m : img.shape[0] - m, m : img.shape[1] - m],
         coh[m : img.shape[0] - m, m : img.shape[1] - m],
