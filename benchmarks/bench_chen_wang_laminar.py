@@ -82,18 +82,18 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     # Session cw6: the onions' last 64^3 misses. Shells around random centres (opt-in, not a default: the
     # crops do not gain) and a shorter sheet (2.5 periods: fewer closed shells); docs/solid.md.
     # Their spacing then: 1.5 sheet lengths (4.5 periods on the onions, 6 on the crops), the same bytes.
-    ("onions", "shells=centres 1.5 lengths", {"shells": "centres", "centre_spacing": 4.5}, 64),
-    ("onions", "shells=centres 1.5 lengths", {"shells": "centres", "centre_spacing": 4.5}, 128),
-    ("onion crop", "shells=centres 1.5 lengths", {"shells": "centres", "centre_spacing": 6.0}, 64),
-    ("onion-core crop", "shells=centres 1.5 lengths", {"shells": "centres", "centre_spacing": 6.0}, 64),
+    ("onions", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 4.5}, 64),
+    ("onions", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 4.5}, 128),
+    ("onion crop", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 6.0}, 64),
+    ("onion-core crop", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 6.0}, 64),
     ("onions", "structure_length=2.5", {"structure_length": 2.5}, 64),
     # Session cw8: the centres' spacing fitted to the fringes' curvature, and shells='auto' (the default
     # since: the centres where the fringes' centres of curvature gather, the onion truth; the surfaces on
     # the crops, whose rows keep their bytes); the surfaces' rows are the defaults' before.
     ("onions", "shells=surfaces", {"shells": "surfaces"}, 64),
     ("onions", "shells=surfaces", {"shells": "surfaces"}, 128),
-    ("onion crop", "shells=centres fitted", {"shells": "centres"}, 64),
-    ("onion-core crop", "shells=centres fitted", {"shells": "centres"}, 64),
+    ("onion crop", "shells=centres-fitted", {"shells": "centres"}, 64),
+    ("onion-core crop", "shells=centres-fitted", {"shells": "centres"}, 64),
 )
 
 
