@@ -14,7 +14,8 @@ their misses (``solve_radius``, ``position_weight``; none a default) and the she
 (``structure_length``: 4 periods, the default before session cw5; 3; 2.5; solid-kopf's fit) and the shells
 around random centres (``shells='centres'``, session cw6; their spacing fitted and ``shells='auto'``, cw8).
 Cells as in docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets,
-**x** when it misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
+**x** when it misses its target; CPU s the median process CPU time of
+:func:`texsynth.synth.api.synthesize` (both cores).
 """
 
 from __future__ import annotations
