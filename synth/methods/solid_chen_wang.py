@@ -252,8 +252,8 @@ class SolidChenWangParams(SolidParams):
     )
     shells: Literal["auto", "surfaces", "centres"] = Field(
         "auto",
-        description="Shape of the starting sheets: along the surfaces of a smooth random field, or shells "
-        "around random centres (a material of many small onions); automatic: from the fringes' curvature.",
+        description="Shape of the starting sheets: surfaces of a smooth random field, or shells around "
+        "random centres (many small onions); automatic: from the fringes' curvature.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
