@@ -12,9 +12,10 @@ Rows: the known answers of :mod:`benchmarks.bench_laminar` (onions and the turbo
 (:func:`texsynth.synth.evaluate.evaluate_volume`, every second slice); and the departures measured against
 their misses (``solve_radius``, ``position_weight``; none a default) and the sheet length's candidates
 (``structure_length``: 4 periods, the default before session cw5; 3; 2.5; solid-kopf's fit) and the shells
-around random centres (``shells='centres'``, session cw6). Cells as in
-docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets, **x** when it
-misses its target; CPU s the median process CPU time of :func:`texsynth.synth.api.synthesize` (both cores).
+around random centres (``shells='centres'``, session cw6; their spacing fitted and ``shells='auto'``, cw8).
+Cells as in docs/laminar.md: ``xy / xz / yz`` means over the seeds, the worst seed-axis value in brackets,
+**x** when it misses its target; CPU s the median process CPU time of
+:func:`texsynth.synth.api.synthesize` (both cores).
 """
 
 from __future__ import annotations
@@ -81,11 +82,19 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onion-core crop", "structure_length=fitted", {"structure_length": "fitted"}, 64),
     # Session cw6: the onions' last 64^3 misses. Shells around random centres (opt-in, not a default: the
     # crops do not gain) and a shorter sheet (2.5 periods: fewer closed shells); docs/solid.md.
-    ("onions", "shells=centres", {"shells": "centres"}, 64),
-    ("onions", "shells=centres", {"shells": "centres"}, 128),
-    ("onion crop", "shells=centres", {"shells": "centres"}, 64),
-    ("onion-core crop", "shells=centres", {"shells": "centres"}, 64),
+    # Their spacing then: 1.5 sheet lengths (4.5 periods on the onions, 6 on the crops), the same bytes.
+    ("onions", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 4.5}, 64),
+    ("onions", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 4.5}, 128),
+    ("onion crop", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 6.0}, 64),
+    ("onion-core crop", "shells=centres-1.5-lengths", {"shells": "centres", "centre_spacing": 6.0}, 64),
     ("onions", "structure_length=2.5", {"structure_length": 2.5}, 64),
+    # Session cw8: the centres' spacing fitted to the fringes' curvature, and shells='auto' (the default
+    # since: the centres where the fringes' centres of curvature gather, the onion truth; the surfaces on
+    # the crops, whose rows keep their bytes); the surfaces' rows are the defaults' before.
+    ("onions", "shells=surfaces", {"shells": "surfaces"}, 64),
+    ("onions", "shells=surfaces", {"shells": "surfaces"}, 128),
+    ("onion crop", "shells=centres-fitted", {"shells": "centres"}, 64),
+    ("onion-core crop", "shells=centres-fitted", {"shells": "centres"}, 64),
 )
 
 

@@ -26,8 +26,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
-  pilot decides; or, opt-in, shells around random centres), solid-kopf's crumpled stack
-  (``'oriented'``) for crumpled anisotropic exemplars (one, or per plane).
+  pilot decides; or shells around random centres, ``shells``, spaced by the fringes' curvature), solid-kopf's
+  crumpled stack (``'oriented'``) for crumpled anisotropic exemplars (one, or per plane).
 """
 
 from __future__ import annotations
@@ -64,8 +64,11 @@ from texsynth.synth.methods.common import SolidParams, checked_progress, structu
 from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH, laminar_pilot
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
+    CENTRE_SPACINGS,
+    CENTRED_MIN_CONCENTRATION,
     dominant_period,
     fitted_structure_length,
+    fringe_centres,
     laminar_volume,
     level_phase,
     oriented_phase,
@@ -131,9 +134,8 @@ ORIENTED_MAX_LENGTH = 1.5
 #: (docs/solid.md, "The sheets' length for solid-chen-wang").
 MIN_STRUCTURE_LENGTH = 3.0
 MAX_STRUCTURE_LENGTH = 4.0
-#: ``shells='centres'``: the onions' centres are this many sheet lengths apart (one centre per cube of that
-#: side; the onion truth at 3 periods: 4.5 periods, docs/solid.md, session cw6).
-CENTRE_SPACING = 1.5
+#: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`).
+CENTRE_SPACING_RANGE = (CENTRE_SPACINGS[0], CENTRE_SPACINGS[-1])
 
 
 def centre_phase(
@@ -248,17 +250,33 @@ class SolidChenWangParams(SolidParams):
             "fringes' orientations)."
         ),
     )
-    shells: Literal["surfaces", "centres"] = Field(
-        "surfaces",
-        description="Shape of the starting sheets: along the surfaces of a smooth random field, or shells "
-        "around random centres (a material of many small onions).",
+    shells: Literal["auto", "surfaces", "centres"] = Field(
+        "auto",
+        description="Shape of the starting sheets: surfaces of a smooth random field, or shells around "
+        "random centres (many small onions); automatic: from the fringes' curvature.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
-                "length; 'centres': spherical shells around random centres "
-                f"{CENTRE_SPACING:g} sheet lengths apart (closed onion shells: opt-in, for a material made "
-                "of many small onions; a single particle's crop measures worse with it). Only with the "
-                "laminar start."
+                "length; 'centres': spherical shells around random centres centre_spacing periods apart "
+                "(closed onion shells); 'auto': 'centres' when the exemplars' fringes curve around points "
+                f"(at least {CENTRED_MIN_CONCENTRATION:g} of their centres of curvature gather: many small "
+                "onions), else 'surfaces'. A single large particle gathers none; 'centres' with the fitted "
+                "spacing measured better on one such crop (docs/solid.md). Only with the laminar start."
+            )
+        ),
+    )
+    centre_spacing: float | None = Field(
+        None,
+        ge=CENTRE_SPACING_RANGE[0],
+        le=CENTRE_SPACING_RANGE[1],
+        description="Distance between the onions' centres with shells='centres', in fringe periods; empty: "
+        "fitted to the exemplar's curvature.",
+        json_schema_extra=ui(
+            details=(
+                "One centre per cube of this side (periods, "
+                f"{CENTRE_SPACING_RANGE[0]:g}-{CENTRE_SPACING_RANGE[1]:g}). Empty or 'auto': the spacing "
+                "whose shells' slices have the exemplars' median radius of curvature (the onion truth's "
+                "4.8-4.9 periods, its centres are 5.0 apart)."
             )
         ),
     )
@@ -390,6 +408,12 @@ class SolidChenWangParams(SolidParams):
     @classmethod
     def _auto_length(cls, value: object) -> object:
         """``'auto'`` is the empty value: the length fitted to the exemplars."""
+        return None if value == "auto" else value
+
+    @field_validator("centre_spacing", mode="before")
+    @classmethod
+    def _auto_spacing(cls, value: object) -> object:
+        """``'auto'`` is the empty value: the spacing fitted to the exemplars."""
         return None if value == "auto" else value
 
 
@@ -655,6 +679,10 @@ class _Schedule:
     length: float = 0.0
     #: The laminar start's sheets: 'surfaces' or 'centres' (``shells``); None without the laminar start.
     shells: str | None = None
+    #: The exemplars' centres of curvature: their concentration and the fitted spacing (periods); None
+    #: without the laminar start.
+    concentration: float | None = None
+    centre_spacing: float | None = None
 
     @property
     def laminar_start(self) -> bool:
@@ -696,7 +724,7 @@ class _Schedule:
         if coarse_iterations is None:
             coarse_iterations = iterations
         period = stack = length = 0.0
-        shells = None
+        shells = concentration = spacing = None
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
         if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
@@ -706,7 +734,12 @@ class _Schedule:
         elif start == "laminar":
             images = [np.asarray(exemplars[p]) for p in params.planes]
             length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
+            concentration, spacing = fringe_centres(images)
+            if params.centre_spacing is not None:
+                spacing = params.centre_spacing
             shells = params.shells
+            if shells == "auto":
+                shells = "centres" if concentration >= CENTRED_MIN_CONCENTRATION else "surfaces"
         return cls(
             iterations,
             coarse_iterations,
@@ -717,6 +750,8 @@ class _Schedule:
             stack,
             length,
             shells,
+            concentration,
+            spacing,
         )
 
     def levels(self, levels: int) -> int:
@@ -767,6 +802,9 @@ class _ChenWangLoop:
             "start_length": schedule.length if schedule.laminar_start else None,
             # The laminar start's sheets ('surfaces' or 'centres'), None without it.
             "shells": schedule.shells,
+            # The exemplars' centres of curvature (share gathered) and the centres' spacing (periods).
+            "centre_concentration": schedule.concentration,
+            "centre_spacing": schedule.centre_spacing,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},
@@ -803,7 +841,7 @@ class _ChenWangLoop:
                 )
                 start_volume = sheets(level_phase(phi, step.level), stack / scale, values)
             elif self.schedule.shells == "centres":  # onions: shells around random centres
-                spacing = CENTRE_SPACING * self.schedule.length * self.schedule.period / scale
+                spacing = float(self.schedule.centre_spacing or 0.0) * self.schedule.period / scale
                 phase = centre_phase(shape, spacing, rng, periodic=params.periodic)
                 start_volume = sheets(phase, self.schedule.period / scale, values)
             else:

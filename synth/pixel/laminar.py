@@ -21,7 +21,8 @@ fringe orientations (:func:`sheet_normal`), crumpled as much as their fringes sp
 chooses between them. Both lengths can be fitted to the exemplars: ``L`` to their coherence at the period's
 scale and their fringes' curvature (:func:`fitted_structure_length`), the crumples' to how far their fringes
 keep an orientation (:func:`fitted_oriented_length`); the field scales with its length, so tables measured
-once on the starts' own slices hold at every period.
+once on the starts' own slices hold at every period. Shells around random centres (``solid-chen-wang``):
+whether the fringes curve around points and how far apart (:func:`curvature_centres`, :func:`fringe_centres`).
 
 References
 ----------
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -43,6 +45,12 @@ from texsynth.synth.threads import current_threads
 
 __all__ = [
     "BEND_PER_LENGTH",
+    "CENTRED_MIN_CONCENTRATION",
+    "CENTRE_CONCENTRATION",
+    "CENTRE_DENSITY",
+    "CENTRE_RADIUS",
+    "CENTRE_SPACINGS",
+    "CENTRE_VOTE_SIGMA",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
     "ORIENTED_MAX_BEND",
@@ -51,11 +59,14 @@ __all__ = [
     "SHEET_LENGTHS",
     "SHEET_RADIUS",
     "START_COHERENCE",
+    "CurvatureCentres",
     "bend_length",
+    "curvature_centres",
     "dominant_period",
     "exemplar_bend",
     "fitted_oriented_length",
     "fitted_structure_length",
+    "fringe_centres",
     "fringe_radius",
     "laminar_phase",
     "laminar_volume",
@@ -486,17 +497,16 @@ def period_coherence(image: np.ndarray, period: float | None = None) -> float:
     return float(c[m : c.shape[0] - m, m : c.shape[1] - m].mean())
 
 
-def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
-    """The median radius of curvature (periods) of the fringes where they are the more coherent half.
+def _fringe_turn(img: np.ndarray, p: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The fringes' signed turn ``d theta / d s`` (radians per px), their normal angle ``theta`` in ``(x,
+    y) = (column, -row)`` axes, the tensor coherence, and the border (two periods) the measures leave out.
 
     The orientation field of the structure tensor (Gaussian derivatives of 1 px, integration of half a
     period: the pixel noise averages out, a ring of two periods keeps its turn) is differentiated along
-    the fringes: ``kappa = |d theta / d s|`` from the doubled-angle unit field ``u``, ``kappa = |u x
-    (t . grad) u| / 2`` with ``t`` the fringe tangent; the median over the pixels of above-median
-    coherence (the fringes, not the gaps between onions) is inverted. A border of two periods is left out.
+    the fringe tangent ``t = (-sin theta, cos theta)``: ``d theta / d s = (u x (t . grad) u) / 2`` with
+    ``u`` the doubled-angle unit field. Flipping ``theta`` by ``pi`` flips ``t`` and the turn's sign
+    together, so the centre of curvature ``x - n / turn`` (``n`` the normal) is well defined.
     """
-    img = np.asarray(to_grey(image), dtype=np.float64)
-    p = dominant_period(img) if period is None else float(period)
     t = structure_tensor(img, 1.0, p / 2.0).astype(np.float64)
     a, b, c = t[..., 0], t[..., 1], t[..., 2]
     z = (a - c) + 2j * b  # doubled angle of the gradient in (x, y) = (column, -row) axes
@@ -508,15 +518,116 @@ def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
     d_col = [np.gradient(f, axis=1) for f in (u.real, u.imag)]
     # along t = (tx, ty) in (x, y): d/ds = tx d/dcol - ty d/drow
     dr, di = (tx * dc - ty * dr_ for dc, dr_ in zip(d_col, d_row, strict=True))
-    kappa = 0.5 * np.abs(u.real * di - u.imag * dr)
+    turn = 0.5 * (u.real * di - u.imag * dr)
     coh = mag / np.maximum(a + c, 1e-12)
     m = min(int(np.ceil(2.0 * p)), (min(img.shape) - 1) // 4)
+    return turn, theta, coh, m
+
+
+def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
+    """The median radius of curvature (periods) of the fringes where they are the more coherent half.
+
+    ``kappa = |d theta / d s|`` of :func:`_fringe_turn`; the median over the pixels of above-median
+    coherence (the fringes, not the gaps between onions) is inverted. A border of two periods is left out.
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    turn, _, coh, m = _fringe_turn(img, p)
+    kappa = np.abs(turn)
     kappa, coh = (
         kappa[m : img.shape[0] - m, m : img.shape[1] - m],
         coh[m : img.shape[0] - m, m : img.shape[1] - m],
     )
     k = float(np.median(kappa[coh >= np.median(coh)]))
     return 1.0 / max(k, 1e-6) / p
+
+
+#: :func:`curvature_centres`: the votes are smoothed by a Gaussian of this many periods, and a vote is
+#: gathered where their density reaches :data:`CENTRE_DENSITY` times the density of as many votes spread
+#: evenly over the image (docs/solid.md, session cw8: onion truth's top 21-23, real crops 7, soot 5-6).
+CENTRE_VOTE_SIGMA = 0.5
+CENTRE_DENSITY = 8.0
+
+
+@dataclass(frozen=True)
+class CurvatureCentres:
+    """Where the fringes' centres of curvature fall (:func:`curvature_centres`)."""
+
+    #: The exemplar's dominant period (px).
+    period: float
+    #: Share of the fringe pixels whose centre of curvature lands where the votes gather (0-1).
+    concentration: float
+    #: The median radius of curvature of the fringe pixels (periods): the onions' size.
+    radius: float
+    #: The vote peaks (row, column; px), strongest first: the onions' centres seen in the image.
+    centres: np.ndarray
+    #: The densest vote over the evenly spread density.
+    peak: float
+
+
+def curvature_centres(image: np.ndarray, period: float | None = None) -> CurvatureCentres:
+    """The fringes' centres of curvature, voted into the image: do the fringes curve around points?
+
+    Each pixel of above-median coherence (the fringes; a border of two periods left out) votes for its
+    centre of curvature ``x - n / (d theta / d s)`` (:func:`_fringe_turn`). Rings around a point put
+    every vote at that point; straight fringes vote at infinity (outside the image); bent sheets and
+    kinked fringes scatter their votes. The votes inside the image are smoothed
+    (:data:`CENTRE_VOTE_SIGMA` periods) and divided by the density of as many votes spread evenly;
+    ``concentration`` is the share of all voters whose vote lands at :data:`CENTRE_DENSITY` or more,
+    ``centres`` the local maxima (within a period) above it. ``radius`` is the voters' median ``|1 /
+    turn|``, in periods (the same quantity as :func:`fringe_radius`, over the same pixels).
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    turn, theta, coh, m = _fringe_turn(img, p)
+    h, w = img.shape
+    inner = np.zeros((h, w), dtype=bool)
+    inner[m : h - m, m : w - m] = True
+    voters = inner & (coh >= np.median(coh[inner]))
+    k = turn[voters]
+    k = np.where(np.abs(k) < 1e-9, 1e-9, k)
+    rows, cols = np.nonzero(voters)
+    # (x, y) = (column, -row): the centre x - n / k, n = (cos theta, sin theta)
+    c_col = cols - np.cos(theta[voters]) / k
+    c_row = rows + np.sin(theta[voters]) / k
+    inside = (c_row >= 0) & (c_row < h) & (c_col >= 0) & (c_col < w)
+    vr, vc = c_row[inside].astype(np.int64), c_col[inside].astype(np.int64)
+    votes = np.bincount(vr * w + vc, minlength=h * w).astype(np.float64).reshape(h, w)
+    density = ndi.gaussian_filter(votes, CENTRE_VOTE_SIGMA * p, mode="constant")
+    density /= max(rows.size / (h * w), 1e-12)
+    concentration = float(np.sum(density[vr, vc] >= CENTRE_DENSITY)) / max(rows.size, 1)
+    peaks = (density == ndi.maximum_filter(density, size=2 * int(p) + 1, mode="constant")) & (
+        density >= CENTRE_DENSITY
+    )
+    centres = np.argwhere(peaks)
+    centres = centres[np.argsort(-density[peaks], kind="stable")]
+    radius = float(np.median(1.0 / np.abs(k))) / p if k.size else float("inf")
+    return CurvatureCentres(p, concentration, radius, centres, float(density.max()))
+
+
+#: ``solid-chen-wang``'s shells around centres: centre spacings (periods; one centre per cube of that side)
+#: and the mean :func:`curvature_centres` radius and concentration of their slices (``python -m
+#: benchmarks.bench_laminar --calibrate``: ``cos(2 pi d / period)`` of the distance ``d`` to the nearest
+#: centre plus noise 0.3, period 6 px, 128^3, two draws, every 16th slice of each axis).
+CENTRE_SPACINGS = (3.0, 4.0, 4.5, 5.0, 6.0, 8.0, 12.0, 16.0, 24.0)
+CENTRE_RADIUS = (2.3, 2.48, 2.62, 2.78, 3.12, 3.83, 5.27, 7.64, 8.93)
+CENTRE_CONCENTRATION = (0.148, 0.344, 0.434, 0.503, 0.591, 0.698, 0.659, 0.433, 0.365)
+#: ... and the concentration of the surfaces' slices (:func:`laminar_phase`, the same draws) at sheet lengths
+#: 2, 3, 4 and 6 periods: 0.015, 0.055, 0.102, 0.081. Exemplars whose fringes gather their centres of
+#: curvature at least this much curve around points (halfway between the surfaces' 0.10 and the centres'
+#: 0.34 at 4 periods; the onion truth 0.29-0.43, the real onion crops, soot and the stack 0.00).
+CENTRED_MIN_CONCENTRATION = 0.2
+
+
+def fringe_centres(images: Sequence[np.ndarray]) -> tuple[float, float]:
+    """The exemplars' mean :func:`curvature_centres` concentration, and the centre spacing (periods) whose
+    shells' slices curve as much as theirs (their mean radius looked up in :data:`CENTRE_RADIUS`, linear
+    between the table's spacings, clipped to its ends: the onion truth's 2.6-2.9 gives 4.9-5.1 periods,
+    its own centres are 5.0 apart; the real onion crops' 6.8-7.5 give 14-16)."""
+    found = [curvature_centres(im) for im in images]
+    concentration = float(np.mean([f.concentration for f in found]))
+    radius = float(np.mean([f.radius for f in found]))
+    return concentration, float(np.interp(radius, CENTRE_RADIUS, CENTRE_SPACINGS))
 
 
 def fitted_structure_length(images: Sequence[np.ndarray]) -> float:

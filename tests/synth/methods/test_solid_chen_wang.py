@@ -276,7 +276,9 @@ def test_progress_reaches_one_and_a_raising_callback_cancels() -> None:
         ({"params": {"structure": "stacked"}}, InvalidParameter, "structure"),
         ({"params": {"oriented_length": 0.0}}, InvalidParameter, "oriented_length"),
         ({"params": {"shells": "rings"}}, InvalidParameter, "shells"),
-        ({"params": {"shells": "auto"}}, InvalidParameter, "shells"),
+        ({"params": {"centre_spacing": 1.0}}, InvalidParameter, "centre_spacing"),
+        ({"params": {"centre_spacing": 25.0}}, InvalidParameter, "centre_spacing"),
+        ({"params": {"centre_spacing": "wide"}}, InvalidParameter, "centre_spacing"),
         ({"params": {"structure_length": "long"}}, InvalidParameter, "structure_length"),
         ({"params": {"structure_length": 0.0}}, InvalidParameter, "structure_length"),
         ({"params": {"structure_length": 65.0}}, InvalidParameter, "structure_length"),
@@ -472,7 +474,7 @@ def test_sheet_length_is_the_fit_within_three_to_four_periods_or_as_given() -> N
     three = three.astype(np.float32)
     fits = [fitted_structure_length([im]) for im in (small_onions, three, shells)]
     assert fits[0] < MIN_STRUCTURE_LENGTH < fits[1] < MAX_STRUCTURE_LENGTH < fits[2]
-    laminar = {"structure": "laminar"}
+    laminar = {"structure": "laminar", "shells": "surfaces"}  # the length shapes the surfaces only
     for image, want in (
         (small_onions, MIN_STRUCTURE_LENGTH),
         (three, fits[1]),
@@ -519,9 +521,11 @@ def test_centre_phase_is_the_distance_to_the_nearest_centre(periodic: bool) -> N
 
 def test_centre_shells_start_from_onions_only_with_the_laminar_start(monkeypatch: pytest.MonkeyPatch) -> None:
     """``shells='centres'``: the laminar start's sheets are the shells of :func:`centre_phase`, its centres
-    ``CENTRE_SPACING`` sheet lengths apart at the coarsest level; the volume differs from the surfaces'
-    start, the same seed gives the same bytes, and without the laminar start the option changes nothing."""
+    ``centre_spacing`` periods apart at the coarsest level (fitted to the exemplar when empty, the stats say
+    it); the volume differs from the surfaces' start, the same seed gives the same bytes, and without the
+    laminar start the option changes nothing."""
     import texsynth.synth.methods.solid_chen_wang as cw
+    from texsynth.synth.pixel.laminar import fringe_centres
 
     calls: list[tuple[tuple[int, ...], float]] = []
     real = cw.centre_phase
@@ -545,7 +549,18 @@ def test_centre_shells_start_from_onions_only_with_the_laminar_start(monkeypatch
     scale = 2 ** (stats["levels"] - 1)
     assert shape == (16 // scale,) * 3
     assert stats["shells"] == "centres" and runs["surfaces"].stats["shells"] == "surfaces"
-    assert spacing == pytest.approx(cw.CENTRE_SPACING * 3.0 * stats["period"] / scale)
+    assert stats["centre_spacing"] == pytest.approx(fringe_centres([ex])[1])
+    assert spacing == pytest.approx(stats["centre_spacing"] * stats["period"] / scale)
+    given = synthesize(
+        "solid-chen-wang",
+        ex,
+        size=(16, 16, 16),
+        params={**params, "shells": "centres", "centre_spacing": 7.5},
+        seed=2,
+    )
+    assert given.stats["centre_spacing"] == 7.5
+    assert calls[-1][1] == pytest.approx(7.5 * stats["period"] / scale)
+    calls.pop()
     assert runs["centres"].image.tobytes() != runs["surfaces"].image.tobytes()
     again = synthesize(
         "solid-chen-wang", ex, size=(16, 16, 16), params={**params, "shells": "centres"}, seed=2
@@ -560,22 +575,51 @@ def test_centre_shells_start_from_onions_only_with_the_laminar_start(monkeypatch
     assert noise[0].image.tobytes() == noise[1].image.tobytes() and noise[1].stats["shells"] is None
 
 
-def test_shells_default_to_surfaces_and_centres_only_when_asked() -> None:
-    """``shells`` defaults to 'surfaces' whatever the fitted sheet length (the onion truth's short fit,
-    2.11 periods, included: a default that changed only the known answer would bend the yardstick); 'centres'
-    when asked; no shells without the laminar start; any other value is refused, naming the field."""
+def test_shells_default_to_auto_and_take_what_is_asked() -> None:
+    """``shells`` defaults to 'auto' (session cw8: the fringes' curvature decides, not the fitted sheet
+    length; session 14 refused a rule by the length); 'surfaces' and 'centres' are taken as asked whatever
+    the exemplar; no shells without the laminar start."""
     from texsynth.synth.io.laminar import onion_volume
-    from texsynth.synth.methods.solid_chen_wang import MIN_STRUCTURE_LENGTH, SolidChenWangParams, _Schedule
+    from texsynth.synth.methods.solid_chen_wang import SolidChenWangParams, _Schedule
     from texsynth.synth.output.volume import mid_slices
-    from texsynth.synth.pixel.laminar import fitted_structure_length
 
     small = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
-    assert fitted_structure_length([small]) < MIN_STRUCTURE_LENGTH
+    r, c = np.mgrid[0:64, 0:64].astype(np.float64)
+    large = (0.5 + 0.4 * np.cos(2 * np.pi * np.hypot(r + 100.0, c - 30.0) / 6.0)).astype(np.float32)
 
     def shells(image: np.ndarray, **params: object) -> str | None:
         return _Schedule.resolve(SolidChenWangParams(**params), dict.fromkeys(PLANES, image)).shells
 
-    assert SolidChenWangParams().shells == "surfaces"
-    assert shells(small, structure="laminar") == "surfaces"
-    assert shells(small, structure="laminar", shells="centres") == "centres"
+    assert SolidChenWangParams().shells == "auto"
+    assert shells(small, structure="laminar") == "centres"
+    assert shells(large, structure="laminar") == "surfaces"
+    assert shells(small, structure="laminar", shells="surfaces") == "surfaces"
+    assert shells(large, structure="laminar", shells="centres") == "centres"
     assert shells(small, structure="none", shells="centres") is None
+
+
+def test_auto_shells_take_centres_only_where_the_fringes_curve_around_points() -> None:
+    """``shells='auto'``: the centres for small onions (their fringes' centres of curvature gather: the
+    onion truth's 64^3 mid-slice), the surfaces for one large ring set seen off-centre and for gently bent
+    laminae (their centres scatter or lie outside); the stats say the concentration and the spacing, and
+    ``'auto'`` without the laminar start changes nothing."""
+    from texsynth.synth.io.laminar import onion_volume
+    from texsynth.synth.methods.solid_chen_wang import _Schedule
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import CENTRED_MIN_CONCENTRATION
+
+    small_onions = mid_slices(onion_volume((96, 96, 96), seed=1))["xy"]
+    r, c = np.mgrid[0:96, 0:96].astype(np.float64)
+    far = (0.5 + 0.4 * np.cos(2 * np.pi * np.hypot(r + 150.0, c - 40.0) / 6.0)).astype(np.float32)
+    bent = undulating_laminae((96, 96), period=6.0, amplitude=4.0, wavelength=48.0, noise=0.2, seed=1)
+    laminar = SolidChenWangParams(structure="laminar", shells="auto")
+    picks = {}
+    for name, image in (("onions", small_onions), ("far rings", far), ("bent", bent)):
+        schedule = _Schedule.resolve(laminar, dict.fromkeys(PLANES, image))
+        picks[name] = (schedule.shells, schedule.concentration)
+    assert picks["onions"][0] == "centres" and picks["onions"][1] >= CENTRED_MIN_CONCENTRATION
+    assert picks["far rings"][0] == "surfaces" and picks["bent"][0] == "surfaces"
+    assert max(picks["far rings"][1], picks["bent"][1]) < CENTRED_MIN_CONCENTRATION
+    none = SolidChenWangParams(structure="none", shells="auto")
+    schedule = _Schedule.resolve(none, dict.fromkeys(PLANES, small_onions))
+    assert schedule.shells is None and schedule.centre_spacing is None

@@ -394,3 +394,62 @@ def test_auto_keeps_bent_laminae_on_the_random_start_when_bends_are_capped() -> 
     assert start_kind("auto", bent, ("xz", "yz"), True, None, ORIENTED_MAX_BEND) == "none"
     assert start_kind("auto", bent, ("xz", "yz"), True) == "oriented"
     assert start_kind("oriented", bent, ("xz", "yz"), True, None, ORIENTED_MAX_BEND) == "oriented"
+
+
+@pytest.mark.parametrize(("centre", "noise"), [((64.0, 64.0), 0.0), ((41.3, 83.7), 0.3), ((90.0, 30.0), 0.3)])
+def test_curvature_centres_find_the_centre_of_concentric_rings(centre, noise) -> None:
+    """Rings around a known point: the fringes' centres of curvature gather at that point (one peak
+    within two pixels, nearly every vote), and the radius lies among the fringe pixels' distances to it."""
+    rng = np.random.default_rng(7)
+    r, c = np.mgrid[0:128, 0:128].astype(np.float64)
+    d = np.hypot(r - centre[0], c - centre[1])
+    found = laminar.curvature_centres(np.cos(2 * np.pi * d / 6.0) + rng.normal(0, noise, d.shape), 6.0)
+    assert found.concentration > 0.6 and found.peak > 50.0
+    assert np.hypot(*(found.centres[0] - np.asarray(centre))) < 2.0
+    inner = d[12:-12, 12:-12]  # the border the measure leaves out: two periods
+    assert np.median(inner) / 6.0 < found.radius < inner.max() / 6.0
+
+
+def test_curvature_radius_of_rings_around_a_far_centre() -> None:
+    """Rings around a point 200 px above the image: every fringe pixel's radius of curvature is 200-330 px
+    (33-55 periods), and so is the median; their centres fall outside the image (no peak)."""
+    r, c = np.mgrid[0:128, 0:128].astype(np.float64)
+    d = np.hypot(r + 200.0, c - 64.0)
+    found = laminar.curvature_centres(np.cos(2 * np.pi * d / 6.0), 6.0)
+    assert 200.0 / 6.0 * 0.95 < found.radius < 330.0 / 6.0 * 1.05
+    assert found.concentration == 0.0 and len(found.centres) == 0
+
+
+def test_curvature_centres_of_straight_or_bent_fringes_gather_nowhere() -> None:
+    """Straight stripes: every centre of curvature is at infinity (none in the image, no peak); gently bent
+    laminae: their centres scatter (far below the threshold), while three onions gather above it."""
+    from texsynth.synth.io.patterns import undulating_laminae
+
+    r, c = np.mgrid[0:128, 0:128].astype(np.float64)
+    stripes = laminar.curvature_centres(np.cos(2 * np.pi * (0.6 * r + 0.8 * c) / 6.0), 6.0)
+    assert stripes.concentration == 0.0 and stripes.centres.shape == (0, 2) and stripes.radius > 100.0
+    bent = laminar.curvature_centres(undulating_laminae((128, 128), 7.0, 16.0, 128.0, noise=0.3))
+    assert bent.concentration < 0.05 and bent.radius > 5.0
+    onions = laminar.curvature_centres(_shells(128, seed=4))
+    assert onions.concentration > laminar.CENTRED_MIN_CONCENTRATION > bent.concentration
+    assert 1 <= len(onions.centres) <= 6
+
+
+def test_fringe_centres_spacing_follows_the_onions_size() -> None:
+    """Slices of shells around random centres ``s`` periods apart (the start's own geometry, a new draw):
+    the fitted spacing follows ``s`` (within the calibration's spread) and their fringes gather their
+    centres above the threshold; slices of the surfaces' sheets stay below it."""
+    from texsynth.synth.methods.solid_chen_wang import centre_phase
+
+    period, side = 6.0, 96
+    rng = np.random.default_rng(11)
+    fits = []
+    for spacing in (4.0, 8.0):
+        wave = np.cos(2 * np.pi * centre_phase((side,) * 3, spacing * period, rng) / period)
+        cuts = [np.ascontiguousarray(np.take(wave, i, axis=a)) for a in range(3) for i in (24, 72)]
+        fits.append(laminar.fringe_centres([cut + rng.normal(0, 0.3, cut.shape) for cut in cuts]))
+    assert fits[0][0] > laminar.CENTRED_MIN_CONCENTRATION and fits[1][0] > laminar.CENTRED_MIN_CONCENTRATION
+    assert 3.0 <= fits[0][1] < 6.0 < fits[1][1] <= 12.0
+    wave = np.cos(2 * np.pi * laminar_phase((side,) * 3, 3.0 * period, rng) / period)
+    cuts = [np.ascontiguousarray(np.take(wave, i, axis=a)) for a in range(3) for i in (24, 72)]
+    assert laminar.fringe_centres(cuts)[0] < laminar.CENTRED_MIN_CONCENTRATION
