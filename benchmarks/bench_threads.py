@@ -14,7 +14,8 @@ reported: on a machine shared with other jobs, a 2-thread run cannot get two cor
 speed-up is then a floor (CPU time says what the work costs; its growth from 1 to 2 threads is the
 parallel overhead). The bytes of every run are compared: the same with 1 and 2 threads. The CPU time of
 the synthesis' busiest thread (Linux's per-thread counters) gives a speed-up estimate that the load
-inflates less (see the section's note).
+inflates less (see the section's note). ``--stages N`` instead prints solid-kopf's stages per level at ``N``
+threads in this process (:func:`stage_table`): which of them run on the calling thread alone.
 """
 
 from __future__ import annotations
