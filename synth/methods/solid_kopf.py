@@ -624,8 +624,12 @@ def _run_solid_kopf(
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
     # names bad exemplars before choosing a start; its one level is the finest level of every plan below
-    # (the same images and neighbourhood side), whose tables are built meanwhile on a helper thread
-    plan_levels(run.views, size, 1, params.neighbourhood_size).prefetch(0)
+    # (the same images and neighbourhood side), whose tables are built meanwhile on a helper thread when
+    # one exemplar serves every plane (per-plane exemplars' three tables a level would crowd the cache of
+    # tables before their level comes: each level prefetches the next finer one instead)
+    checked = plan_levels(run.views, size, 1, params.neighbourhood_size)
+    if set(checked.roles) == {"exemplar"}:
+        checked.prefetch(0)
     period, phi, length = 0.0, None, None
     pilot = partial(
         laminar_pilot, settings={"structure_length": params.structure_length}, centred=CENTRED_START
