@@ -14,7 +14,8 @@ reported: on a machine shared with other jobs, a 2-thread run cannot get two cor
 speed-up is then a floor (CPU time says what the work costs; its growth from 1 to 2 threads is the
 parallel overhead). The bytes of every run are compared: the same with 1 and 2 threads. The CPU time of
 the synthesis' busiest thread (Linux's per-thread counters) gives a speed-up estimate that the load
-inflates less (see the section's note).
+inflates less (see the section's note). ``--stages N`` instead prints solid-kopf's stages per level at ``N``
+threads in this process (:func:`stage_table`): which of them run on the calling thread alone.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -224,12 +226,138 @@ def report(results: list[dict[str, object]], title: str = "") -> str:
     return "\n".join(lines)
 
 
+#: ``--stages``: what is timed in a solid-kopf run, per level (function names in solid_kopf's namespace).
+STAGES = (
+    "structure_schedule",
+    "_mixed",
+    "start_kind",
+    "plan_levels",
+    "laminar_phase",
+    "initial_volume",
+    "initial_sources",
+    "upsample_volume",
+    "upsample_plane_sources",
+    "orientation_labels",
+    "gather_plane",
+    "search_plane",
+    "dense_sources",
+    "_position_factors",
+    "_orientation_factors",
+    "scan_order",
+    "irls_update",
+    "best_vote",
+    "slice_coherence",
+    "match_histogram",
+)
+
+
+def stage_table(exemplar: Path, side: int, threads: int, runs: int) -> str:
+    """Per stage and level of ``runs`` in-process solid-kopf ``side^3`` runs (seed 1, ``threads``): wall,
+    CPU of every thread, the calling thread's CPU, and the idle core-seconds ``threads * wall - CPU``
+    (a stage whose CPU is the calling thread's alone ran on one core). Times are exclusive of the stages
+    inside a stage; the exemplar tables are built anew each run (cache cleared); '(rest)' is the Python
+    between the stages; a stage on the prefetch thread is marked '(helper thread)' (its 'calling thread'
+    column is that thread's CPU). Run it where nothing else runs: another process's work shows as idle."""
+    from texsynth.synth.threads import single_threaded_blas
+
+    single_threaded_blas()
+    import numpy as np  # noqa: F401  (after the BLAS setting)
+
+    import texsynth.synth.methods.solid_kopf as kopf
+    import texsynth.synth.pixel.solid as solid
+    from texsynth.synth.api import synthesize
+    from texsynth.synth.io import load_image
+
+    image = load_image(exemplar)
+    table: dict[tuple[str, str], list[float]] = {}
+    level = ["start"]
+    local = threading.local()  # each thread's stack of open stages
+    caller = threading.get_ident()
+
+    def wrap(owner: object, name: str, label: str | None = None) -> None:
+        inner = getattr(owner, name)
+
+        def timed(*args: object, **kwargs: object) -> object:
+            if name == "start_level":
+                level[0] = f"level {args[1].level + 1}"  # type: ignore[attr-defined]
+            stack = local.__dict__.setdefault("stack", [])
+            t, c, m = time.perf_counter(), time.process_time(), time.thread_time()
+            stack.append([0.0, 0.0, 0.0])
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                dt, dc, dm = time.perf_counter() - t, time.process_time() - c, time.thread_time() - m
+                nested = stack.pop()
+                where = level[0] if threading.get_ident() == caller else f"{level[0]} (helper thread)"
+                row = table.setdefault((where, label or name), [0.0, 0.0, 0.0, 0.0])
+                row[0] += 1
+                row[1] += dt - nested[0]
+                row[2] += dc - nested[1]
+                row[3] += dm - nested[2]
+                if stack:
+                    stack[-1][0] += dt
+                    stack[-1][1] += dc
+                    stack[-1][2] += dm
+
+        setattr(owner, name, timed)
+
+    for name in STAGES:
+        if hasattr(kopf, name):
+            wrap(kopf, name)
+    wrap(solid, "_build_neighbourhoods", "exemplar tables (PCA, k-d tree, k-coherence sets)")
+    wrap(kopf.HistogramState, "start", "histogram start")
+    for name in ("start_level", "iterate", "end_level", "result"):
+        wrap(kopf._KopfLoop, name, f"{name} (rest)")
+    wrap(kopf, "_run_solid_kopf", "run (rest)")
+    synthesize("solid-kopf", image, size=(16, 16, 16), seed=1, threads=threads)  # kernels loaded
+    table.clear()
+    walls = []
+    for _ in range(runs):
+        solid._BUILT.clear()
+        level[0] = "start"
+        t, c = time.perf_counter(), time.process_time()
+        synthesize("solid-kopf", image, size=(side,) * 3, seed=1, threads=threads)
+        walls.append((time.perf_counter() - t, time.process_time() - c))
+    wall = statistics.median(w for w, _ in walls)
+    cpu = statistics.median(c for _, c in walls)
+    lines = [
+        f"solid-kopf {side}^3 from {exemplar.name}, {threads} threads, {runs} runs: synthesis {wall:.2f} s"
+        f" wall, {cpu:.2f} s CPU ({cpu / wall:.2f} cores), load {_load():.1f}; per run:",
+        "",
+        "| level | stage | calls | wall (s) | CPU (s) | calling thread (s) | others (s) | idle core-s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for (lv, name), (n, w, c, m) in sorted(table.items(), key=lambda kv: -kv[1][1]):
+        if w / runs < 0.002:
+            continue
+        lines.append(
+            f"| {lv} | {name} | {n / runs:.0f} | {w / runs:.3f} | {c / runs:.3f} | {m / runs:.3f} |"
+            f" {(c - m) / runs:.3f} | {(threads * w - c) / runs:.3f} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=3, help="runs per thread count (default 3)")
     parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
     parser.add_argument("--no-write", action="store_true", help="print the table, leave the docs alone")
+    parser.add_argument(
+        "--stages",
+        type=int,
+        metavar="THREADS",
+        help="instead: solid-kopf's per-stage, per-level table at this many threads, in this process (the"
+        " kopf-64 / kopf-128 cases; --runs runs); prints, writes nothing",
+    )
     args = parser.parse_args(argv)
+    if args.stages is not None:
+        with tempfile.TemporaryDirectory(prefix="bench-threads-") as tmp:
+            exemplar = _exemplar(Path(tmp))
+            for name in args.cases.split(","):
+                if name.strip() in ("kopf-64", "kopf-128"):
+                    side = int(CASES[name.strip()][1].split("x")[0])
+                    print(stage_table(exemplar, side, args.stages, args.runs) + "\n")
+        return 0
     names = [c.strip() for c in args.cases.split(",") if c.strip()]
     unknown = [c for c in names if c not in CASES]
     if unknown:

@@ -1178,13 +1178,17 @@ def _evaluate_volume(
             "volume", f"volume of shape {vol.shape} is too small to evaluate (< {MIN_SIDE} voxels)"
         )
 
-    # one queue for the threads: each exemplar's statistics (once, however many planes it serves), the
-    # volume's moments (with every slice taken, each axis pools every voxel once: they are the volume's),
-    # every axis's runs of slices, then S2; taken in that order, each axis compared as soon as its slices
+    # one queue for the threads: S2 (the longest single job: first, so that it does not end the queue on
+    # one thread while the other waits), each exemplar's statistics (once, however many planes it serves),
+    # the volume's moments (with every slice taken, each axis pools every voxel once: they are the
+    # volume's), every axis's runs of slices; taken in that order, each axis compared as soon as its slices
     # are in, so the threads do not wait at the end of an axis
     threads = current_threads()
     views = {axis: np.moveaxis(vol, axis, 0)[::slice_step] for axis in axes}
-    jobs: list[tuple[str, Any, Callable[[], Any]]] = [
+    jobs: list[tuple[str, Any, Callable[[], Any]]] = []
+    if s2:
+        jobs.append(("s2", None, partial(_s2_comparisons, planes, vol, threshold, bool(s2_periodic))))
+    jobs += [
         ("exemplar", key, partial(_exemplar_stats, ex, settings))
         for key, ex in {id(ex): ex for ex in planes.values()}.items()
     ]
@@ -1195,8 +1199,6 @@ def _evaluate_volume(
         for axis in axes
         for run in _chunks(len(views[axis]), views[axis][0].size, threads)
     ]
-    if s2:
-        jobs.append(("s2", None, partial(_s2_comparisons, planes, vol, threshold, bool(s2_periodic))))
     ref_stats: dict[int, ImageStats] = {}
     ref_moments: dict[int, dict[str, Any]] = {}
     volume_moments: dict[str, Any] | None = None

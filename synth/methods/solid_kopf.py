@@ -402,6 +402,7 @@ class _KopfLoop:
         params, plan, active = self.params, self.plan, self.run.active
         n = step.size
         self.nbhs = plan.neighbourhoods(step.level)
+        plan.prefetch(step.level - 1)  # the next finer level's tables, built while this level runs
         images = [plan.exemplars[p][step.level] for p in range(3)]
         self.images = images
         if step.coarsest:
@@ -622,7 +623,13 @@ def _run_solid_kopf(
     levels, iterations = params.levels, params.iterations
     if params.adapt_to_structure:
         levels, iterations = structure_schedule(run.constrained(), levels, iterations)
-    plan_levels(run.views, size, 1, params.neighbourhood_size)  # names bad exemplars before choosing a start
+    # names bad exemplars before choosing a start; its one level is the finest level of every plan below
+    # (the same images and neighbourhood side), whose tables are built meanwhile on a helper thread when
+    # one exemplar serves every plane (per-plane exemplars' three tables a level would crowd the cache of
+    # tables before their level comes: each level prefetches the next finer one instead)
+    checked = plan_levels(run.views, size, 1, params.neighbourhood_size)
+    if set(checked.roles) == {"exemplar"}:
+        checked.prefetch(0)
     period, phi, length = 0.0, None, None
     pilot = partial(
         laminar_pilot, settings={"structure_length": params.structure_length}, centred=CENTRED_START

@@ -30,11 +30,14 @@ Stanford 2002, ch. 7): the per-slice neighbourhoods of Wei-Levoy solid synthesis
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
 import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -56,7 +59,7 @@ from texsynth.synth.kernels.solid_search import (
 )
 from texsynth.synth.kernels.solid_sources import dense_sources, upsample_sources
 from texsynth.synth.pixel.synthesis import level_neighbourhood_size
-from texsynth.synth.threads import current_threads, thread_map
+from texsynth.synth.threads import current_threads, thread_map, use_threads
 
 __all__ = [
     "PLANES",
@@ -297,15 +300,26 @@ def exemplar_neighbourhoods(
             f"{h}x{w} pixels is smaller than the {size}x{size} neighbourhood: use a smaller neighbourhood",
         )
     key = (img.shape, hashlib.blake2b(img.tobytes(), digest_size=16).digest(), int(size), bool(centre))
-    with _BUILT_LOCK:
-        if key in _BUILT:
-            _BUILT.move_to_end(key)
-            return _BUILT[key]
-    built = _build_neighbourhoods(img, int(size), bool(centre))
-    with _BUILT_LOCK:
-        _BUILT[key] = built
-        while len(_BUILT) > NEIGHBOURHOOD_CACHE:
-            _BUILT.popitem(last=False)
+    while True:
+        with _BUILT_LOCK:
+            if key in _BUILT:
+                _BUILT.move_to_end(key)
+                return _BUILT[key]
+            building = _BUILDING.get(key)
+            if building is None:  # this thread builds it; another asking meanwhile waits for it
+                building = _BUILDING[key] = threading.Event()
+                break
+        building.wait()  # another thread built it (a prefetch): from the cache, or built here if that failed
+    try:
+        built = _build_neighbourhoods(img, int(size), bool(centre))
+        with _BUILT_LOCK:
+            _BUILT[key] = built
+            while len(_BUILT) > NEIGHBOURHOOD_CACHE:
+                _BUILT.popitem(last=False)
+    finally:
+        with _BUILT_LOCK:
+            del _BUILDING[key]
+        building.set()
     return built
 
 
@@ -313,7 +327,30 @@ def exemplar_neighbourhoods(
 #: of a method's stages build the same tables from the same images; building them is serial NumPy work.
 NEIGHBOURHOOD_CACHE = 8
 _BUILT: OrderedDict[tuple, ExemplarNeighbourhoods] = OrderedDict()
+_BUILDING: dict[tuple, threading.Event] = {}  # tables being built now, by key
 _BUILT_LOCK = threading.Lock()
+#: The thread that builds a finer level's tables while the coarser level runs (:meth:`SolidPlan.prefetch`).
+_PREFETCH: list[ThreadPoolExecutor] = []
+
+
+def _prefetcher() -> ThreadPoolExecutor:
+    """This process's one table-building thread, started at first use and kept (its CPU stays counted)."""
+    with _BUILT_LOCK:
+        if not _PREFETCH:
+            _PREFETCH.append(ThreadPoolExecutor(1, thread_name_prefix="texsynth-tables"))
+        return _PREFETCH[0]
+
+
+def _forget_prefetcher() -> None:
+    """In a forked child the parent's threads do not exist: its pool, locks and builds in flight go."""
+    global _BUILT_LOCK
+    _PREFETCH.clear()
+    _BUILDING.clear()
+    _BUILT_LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_prefetcher)
 
 
 def _build_neighbourhoods(img: np.ndarray, size: int, centre: bool) -> ExemplarNeighbourhoods:
@@ -391,6 +428,23 @@ class SolidPlan:
     sizes: list[int]
     exemplars: list[list[np.ndarray]]
     roles: list[str]
+
+    def prefetch(self, level: int, *, centre: bool = True) -> Future | None:
+        """Start building ``level``'s tables (:meth:`neighbourhoods`) on a helper thread when the job has
+        two threads or more, so that a finer level's tables are built while the coarser level runs (their
+        serial NumPy and k-d tree work on the core the coarser level's Python leaves idle); ``None`` with
+        one thread or no such level. The tables depend only on the images: the same bytes either way. A
+        later :meth:`neighbourhoods` waits for a build in flight; a failed one is built (and raises) again
+        in the caller."""
+        threads = current_threads()
+        if threads < 2 or not 0 <= level < self.levels:
+            return None
+
+        def build() -> None:
+            with use_threads(threads), contextlib.suppress(InvalidInput):  # raised again where it is run
+                self.neighbourhoods(level, centre=centre)
+
+        return _prefetcher().submit(build)
 
     def neighbourhoods(self, level: int, *, centre: bool = True) -> list[ExemplarNeighbourhoods]:
         """The three planes' :class:`ExemplarNeighbourhoods` at ``level`` (built once per distinct image)."""

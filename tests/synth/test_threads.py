@@ -289,6 +289,7 @@ def test_thread_map_works_in_a_forked_child_after_the_parent_used_it() -> None:
 # solid-kopf's serial parts put on the threads (issue 25, branch kwhole25): the pilot's and the final step's
 # slice coherence (stacks of slices on the threads), the final rank remap sorted in two halves (forced at
 # every size), the k-coherence sets' differences; with 1, 2 and 4 threads in a process whose pools have 4.
+# Branch kopf64w: the finer levels' exemplar tables prefetched on a helper thread (2 and 4 threads).
 _KOPF_STARTS = """
 import hashlib, json
 import texsynth.synth.kernels.solid_search as k
@@ -303,6 +304,8 @@ ex = undulating_laminae((40, 40), period=6.0, amplitude=4.0, wavelength=32.0, no
 cases = {
     "laminar-auto-final": {"structure": "laminar", "final_step": "auto", "levels": 2},
     "laminar-best": {"structure": "laminar", "final_step": "best", "levels": 2},
+    # three levels: each finer level's tables built on the helper thread while the coarser one runs
+    "random-3-levels": {"structure": "none", "levels": 3, "adapt_to_structure": False},
 }
 out = {}
 for name, params in cases.items():
@@ -328,6 +331,6 @@ def test_kopf_starts_and_remap_give_the_same_bytes_with_one_two_and_four_threads
         [sys.executable, "-c", _KOPF_STARTS], env=env, capture_output=True, text=True, check=True
     )
     digests = json.loads(done.stdout.strip().splitlines()[-1])
-    assert len(digests) == 3
+    assert len(digests) == 4
     differ = {name: d for name, d in digests.items() if len(set(d)) != 1}
     assert not differ, f"bytes depend on the thread count: {differ}"

@@ -462,3 +462,55 @@ def test_merge_remap_of_two_sorted_halves_equals_one_stable_sort(half: int) -> N
     right = np.argsort(values[half:], kind="stable")
     merge_remap(values, left, right, ref, out)
     assert out.tobytes() == merge_remap_reference(values, ref).tobytes()
+
+
+def _tables_equal(a, b) -> None:
+    for name in ("centres", "vectors", "mean", "basis"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    np.testing.assert_array_equal(a.sets.kset, b.sets.kset)
+    np.testing.assert_array_equal(a.sets.valid, b.sets.valid)
+
+
+def test_prefetched_tables_are_the_direct_builds_and_handed_out_once() -> None:
+    """A finer level's tables built on the helper thread (``SolidPlan.prefetch``, 2 threads) are the
+    tables a direct build gives, array for array; the level's own request waits for the build in flight
+    and gets that object; with one thread nothing is prefetched."""
+    import texsynth.synth.pixel.solid as solid
+    from texsynth.synth.threads import use_threads
+
+    ex = _exemplar((40, 44), seed=5)
+    plan = plan_levels(dict.fromkeys(PLANES, ex), (16, 16, 16), 2, 5)
+    solid._BUILT.clear()
+    direct = solid._build_neighbourhoods(plan.exemplars[0][0], plan.sizes[0], True)
+    with use_threads(1):
+        assert plan.prefetch(0) is None
+    with use_threads(2):
+        future = plan.prefetch(0)
+        assert future is not None
+        got = plan.neighbourhoods(0)  # may wait for the build in flight
+        future.result()
+        assert all(nb is got[0] for nb in got)  # one table for the three planes, built once
+        assert plan.neighbourhoods(0)[0] is got[0]
+        assert plan.prefetch(5) is None  # no such level
+    _tables_equal(got[0], direct)
+    assert not solid._BUILDING
+
+
+def test_a_failed_prefetch_is_raised_by_the_level_that_needs_it() -> None:
+    """A build that fails on the helper thread leaves no table and no build in flight: the caller's own
+    request builds it again and raises there (here the neighbourhood is wider than the exemplar)."""
+    import dataclasses
+
+    import texsynth.synth.pixel.solid as solid
+    from texsynth.synth.threads import use_threads
+
+    ex = _exemplar((20, 22), seed=6)
+    plan = dataclasses.replace(plan_levels(dict.fromkeys(PLANES, ex), (8, 8, 8), 1, 5), sizes=[30])
+    solid._BUILT.clear()
+    with use_threads(2):
+        future = plan.prefetch(0)
+        assert future is not None
+        future.result()  # the helper swallowed the error ...
+        assert not solid._BUILDING and not solid._BUILT
+        with pytest.raises(InvalidInput, match="30x30"):  # ... which the level's own request raises
+            plan.neighbourhoods(0)
