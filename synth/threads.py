@@ -32,8 +32,6 @@ from texsynth.synth.errors import InvalidParameter
 
 __all__ = [
     "BLAS_THREADS",
-    "OMP_SPIN",
-    "OMP_SPIN_DEFAULT",
     "OMP_WAIT",
     "THREADS_ENV",
     "available_cores",
@@ -61,11 +59,6 @@ THREADS_ENV = "TEXSYNTH_THREADS"
 #: How OpenMP's idle threads wait (numba's ``omp`` threading layer): ``passive`` sleeps instead of spinning.
 OMP_WAIT = "OMP_WAIT_POLICY"
 
-#: GNU OpenMP's busy-wait before an idle thread sleeps, in spins (it wins over the ``passive`` policy's 0).
-OMP_SPIN = "GOMP_SPINCOUNT"
-#: About 100 us here (a spin took 24-25 ns on this machine): the gap between two parallel loops of a pass.
-OMP_SPIN_DEFAULT = "4000"
-
 
 def single_threaded_blas() -> None:
     """Ask for one OpenBLAS thread, and OpenMP threads that sleep while they wait, unless the
@@ -74,19 +67,9 @@ def single_threaded_blas() -> None:
     Spinning threads burn a core the other jobs of a shared machine need: solid-chen-wang 64^3 with 2
     threads under load 5 took 7.5-8.7 s of CPU and 11.6-13.1 s wall spinning, 5.4-5.5 s and 8.5 s
     passive (docs/benchmarks.md, "Threads"). Same bytes either way.
-
-    Sleeping at once costs the other way: a pixel pass is hundreds of short parallel loops (a level of
-    tiles each, about 1 ms), and a thread woken from sleep for each came late (a futex wake and the
-    scheduler's latency: 69 us a level against 26 us of work in a bare loop; 35-75 us a level with blocks
-    of the passes' size). :data:`OMP_SPIN_DEFAULT` spins of about 100 us bridge those gaps and still let a
-    thread sleep through a serial stretch: 0.04-0.09 s of a 2-thread ``tensor-constrained`` 512^2 run
-    (1,165 levels). When other processes want both cores (load 3.5-6) the spin costs up to 12% more CPU
-    (docs/benchmarks.md, "Threads: 1 -> 2, 2D methods", session 16); ``GOMP_SPINCOUNT=0`` restores the
-    plain passive wait.
     """
     os.environ.setdefault(BLAS_THREADS, "1")
     os.environ.setdefault(OMP_WAIT, "passive")
-    os.environ.setdefault(OMP_SPIN, OMP_SPIN_DEFAULT)
 
 
 def available_cores() -> int:

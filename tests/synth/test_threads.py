@@ -21,16 +21,11 @@ from texsynth.synth.errors import InvalidParameter
 from texsynth.synth.io import save_image
 from texsynth.synth.io.patterns import undulating_laminae
 from texsynth.synth.threads import (
-    BLAS_THREADS,
-    OMP_SPIN,
-    OMP_SPIN_DEFAULT,
-    OMP_WAIT,
     THREADS_ENV,
     available_cores,
     check_threads,
     max_threads,
     service_threads,
-    single_threaded_blas,
     use_threads,
 )
 
@@ -162,17 +157,6 @@ def test_service_settings_carry_the_count_to_the_workers() -> None:
     assert settings.threads == available_cores()
     assert Settings.from_env(settings.to_env()).threads == settings.threads
     assert Settings.from_env({THREADS_ENV: "1"}).threads == 1
-
-
-def test_entry_points_ask_openmp_for_a_short_spin_then_sleep(monkeypatch: pytest.MonkeyPatch) -> None:
-    for name in (BLAS_THREADS, OMP_WAIT, OMP_SPIN):
-        monkeypatch.delenv(name, raising=False)
-    single_threaded_blas()
-    assert (os.environ[BLAS_THREADS], os.environ[OMP_WAIT]) == ("1", "passive")
-    assert os.environ[OMP_SPIN] == OMP_SPIN_DEFAULT and int(OMP_SPIN_DEFAULT) > 0
-    monkeypatch.setenv(OMP_SPIN, "0")  # a value already in the environment wins
-    single_threaded_blas()
-    assert os.environ[OMP_SPIN] == "0"
 
 
 @pytest.mark.parametrize("command", ["synthesize", "evaluate"])
