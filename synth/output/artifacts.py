@@ -32,6 +32,7 @@ import platform
 import threading
 from collections.abc import Callable, Mapping
 from contextlib import suppress
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -101,8 +102,13 @@ class _Pictures:
 
     def add(self, task: Callable[[], object]) -> None:
         """Queue ``task`` (whatever it returns, it names no file here)."""
+
+        def run() -> list[str]:
+            task()
+            return []
+
         with self.cond:
-            self.tasks.append(lambda: (task(), [])[1])
+            self.tasks.append(run)
             self.done.append([])
             self.cond.notify()
 
@@ -164,11 +170,16 @@ def _tensor_names(prefix: str) -> list[str]:
     return [f"{prefix}coherence.png", f"{prefix}orientation.png"]
 
 
-def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list[str]:
+def _write_pngs(folder: Path, prefix: str, pngs: list[bytes]) -> list[str]:
+    """Write a tensor field's encoded images (:func:`_tensor_pngs`) under their names; return the names."""
     names = _tensor_names(prefix)
-    for name, data in zip(names, _tensor_pngs(tensors), strict=True):
+    for name, data in zip(names, pngs, strict=True):
         atomic_write_bytes(folder / name, data)
     return names
+
+
+def _write_tensor_images(folder: Path, prefix: str, tensors: np.ndarray) -> list[str]:
+    return _write_pngs(folder, prefix, _tensor_pngs(tensors))
 
 
 class ExemplarAhead:
@@ -353,14 +364,7 @@ def write_artifacts(
 
     def tensor_images(prefix: str, tensors: Callable[[], np.ndarray]) -> Callable[[], list[str]]:
         if prefix in made:  # encoded while the output was synthesized
-
-            def write() -> list[str]:
-                names = _tensor_names(prefix)
-                for name, data in zip(names, made[prefix], strict=True):
-                    atomic_write_bytes(folder / name, data)
-                return names
-
-            return write
+            return partial(_write_pngs, folder, prefix, made[prefix])
         return lambda: _write_tensor_images(folder, prefix, np.asarray(tensors()))
 
     def extra(key: str, arr: np.ndarray) -> Callable[[], list[str]]:
