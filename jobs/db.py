@@ -200,6 +200,23 @@ def _version(db: Any) -> str | None:
     return None if row is None else row[0]
 
 
+def _write_ahead_log(db: sqlite3.Connection, wait: float = 30.0) -> None:
+    """Put the SQLite file in WAL mode. The switch needs the file to itself and SQLite does not call
+    the busy handler for it: a process that starts beside another gets "database is locked" at once,
+    so the switch is tried again, for up to ``wait`` seconds, until it holds or another process made it."""
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            if db.execute("PRAGMA journal_mode").fetchone()[0] == "wal":
+                return
+            db.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.02)
+
+
 def migrate(database: Database) -> None:
     """Bring the schema to :data:`HEAD` with Alembic, unless it is there already (the usual case)."""
     if database.postgres:
@@ -208,7 +225,7 @@ def migrate(database: Database) -> None:
                 return
     else:
         with database.connect() as db:
-            db.execute("PRAGMA journal_mode=WAL")
+            _write_ahead_log(db)
             if _version(db) == HEAD:
                 return
     from alembic import command

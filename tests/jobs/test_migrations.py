@@ -172,3 +172,27 @@ def test_processes_starting_together_migrate_once(request, tmp_path, kind):
             tuple(r) if kind == "sqlite" else (r[0],)
             for r in db.execute("SELECT version_num FROM alembic_version").fetchall()
         ] == [(HEAD,)]
+
+
+def test_the_switch_to_wal_waits_for_a_process_holding_the_file(tmp_path):
+    """SQLite refuses ``journal_mode=WAL`` at once (no busy handler) while another connection holds a
+    lock: the switch is tried again until the lock goes, and gives up with SQLite's error at its deadline."""
+    import threading
+
+    from texsynth.jobs.db import _write_ahead_log
+
+    path = tmp_path / "jobs.sqlite"
+    holder = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+    holder.execute("CREATE TABLE t (x)")
+    holder.execute("BEGIN EXCLUSIVE")
+    db = sqlite3.connect(path, timeout=0.01, isolation_level=None)
+    with pytest.raises(sqlite3.OperationalError, match="locked"):
+        _write_ahead_log(db, wait=0.1)
+    release = threading.Timer(0.3, lambda: holder.execute("COMMIT"))
+    release.start()
+    _write_ahead_log(db, wait=10.0)
+    release.join()
+    assert db.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    _write_ahead_log(db, wait=0.0)  # already WAL: nothing to switch, no lock needed
+    holder.close()
+    db.close()
