@@ -95,6 +95,10 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int], ...] = (
     ("onions", "shells=surfaces", {"shells": "surfaces"}, 128),
     ("onion crop", "shells=centres-fitted", {"shells": "centres"}, 64),
     ("onion-core crop", "shells=centres-fitted", {"shells": "centres"}, 64),
+    # Session 17: shells='auto' takes the fitted centres also where one centre explains the fringes'
+    # orientations (a particle seen whole: both crops); their surfaces, the defaults' before, measured beside.
+    ("onion crop", "shells=surfaces", {"shells": "surfaces"}, 64),
+    ("onion-core crop", "shells=surfaces", {"shells": "surfaces"}, 64),
 )
 
 

@@ -303,7 +303,44 @@ def calibrate(side: int = 128, period: float = 6.0) -> dict[str, Any]:
         "SHEET_RADIUS": radii,
         "BEND_PER_LENGTH": round(float(np.mean(ratios)), 3),
         **centres,
+        **concentric_calibration(side, period),
     }
+
+
+def concentric_calibration(side: int = 128, period: float = 6.0) -> dict[str, Any]:
+    """``CONCENTRIC_MIN_EXPLAINED``'s evidence: the :func:`~texsynth.synth.pixel.laminar.concentric_fit`
+    ``explained`` of every 16th slice along each axis (two draws, noise 0.3: 48 slices a row) of the
+    surfaces' sheets at 2, 3, 4 and 6 periods (mean, 99% quantile, max) and of the shells around centres 5-24
+    periods apart (mean, median, share at or above the threshold)."""
+    from texsynth.synth.methods.solid_chen_wang import centre_phase
+    from texsynth.synth.pixel.laminar import CONCENTRIC_MIN_EXPLAINED, concentric_fit, laminar_phase
+
+    shape = (side,) * 3
+
+    def explained(phi: np.ndarray) -> np.ndarray:
+        wave = np.cos(2.0 * np.pi * phi / period)
+        wave += 0.3 * np.random.default_rng(5).standard_normal(wave.shape)
+        cuts = [np.ascontiguousarray(np.take(wave, i, axis=a)) for a in range(3) for i in range(8, side, 16)]
+        return np.asarray([concentric_fit(cut, period).explained for cut in cuts])
+
+    out: dict[str, dict[str, list[float]]] = {"SURFACES_CONCENTRIC": {}, "CENTRES_CONCENTRIC": {}}
+    for length in (2.0, 3.0, 4.0, 6.0):
+        phis = [laminar_phase(shape, length * period, np.random.default_rng(d)) for d in (1, 2)]
+        v = np.concatenate([explained(phi) for phi in phis])
+        row = [round(float(x), 2) for x in (v.mean(), np.quantile(v, 0.99), v.max())]
+        out["SURFACES_CONCENTRIC"][str(length)] = row
+        print(f"surfaces {length} periods: explained mean {row[0]}, q99 {row[1]}, max {row[2]}", flush=True)
+    for spacing in (5.0, 8.0, 12.0, 16.0, 24.0):
+        phis = [centre_phase(shape, spacing * period, np.random.default_rng(d)) for d in (1, 2)]
+        v = np.concatenate([explained(phi) for phi in phis])
+        row = [round(float(x), 2) for x in (v.mean(), np.median(v), np.mean(v >= CONCENTRIC_MIN_EXPLAINED))]
+        out["CENTRES_CONCENTRIC"][str(spacing)] = row
+        print(
+            f"centres {spacing} periods apart: explained mean {row[0]}, median {row[1]}, share "
+            f">= {CONCENTRIC_MIN_EXPLAINED:g} {row[2]}",
+            flush=True,
+        )
+    return out
 
 
 def centre_calibration(side: int = 128, period: float = 6.0) -> dict[str, Any]:
@@ -379,21 +416,25 @@ def curvature_sets() -> dict[str, dict[str, np.ndarray]]:
 def curvature_table() -> str:
     """Per exemplar set: the fringes' centres of curvature
     (:func:`~texsynth.synth.pixel.laminar.curvature_centres` per distinct plane: concentration, densest vote,
-    radius, peaks; the mean concentration is what ``'auto'`` compares), the fitted centre spacing, and what
+    radius, peaks; the mean concentration is what ``'auto'`` compares), how much one centre explains
+    (:func:`~texsynth.synth.pixel.laminar.concentric_fit`, ``'auto'``'s other test), the fitted centre
+    spacing, and what
     ``solid-chen-wang``'s ``shells='auto'`` takes (its start and shells, from the schedule alone)."""
     from texsynth.synth.methods.solid_chen_wang import SolidChenWangParams, _Schedule
-    from texsynth.synth.pixel.laminar import curvature_centres, fringe_centres
+    from texsynth.synth.pixel.laminar import concentric_fit, curvature_centres, fringe_centres
 
     lines = [
         "| exemplar set | concentration (mean) | densest vote | radius (periods) | peaks "
-        "| fitted spacing (periods) | start | `shells='auto'` |",
-        "|---|---|---|---|---|---|---|---|",
+        "| one centre explains (mean) | fitted spacing (periods) | start | `shells='auto'` |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, planes in curvature_sets().items():
         images = [planes[p] for p in ("xy", "xz", "yz")]
         distinct = [im for i, im in enumerate(images) if all(im is not o for o in images[:i])]
         found = [curvature_centres(im) for im in distinct]
+        rings = [concentric_fit(im).explained for im in distinct]
         concentration, spacing = fringe_centres(images)
+        concentric = float(np.mean([concentric_fit(im).explained for im in images]))
         schedule = _Schedule.resolve(SolidChenWangParams(shells="auto"), planes)
 
         def cells(values: list[float], fmt: str) -> str:
@@ -402,7 +443,8 @@ def curvature_table() -> str:
         lines.append(
             f"| {name} | {cells([f.concentration for f in found], '.2f')} ({concentration:.2f}) "
             f"| {cells([f.peak for f in found], '.1f')} | {cells([f.radius for f in found], '.1f')} "
-            f"| {cells([len(f.centres) for f in found], 'd')} | {spacing:.1f} | {schedule.start} "
+            f"| {cells([len(f.centres) for f in found], 'd')} | {cells(rings, '.2f')} ({concentric:.2f}) "
+            f"| {spacing:.1f} | {schedule.start} "
             f"| {schedule.shells or '(no laminar start)'} |"
         )
         print(lines[-1], flush=True)

@@ -66,9 +66,11 @@ from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
     CENTRE_SPACINGS,
     CENTRED_MIN_CONCENTRATION,
+    CONCENTRIC_MIN_EXPLAINED,
     dominant_period,
     fitted_structure_length,
     fringe_centres,
+    fringe_concentricity,
     laminar_volume,
     level_phase,
     oriented_phase,
@@ -260,8 +262,9 @@ class SolidChenWangParams(SolidParams):
                 "length; 'centres': spherical shells around random centres centre_spacing periods apart "
                 "(closed onion shells); 'auto': 'centres' when the exemplars' fringes curve around points "
                 f"(at least {CENTRED_MIN_CONCENTRATION:g} of their centres of curvature gather: many small "
-                "onions), else 'surfaces'. A single large particle gathers none; 'centres' with the fitted "
-                "spacing measured better on one such crop (docs/solid.md). Only with the laminar start."
+                "onions) or around one point (one centre explains at least "
+                f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight: a particle "
+                "seen whole), else 'surfaces'. Only with the laminar start."
             )
         ),
     )
@@ -683,6 +686,9 @@ class _Schedule:
     #: without the laminar start.
     concentration: float | None = None
     centre_spacing: float | None = None
+    #: How much one centre per exemplar explains their orientations (``concentric_fit``); None without
+    #: the laminar start.
+    concentric: float | None = None
 
     @property
     def laminar_start(self) -> bool:
@@ -724,7 +730,7 @@ class _Schedule:
         if coarse_iterations is None:
             coarse_iterations = iterations
         period = stack = length = 0.0
-        shells = concentration = spacing = None
+        shells = concentration = spacing = concentric = None
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
         if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
@@ -737,9 +743,11 @@ class _Schedule:
             concentration, spacing = fringe_centres(images)
             if params.centre_spacing is not None:
                 spacing = params.centre_spacing
+            concentric = fringe_concentricity(images)
             shells = params.shells
-            if shells == "auto":
-                shells = "centres" if concentration >= CENTRED_MIN_CONCENTRATION else "surfaces"
+            if shells == "auto":  # many small onions, or one particle seen whole
+                centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
+                shells = "centres" if centred else "surfaces"
         return cls(
             iterations,
             coarse_iterations,
@@ -752,6 +760,7 @@ class _Schedule:
             shells,
             concentration,
             spacing,
+            concentric,
         )
 
     def levels(self, levels: int) -> int:
@@ -805,6 +814,8 @@ class _ChenWangLoop:
             # The exemplars' centres of curvature (share gathered) and the centres' spacing (periods).
             "centre_concentration": schedule.concentration,
             "centre_spacing": schedule.centre_spacing,
+            # How much one centre explains the exemplars' orientations (a particle seen whole).
+            "concentric_explained": schedule.concentric,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},

@@ -22,7 +22,8 @@ chooses between them. Both lengths can be fitted to the exemplars: ``L`` to thei
 scale and their fringes' curvature (:func:`fitted_structure_length`), the crumples' to how far their fringes
 keep an orientation (:func:`fitted_oriented_length`); the field scales with its length, so tables measured
 once on the starts' own slices hold at every period. Shells around random centres (``solid-chen-wang``):
-whether the fringes curve around points and how far apart (:func:`curvature_centres`, :func:`fringe_centres`).
+whether the fringes curve around points and how far apart (:func:`curvature_centres`, :func:`fringe_centres`),
+or around one point, a particle seen whole (:func:`concentric_fit`).
 
 References
 ----------
@@ -51,6 +52,7 @@ __all__ = [
     "CENTRE_RADIUS",
     "CENTRE_SPACINGS",
     "CENTRE_VOTE_SIGMA",
+    "CONCENTRIC_MIN_EXPLAINED",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
     "ORIENTED_MAX_BEND",
@@ -59,14 +61,17 @@ __all__ = [
     "SHEET_LENGTHS",
     "SHEET_RADIUS",
     "START_COHERENCE",
+    "ConcentricFit",
     "CurvatureCentres",
     "bend_length",
+    "concentric_fit",
     "curvature_centres",
     "dominant_period",
     "exemplar_bend",
     "fitted_oriented_length",
     "fitted_structure_length",
     "fringe_centres",
+    "fringe_concentricity",
     "fringe_radius",
     "laminar_phase",
     "laminar_volume",
@@ -617,6 +622,85 @@ CENTRE_CONCENTRATION = (0.148, 0.344, 0.434, 0.503, 0.591, 0.698, 0.659, 0.433, 
 #: curvature at least this much curve around points (halfway between the surfaces' 0.10 and the centres'
 #: 0.34 at 4 periods; the onion truth 0.29-0.43, the real onion crops, soot and the stack 0.00).
 CENTRED_MIN_CONCENTRATION = 0.2
+
+
+@dataclass(frozen=True)
+class ConcentricFit:
+    """How well one centre explains the fringes' orientations (:func:`concentric_fit`)."""
+
+    #: The exemplar's dominant period (px).
+    period: float
+    #: Agreement with straight parallel fringes: the mean resultant of the doubled orientation (0-1).
+    straight: float
+    #: Agreement with rings around the best centre: the mean of ``cos 2 (theta - phi)`` (-1 to 1).
+    rings: float
+    #: The share of the straight model's misfit that the rings explain, ``(rings - straight) / (1 -
+    #: straight)`` within [-1, 1]: about 1 for concentric fringes, 0 or less for many centres, -1 for
+    #: straight stripes (no misfit to explain).
+    explained: float
+    #: The best centre (row, column; px), possibly outside the image (up to half its size beyond).
+    centre: tuple[float, float]
+
+
+def concentric_fit(image: np.ndarray, period: float | None = None) -> ConcentricFit:
+    """Do the fringes curve around one point: a crop of one large particle (an onion seen whole)?
+
+    :func:`curvature_centres` finds many small onions, where every fringe's centre of curvature falls
+    near one of them. A crop of one particle whose fringes bend and break gathers no such votes, but its
+    orientation field is still that of rings around one centre. Over the same pixels (above-median
+    coherence, a border of two periods left out, every half period), weighted by their coherence, the
+    fringe normal ``theta`` (:func:`_fringe_turn`) is compared with the direction ``phi`` from a centre:
+    ``rings`` is the best mean ``cos 2 (theta - phi)`` over centres up to half the image beyond its sides
+    (a grid of 1/16 of the image, then refined twice by quarters); ``straight`` is what one orientation
+    explains, so that far centres, whose rings are straight, gain nothing. ``explained`` compares them.
+    """
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    _, theta, coh, m = _fringe_turn(img, p)
+    h, w = img.shape
+    inner = np.zeros((h, w), dtype=bool)
+    inner[m : h - m, m : w - m] = True
+    voters = inner & (coh >= np.median(coh[inner]))
+    step = max(1, round(p / 2.0))
+    every = np.zeros((h, w), dtype=bool)
+    every[::step, ::step] = True
+    voters &= every
+    rows, cols = np.nonzero(voters)
+    weight = coh[voters] / max(float(np.sum(coh[voters])), 1e-12)
+    doubled = np.exp(2j * theta[voters])  # in (x, y) = (column, -row) axes
+    straight = float(abs(np.sum(weight * doubled)))
+
+    def agreement(centres: np.ndarray) -> np.ndarray:
+        radial = (cols[None, :] - centres[:, 1:2]) - 1j * (rows[None, :] - centres[:, 0:1])
+        radial2 = radial * radial / np.maximum(np.abs(radial) ** 2, 1e-12)
+        return np.real(doubled[None, :] * np.conj(radial2)) @ weight
+
+    grid_step = max(h, w) / 16.0
+    axes = (np.arange(-h / 2, 1.5 * h + 1e-9, grid_step), np.arange(-w / 2, 1.5 * w + 1e-9, grid_step))
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
+    scores = agreement(centres)
+    best = centres[int(np.argmax(scores))]
+    for _ in range(2):
+        grid_step /= 4.0
+        offsets = np.arange(-4, 5) * grid_step
+        centres = best + np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
+        scores = agreement(centres)
+        best = centres[int(np.argmax(scores))]
+    rings = float(np.max(scores))
+    explained = float(np.clip((rings - straight) / max(1.0 - straight, 1e-6), -1.0, 1.0))
+    return ConcentricFit(p, straight, rings, explained, (float(best[0]), float(best[1])))
+
+
+#: Exemplars whose orientations one centre explains at least this much (:func:`concentric_fit`, the mean
+#: over the planes) are a particle seen whole: more than any slice of the surfaces' start at the sheet
+#: lengths ``solid-chen-wang`` takes, 3-4 periods (96 slices: max 0.43 and 0.61; ``python -m
+#: benchmarks.bench_laminar --calibrate``). The real onion crops 0.76-0.85; soot, the onion truth -0.1-0.1.
+CONCENTRIC_MIN_EXPLAINED = 0.65
+
+
+def fringe_concentricity(images: Sequence[np.ndarray]) -> float:
+    """The exemplars' mean :func:`concentric_fit` ``explained``: how much one centre per image explains."""
+    return float(np.mean([concentric_fit(im).explained for im in images]))
 
 
 def fringe_centres(images: Sequence[np.ndarray]) -> tuple[float, float]:

@@ -453,3 +453,44 @@ def test_fringe_centres_spacing_follows_the_onions_size() -> None:
     wave = np.cos(2 * np.pi * laminar_phase((side,) * 3, 3.0 * period, rng) / period)
     cuts = [np.ascontiguousarray(np.take(wave, i, axis=a)) for a in range(3) for i in (24, 72)]
     assert laminar.fringe_centres(cuts)[0] < laminar.CENTRED_MIN_CONCENTRATION
+
+
+def _wobbly_rings(n: int, centre: tuple[float, float], wobble: float, seed: int = 3) -> np.ndarray:
+    """Rings of period 6 around ``centre`` whose radius wobbles by ``wobble`` px (five lobes, turning with
+    the radius): the bent fringes of one particle seen whole, plus noise."""
+    r, c = np.mgrid[0:n, 0:n].astype(np.float64)
+    d, angle = np.hypot(r - centre[0], c - centre[1]), np.arctan2(r - centre[0], c - centre[1])
+    phase = d + wobble * np.sin(5 * angle + d / 10.0)
+    noise = np.random.default_rng(seed).normal(0, 0.1, d.shape)
+    return np.clip(0.5 + 0.4 * np.cos(2 * np.pi * phase / 6.0) + noise, 0.0, 1.0).astype(np.float32)
+
+
+@pytest.mark.parametrize("centre", [(48.0, 48.0), (30.5, 61.2), (-30.0, 48.0), (-20.0, 110.0)])
+def test_concentric_fit_finds_the_one_centre_of_rings(centre) -> None:
+    """Rings around one point, inside the image or up to half of it beyond: one centre explains all the
+    orientations' departure from straight, found within two pixels."""
+    found = laminar.concentric_fit(_wobbly_rings(96, centre, 0.0))
+    assert found.explained > 0.95 and found.rings > 0.95
+    assert np.hypot(found.centre[0] - centre[0], found.centre[1] - centre[1]) < 2.0
+
+
+def test_concentric_fit_of_bent_rings_stripes_and_many_onions() -> None:
+    """Bent rings around one centre (a particle whose fringes wobble): no centre of curvature gathers,
+    but one centre still explains most of them; straight stripes -1 (nothing to explain), rings around a
+    far centre (nearly straight: the search stops half an image beyond) less than the threshold, many
+    small onions and bent laminae nothing."""
+    from texsynth.synth.io.laminar import onion_volume
+    from texsynth.synth.io.patterns import undulating_laminae
+
+    bent_rings = _wobbly_rings(96, (46.0, 50.0), 3.0)
+    assert laminar.curvature_centres(bent_rings).concentration < laminar.CENTRED_MIN_CONCENTRATION
+    assert laminar.concentric_fit(bent_rings).explained > 0.75
+    r, c = np.mgrid[0:128, 0:128].astype(np.float64)
+    assert laminar.concentric_fit(np.cos(2 * np.pi * (0.6 * r + 0.8 * c) / 6.0), 6.0).explained == -1.0
+    far = laminar.concentric_fit(np.cos(2 * np.pi * np.hypot(r + 200.0, c - 64.0) / 6.0), 6.0)
+    onions = laminar.concentric_fit(mid_slices(onion_volume((128, 128, 128), seed=11))["xy"])
+    bent = laminar.concentric_fit(undulating_laminae((128, 128), 7.0, 16.0, 128.0, noise=0.3))
+    assert max(onions.explained, bent.explained) < 0.3 and far.explained < laminar.CONCENTRIC_MIN_EXPLAINED
+    assert laminar.fringe_concentricity([bent_rings, bent_rings]) == pytest.approx(
+        laminar.concentric_fit(bent_rings).explained
+    )
