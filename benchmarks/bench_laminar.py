@@ -2,7 +2,8 @@
 
 Run: ``python -m benchmarks.bench_laminar`` (writes docs/laminar.md, docs/laminar-benchmark.json and
 docs/img/laminar-*.png). ``--only NAME`` (repeatable) runs the rows whose key contains NAME and keeps the
-other rows of docs/laminar-benchmark.json; ``--seeds 1`` for a quick look; ``--report`` rewrites
+other rows of docs/laminar-benchmark.json; ``--seeds 1`` for a quick look (``--from-seed K``: add seeds K..N
+to rows that have 1..K-1); ``--report`` rewrites
 docs/laminar.md from docs/laminar-benchmark.json without running anything.
 
 1. **The truths** (:mod:`texsynth.synth.io.laminar`, 128^3, seed 11, defaults: period 6 px, blur 0.8, noise
@@ -91,7 +92,7 @@ RUNS: tuple[tuple[str, str, dict[str, Any], int, tuple[str, ...]], ...] = (
     ("solid-kopf", "final-average", {"final_step": "average"}, 64, ("one",)),
     ("solid-chen-wang", "defaults", {}, 64, ("one", "planes")),
     ("solid-chen-wang", "paper", CHEN_WANG_PAPER, 64, ("one", "planes")),
-    ("solid-kopf", "defaults", {}, 128, ("one",)),
+    ("solid-kopf", "defaults", {}, 128, ("one", "planes")),
     ("solid-chen-wang", "defaults", {}, 128, ("one", "planes")),
     ("solid-chen-wang", "paper", CHEN_WANG_PAPER, 128, ("one",)),
 )
@@ -856,6 +857,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="solid synthesis against known laminar answers")
     parser.add_argument("--only", action="append", default=[], help="run the rows whose key contains this")
     parser.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
+    parser.add_argument(
+        "--from-seed",
+        type=int,
+        default=1,
+        help="run seeds K..N only, keeping the rows' seeds 1..K-1 already in the results (all must be there)",
+    )
     parser.add_argument("--report", action="store_true", help="only rewrite docs/laminar.md from the results")
     parser.add_argument("--calibrate", action="store_true", help="only print the fitted lengths' tables")
     parser.add_argument(
@@ -947,8 +954,10 @@ def main(argv: list[str] | None = None) -> int:
                     continue
                 if side not in refs:
                     refs[side] = truth_slices(truth, (side,) * 3)
-                rows = []
-                for seed in seeds:
+                rows = saved["runs"].get(row_key, [])[: args.from_seed - 1]
+                if len(rows) < args.from_seed - 1:
+                    parser.error(f"--from-seed {args.from_seed}: {row_key} has {len(rows)} seeds saved")
+                for seed in seeds[args.from_seed - 1 :]:
                     row, volume = run_one(method, params, planes, side, seed, refs[side])
                     rows.append(row)
                     print(

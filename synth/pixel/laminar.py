@@ -21,9 +21,8 @@ fringe orientations (:func:`sheet_normal`), crumpled as much as their fringes sp
 chooses between them. Both lengths can be fitted to the exemplars: ``L`` to their coherence at the period's
 scale and their fringes' curvature (:func:`fitted_structure_length`), the crumples' to how far their fringes
 keep an orientation (:func:`fitted_oriented_length`); the field scales with its length, so tables measured
-once on the starts' own slices hold at every period. Shells around random centres (``solid-chen-wang``):
-whether the fringes curve around points and how far apart (:func:`curvature_centres`, :func:`fringe_centres`),
-or around one point, a particle seen whole (:func:`concentric_fit`).
+once on the starts' own slices hold at every period. Shells around centres (``solid-chen-wang``): do the
+fringes curve around points, how far apart (:func:`curvature_centres`), or round one (:func:`concentric_fit`)?
 
 References
 ----------
