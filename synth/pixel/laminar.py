@@ -546,6 +546,21 @@ def fringe_radius(image: np.ndarray, period: float | None = None) -> float:
     return 1.0 / max(k, 1e-6) / p
 
 
+def _fringe_pixels(
+    image: np.ndarray, period: float | None
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The period, :func:`_fringe_turn`'s turn, normal angle and coherence, and the fringe pixels that
+    :func:`curvature_centres` and :func:`concentric_fit` read: above-median coherence, a border of two
+    periods left out."""
+    img = np.asarray(to_grey(image), dtype=np.float64)
+    p = dominant_period(img) if period is None else float(period)
+    turn, theta, coh, m = _fringe_turn(img, p)
+    h, w = img.shape
+    inner = np.zeros((h, w), dtype=bool)
+    inner[m : h - m, m : w - m] = True
+    return p, turn, theta, coh, inner & (coh >= np.median(coh[inner]))
+
+
 #: :func:`curvature_centres`: the votes are smoothed by a Gaussian of this many periods, and a vote is
 #: gathered where their density reaches :data:`CENTRE_DENSITY` times the density of as many votes spread
 #: evenly over the image (docs/solid.md, session cw8: onion truth's top 21-23, real crops 7, soot 5-6).
@@ -581,13 +596,8 @@ def curvature_centres(image: np.ndarray, period: float | None = None) -> Curvatu
     ``centres`` the local maxima (within a period) above it. ``radius`` is the voters' median ``|1 /
     turn|``, in periods (the same quantity as :func:`fringe_radius`, over the same pixels).
     """
-    img = np.asarray(to_grey(image), dtype=np.float64)
-    p = dominant_period(img) if period is None else float(period)
-    turn, theta, coh, m = _fringe_turn(img, p)
-    h, w = img.shape
-    inner = np.zeros((h, w), dtype=bool)
-    inner[m : h - m, m : w - m] = True
-    voters = inner & (coh >= np.median(coh[inner]))
+    p, turn, theta, _, voters = _fringe_pixels(image, period)
+    h, w = voters.shape
     k = turn[voters]
     k = np.where(np.abs(k) < 1e-9, 1e-9, k)
     rows, cols = np.nonzero(voters)
@@ -653,13 +663,8 @@ def concentric_fit(image: np.ndarray, period: float | None = None) -> Concentric
     (a grid of 1/16 of the image, then refined twice by quarters); ``straight`` is what one orientation
     explains, so that far centres, whose rings are straight, gain nothing. ``explained`` compares them.
     """
-    img = np.asarray(to_grey(image), dtype=np.float64)
-    p = dominant_period(img) if period is None else float(period)
-    _, theta, coh, m = _fringe_turn(img, p)
-    h, w = img.shape
-    inner = np.zeros((h, w), dtype=bool)
-    inner[m : h - m, m : w - m] = True
-    voters = inner & (coh >= np.median(coh[inner]))
+    p, _, theta, coh, voters = _fringe_pixels(image, period)
+    h, w = voters.shape
     step = max(1, round(p / 2.0))
     every = np.zeros((h, w), dtype=bool)
     every[::step, ::step] = True
