@@ -834,6 +834,41 @@ def crop_floor_table(floor: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+CROP_VOLUMES = DOCS / "laminar-crops.json"
+#: The solids measured on the real crops beside the 2D line (:func:`crop_volumes`).
+CROP_METHODS = ("solid-kopf", "solid-chen-wang")
+
+
+def crop_volumes(seeds: tuple[int, ...], side: int = 64) -> dict[str, list[dict[str, Any]]]:
+    """Every solid's defaults on the real onion crops (one exemplar for the three planes), ``side^3``, per
+    seed: CPU and wall seconds and the per-axis measures of its slices (every second) against the crop
+    (:func:`against_exemplars`), the measures docs/solid.md's crop rows use; seed 1's slices pictured."""
+    from texsynth.synth.colour import to_grey
+    from texsynth.synth.io import load_image
+
+    out: dict[str, list[dict[str, Any]]] = {}
+    for path in PILOT_EXEMPLARS[:2]:
+        image = np.ascontiguousarray(to_grey(np.asarray(load_image(path), dtype=np.float32)))
+        planes = dict.fromkeys(("xy", "xz", "yz"), image)
+        for method in CROP_METHODS:
+            key = f"{path.stem}, `{method}` defaults, {side}^3"
+            rows = []
+            for seed in seeds:
+                cpu, wall = time.process_time(), time.perf_counter()
+                result = synthesize(method, exemplars=planes, size=(side,) * 3, seed=seed)
+                cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+                axes = against_exemplars(image, result.image)
+                rows.append({"cpu": cpu, "wall": wall, "axes": axes, "stats": _small(result.stats)})
+                print(f"{key} seed {seed}: {cpu:.1f} s CPU", flush=True)
+                if seed == seeds[0]:
+                    title = f"{method} defaults {side}^3, seed {seed}"
+                    Image.fromarray(slices_image(result.image, planes, title=title)).save(
+                        DOCS / "img" / f"laminar-crop-{path.stem}-{method}-{side}-slices.png"
+                    )
+            out[key] = rows
+    return out
+
+
 def reference_table(floor: dict[str, Any]) -> str:
     """The real crops' 2D reference line (docs/laminar.md): :func:`crop_floor`'s ``2d whole`` rows, the
     whole ``tensor-constrained`` 256^2 output of each crop against the crop; the mean over the seeds and the
@@ -865,6 +900,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--report", action="store_true", help="only rewrite docs/laminar.md from the results")
     parser.add_argument("--calibrate", action="store_true", help="only print the fitted lengths' tables")
+    parser.add_argument(
+        "--crops",
+        action="store_true",
+        help="only the solids' defaults on the real onion crops, 64^3, seeds 1..N (docs/laminar-crops.json)",
+    )
     parser.add_argument(
         "--curvature",
         action="store_true",
@@ -902,6 +942,12 @@ def main(argv: list[str] | None = None) -> int:
         "the full 64^3 runs (--seeds), every laminar-start exemplar set",
     )
     args = parser.parse_args(argv)
+    if args.crops:
+        volumes = crop_volumes(tuple(range(1, args.seeds + 1)))
+        CROP_VOLUMES.write_text(json.dumps(volumes, indent=1) + "\n")
+        print(table(volumes))
+        (DOCS / "laminar.md").write_text(report(json.loads(RESULTS.read_text())))
+        return 0
     if args.family is not None and not args.floor:
         parser.error("--family: only with --floor N")
     if args.shells_pilot:
@@ -1026,7 +1072,8 @@ def report(saved: dict[str, Any]) -> str:
     parts.append(
         "## The solids\n\nEvery `solid-chen-wang` row was re-run in session lam24 (the per-plane "
         "turbostratic ones in cw7); the notes below say when the `solid-kopf` rows were (its `paper` rows "
-        "are the baseline's).\n\n" + table(saved["runs"]) + "\n"
+        "are the baseline's). Session 17 completed every 128^3 row to seeds 1-3 and added `solid-kopf`'s "
+        "per-plane 128^3 rows (quiet machine, load 1-2).\n\n" + table(saved["runs"]) + "\n"
     )
     parts.append("### Pictures (seed 1): mid-slices above their exemplars, and the cube\n")
     for key, pic in saved["pictures"].items():
@@ -1042,6 +1089,15 @@ def report(saved: dict[str, Any]) -> str:
         if pictures:
             pictures = f"The crops (left) and the 2D line's seed 1 at the same scale:\n\n{pictures}\n\n"
         parts.append(REFERENCE + reference_table(floor) + "\n\n" + pictures + REFERENCE_NOTES)
+    if CROP_VOLUMES.exists():
+        volumes = json.loads(CROP_VOLUMES.read_text())
+        pictures = " ".join(
+            f"![{key}](img/laminar-crop-{key.split(',')[0]}-{method}-64-slices.png)"
+            for key in volumes
+            for method in CROP_METHODS
+            if f"`{method}`" in key
+        )
+        parts.append(CROP_SOLIDS + table(volumes) + "\n\n" + pictures + "\n\n" + CROP_SOLIDS_NOTES)
     parts.append(NOTES)
     parts.append(
         f"_Written {time.strftime('%Y-%m-%d')} on {machine()}; the machine was shared (each session's load "
@@ -1059,6 +1115,16 @@ output against the crop by `texsynth.synth.evaluate.evaluate_pair`, the measure 
 metrics.json (`python -m benchmarks.bench_laminar --crop-floor`, docs/laminar-crop-floor.json, whose 64^2
 block rows are docs/solid.md's "The crops' own floor"). Cells: the mean over the seeds (the worst seed),
 **x** where the 2D output itself misses a volume's target.
+
+"""
+
+CROP_SOLIDS = """### The solids on the same crops
+
+Each solid's defaults from the crop alone (one exemplar for the three planes), 64^3, seeds 1-3, every second
+slice against the crop (`python -m benchmarks.bench_laminar --crops`, docs/laminar-crops.json; the
+measures of docs/solid.md's crop rows). A 64^2 slice holds few fringes: the crops' own 64^2 blocks score
+length KS 0.15-0.18 (onion crop; the core 0.07-0.08) and tortuosity KS 0.21-0.23 against the whole crop
+(docs/solid.md, "The crops' own floor"), so the volumes' floor sits above the 0.15 target on both crops.
 
 """
 
@@ -1085,6 +1151,20 @@ REFERENCE_NOTES = """\
   and tortuosity targets on its worst seeds (0.20).
 """
 
+
+CROP_SOLIDS_NOTES = """\
+- **Against the 2D line and the crops' own 64^2 floor** (session 17's run; onion crop / core):
+  - *Tortuosity KS*: the solids 0.19-0.25 / 0.16-0.22 (worst 0.27 / 0.24), the crops' own blocks 0.22 /
+    0.21-0.23 (worst draws 0.28 / 0.26), the 2D line 0.17 / 0.21: at the floor, near the line.
+  - *Length KS*: on the onion crop 0.11-0.13, below both its floor (0.15-0.18) and the 2D line (0.17); on
+    the core 0.15-0.18 (worst 0.21) against its floor 0.07-0.08 and the line 0.09: the one measure where the
+    volumes are clearly behind. Both solids over-order the core (coherence 1.04-1.09, the line 0.94).
+  - *Orientation KL*: `solid-chen-wang` 0.03-0.09 (worst 0.10), `solid-kopf` 0.05-0.13 (worst 0.16, the onion
+    crop's xz and yz), the 2D line 0.01-0.02. Grey KL 0.00 and contrast 1.00 everywhere.
+- `solid-chen-wang` takes the fitted shells around centres on both crops since session 17 (one centre
+  explains 0.85 / 0.76 of their orientations: docs/solid.md, "One particle seen whole").
+
+"""
 
 NOTES = """## `solid-chen-wang` re-run (issue 24, session lam24)
 

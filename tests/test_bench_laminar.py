@@ -67,3 +67,34 @@ def test_report_shows_the_reference_line_when_the_floor_was_measured(
     assert "## The real crops: the 2D reference line" in text
     assert "| hrtem-onion-128, 3 seeds | 0.99 (0.97) |" in text
     assert text.index("the 2D reference line") < text.index("## `solid-chen-wang` re-run")
+
+
+def test_report_shows_the_solids_on_the_crops_beside_the_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--crops``' rows (docs/laminar-crops.json) follow the 2D line: one row per crop and solid, cells as
+    the known answers' (per axis means, the worst seed-axis, **x** on a miss); no file, no section."""
+    saved = json.loads(bench_laminar.RESULTS.read_text())
+    monkeypatch.setattr(bench_laminar, "CROP_FLOOR", tmp_path / "floor.json")
+    (tmp_path / "floor.json").write_text(json.dumps(_floor()))
+    monkeypatch.setattr(bench_laminar, "CROP_VOLUMES", tmp_path / "missing.json")
+    assert "### The solids on the same crops" not in bench_laminar.report(saved)
+    axes = {
+        a: {
+            "coherence_ratio": 1.0,
+            "orientation_kl": 0.05,
+            "fringe_ks_length": 0.1 + 0.05 * int(a),
+            "fringe_ks_tortuosity": 0.2,
+            "grey_kl": 0.0,
+            "contrast": 1.0,
+        }
+        for a in bench_laminar.AXES
+    }
+    volumes = {"hrtem-onion-128, `solid-kopf` defaults, 64^3": [{"cpu": 2.0, "wall": 1.5, "axes": axes}]}
+    (tmp_path / "crops.json").write_text(json.dumps(volumes))
+    monkeypatch.setattr(bench_laminar, "CROP_VOLUMES", tmp_path / "crops.json")
+    text = bench_laminar.report(saved)
+    row = next(line for line in text.splitlines() if line.startswith("| hrtem-onion-128, `solid-kopf`"))
+    assert "| 0.10 / 0.15 / 0.20 (0.20 **x**) | 0.20 / 0.20 / 0.20 (0.20 **x**) |" in row
+    assert "img/laminar-crop-hrtem-onion-128-solid-kopf-64-slices.png" in text
+    assert text.index("the 2D reference line") < text.index("### The solids on the same crops")
