@@ -41,6 +41,7 @@ from scipy import ndimage as ndi
 
 from texsynth.synth.analysis.tensor import coherence, mean_coherence, structure_tensor
 from texsynth.synth.colour import to_grey
+from texsynth.synth.errors import InvalidInput
 from texsynth.synth.threads import current_threads
 
 __all__ = [
@@ -54,6 +55,7 @@ __all__ = [
     "CONCENTRIC_MIN_EXPLAINED",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
+    "MIN_PERIOD_SIDE",
     "ORIENTED_MAX_BEND",
     "PILOT_COHERENCE",
     "SHEET_COHERENCE",
@@ -90,6 +92,8 @@ __all__ = [
 
 #: Shortest period (px) a pyramid level must keep to carry fringes (2 px is Nyquist; 3 keeps a profile).
 MIN_PERIOD = 3.0
+#: :func:`dominant_period` searches periods from :data:`MIN_PERIOD` to a quarter of the shorter side.
+MIN_PERIOD_SIDE = 12
 #: An exemplar is isotropic when the coherence of its mean structure tensor is below this (its fringes run
 #: every way): onion truth 0.08, turbostratic 0.11, real onion crop 0.15, soot 0.24; bent laminae 0.50,
 #: diagonal laminae 0.99. Only an isotropic exemplar fits the isotropic sheets of :func:`laminar_phase`.
@@ -125,6 +129,12 @@ def dominant_period(image: np.ndarray) -> float:
     """
     img = np.asarray(image, dtype=np.float64)
     h, w = img.shape
+    if min(h, w) < MIN_PERIOD_SIDE:
+        raise InvalidInput(
+            "exemplar",
+            f"{h} x {w} px is too small to measure its fringe period (a structured start needs at least "
+            f"{MIN_PERIOD_SIDE} px on each side: four periods of {MIN_PERIOD:g} px); use structure='none'",
+        )
     power = np.abs(np.fft.fft2(img - img.mean())) ** 2
     radius = np.hypot(np.fft.fftfreq(h)[:, None], np.fft.fftfreq(w)[None, :])
     step = 1.0 / min(h, w)

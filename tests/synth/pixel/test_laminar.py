@@ -9,6 +9,7 @@ from scipy import ndimage as ndi
 
 from texsynth.synth.analysis.tensor import mean_coherence
 from texsynth.synth.api import synthesize
+from texsynth.synth.errors import InvalidInput
 from texsynth.synth.io.laminar import turbostratic_volume
 from texsynth.synth.output.volume import mid_slices
 from texsynth.synth.pixel import laminar
@@ -494,3 +495,20 @@ def test_concentric_fit_of_bent_rings_stripes_and_many_onions() -> None:
     assert laminar.fringe_concentricity([bent_rings, bent_rings]) == pytest.approx(
         laminar.concentric_fit(bent_rings).explained
     )
+
+
+@pytest.mark.parametrize("shape", [(11, 11), (9, 40), (40, 10)])
+def test_a_structured_start_on_a_too_small_exemplar_is_named(shape) -> None:
+    """The fringe period is searched among periods of 3 px to a quarter of the shorter side: below 12 px
+    there is none, and asking for a structured start says so, naming the exemplar (it crashed before)."""
+    image = np.random.default_rng(0).random(shape).astype(np.float32)
+    with pytest.raises(InvalidInput, match=r"exemplar.*too small to measure its fringe period.*12 px"):
+        dominant_period(image)
+    for method, structure in (
+        ("solid-kopf", "laminar"),
+        ("solid-kopf", "oriented"),
+        ("solid-chen-wang", "laminar"),
+    ):
+        with pytest.raises(InvalidInput, match="structure='none'"):
+            synthesize(method, image, size=(12, 12, 12), params={"structure": structure})
+    assert dominant_period(np.random.default_rng(0).random((12, 12))) >= laminar.MIN_PERIOD
