@@ -313,8 +313,12 @@ def concentric_calibration(side: int = 128, period: float = 6.0) -> dict[str, An
     ``explained`` of every 16th slice along each axis (two draws, noise 0.3: 48 slices a row) of the
     surfaces' sheets at 2, 3, 4 and 6 periods (mean, 99% quantile, max) and of the shells around centres 5-24
     periods apart (mean, median, share at or above the threshold)."""
-    from texsynth.synth.methods.solid_chen_wang import centre_phase
-    from texsynth.synth.pixel.laminar import CONCENTRIC_MIN_EXPLAINED, concentric_fit, laminar_phase
+    from texsynth.synth.pixel.laminar import (
+        CONCENTRIC_MIN_EXPLAINED,
+        centre_phase,
+        concentric_fit,
+        laminar_phase,
+    )
 
     shape = (side,) * 3
 
@@ -351,8 +355,7 @@ def centre_calibration(side: int = 128, period: float = 6.0) -> dict[str, Any]:
     centre, plus noise 0.3, two draws, every 16th slice of each axis) at each of ``CENTRE_SPACINGS``, and
     the concentration of the surfaces' sheets (:func:`~texsynth.synth.pixel.laminar.laminar_phase`) at 2,
     3, 4 and 6 periods, against which ``CENTRED_MIN_CONCENTRATION`` is set."""
-    from texsynth.synth.methods.solid_chen_wang import centre_phase
-    from texsynth.synth.pixel.laminar import CENTRE_SPACINGS, curvature_centres, laminar_phase
+    from texsynth.synth.pixel.laminar import CENTRE_SPACINGS, centre_phase, curvature_centres, laminar_phase
 
     shape = (side,) * 3
 

@@ -40,7 +40,6 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 from scipy import ndimage as ndi
-from scipy.spatial import cKDTree
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -67,6 +66,7 @@ from texsynth.synth.pixel.laminar import (
     CENTRE_SPACINGS,
     CENTRED_MIN_CONCENTRATION,
     CONCENTRIC_MIN_EXPLAINED,
+    centre_phase,
     dominant_period,
     fitted_structure_length,
     fringe_centres,
@@ -101,7 +101,6 @@ from texsynth.synth.pixel.synthesis import k_coherence_sets
 
 __all__ = [
     "SolidChenWangParams",
-    "centre_phase",
     "chen_wang_structure_length",
     "run_solid_chen_wang",
     "synthesize_solid_chen_wang",
@@ -138,45 +137,6 @@ MIN_STRUCTURE_LENGTH = 3.0
 MAX_STRUCTURE_LENGTH = 4.0
 #: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`).
 CENTRE_SPACING_RANGE = (CENTRE_SPACINGS[0], CENTRE_SPACINGS[-1])
-
-
-def centre_phase(
-    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
-) -> np.ndarray:
-    """The phase of nested spherical shells (voxels): the distance to the nearest of random centres.
-
-    One centre per ``spacing**3`` voxels (at least one), uniform in the volume; with ``periodic`` the
-    distance wraps at the volume's sides (a k-d tree with the volume as its box).
-    Returns ``(D, H, W)`` float64.
-    """
-    dims = np.asarray(shape, dtype=np.float64)
-    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
-    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
-    if periodic:  # the box is half-open: a centre drawn at the far side exactly wraps to 0
-        centres = np.where(centres >= dims, 0.0, centres)
-    tree = cKDTree(centres, boxsize=dims if periodic else None)
-    grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
-    distance, _ = tree.query(grid.reshape(-1, 3))
-    return distance.reshape(shape)
-
-
-def centre_phase_reference(
-    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
-) -> np.ndarray:
-    """:func:`centre_phase` by brute force over the centres (the plain reference of the tests)."""
-    dims = np.asarray(shape, dtype=np.float64)
-    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
-    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
-    axes = [np.arange(n_, dtype=np.float64) for n_ in shape]
-    best = np.full(shape, np.inf)
-    for centre in centres:
-        d = [np.abs(axes[i] - centre[i]) for i in range(3)]
-        if periodic:
-            d = [np.minimum(d[i], dims[i] - d[i]) for i in range(3)]
-        np.minimum(
-            best, d[0][:, None, None] ** 2 + d[1][None, :, None] ** 2 + d[2][None, None, :] ** 2, out=best
-        )
-    return np.sqrt(best)
 
 
 def chen_wang_structure_length(images: list[np.ndarray]) -> float:
