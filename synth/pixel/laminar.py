@@ -63,9 +63,11 @@ __all__ = [
     "START_COHERENCE",
     "ConcentricFit",
     "CurvatureCentres",
+    "Shells",
     "bend_length",
     "centre_phase",
     "centre_phase_reference",
+    "choose_shells",
     "concentric_fit",
     "curvature_centres",
     "dominant_period",
@@ -758,6 +760,32 @@ def fringe_centres(images: Sequence[np.ndarray]) -> tuple[float, float]:
     concentration = float(np.mean([f.concentration for f in found]))
     radius = float(np.mean([f.radius for f in found]))
     return concentration, float(np.interp(radius, CENTRE_RADIUS, CENTRE_SPACINGS))
+
+
+@dataclass(frozen=True)
+class Shells:
+    """The laminar start's sheets (:func:`choose_shells`) and the measures that chose them."""
+
+    #: 'surfaces' (around the zero level of a random field) or 'centres' (around random centres).
+    kind: str
+    #: :func:`fringe_centres`' concentration and fitted spacing (periods; or the given one).
+    concentration: float
+    spacing: float
+    #: :func:`fringe_concentricity`: how much one centre explains the exemplars' orientations.
+    concentric: float
+
+
+def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarray]) -> Shells:
+    """``shells`` ('auto', 'surfaces' or 'centres') resolved for ``images``: 'auto' takes the centres where
+    the fringes' centres of curvature gather (:data:`CENTRED_MIN_CONCENTRATION`: many small onions) or one
+    centre explains their orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole); the
+    centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`)."""
+    concentration, fitted = fringe_centres(images)
+    concentric = fringe_concentricity(images)
+    if shells == "auto":
+        centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
+        shells = "centres" if centred else "surfaces"
+    return Shells(shells, concentration, fitted if spacing is None else float(spacing), concentric)
 
 
 def fitted_structure_length(images: Sequence[np.ndarray]) -> float:
