@@ -11,6 +11,7 @@ from texsynth.synth.api import PLANES, Progress
 from texsynth.synth.grid.neighbourhood import Shape
 from texsynth.synth.grid.scan import ScanOrder
 from texsynth.synth.params import MethodParams, ui
+from texsynth.synth.pixel.laminar import CENTRE_SPACINGS, CENTRED_MIN_CONCENTRATION, CONCENTRIC_MIN_EXPLAINED
 
 if TYPE_CHECKING:  # the pixel driver, imported by the pixel methods that use it (not by the patch methods)
     from texsynth.synth.pixel.synthesis import SearchSettings
@@ -18,9 +19,12 @@ if TYPE_CHECKING:  # the pixel driver, imported by the pixel methods that use it
 __all__ = [
     "NeighbourhoodParams",
     "PatchParams",
+    "ShellKind",
+    "ShellParams",
     "SolidParams",
     "as_features",
     "checked_progress",
+    "shells_field",
     "structure_fields",
 ]
 
@@ -278,6 +282,62 @@ class SolidParams(MethodParams):
         if value % 2 == 0:
             raise ValueError("neighbourhood_size must be odd")
         return value
+
+
+#: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`).
+CENTRE_SPACING_RANGE = (CENTRE_SPACINGS[0], CENTRE_SPACINGS[-1])
+
+
+#: The laminar start's sheets (:func:`shells_field`).
+ShellKind = Literal["auto", "surfaces", "centres"]
+
+
+def shells_field(default: str, measured: str) -> Any:
+    """The solids' ``shells`` field: one description for both methods, each its own default and what it
+    measured (``measured``, appended to the details): ``shells: ShellKind = shells_field(...)``."""
+    return Field(
+        default,
+        description="Shape of the starting sheets: surfaces of a smooth random field, or shells around "
+        "random centres (many small onions); automatic: from the fringes' curvature.",
+        json_schema_extra=ui(
+            details=(
+                "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
+                "length; 'centres': spherical shells around random centres centre_spacing periods apart "
+                "(closed onion shells); 'auto': 'centres' when the exemplars' fringes curve around points "
+                f"(at least {CENTRED_MIN_CONCENTRATION:g} of their centres of curvature gather: many small "
+                "onions) or around one point (one centre explains at least "
+                f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight: a particle "
+                "seen whole), else 'surfaces'. Only with the laminar start. " + measured
+            )
+        ),
+    )
+
+
+class ShellParams(SolidParams):
+    """The solids with a laminar start: how far apart the centres of its shells are (with ``shells``,
+    :func:`shells_field`, each method's default; :func:`texsynth.synth.pixel.laminar.choose_shells`)."""
+
+    centre_spacing: float | None = Field(
+        None,
+        ge=CENTRE_SPACING_RANGE[0],
+        le=CENTRE_SPACING_RANGE[1],
+        description="Distance between the onions' centres with shells='centres', in fringe periods; empty: "
+        "fitted to the exemplar's curvature.",
+        json_schema_extra=ui(
+            details=(
+                "One centre per cube of this side (periods, "
+                f"{CENTRE_SPACING_RANGE[0]:g}-{CENTRE_SPACING_RANGE[1]:g}). Empty or 'auto': the spacing "
+                "whose shells' slices have the exemplars' median radius of curvature (the onion truth's "
+                "4.8-4.9 periods, its centres are 5.0 apart)."
+            )
+        ),
+    )
+
+    @field_validator("centre_spacing", mode="before")
+    @classmethod
+    def _auto_spacing(cls, value: object) -> object:
+        """``'auto'`` is the empty value: the spacing fitted to the exemplars."""
+        return None if value == "auto" else value
 
 
 def structure_fields(structure_details: str, length_details: str) -> tuple[Any, Any]:

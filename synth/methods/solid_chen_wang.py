@@ -40,7 +40,6 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 from scipy import ndimage as ndi
-from scipy.spatial import cKDTree
 
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
@@ -60,17 +59,20 @@ from texsynth.synth.kernels.solid_kcoherence import (
     search_pass,
     solve_pass,
 )
-from texsynth.synth.methods.common import SolidParams, checked_progress, structure_fields
+from texsynth.synth.methods.common import (
+    ShellKind,
+    ShellParams,
+    checked_progress,
+    shells_field,
+    structure_fields,
+)
 from texsynth.synth.methods.solid_kopf import ORIENTED_LENGTH, laminar_pilot
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
-    CENTRE_SPACINGS,
-    CENTRED_MIN_CONCENTRATION,
-    CONCENTRIC_MIN_EXPLAINED,
+    centre_phase,
+    choose_shells,
     dominant_period,
     fitted_structure_length,
-    fringe_centres,
-    fringe_concentricity,
     laminar_volume,
     level_phase,
     oriented_phase,
@@ -101,7 +103,6 @@ from texsynth.synth.pixel.synthesis import k_coherence_sets
 
 __all__ = [
     "SolidChenWangParams",
-    "centre_phase",
     "chen_wang_structure_length",
     "run_solid_chen_wang",
     "synthesize_solid_chen_wang",
@@ -136,47 +137,6 @@ ORIENTED_MAX_LENGTH = 1.5
 #: (docs/solid.md, "The sheets' length for solid-chen-wang").
 MIN_STRUCTURE_LENGTH = 3.0
 MAX_STRUCTURE_LENGTH = 4.0
-#: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`).
-CENTRE_SPACING_RANGE = (CENTRE_SPACINGS[0], CENTRE_SPACINGS[-1])
-
-
-def centre_phase(
-    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
-) -> np.ndarray:
-    """The phase of nested spherical shells (voxels): the distance to the nearest of random centres.
-
-    One centre per ``spacing**3`` voxels (at least one), uniform in the volume; with ``periodic`` the
-    distance wraps at the volume's sides (a k-d tree with the volume as its box).
-    Returns ``(D, H, W)`` float64.
-    """
-    dims = np.asarray(shape, dtype=np.float64)
-    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
-    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
-    if periodic:  # the box is half-open: a centre drawn at the far side exactly wraps to 0
-        centres = np.where(centres >= dims, 0.0, centres)
-    tree = cKDTree(centres, boxsize=dims if periodic else None)
-    grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
-    distance, _ = tree.query(grid.reshape(-1, 3))
-    return distance.reshape(shape)
-
-
-def centre_phase_reference(
-    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
-) -> np.ndarray:
-    """:func:`centre_phase` by brute force over the centres (the plain reference of the tests)."""
-    dims = np.asarray(shape, dtype=np.float64)
-    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
-    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
-    axes = [np.arange(n_, dtype=np.float64) for n_ in shape]
-    best = np.full(shape, np.inf)
-    for centre in centres:
-        d = [np.abs(axes[i] - centre[i]) for i in range(3)]
-        if periodic:
-            d = [np.minimum(d[i], dims[i] - d[i]) for i in range(3)]
-        np.minimum(
-            best, d[0][:, None, None] ** 2 + d[1][None, :, None] ** 2 + d[2][None, None, :] ** 2, out=best
-        )
-    return np.sqrt(best)
 
 
 def chen_wang_structure_length(images: list[np.ndarray]) -> float:
@@ -188,7 +148,7 @@ def chen_wang_structure_length(images: list[np.ndarray]) -> float:
     return float(np.clip(fit, MIN_STRUCTURE_LENGTH, MAX_STRUCTURE_LENGTH))
 
 
-class SolidChenWangParams(SolidParams):
+class SolidChenWangParams(ShellParams):
     """Parameters of Chen & Wang's solid synthesis (defaults: the paper's and the study's settings)."""
 
     levels: int = Field(
@@ -252,36 +212,10 @@ class SolidChenWangParams(SolidParams):
             "fringes' orientations)."
         ),
     )
-    shells: Literal["auto", "surfaces", "centres"] = Field(
+    shells: ShellKind = shells_field(
         "auto",
-        description="Shape of the starting sheets: surfaces of a smooth random field, or shells around "
-        "random centres (many small onions); automatic: from the fringes' curvature.",
-        json_schema_extra=ui(
-            details=(
-                "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
-                "length; 'centres': spherical shells around random centres centre_spacing periods apart "
-                "(closed onion shells); 'auto': 'centres' when the exemplars' fringes curve around points "
-                f"(at least {CENTRED_MIN_CONCENTRATION:g} of their centres of curvature gather: many small "
-                "onions) or around one point (one centre explains at least "
-                f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight: a particle "
-                "seen whole), else 'surfaces'. Only with the laminar start."
-            )
-        ),
-    )
-    centre_spacing: float | None = Field(
-        None,
-        ge=CENTRE_SPACING_RANGE[0],
-        le=CENTRE_SPACING_RANGE[1],
-        description="Distance between the onions' centres with shells='centres', in fringe periods; empty: "
-        "fitted to the exemplar's curvature.",
-        json_schema_extra=ui(
-            details=(
-                "One centre per cube of this side (periods, "
-                f"{CENTRE_SPACING_RANGE[0]:g}-{CENTRE_SPACING_RANGE[1]:g}). Empty or 'auto': the spacing "
-                "whose shells' slices have the exemplars' median radius of curvature (the onion truth's "
-                "4.8-4.9 periods, its centres are 5.0 apart)."
-            )
-        ),
+        "Default 'auto': the centres measured better on the onion truth (sessions cw6-cw8) and on the real "
+        "onion crops (session 17; docs/solid.md).",
     )
     oriented_length: float = Field(
         ORIENTED_LENGTH,
@@ -411,12 +345,6 @@ class SolidChenWangParams(SolidParams):
     @classmethod
     def _auto_length(cls, value: object) -> object:
         """``'auto'`` is the empty value: the length fitted to the exemplars."""
-        return None if value == "auto" else value
-
-    @field_validator("centre_spacing", mode="before")
-    @classmethod
-    def _auto_spacing(cls, value: object) -> object:
-        """``'auto'`` is the empty value: the spacing fitted to the exemplars."""
         return None if value == "auto" else value
 
 
@@ -740,14 +668,9 @@ class _Schedule:
         elif start == "laminar":
             images = [np.asarray(exemplars[p]) for p in params.planes]
             length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
-            concentration, spacing = fringe_centres(images)
-            if params.centre_spacing is not None:
-                spacing = params.centre_spacing
-            concentric = fringe_concentricity(images)
-            shells = params.shells
-            if shells == "auto":  # many small onions, or one particle seen whole
-                centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
-                shells = "centres" if centred else "surfaces"
+            chosen = choose_shells(params.shells, params.centre_spacing, images)
+            shells, concentration = chosen.kind, chosen.concentration
+            spacing, concentric = chosen.spacing, chosen.concentric
         return cls(
             iterations,
             coarse_iterations,

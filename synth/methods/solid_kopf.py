@@ -63,10 +63,19 @@ from texsynth.synth.kernels.solid_search import (
     best_vote,
     irls_update,
 )
-from texsynth.synth.methods.common import SolidParams, checked_progress, structure_fields
+from texsynth.synth.methods.common import (
+    ShellKind,
+    ShellParams,
+    checked_progress,
+    shells_field,
+    structure_fields,
+)
 from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
     ORIENTED_MAX_BEND,
+    Shells,
+    centre_phase,
+    choose_shells,
     dominant_period,
     fitted_oriented_length,
     fitted_structure_length,
@@ -142,7 +151,7 @@ RANDOM_CANDIDATES = 2
 SEARCH_BATCH = 65536
 
 
-class SolidKopfParams(SolidParams):
+class SolidKopfParams(ShellParams):
     """Parameters of Kopf et al.'s solid optimisation; defaults are the study's settings."""
 
     levels: int = Field(
@@ -193,6 +202,11 @@ class SolidKopfParams(SolidParams):
             "length whose sheets' slices are at least as coherent at the period's scale and at most as "
             "curved as the exemplars (small onions get short sheets, large shells long ones)."
         ),
+    )
+    shells: ShellKind = shells_field(
+        "surfaces",
+        "Default 'surfaces': 'auto' draws rings closer to the onion truth's, with better orientations, but "
+        "its fringe lengths and the real onion crop's tortuosity measured worse (session 17; docs/solid.md).",
     )
     oriented_length: float | None = Field(
         ORIENTED_LENGTH,
@@ -373,7 +387,7 @@ class _KopfLoop:
         run: SolidRun,
         iterations: int,
         period: float = 0.0,
-        phi: np.ndarray | None = None,
+        start_phase: np.ndarray | None = None,
     ) -> None:
         self.params, self.plan, self.run, self.iterations = params, plan, run, iterations
         self.period = period  # > 0: the laminar start at this period (px of the finest level)
@@ -385,16 +399,17 @@ class _KopfLoop:
         self.meter = ProgressMeter(run.report, float(total))
         self.timings = {"search": 0.0, "optimisation": 0.0}
         self.energies: dict[str, list[float]] = {}
-        if period > 0 and phi is not None:
+        if period > 0 and start_phase is not None:  # the structured start's phase at the coarsest level
             coarsest = plan.levels - 1
             values = np.concatenate([plan.exemplars[p][-1].ravel() for p in run.active])
-            self.vol = sheets(level_phase(phi, coarsest), period / 2.0**coarsest, values)
+            self.vol = sheets(start_phase, period / 2.0**coarsest, values)
         else:
             self.vol = initial_volume(plan.shapes[-1], [plan.exemplars[p][-1] for p in run.active], run.rng)
         self.src = np.zeros((3, 0), dtype=np.int64)
         self.pooled = np.zeros(0, dtype=np.float32)
         self.final = "average"  # the last step taken (``final_step``)
         self.start_length: float | None = None  # periods; set by the caller after a structured start
+        self.shells: Shells | None = None  # the laminar start's sheets; set by the caller
         self.order_usage = False  # the usage target follows the exemplar's order (``order_usage``)
 
     def start_level(self, step: LevelStep) -> None:
@@ -574,6 +589,12 @@ class _KopfLoop:
                 "period": self.period if self.period > 0 else None,
                 # The structured start's sheet or crumple length (periods), fitted ('auto') or given.
                 "start_length": self.start_length,
+                # The laminar start's sheets ('surfaces' or 'centres'), the exemplars' centres of curvature
+                # (share gathered), the centres' spacing (periods) and how much one centre explains.
+                "shells": self.shells.kind if self.shells else None,
+                "centre_concentration": self.shells.concentration if self.shells else None,
+                "centre_spacing": self.shells.spacing if self.shells else None,
+                "concentric_explained": self.shells.concentric if self.shells else None,
                 "order_usage": self.order_usage,
             },
         )
@@ -651,13 +672,22 @@ def _run_solid_kopf(
         period = float(np.mean([dominant_period(image) for image in run.constrained()]))
         levels = structure_levels(period, levels)
     plan = plan_levels(run.views, size, levels, params.neighbourhood_size)
+    coarsest, shells, start_phase = plan.levels - 1, None, None
     if period > 0 and phi is None:
         length = resolved_length(params.structure_length, partial(fitted_structure_length, run.constrained()))
-        phi = laminar_phase(
-            plan.shapes[0], length * period, run.rng, periodic=params.periodic, centred=centred
-        )
-    loop = _KopfLoop(params, plan, run, iterations, period, phi)
+        shells = choose_shells(params.shells, params.centre_spacing, run.constrained())
+        if shells.kind == "centres":  # drawn at the coarsest level, the only one the start reads
+            spacing = shells.spacing * period / 2.0**coarsest
+            start_phase = centre_phase(plan.shapes[-1], spacing, run.rng, periodic=params.periodic)
+        else:
+            phi = laminar_phase(
+                plan.shapes[0], length * period, run.rng, periodic=params.periodic, centred=centred
+            )
+    if phi is not None:
+        start_phase = level_phase(phi, coarsest)
+    loop = _KopfLoop(params, plan, run, iterations, period, start_phase)
     loop.start_length = length
+    loop.shells = shells
     loop.order_usage = params.order_usage == "on" or (
         params.order_usage == "auto" and params.adapt_to_structure and _mixed(run.constrained())
     )
@@ -705,7 +735,8 @@ def pilot_ratios(
     pinned = settings if settings is not None else PILOT_SETTINGS
     ratios = {}
     for structure in ("none", "laminar"):
-        params = SolidKopfParams(structure=structure, **pinned)  # type: ignore[arg-type]
+        # the surfaces, as the pilot was measured: its choice does not move with the shells' rule
+        params = SolidKopfParams(structure=structure, **{"shells": "surfaces", **pinned})  # type: ignore[arg-type]
         volume = _run_solid_kopf(
             exemplar,
             size=(side,) * 3,

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage as ndi
+from scipy.spatial import cKDTree
 
 from texsynth.synth.analysis.tensor import coherence, mean_coherence, structure_tensor
 from texsynth.synth.colour import to_grey
@@ -64,7 +65,11 @@ __all__ = [
     "START_COHERENCE",
     "ConcentricFit",
     "CurvatureCentres",
+    "Shells",
     "bend_length",
+    "centre_phase",
+    "centre_phase_reference",
+    "choose_shells",
     "concentric_fit",
     "curvature_centres",
     "dominant_period",
@@ -339,6 +344,45 @@ def level_phase(phi: np.ndarray, level: int) -> np.ndarray:
     """The phase at pyramid ``level`` (in that level's voxels): ``phi`` subsampled by ``2**level``, scaled."""
     step = 2**level
     return np.ascontiguousarray(phi[::step, ::step, ::step] / step)
+
+
+def centre_phase(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
+) -> np.ndarray:
+    """The phase of nested spherical shells (voxels): the distance to the nearest of random centres.
+
+    One centre per ``spacing**3`` voxels (at least one), uniform in the volume; with ``periodic`` the
+    distance wraps at the volume's sides (a k-d tree with the volume as its box).
+    Returns ``(D, H, W)`` float64.
+    """
+    dims = np.asarray(shape, dtype=np.float64)
+    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
+    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
+    if periodic:  # the box is half-open: a centre drawn at the far side exactly wraps to 0
+        centres = np.where(centres >= dims, 0.0, centres)
+    tree = cKDTree(centres, boxsize=dims if periodic else None)
+    grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
+    distance, _ = tree.query(grid.reshape(-1, 3))
+    return distance.reshape(shape)
+
+
+def centre_phase_reference(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
+) -> np.ndarray:
+    """:func:`centre_phase` by brute force over the centres (the plain reference of the tests)."""
+    dims = np.asarray(shape, dtype=np.float64)
+    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
+    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
+    axes = [np.arange(n_, dtype=np.float64) for n_ in shape]
+    best = np.full(shape, np.inf)
+    for centre in centres:
+        d = [np.abs(axes[i] - centre[i]) for i in range(3)]
+        if periodic:
+            d = [np.minimum(d[i], dims[i] - d[i]) for i in range(3)]
+        np.minimum(
+            best, d[0][:, None, None] ** 2 + d[1][None, :, None] ** 2 + d[2][None, None, :] ** 2, out=best
+        )
+    return np.sqrt(best)
 
 
 def sheets(phi: np.ndarray, period: float, values: np.ndarray) -> np.ndarray:
@@ -726,6 +770,32 @@ def fringe_centres(images: Sequence[np.ndarray]) -> tuple[float, float]:
     concentration = float(np.mean([f.concentration for f in found]))
     radius = float(np.mean([f.radius for f in found]))
     return concentration, float(np.interp(radius, CENTRE_RADIUS, CENTRE_SPACINGS))
+
+
+@dataclass(frozen=True)
+class Shells:
+    """The laminar start's sheets (:func:`choose_shells`) and the measures that chose them."""
+
+    #: 'surfaces' (around the zero level of a random field) or 'centres' (around random centres).
+    kind: str
+    #: :func:`fringe_centres`' concentration and fitted spacing (periods; or the given one).
+    concentration: float
+    spacing: float
+    #: :func:`fringe_concentricity`: how much one centre explains the exemplars' orientations.
+    concentric: float
+
+
+def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarray]) -> Shells:
+    """``shells`` ('auto', 'surfaces' or 'centres') resolved for ``images``: 'auto' takes the centres where
+    the fringes' centres of curvature gather (:data:`CENTRED_MIN_CONCENTRATION`: many small onions) or one
+    centre explains their orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole); the
+    centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`)."""
+    concentration, fitted = fringe_centres(images)
+    concentric = fringe_concentricity(images)
+    if shells == "auto":
+        centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
+        shells = "centres" if centred else "surfaces"
+    return Shells(shells, concentration, fitted if spacing is None else float(spacing), concentric)
 
 
 def fitted_structure_length(images: Sequence[np.ndarray]) -> float:

@@ -502,7 +502,7 @@ def test_sheet_length_is_the_fit_within_three_to_four_periods_or_as_given() -> N
 def test_centre_phase_is_the_distance_to_the_nearest_centre(periodic: bool) -> None:
     """``centre_phase`` (k-d tree) equals its brute-force reference, wrapped at the sides when periodic;
     one centre per ``spacing**3`` voxels, each at distance 0 from itself."""
-    from texsynth.synth.methods.solid_chen_wang import centre_phase, centre_phase_reference
+    from texsynth.synth.pixel.laminar import centre_phase, centre_phase_reference
 
     shape = (12, 16, 20)
     got = centre_phase(shape, 6.0, np.random.default_rng(5), periodic=periodic)

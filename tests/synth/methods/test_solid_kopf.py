@@ -507,3 +507,65 @@ def test_slice_coherence_in_stacks_is_the_per_slice_mean(shape, step: int, threa
     assert got == slice_coherence_reference(vol, step)
     assert got64 == slice_coherence_reference(vol.astype(np.float64), step)
     assert 0.0 < got < 1.0
+
+
+def test_shells_around_centres_for_small_onions_drawn_at_the_coarsest_level(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``shells='auto'`` (opt-in; the default is 'surfaces'): small onions (their centres of curvature
+    gather) start from shells around random centres, drawn once at the coarsest level with the fitted
+    spacing (periods) scaled to its voxels; the stats say so; the default keeps the random field's
+    sheets, as do gently bent laminae with 'auto'; the same seed gives the same bytes."""
+    import texsynth.synth.methods.solid_kopf as kopf
+    from texsynth.synth.io.laminar import onion_volume
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import fringe_centres
+
+    calls: list[tuple[tuple[int, ...], float]] = []
+    real = kopf.centre_phase
+
+    def spy(shape, spacing, rng, *, periodic=True):  # type: ignore[no-untyped-def]
+        calls.append((tuple(shape), spacing))
+        return real(shape, spacing, rng, periodic=periodic)
+
+    monkeypatch.setattr(kopf, "centre_phase", spy)
+    onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
+    params = {**SMALL, "structure": "laminar", "shells": "auto"}
+    run = synthesize("solid-kopf", onions, size=SIZE, params=params, seed=2)
+    stats = run.stats
+    assert stats["shells"] == "centres" and stats["centre_spacing"] == pytest.approx(
+        fringe_centres([onions])[1]
+    )
+    assert len(calls) == 1
+    scale = 2 ** (stats["levels"] - 1)
+    assert calls[0] == (
+        tuple(s // scale for s in SIZE),
+        pytest.approx(stats["centre_spacing"] * stats["period"] / scale),
+    )
+    again = synthesize("solid-kopf", onions, size=SIZE, params=params, seed=2)
+    assert again.image.tobytes() == run.image.tobytes()
+    surfaces = synthesize("solid-kopf", onions, size=SIZE, params={**params, "shells": "surfaces"}, seed=2)
+    assert surfaces.stats["shells"] == "surfaces" and len(calls) == 2  # no new call
+    assert surfaces.image.tobytes() != run.image.tobytes()
+    default = synthesize("solid-kopf", onions, size=SIZE, params={**SMALL, "structure": "laminar"}, seed=2)
+    assert default.image.tobytes() == surfaces.image.tobytes() and default.stats["shells"] == "surfaces"
+    bent = synthesize("solid-kopf", _soft(), size=SIZE, params=params, seed=2)
+    assert bent.stats["shells"] == "surfaces" and len(calls) == 2
+    noise = synthesize("solid-kopf", onions, size=SIZE, params={**SMALL, "structure": "none"}, seed=2)
+    assert noise.stats["shells"] is None and noise.stats["concentric_explained"] is None
+
+
+def test_the_pilot_draws_the_surfaces_whatever_the_shells(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pilot that chooses the laminar start (solid-kopf's and solid-chen-wang's) keeps the surfaces it
+    was measured with: on small onions, where 'auto' takes the centres, it never draws them."""
+    import texsynth.synth.methods.solid_kopf as kopf
+    from texsynth.synth.io.laminar import onion_volume
+    from texsynth.synth.output.volume import mid_slices
+
+    def refuse(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise AssertionError("the pilot drew shells around centres")
+
+    monkeypatch.setattr(kopf, "centre_phase", refuse)
+    onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
+    ratios = kopf.pilot_ratios(onions, side=16)
+    assert set(ratios) == {"none", "laminar"} and all(r > 0 for r in ratios.values())

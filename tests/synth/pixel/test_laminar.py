@@ -440,7 +440,7 @@ def test_fringe_centres_spacing_follows_the_onions_size() -> None:
     """Slices of shells around random centres ``s`` periods apart (the start's own geometry, a new draw):
     the fitted spacing follows ``s`` (within the calibration's spread) and their fringes gather their
     centres above the threshold; slices of the surfaces' sheets stay below it."""
-    from texsynth.synth.methods.solid_chen_wang import centre_phase
+    from texsynth.synth.pixel.laminar import centre_phase
 
     period, side = 6.0, 96
     rng = np.random.default_rng(11)
