@@ -207,7 +207,7 @@ class Service:
         self.admission.check_job(
             method, params_out, size, shapes, seconds_per_element=spec.seconds_per_element
         )
-        if spec.precheck is not None and "exemplar" in shapes:  # geometry against the inputs, before queueing
+        if spec.precheck is not None and any(r.startswith("exemplar") for r in shapes):  # before queueing
             spec.precheck(model, {**shapes, "output": _output_shape(size)})
         return JobRequest(
             method=method,
@@ -342,7 +342,7 @@ class Service:
                 field_prefix="grid.",
                 seconds_per_element=spec.seconds_per_element,
             )
-            if spec.precheck is not None and "exemplar" in req.shapes:
+            if spec.precheck is not None and any(r.startswith("exemplar") for r in req.shapes):
                 try:
                     spec.precheck(model, {**req.shapes, "output": _output_shape(size)})
                 except InvalidParameter as exc:

@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from texsynth.synth.api import PLANES, Progress
+from texsynth.synth.errors import InvalidInput
 from texsynth.synth.grid.neighbourhood import Shape
 from texsynth.synth.grid.scan import ScanOrder
 from texsynth.synth.params import MethodParams, ui
-from texsynth.synth.pixel.laminar import CENTRE_SPACINGS, CENTRED_MIN_CONCENTRATION, CONCENTRIC_MIN_EXPLAINED
+from texsynth.synth.pixel.laminar import (
+    CENTRE_SPACINGS,
+    CENTRED_MIN_CONCENTRATION,
+    CONCENTRIC_MIN_EXPLAINED,
+    MIN_PERIOD_SIDE,
+)
 
 if TYPE_CHECKING:  # the pixel driver, imported by the pixel methods that use it (not by the patch methods)
     from texsynth.synth.pixel.synthesis import SearchSettings
@@ -24,6 +31,7 @@ __all__ = [
     "SolidParams",
     "as_features",
     "checked_progress",
+    "precheck_structured_start",
     "shells_field",
     "structure_fields",
 ]
@@ -338,6 +346,23 @@ class ShellParams(SolidParams):
     def _auto_spacing(cls, value: object) -> object:
         """``'auto'`` is the empty value: the spacing fitted to the exemplars."""
         return None if value == "auto" else value
+
+
+def precheck_structured_start(params: Any, shapes: Mapping[str, tuple[int, ...]]) -> None:
+    """:attr:`MethodSpec.precheck` of the solids: a structured start asked for (``structure`` 'laminar' or
+    'oriented') measures each exemplar's fringe period, which needs :data:`MIN_PERIOD_SIDE` px a side; a
+    smaller exemplar is named before the job is queued ('auto' takes no structured start there)."""
+    structure = getattr(params, "structure", "none")
+    if structure not in ("laminar", "oriented"):
+        return
+    for role, shape in shapes.items():
+        if role.startswith("exemplar") and min(shape[:2]) < MIN_PERIOD_SIDE:
+            raise InvalidInput(
+                role,
+                f"{shape[1]} x {shape[0]} px is too small to measure its fringe period (structure="
+                f"{structure!r} needs at least {MIN_PERIOD_SIDE} px on each side); use structure='none' or "
+                "'auto'",
+            )
 
 
 def structure_fields(structure_details: str, length_details: str) -> tuple[Any, Any]:

@@ -63,6 +63,7 @@ from texsynth.synth.methods.common import (
     ShellKind,
     ShellParams,
     checked_progress,
+    precheck_structured_start,
     shells_field,
     structure_fields,
 )
@@ -938,6 +939,7 @@ SPEC = register(
         "histogram matching (Chen & Wang 2010).",
         params_model=SolidChenWangParams,
         run=run_solid_chen_wang,
+        precheck=precheck_structured_start,
         output_ndim=3,
         plane_exemplars=True,
         paper="Chen & Wang, The Visual Computer 26(4), 2010",

@@ -67,6 +67,7 @@ from texsynth.synth.methods.common import (
     ShellKind,
     ShellParams,
     checked_progress,
+    precheck_structured_start,
     shells_field,
     structure_fields,
 )
@@ -796,6 +797,7 @@ SPEC = register(
         summary="Solid texture by optimising 3 orthogonal slice neighbourhoods per voxel (Kopf et al. 2007).",
         params_model=SolidKopfParams,
         run=run_solid_kopf,
+        precheck=precheck_structured_start,
         output_ndim=3,
         plane_exemplars=True,
         paper="Kopf, Fu, Cohen-Or, Deussen, Lischinski, Wong, SIGGRAPH 2007",

@@ -105,6 +105,26 @@ class TestRejected:
         assert r.status_code == 422, r.text
         assert r.json()["field"] == field and words in r.json()["message"]
 
+    @pytest.mark.parametrize("method", ["solid-kopf", "solid-chen-wang"])
+    def test_a_structured_start_on_a_tiny_exemplar_422_before_queueing(self, embedded, method):
+        """An 11x11 exemplar holds no fringe period to measure: structure='laminar' is refused at submission,
+        naming the exemplar (it crashed in the worker before)."""
+        import io
+
+        import numpy as np
+        from PIL import Image
+
+        buffer = io.BytesIO()
+        pixels = (np.random.default_rng(0).random((11, 11)) * 255).astype(np.uint8)
+        Image.fromarray(pixels).save(buffer, format="PNG")
+        params = {"width": 16, "height": 16, "depth": 16, "structure": "laminar"}
+        r = _post(embedded, buffer.getvalue(), method=method, params=params)
+        assert r.status_code == 422, r.text
+        assert (
+            r.json()["field"] == "exemplar"
+            and "too small to measure its fringe period" in r.json()["message"]
+        )
+
     @pytest.mark.parametrize(
         ("params", "fields", "field", "words"),
         [

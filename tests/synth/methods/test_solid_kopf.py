@@ -569,3 +569,25 @@ def test_the_pilot_draws_the_surfaces_whatever_the_shells(monkeypatch: pytest.Mo
     onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
     ratios = kopf.pilot_ratios(onions, side=16)
     assert set(ratios) == {"none", "laminar"} and all(r > 0 for r in ratios.values())
+
+
+def test_the_structured_start_precheck_names_the_too_small_plane() -> None:
+    """``precheck_structured_start`` (both solids' ``MethodSpec.precheck``): with 'laminar' or 'oriented' an
+    exemplar under 12 px a side is named by its role before any work; 'auto' and 'none' pass it."""
+    from texsynth.synth.api import find_method
+    from texsynth.synth.methods.common import precheck_structured_start
+    from texsynth.synth.methods.solid_kopf import SolidKopfParams
+
+    shapes = {
+        "exemplar_xy": (64, 64),
+        "exemplar_xz": (64, 11),
+        "exemplar_yz": (64, 64),
+        "output": (16, 16, 16),
+    }
+    for structure in ("laminar", "oriented"):
+        with pytest.raises(InvalidInput, match=r"exemplar_xz.*11 x 64 px is too small"):
+            precheck_structured_start(SolidKopfParams(structure=structure), shapes)
+    for structure in ("auto", "none"):
+        precheck_structured_start(SolidKopfParams(structure=structure), shapes)
+    assert find_method("solid-kopf").precheck is precheck_structured_start  # type: ignore[union-attr]
+    assert find_method("solid-chen-wang").precheck is precheck_structured_start  # type: ignore[union-attr]
