@@ -547,7 +547,8 @@ class _KopfLoop:
             return
         best = best_vote(self.vol, self.field, self.packed, self.params.periodic)
         if final == "auto":
-            target = float(np.mean([mean_coherence(self.images[p]) for p in self.run.active]))
+            # a flat exemplar has no coherence to keep (0): the pilot's floor, so neither step divides by it
+            target = max(float(np.mean([mean_coherence(self.images[p]) for p in self.run.active])), 1e-6)
             gaps = [
                 abs(np.log(max(slice_coherence(v, _slice_step(v)) / target, 1e-6))) for v in (self.vol, best)
             ]

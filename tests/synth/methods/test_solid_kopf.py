@@ -591,3 +591,12 @@ def test_the_structured_start_precheck_names_the_too_small_plane() -> None:
         precheck_structured_start(SolidKopfParams(structure=structure), shapes)
     assert find_method("solid-kopf").precheck is precheck_structured_start  # type: ignore[union-attr]
     assert find_method("solid-chen-wang").precheck is precheck_structured_start  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize("structure", ["laminar", "oriented"])
+def test_a_flat_exemplar_with_a_structured_start_finishes(structure: str) -> None:
+    """A flat exemplar has no coherence: the last step's choice ('auto', after a structured start) compares
+    coherences against a floor instead of dividing by zero (it raised ZeroDivisionError)."""
+    flat = np.full((20, 20), 0.3, dtype=np.float32)
+    run = synthesize("solid-kopf", flat, size=SIZE, params={**SMALL, "structure": structure}, seed=1)
+    assert run.stats["final_step"] in ("best", "average") and np.isfinite(run.image).all()
