@@ -109,8 +109,9 @@ class StrandHints:
 def _cuts(strand_angle, spacing, rng, periodic):
     """Rasterised cuts: label (H, W) int64 (-1: none), and per pixel u, the cut point and its normal."""
     h, w = strand_angle.shape
-    rows = np.arange(spacing / 2, h, spacing)
-    cols = np.arange(spacing / 2, w, spacing)
+    # cuts every ``spacing`` px from half a spacing in; a side shorter than a spacing gets one, at its middle
+    rows = np.arange(min(spacing, h) / 2, h, spacing)
+    cols = np.arange(min(spacing, w) / 2, w, spacing)
     seeds = np.stack(np.meshgrid(rows, cols, indexing="ij"), axis=-1).reshape(-1, 2)
     seeds = seeds + rng.uniform(-spacing / 4, spacing / 4, seeds.shape)
     n_steps = round(1.2 * spacing)

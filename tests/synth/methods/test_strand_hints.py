@@ -52,3 +52,13 @@ def test_same_seed_same_hints() -> None:
     _, table, strand = _setup(concentric_rings((48, 48)))
     a, b = (strand_hints(strand, table, 24, np.random.default_rng(3)) for _ in range(2))
     assert np.array_equal(a.source, b.source) and np.array_equal(a.copy_angle, b.copy_angle)
+
+
+def test_an_output_shorter_than_the_spacing_still_gets_one_cut_across_it() -> None:
+    """Cuts start half a spacing in; a side shorter than the spacing (a 48 px output, the default 128 px)
+    gets one cut at its middle instead of none (an empty layout crashed before)."""
+    _, table, strand = _setup(waves((48, 40), amplitude=4.0, wavelength=32.0))
+    hints = strand_hints(strand, table, 128, np.random.default_rng(0))
+    assert hints.source.shape == (48, 40, 2) and hints.missed < 0.5
+    inside = (hints.source[..., 0] >= 0) & (hints.source[..., 0] < 64)
+    assert inside.mean() > 0.5
