@@ -35,6 +35,7 @@ from texsynth.synth.threads import current_threads, thread_map
 __all__ = [
     "RotatedDictionary",
     "build_rotated_dictionary",
+    "dictionary_bytes",
     "rotation_candidates",
 ]
 
@@ -161,6 +162,24 @@ def _erode(area: np.ndarray, radius: int) -> np.ndarray:
     return ndi.minimum_filter(area.astype(np.uint8), size=2 * radius + 1, mode="constant", cval=0) > 0
 
 
+def _tiles(shape: tuple[int, int], n_rotations: int) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The dictionary's tile (a square of the exemplar's diagonal and guard, the sides keeping the
+    exemplar's parity so that centres fall on pixels) and its grid of rows and columns of copies."""
+    h, w = shape
+    side = int(np.ceil(np.hypot(h, w))) + 2 * _TILE_GUARD
+    cols = int(np.ceil(np.sqrt(n_rotations)))
+    return (side + (side - h) % 2, side + (side - w) % 2), (int(np.ceil(n_rotations / cols)), cols)
+
+
+def dictionary_bytes(shape: tuple[int, ...], n_rotations: int) -> int:
+    """Bytes of :func:`build_rotated_dictionary`'s canvas for an exemplar of ``shape`` ((h, w) or (h, w,
+    channels)): the copies (float32 a channel), their tensors (3 float32), mask (bool) and tile index
+    (int32), before any feature or pyramid made from it."""
+    (th, tw), (rows, cols) = _tiles((int(shape[0]), int(shape[1])), int(n_rotations))
+    channels = int(shape[2]) if len(shape) > 2 else 1
+    return rows * th * cols * tw * (4 * channels + 12 + 1 + 4)
+
+
 def build_rotated_dictionary(
     exemplar: np.ndarray,
     n_rotations: int,
@@ -198,10 +217,7 @@ def build_rotated_dictionary(
     angles = 2 * np.pi * np.arange(m_count) / m_count
     # Every copy's bounding box fits in a square of the exemplar's diagonal; the tile's sides keep
     # the exemplar's parity so that centres fall on pixels (copy 0 is then the exemplar, exactly).
-    side = int(np.ceil(np.hypot(h, w))) + 2 * _TILE_GUARD
-    th, tw = side + (side - h) % 2, side + (side - w) % 2
-    cols = int(np.ceil(np.sqrt(m_count)))
-    rows = int(np.ceil(m_count / cols))
+    (th, tw), (rows, cols) = _tiles((h, w), m_count)
     H, W = rows * th, cols * tw
     image = np.zeros((H, W, channels.shape[2]), dtype=np.float32)
     tensors_out = np.zeros((H, W, 3), dtype=np.float32)

@@ -41,7 +41,12 @@ from scipy.spatial import cKDTree
 from skimage.transform import resize
 
 from texsynth.synth.analysis.fibre_grey import OWN_GREY_FIBRES, fibre_grey_spread
-from texsynth.synth.analysis.rotation import RotatedDictionary, build_rotated_dictionary, rotation_candidates
+from texsynth.synth.analysis.rotation import (
+    RotatedDictionary,
+    build_rotated_dictionary,
+    dictionary_bytes,
+    rotation_candidates,
+)
 from texsynth.synth.analysis.tensor import (
     ORIENTED_COHERENCE,
     Metric,
@@ -72,6 +77,7 @@ from texsynth.synth.pixel.synthesis import (
 )
 
 __all__ = [
+    "DICTIONARY_MEMORY_LIMIT",
     "K_SET_MEMORY_LIMIT",
     "PAPER_HINTS",
     "STRAND_HINTS",
@@ -85,6 +91,9 @@ __all__ = [
 
 #: Largest estimated size (bytes) of the k-coherence set computation over ``D_M``.
 K_SET_MEMORY_LIMIT = 1_500_000_000
+#: Largest estimated size (bytes) of ``D_M``'s canvas, the features and pyramid made from it counted twice
+#: over (the service's own estimate, TEXSYNTH_MAX_JOB_MEMORY_BYTES, refuses far less before queueing).
+DICTIONARY_MEMORY_LIMIT = 8_000_000_000
 #: A constraint whose largest tensor trace is below this (images in [0, 1]) has no structure at all.
 FLAT_TRACE = 1e-8
 #: Scale of the orientation analysis of :func:`orientation_agreement` (pixels): a window about one
@@ -671,6 +680,15 @@ def run_arbitrary_shape(
             "initial_sources",
             "hints",
             "needs restrict_rotations=True (the hints come with the rotation window)",
+        )
+    need = 2 * dictionary_bytes(exemplar.shape, params.n_rotations)
+    if need > DICTIONARY_MEMORY_LIMIT:
+        raise InvalidParameter(
+            "angular_step",
+            params.angular_step,
+            f"{params.n_rotations} rotated copies of the {exemplar.shape[1]}x{exemplar.shape[0]} exemplar "
+            f"would need about {need / 1e9:.0f} GB; use a larger angular_step (the paper's 5 degrees) or "
+            "a smaller exemplar",
         )
     size = (int(size[0]), int(size[1]))
     mode = "wrap" if params.periodic else "reflect"  # filters on output-sized fields

@@ -610,3 +610,17 @@ def test_fibres_with_their_own_grey_levels_get_the_strand_hints_by_default() -> 
     for recipe in ("paper", "weak"):
         r = ArbitraryShapeParams(recipe=recipe).resolved(wood)
         assert r.fibre_grey_spread is None and r.params.hint_layout == "texture"
+
+
+def test_the_rotated_dictionary_is_sized_before_it_is_built() -> None:
+    """``dictionary_bytes`` is the canvas the dictionary allocates (its four arrays, to the byte), and an
+    ``angular_step`` whose copies would exceed the engine's limit is named before any work (0.001 degrees
+    tried to allocate 37 GiB)."""
+    from texsynth.synth.analysis.rotation import dictionary_bytes
+
+    for shape, m in (((20, 14), 7), ((16, 16, 3), 72)):
+        d = build_rotated_dictionary(np.random.default_rng(0).random(shape).astype(np.float32), m)
+        arrays = (d.image, d.tensors, d.area, d.tile_index)
+        assert dictionary_bytes(shape, m) == sum(a.nbytes for a in arrays)
+    with pytest.raises(InvalidParameter, match=r"angular_step.*360000 rotated copies.*larger angular_step"):
+        _run(_fringes(0.0), waves((32, 32)), angular_step=0.001)
