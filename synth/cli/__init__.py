@@ -103,6 +103,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except StorageError as exc:  # the machine's problem (full disk, permissions), not the input's
         print(f"texsynth {args.command}: error: {exc}", file=sys.stderr)
         return 1
+    except MemoryError as exc:  # the machine's too: what the run would allocate does not fit
+        print(
+            f"texsynth {args.command}: error: not enough memory for this run ({exc or 'MemoryError'}); ask "
+            "for a smaller output, a smaller exemplar or a coarser setting",
+            file=sys.stderr,
+        )
+        return 1
     except KeyboardInterrupt:
         print(f"texsynth {args.command}: interrupted", file=sys.stderr)
         return 130

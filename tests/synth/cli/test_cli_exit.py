@@ -120,3 +120,19 @@ def test_python_dash_m_runs_the_program(tmp_path: Path) -> None:
     )
     assert done.returncode == 0, done.stderr
     assert "tensor-constrained" in done.stdout
+
+
+def test_a_run_that_does_not_fit_in_memory_says_so_without_a_traceback(monkeypatch, capsys) -> None:
+    """A MemoryError (NumPy's 'Unable to allocate ...') is the machine's limit, not a crash: exit 1 and one
+    line that says what to ask for instead."""
+    import texsynth.synth.cli.synthesize as command
+
+    def fail(args):  # type: ignore[no-untyped-def]
+        raise MemoryError("Unable to allocate 37.1 GiB for an array with shape (57600, 57600, 3)")
+
+    monkeypatch.setattr(command, "_run", fail)
+    code = main(["synthesize", "wei-levoy", "--exemplar", "x.png", "--out", "never"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert err.strip().startswith("texsynth synthesize: error: not enough memory for this run (Unable")
+    assert "smaller output" in err
