@@ -774,28 +774,36 @@ def fringe_centres(images: Sequence[np.ndarray]) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class Shells:
-    """The laminar start's sheets (:func:`choose_shells`) and the measures that chose them."""
+    """The laminar start's sheets (:func:`choose_shells`) and the measures that chose them (None: not
+    needed, so not measured)."""
 
     #: 'surfaces' (around the zero level of a random field) or 'centres' (around random centres).
     kind: str
-    #: :func:`fringe_centres`' concentration and fitted spacing (periods; or the given one).
-    concentration: float
-    spacing: float
+    #: :func:`fringe_centres`' concentration and the centres' spacing (periods: given, else fitted).
+    concentration: float | None
+    spacing: float | None
     #: :func:`fringe_concentricity`: how much one centre explains the exemplars' orientations.
-    concentric: float
+    concentric: float | None
 
 
 def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarray]) -> Shells:
     """``shells`` ('auto', 'surfaces' or 'centres') resolved for ``images``: 'auto' takes the centres where
     the fringes' centres of curvature gather (:data:`CENTRED_MIN_CONCENTRATION`: many small onions) or one
     centre explains their orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole); the
-    centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`)."""
-    concentration, fitted = fringe_centres(images)
+    centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`). Only what the
+    choice needs is measured: 'surfaces' nothing, 'centres' the spacing when none is given."""
+    if shells == "surfaces":
+        return Shells("surfaces", None, None, None)
+    concentration = fitted = None
+    if shells == "auto" or spacing is None:
+        concentration, fitted = fringe_centres(images)
+    if shells == "centres":
+        return Shells("centres", concentration, fitted if spacing is None else float(spacing), None)
     concentric = fringe_concentricity(images)
-    if shells == "auto":
-        centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
-        shells = "centres" if centred else "surfaces"
-    return Shells(shells, concentration, fitted if spacing is None else float(spacing), concentric)
+    assert concentration is not None and fitted is not None
+    centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
+    kind = "centres" if centred else "surfaces"
+    return Shells(kind, concentration, fitted if spacing is None else float(spacing), concentric)
 
 
 def fitted_structure_length(images: Sequence[np.ndarray]) -> float:

@@ -512,3 +512,26 @@ def test_a_structured_start_on_a_too_small_exemplar_is_named(shape) -> None:
         with pytest.raises(InvalidInput, match="structure='none'"):
             synthesize(method, image, size=(12, 12, 12), params={"structure": structure})
     assert dominant_period(np.random.default_rng(0).random((12, 12))) >= laminar.MIN_PERIOD
+
+
+def test_choose_shells_measures_only_what_the_choice_needs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """'surfaces' measures nothing; 'centres' with a spacing given nothing, without one only the fitted
+    spacing; 'auto' both measures (and picks the centres for small onions)."""
+    from texsynth.synth.io.laminar import onion_volume
+
+    onions = [mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]]
+    assert laminar.choose_shells("surfaces", None, onions) == laminar.Shells("surfaces", None, None, None)
+    calls: list[str] = []
+    for name in ("fringe_centres", "fringe_concentricity"):
+        real = getattr(laminar, name)
+        monkeypatch.setattr(laminar, name, lambda images, _r=real, _n=name: calls.append(_n) or _r(images))
+    assert laminar.choose_shells("centres", 7.5, onions) == laminar.Shells("centres", None, 7.5, None)
+    assert calls == []
+    fitted = laminar.choose_shells("centres", None, onions)
+    assert calls == ["fringe_centres"] and fitted.concentric is None and fitted.spacing > 0
+    auto = laminar.choose_shells("auto", None, onions)
+    assert calls[1:] == ["fringe_centres", "fringe_concentricity"] and auto.kind == "centres"
+    assert (
+        auto.spacing == pytest.approx(fitted.spacing)
+        and auto.concentration >= laminar.CENTRED_MIN_CONCENTRATION
+    )
