@@ -306,7 +306,7 @@ def shells_field(default: str, measured: str) -> Any:
     return Field(
         default,
         description="Shape of the starting sheets: surfaces of a smooth random field, or shells around "
-        "random centres (onions: many small, or one seen whole); automatic: from the fringes' curvature.",
+        "random centres (onions); automatic: from the fringes' curvature.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
