@@ -9,11 +9,11 @@ STAMP  := $(VENV)/.installed-stamp
 
 .PHONY: serve test test-suite test-nojit lint bench demo clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "texsynth needs Python 3.11 or newer")'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev]'
 	@ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || command -v initdb >/dev/null 2>&1 || echo \
 		"note: PostgreSQL is not installed: its tests will skip (apt-get install postgresql; .ci/run does)"
 	@touch $@

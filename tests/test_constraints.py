@@ -1,4 +1,5 @@
-"""The Docker image installs pinned versions: constraints.txt pins every runtime dependency exactly."""
+"""The Docker image and the Makefile install pinned versions: constraints.txt pins every runtime
+dependency exactly."""
 
 from __future__ import annotations
 
@@ -25,3 +26,4 @@ def test_every_runtime_dependency_is_pinned_and_the_image_uses_the_pins() -> Non
     missing = [dep for dep in runtime if _name(dep) not in pins]
     assert not missing, f"constraints.txt lacks {missing}: refresh it (see its header)"
     assert "pip install -c constraints.txt '.[cluster]'" in (ROOT / "Dockerfile").read_text()
+    assert "pip install --quiet -c constraints.txt -e '.[dev]'" in (ROOT / "Makefile").read_text()
