@@ -11,7 +11,6 @@ from __future__ import annotations
 import io
 import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -24,6 +23,7 @@ import numpy as np
 from PIL import Image
 
 from benchmarks._report import write_section
+from tests.servers import free_port
 from texsynth.app.client import Client, ServiceError
 
 JOB = {"method": "wei-levoy", "params": {"width": 48, "height": 48, "levels": 2, "neighbourhood_size": 7}}
@@ -89,15 +89,9 @@ def run_load(
     }
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
-        port = _free_port()
+        port = free_port()
         env = {**os.environ, "TEXSYNTH_CONCURRENCY": "2"}
         with open(Path(tmp) / "serve.log", "wb") as log:
             proc = subprocess.Popen(

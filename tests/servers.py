@@ -13,6 +13,7 @@ import contextlib
 import glob
 import os
 import pwd
+import random
 import shutil
 import signal
 import socket
@@ -25,10 +26,44 @@ from pathlib import Path
 __all__ = ["Postgres", "SeaweedS3", "free_port", "postgres_binaries", "weed_binary"]
 
 
+def _ephemeral_start() -> int:
+    """The first port the kernel hands to outgoing connections (Linux's ``ip_local_port_range``)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
+_handed: set[int] = set()
+_ports = random.Random(os.getpid() ^ time.monotonic_ns())
+
+
 def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+    """A port free to listen on, below the kernel's ephemeral range.
+
+    A port the kernel picks (``bind`` to 0) lies in the range it also draws the local ports of outgoing
+    connections from: a server of several parts (SeaweedFS's master, volume, filer and gateway) connects
+    between its parts before its last part listens, and one of those connections can take the port
+    chosen for it ("bind: address already in use", seen once in a full run). Below the range no
+    connection takes it; a port is handed out once per process.
+    """
+    high = min(_ephemeral_start(), 32768)
+    if high <= 10000:  # the whole range is ephemeral: take the kernel's choice
+        with socket.socket() as sock:
+            sock.bind(("127.0.0.1", 0))
+            return sock.getsockname()[1]
+    for _ in range(1000):
+        port = _ports.randrange(10000, high)
+        if port in _handed:
+            continue
+        with socket.socket() as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        _handed.add(port)
+        return port
+    raise RuntimeError(f"no free port between 10000 and {high}")
 
 
 def _port_open(port: int) -> bool:

@@ -25,18 +25,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from tests.servers import free_port
 from texsynth.app.client import Client
 from texsynth.jobs.store import JobStore
 
 REPO = Path(__file__).resolve().parents[2]
 TEST_METHODS = "tests.service.methods_for_tests"
 MAX_BODY = 2 * 2**20
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_until(predicate, timeout: float, interval: float = 0.1, what: str = "condition"):
