@@ -1173,6 +1173,18 @@ CROP_SOLIDS_NOTES = """\
   (KL 0.02-0.06, worst 0.07) but leaves the onion crop's floor in tortuosity (0.24-0.25, worst 0.29) and
   gains nothing in length: its default keeps the surfaces (docs/solid.md, "Shells around centres for
   `solid-kopf`").
+- **The core's over-order, tried in session 18 and not kept** (`solid-kopf`, 64^3, seeds 1-3, mean (worst)
+  of the nine seed-axes; default: length KS 0.18 (0.21), tortuosity KS 0.19 (0.24), coherence 1.08):
+  - *shorter starting sheets* (`structure_length`; the fit takes the curvature's 4.4 periods over the
+    coherence's 1.9): 3.0 periods 0.15 (0.18) / 0.20 (0.24) / 1.07, 2.5 periods 0.14 (0.15) / 0.21 (0.25) /
+    1.04, 2.0 periods 0.12 (0.17) / 0.25 (0.28) / 1.00: length and tortuosity trade, and the onion crop at
+    3.7 periods scores as its default (length 0.11, tortuosity 0.22);
+  - *no structured start* (the paper): length 0.09 (0.13) but tortuosity 0.41 (0.44), coherence 0.83;
+  - *eq 4 on coherence bins* (the matches' use of the exemplar's coherence levels pulled toward the
+    exemplar's, as `orientation_gain` does for orientations; a prototype, gains 8 and 32): coherence
+    1.15, length 0.19 (0.24): the over-order is not in which exemplar places the volume copies but in how
+    the sheets join them;
+  - `solid-chen-wang` with `position_weight` 15 (default 5): length 0.16 (0.18) against 0.16 (0.19).
 
 """
 
