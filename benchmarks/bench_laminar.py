@@ -1180,6 +1180,11 @@ CROP_SOLIDS_NOTES = """\
     1.04, 2.0 periods 0.12 (0.17) / 0.25 (0.28) / 1.00: length and tortuosity trade, and the onion crop at
     3.7 periods scores as its default (length 0.11, tortuosity 0.22);
   - *no structured start* (the paper): length 0.09 (0.13) but tortuosity 0.41 (0.44), coherence 0.83;
+  - *sheets in part of the volume only* (a prototype: a smooth random mask, two periods across, keeps the
+    sheets on 60% / 40% of the coarsest level and the random start elsewhere): length 0.14 (0.17) / 0.12
+    (0.15), tortuosity 0.22 (0.26) / 0.26 (0.31), coherence 1.02 / 1.00: the same trade as shorter sheets,
+    because what grows from noise is too tortuous (0.41 with no start, 0.42 with the `best` last step),
+    while the crop's disordered centre holds short straight pieces;
   - *eq 4 on coherence bins* (the matches' use of the exemplar's coherence levels pulled toward the
     exemplar's, as `orientation_gain` does for orientations; a prototype, gains 8 and 32): coherence
     1.15, length 0.19 (0.24): the over-order is not in which exemplar places the volume copies but in how
