@@ -1187,7 +1187,8 @@ CROP_SOLIDS_NOTES = """\
     while the crop's disordered centre holds short straight pieces;
   - *domains of straight stacks* (a prototype, since then the opt-in `shells='domains'`, docs/solid.md:
     the coarsest level's start cut into Voronoi cells about D periods across, each a straight stack of
-    sheets with a random normal and offset, like turbostratic crystallites; `solid-kopf` defaults otherwise). On the core, seeds 1-3 /
+    sheets with a random normal and offset, like turbostratic crystallites; `solid-kopf` defaults
+    otherwise). On the core, seeds 1-3 /
     4-6: D = 2 length 0.09 (0.11) / 0.11 (0.14), tortuosity 0.22 (0.24) / 0.22 (0.27), orientation KL
     0.05 (0.07) / 0.04 (0.08), coherence 1.03 / 1.03, against the default's 0.18 (0.21) / 0.16 (0.21),
     0.19 (0.24) / 0.18 (0.25), 0.07 (0.13) / 0.08 (0.15), 1.08 / 1.05: the length of the 2D line (0.09)
