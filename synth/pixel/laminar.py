@@ -358,6 +358,17 @@ def centre_phase(
     distance wraps at the volume's sides (a k-d tree with the volume as its box).
     Returns ``(D, H, W)`` float64.
     """
+    distance, _, _, _ = _nearest_centre(shape, spacing, rng, periodic)
+    return distance.reshape(shape)
+
+
+def _nearest_centre(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, periodic: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Random centres, one per ``spacing**3`` voxels (at least one), uniform in the volume, and for each
+    voxel (raster order) the distance to its nearest centre and that centre's index, wrapping at the sides
+    with ``periodic`` (a k-d tree with the volume as its box); also the voxels' coordinates ``(N, 3)`` and
+    the number of centres. The centres are the only draws from ``rng``."""
     dims = np.asarray(shape, dtype=np.float64)
     n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
     centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
@@ -365,8 +376,9 @@ def centre_phase(
         centres = np.where(centres >= dims, 0.0, centres)
     tree = cKDTree(centres, boxsize=dims if periodic else None)
     grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
-    distance, _ = tree.query(grid.reshape(-1, 3))
-    return distance.reshape(shape)
+    points = grid.reshape(-1, 3)
+    distance, index = tree.query(points)
+    return distance, index, points, n
 
 
 #: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real onion core crop
@@ -386,18 +398,10 @@ def domain_phase(
     each cell, so ``cos(2 pi phi / period)`` stacks straight sheets there, each cell its own way.
     Returns ``(D, H, W)`` float64.
     """
-    dims = np.asarray(shape, dtype=np.float64)
-    n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
-    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
-    if periodic:  # the box is half-open: a centre drawn at the far side exactly wraps to 0
-        centres = np.where(centres >= dims, 0.0, centres)
-    normals = rng.standard_normal((n, 3))
+    _, cell, points, n = _nearest_centre(shape, spacing, rng, periodic)
+    normals = rng.standard_normal((n, 3))  # each cell's normal and offset, drawn after the centres
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     offsets = rng.uniform(0.0, max(spacing, 1.0), n)
-    tree = cKDTree(centres, boxsize=dims if periodic else None)
-    grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
-    points = grid.reshape(-1, 3)
-    _, cell = tree.query(points)
     return (np.einsum("ij,ij->i", points, normals[cell]) + offsets[cell]).reshape(shape)
 
 

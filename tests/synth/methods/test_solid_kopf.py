@@ -509,6 +509,19 @@ def test_slice_coherence_in_stacks_is_the_per_slice_mean(shape, step: int, threa
     assert 0.0 < got < 1.0
 
 
+def _spy_phase(monkeypatch: pytest.MonkeyPatch, module, name: str) -> list[tuple[tuple[int, ...], float]]:
+    """Record the shape and spacing of every call of ``module.name`` (a start's phase), which still runs."""
+    calls: list[tuple[tuple[int, ...], float]] = []
+    real = getattr(module, name)
+
+    def spy(shape, spacing, rng, *, periodic=True):  # type: ignore[no-untyped-def]
+        calls.append((tuple(shape), spacing))
+        return real(shape, spacing, rng, periodic=periodic)
+
+    monkeypatch.setattr(module, name, spy)
+    return calls
+
+
 def test_shells_around_centres_for_small_onions_drawn_at_the_coarsest_level(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -521,14 +534,7 @@ def test_shells_around_centres_for_small_onions_drawn_at_the_coarsest_level(
     from texsynth.synth.output.volume import mid_slices
     from texsynth.synth.pixel.laminar import fringe_centres
 
-    calls: list[tuple[tuple[int, ...], float]] = []
-    real = kopf.centre_phase
-
-    def spy(shape, spacing, rng, *, periodic=True):  # type: ignore[no-untyped-def]
-        calls.append((tuple(shape), spacing))
-        return real(shape, spacing, rng, periodic=periodic)
-
-    monkeypatch.setattr(kopf, "centre_phase", spy)
+    calls = _spy_phase(monkeypatch, kopf, "centre_phase")
     onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
     params = {**SMALL, "structure": "laminar", "shells": "auto"}
     run = synthesize("solid-kopf", onions, size=SIZE, params=params, seed=2)
@@ -615,14 +621,7 @@ def test_domains_start_from_straight_stacks_at_their_spacing(monkeypatch: pytest
     from texsynth.synth.pixel.laminar import DOMAIN_SPACING
 
     module = kopf if method == "solid-kopf" else cw
-    calls: list[tuple[tuple[int, ...], float]] = []
-    real = module.domain_phase
-
-    def spy(shape, spacing, rng, *, periodic=True):  # type: ignore[no-untyped-def]
-        calls.append((tuple(shape), spacing))
-        return real(shape, spacing, rng, periodic=periodic)
-
-    monkeypatch.setattr(module, "domain_phase", spy)
+    calls = _spy_phase(monkeypatch, module, "domain_phase")
     onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
     small = SMALL if method == "solid-kopf" else {"levels": 2, "iterations": 1, "neighbourhood_size": 5}
     params = {**small, "structure": "laminar", "shells": "domains"}
