@@ -1185,18 +1185,19 @@ CROP_SOLIDS_NOTES = """\
     (0.15), tortuosity 0.22 (0.26) / 0.26 (0.31), coherence 1.02 / 1.00: the same trade as shorter sheets,
     because what grows from noise is too tortuous (0.41 with no start, 0.42 with the `best` last step),
     while the crop's disordered centre holds short straight pieces;
-  - *domains of straight stacks* (a prototype, the lead for the next session: the coarsest level's start
-    cut into Voronoi cells about D periods across, each a straight stack of sheets with a random normal
-    and offset, like turbostratic crystallites; `solid-kopf` defaults otherwise). On the core, seeds 1-3 /
+  - *domains of straight stacks* (a prototype, since then the opt-in `shells='domains'`, docs/solid.md:
+    the coarsest level's start cut into Voronoi cells about D periods across, each a straight stack of
+    sheets with a random normal and offset, like turbostratic crystallites; `solid-kopf` defaults
+    otherwise). On the core, seeds 1-3 /
     4-6: D = 2 length 0.09 (0.11) / 0.11 (0.14), tortuosity 0.22 (0.24) / 0.22 (0.27), orientation KL
     0.05 (0.07) / 0.04 (0.08), coherence 1.03 / 1.03, against the default's 0.18 (0.21) / 0.16 (0.21),
     0.19 (0.24) / 0.18 (0.25), 0.07 (0.13) / 0.08 (0.15), 1.08 / 1.05: the length of the 2D line (0.09)
     and the tortuosity of the crop's own floor (0.21-0.23) and of the line (0.21). D = 3: length 0.13,
     tortuosity 0.16, orientation KL 0.09 (0.14). On the onion crop (long arcs) D = 2 is worse (tortuosity
     0.34, coherence 0.87) and D = 3 about the default (length 0.13, tortuosity 0.21, orientation KL
-    worst 0.21). Not built: no exemplar measure tried so far tells the core from the onion crop (their
-    fringes' median length 2.4 / 2.6 periods, tortuosity 1.10 / 1.09; soot 2.2-2.4 periods; the truths
-    5.8-13).
+    worst 0.21). Not the default: no exemplar measure tried so far tells the core from the onion crop
+    (their fringes' median length 2.4 / 2.6 periods, tortuosity 1.10 / 1.09; soot 2.2-2.4 periods; the
+    truths 5.8-13).
   - *eq 4 on coherence bins* (the matches' use of the exemplar's coherence levels pulled toward the
     exemplar's, as `orientation_gain` does for orientations; a prototype, gains 8 and 32): coherence
     1.15, length 0.19 (0.24): the over-order is not in which exemplar places the volume copies but in how

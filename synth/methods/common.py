@@ -17,6 +17,7 @@ from texsynth.synth.pixel.laminar import (
     CENTRE_SPACINGS,
     CENTRED_MIN_CONCENTRATION,
     CONCENTRIC_MIN_EXPLAINED,
+    DOMAIN_SPACING,
     MIN_PERIOD_SIDE,
 )
 
@@ -293,11 +294,11 @@ class SolidParams(MethodParams):
 
 
 #: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`).
-CENTRE_SPACING_RANGE = (CENTRE_SPACINGS[0], CENTRE_SPACINGS[-1])
+CENTRE_SPACING_RANGE = (min(DOMAIN_SPACING, CENTRE_SPACINGS[0]), CENTRE_SPACINGS[-1])
 
 
 #: The laminar start's sheets (:func:`shells_field`).
-ShellKind = Literal["auto", "surfaces", "centres"]
+ShellKind = Literal["auto", "surfaces", "centres", "domains"]
 
 
 def shells_field(default: str, measured: str) -> Any:
@@ -305,13 +306,16 @@ def shells_field(default: str, measured: str) -> Any:
     measured (``measured``, appended to the details): ``shells: ShellKind = shells_field(...)``."""
     return Field(
         default,
-        description="Shape of the starting sheets: surfaces of a smooth random field, or shells around "
-        "random centres (onions); automatic: from the fringes' curvature.",
+        description="Starting sheets: surfaces of a random field, shells around random centres (onions) "
+        "or straight stacks in random domains; auto: by the fringes' curvature.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
                 "length; 'centres': spherical shells around random centres centre_spacing periods apart "
-                "(closed onion shells); 'auto': 'centres' when the exemplars' fringes curve around points "
+                "(closed onion shells); 'domains': straight stacks, each with its own random normal, in "
+                "random cells centre_spacing periods apart (turbostratic crystallites: short straight "
+                f"fringes; {DOMAIN_SPACING:g} when empty, measured on the onion core crop); 'auto': "
+                "'centres' when the exemplars' fringes curve around points "
                 f"(at least {CENTRED_MIN_CONCENTRATION:g} of their centres of curvature gather: many small "
                 "onions) or around one point (one centre explains at least "
                 f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight: a particle "
@@ -329,8 +333,8 @@ class ShellParams(SolidParams):
         None,
         ge=CENTRE_SPACING_RANGE[0],
         le=CENTRE_SPACING_RANGE[1],
-        description="Distance between the onions' centres with shells='centres', in fringe periods; empty: "
-        "fitted to the exemplar's curvature.",
+        description="Distance between the onions' centres (shells='centres') or the domains' (shells="
+        f"'domains'), in fringe periods; empty: fitted, or {DOMAIN_SPACING:g} for domains.",
         json_schema_extra=ui(
             details=(
                 "One centre per cube of this side (periods, "

@@ -72,6 +72,7 @@ from texsynth.synth.params import ui
 from texsynth.synth.pixel.laminar import (
     centre_phase,
     choose_shells,
+    domain_phase,
     dominant_period,
     fitted_structure_length,
     laminar_volume,
@@ -775,9 +776,10 @@ class _ChenWangLoop:
                     periodic=params.periodic,
                 )
                 start_volume = sheets(level_phase(phi, step.level), stack / scale, values)
-            elif self.schedule.shells == "centres":  # onions: shells around random centres
+            elif self.schedule.shells in ("centres", "domains"):  # onions, or straight stacks in cells
                 spacing = float(self.schedule.centre_spacing or 0.0) * self.schedule.period / scale
-                phase = centre_phase(shape, spacing, rng, periodic=params.periodic)
+                drawn = centre_phase if self.schedule.shells == "centres" else domain_phase
+                phase = drawn(shape, spacing, rng, periodic=params.periodic)
                 start_volume = sheets(phase, self.schedule.period / scale, values)
             else:
                 start_volume = laminar_volume(

@@ -77,6 +77,7 @@ from texsynth.synth.pixel.laminar import (
     Shells,
     centre_phase,
     choose_shells,
+    domain_phase,
     dominant_period,
     fitted_oriented_length,
     fitted_structure_length,
@@ -678,9 +679,10 @@ def _run_solid_kopf(
     if period > 0 and phi is None:
         length = resolved_length(params.structure_length, partial(fitted_structure_length, run.constrained()))
         shells = choose_shells(params.shells, params.centre_spacing, run.constrained())
-        if shells.kind == "centres":  # drawn at the coarsest level, the only one the start reads
+        if shells.kind in ("centres", "domains"):  # drawn at the coarsest level, the only one the start reads
             spacing = shells.spacing * period / 2.0**coarsest
-            start_phase = centre_phase(plan.shapes[-1], spacing, run.rng, periodic=params.periodic)
+            drawn = centre_phase if shells.kind == "centres" else domain_phase
+            start_phase = drawn(plan.shapes[-1], spacing, run.rng, periodic=params.periodic)
         else:
             phi = laminar_phase(
                 plan.shapes[0], length * period, run.rng, periodic=params.periodic, centred=centred

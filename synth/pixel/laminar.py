@@ -23,6 +23,7 @@ scale and their fringes' curvature (:func:`fitted_structure_length`), the crumpl
 keep an orientation (:func:`fitted_oriented_length`); the field scales with its length, so tables measured
 once on the starts' own slices hold at every period. Shells around centres (``solid-chen-wang``): do the
 fringes curve around points, how far apart (:func:`curvature_centres`), or round one (:func:`concentric_fit`)?
+Or straight stacks in random cells of a few periods, turbostratic crystallites (:func:`domain_phase`).
 
 References
 ----------
@@ -54,6 +55,7 @@ __all__ = [
     "CENTRE_SPACINGS",
     "CENTRE_VOTE_SIGMA",
     "CONCENTRIC_MIN_EXPLAINED",
+    "DOMAIN_SPACING",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
     "MIN_PERIOD_SIDE",
@@ -72,6 +74,7 @@ __all__ = [
     "choose_shells",
     "concentric_fit",
     "curvature_centres",
+    "domain_phase",
     "dominant_period",
     "exemplar_bend",
     "fitted_oriented_length",
@@ -355,6 +358,17 @@ def centre_phase(
     distance wraps at the volume's sides (a k-d tree with the volume as its box).
     Returns ``(D, H, W)`` float64.
     """
+    distance, _, _, _ = _nearest_centre(shape, spacing, rng, periodic)
+    return distance.reshape(shape)
+
+
+def _nearest_centre(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, periodic: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Random centres, one per ``spacing**3`` voxels (at least one), uniform in the volume, and for each
+    voxel (raster order) the distance to its nearest centre and that centre's index, wrapping at the sides
+    with ``periodic`` (a k-d tree with the volume as its box); also the voxels' coordinates ``(N, 3)`` and
+    the number of centres. The centres are the only draws from ``rng``."""
     dims = np.asarray(shape, dtype=np.float64)
     n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
     centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
@@ -362,8 +376,33 @@ def centre_phase(
         centres = np.where(centres >= dims, 0.0, centres)
     tree = cKDTree(centres, boxsize=dims if periodic else None)
     grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
-    distance, _ = tree.query(grid.reshape(-1, 3))
-    return distance.reshape(shape)
+    points = grid.reshape(-1, 3)
+    distance, index = tree.query(points)
+    return distance, index, points, n
+
+
+#: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real onion core crop
+#: (short straight fringes around a disordered centre), 2 periods gave `solid-kopf`'s slices the fringe
+#: lengths of the best 2D output and 3 periods longer ones (docs/laminar.md, "The core's over-order").
+DOMAIN_SPACING = 2.0
+
+
+def domain_phase(
+    shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, *, periodic: bool = True
+) -> np.ndarray:
+    """The phase (voxels) of straight stacks in random domains: turbostratic crystallites.
+
+    One domain per ``spacing**3`` voxels (at least one): the Voronoi cell of a centre drawn uniformly in
+    the volume (with ``periodic``, distances wrap at its sides), whose phase is ``n . r + c`` with a
+    random unit normal ``n`` and a random offset ``c`` in ``[0, spacing)``: ``|grad phi| = 1`` inside
+    each cell, so ``cos(2 pi phi / period)`` stacks straight sheets there, each cell its own way.
+    Returns ``(D, H, W)`` float64.
+    """
+    _, cell, points, n = _nearest_centre(shape, spacing, rng, periodic)
+    normals = rng.standard_normal((n, 3))  # each cell's normal and offset, drawn after the centres
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    offsets = rng.uniform(0.0, max(spacing, 1.0), n)
+    return (np.einsum("ij,ij->i", points, normals[cell]) + offsets[cell]).reshape(shape)
 
 
 def centre_phase_reference(
@@ -777,9 +816,11 @@ class Shells:
     """The laminar start's sheets (:func:`choose_shells`) and the measures that chose them (None: not
     needed, so not measured)."""
 
-    #: 'surfaces' (around the zero level of a random field) or 'centres' (around random centres).
+    #: 'surfaces' (around the zero level of a random field), 'centres' (around random centres) or
+    #: 'domains' (straight stacks in random cells).
     kind: str
-    #: :func:`fringe_centres`' concentration and the centres' spacing (periods: given, else fitted).
+    #: :func:`fringe_centres`' concentration and the centres' spacing (periods: given, else fitted; the
+    #: domains': given, else :data:`DOMAIN_SPACING`).
     concentration: float | None
     spacing: float | None
     #: :func:`fringe_concentricity`: how much one centre explains the exemplars' orientations.
@@ -787,13 +828,16 @@ class Shells:
 
 
 def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarray]) -> Shells:
-    """``shells`` ('auto', 'surfaces' or 'centres') resolved for ``images``: 'auto' takes the centres where
-    the fringes' centres of curvature gather (:data:`CENTRED_MIN_CONCENTRATION`: many small onions) or one
-    centre explains their orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole); the
-    centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`). Only what the
-    choice needs is measured: 'surfaces' nothing, 'centres' the spacing when none is given."""
+    """``shells`` ('auto', 'surfaces', 'centres' or 'domains') resolved for ``images``: 'auto' takes the
+    centres where the fringes' centres of curvature gather (:data:`CENTRED_MIN_CONCENTRATION`: many small
+    onions) or one centre explains their orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen
+    whole); the centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`).
+    Only what the choice needs is measured: 'surfaces' nothing, 'centres' the spacing when none is given,
+    'domains' nothing (their spacing: the given one, else :data:`DOMAIN_SPACING`)."""
     if shells == "surfaces":
         return Shells("surfaces", None, None, None)
+    if shells == "domains":
+        return Shells("domains", None, DOMAIN_SPACING if spacing is None else float(spacing), None)
     concentration = fitted = None
     if shells == "auto" or spacing is None:
         concentration, fitted = fringe_centres(images)

@@ -509,6 +509,19 @@ def test_slice_coherence_in_stacks_is_the_per_slice_mean(shape, step: int, threa
     assert 0.0 < got < 1.0
 
 
+def _spy_phase(monkeypatch: pytest.MonkeyPatch, module, name: str) -> list[tuple[tuple[int, ...], float]]:
+    """Record the shape and spacing of every call of ``module.name`` (a start's phase), which still runs."""
+    calls: list[tuple[tuple[int, ...], float]] = []
+    real = getattr(module, name)
+
+    def spy(shape, spacing, rng, *, periodic=True):  # type: ignore[no-untyped-def]
+        calls.append((tuple(shape), spacing))
+        return real(shape, spacing, rng, periodic=periodic)
+
+    monkeypatch.setattr(module, name, spy)
+    return calls
+
+
 def test_shells_around_centres_for_small_onions_drawn_at_the_coarsest_level(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -521,14 +534,7 @@ def test_shells_around_centres_for_small_onions_drawn_at_the_coarsest_level(
     from texsynth.synth.output.volume import mid_slices
     from texsynth.synth.pixel.laminar import fringe_centres
 
-    calls: list[tuple[tuple[int, ...], float]] = []
-    real = kopf.centre_phase
-
-    def spy(shape, spacing, rng, *, periodic=True):  # type: ignore[no-untyped-def]
-        calls.append((tuple(shape), spacing))
-        return real(shape, spacing, rng, periodic=periodic)
-
-    monkeypatch.setattr(kopf, "centre_phase", spy)
+    calls = _spy_phase(monkeypatch, kopf, "centre_phase")
     onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
     params = {**SMALL, "structure": "laminar", "shells": "auto"}
     run = synthesize("solid-kopf", onions, size=SIZE, params=params, seed=2)
@@ -600,3 +606,40 @@ def test_a_flat_exemplar_with_a_structured_start_finishes(structure: str) -> Non
     flat = np.full((20, 20), 0.3, dtype=np.float32)
     run = synthesize("solid-kopf", flat, size=SIZE, params={**SMALL, "structure": structure}, seed=1)
     assert run.stats["final_step"] in ("best", "average") and np.isfinite(run.image).all()
+
+
+@pytest.mark.parametrize("method", ["solid-kopf", "solid-chen-wang"])
+def test_domains_start_from_straight_stacks_at_their_spacing(monkeypatch: pytest.MonkeyPatch, method) -> None:
+    """``shells='domains'`` (opt-in, both solids): the laminar start's sheets are :func:`domain_phase`'s
+    straight stacks, drawn once at the coarsest level, :data:`DOMAIN_SPACING` periods apart unless
+    ``centre_spacing`` says otherwise, scaled to its voxels; the stats say so; the volume differs from the
+    surfaces' start and the same seed gives the same bytes."""
+    import texsynth.synth.methods.solid_chen_wang as cw
+    import texsynth.synth.methods.solid_kopf as kopf
+    from texsynth.synth.io.laminar import onion_volume
+    from texsynth.synth.output.volume import mid_slices
+    from texsynth.synth.pixel.laminar import DOMAIN_SPACING
+
+    module = kopf if method == "solid-kopf" else cw
+    calls = _spy_phase(monkeypatch, module, "domain_phase")
+    onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
+    small = SMALL if method == "solid-kopf" else {"levels": 2, "iterations": 1, "neighbourhood_size": 5}
+    params = {**small, "structure": "laminar", "shells": "domains"}
+    run = synthesize(method, onions, size=SIZE, params=params, seed=2)
+    stats = run.stats
+    assert stats["shells"] == "domains" and stats["centre_spacing"] == DOMAIN_SPACING
+    assert len(calls) == 1
+    scale = 2 ** (stats["levels"] - 1)
+    assert calls[0] == (
+        tuple(s // scale for s in SIZE),
+        pytest.approx(DOMAIN_SPACING * stats["period"] / scale),
+    )
+    again = synthesize(method, onions, size=SIZE, params=params, seed=2)
+    assert again.image.tobytes() == run.image.tobytes()
+    wider = synthesize(method, onions, size=SIZE, params={**params, "centre_spacing": 4.0}, seed=2)
+    assert wider.stats["centre_spacing"] == 4.0 and calls[-1][1] == pytest.approx(
+        4.0 * stats["period"] / scale
+    )
+    surfaces = synthesize(method, onions, size=SIZE, params={**params, "shells": "surfaces"}, seed=2)
+    assert surfaces.stats["shells"] == "surfaces" and len(calls) == 3  # no new call
+    assert surfaces.image.tobytes() != run.image.tobytes()

@@ -535,3 +535,64 @@ def test_choose_shells_measures_only_what_the_choice_needs(monkeypatch: pytest.M
         auto.spacing == pytest.approx(fitted.spacing)
         and auto.concentration >= laminar.CENTRED_MIN_CONCENTRATION
     )
+
+
+def test_domain_phase_stacks_straight_sheets_in_random_cells() -> None:
+    """``domain_phase``: one cell per ``spacing**3`` voxels, the nearest centre's (wrapping with
+    ``periodic``); inside a cell the phase is ``n . r + c``, a plane wave of unit gradient (straight
+    sheets), each cell its own normal; the same generator state gives the same phase."""
+    from scipy.spatial import cKDTree
+
+    from texsynth.synth.pixel.laminar import domain_phase
+
+    shape, spacing = (24, 20, 16), 6.0
+    phi = domain_phase(shape, spacing, np.random.default_rng(3))
+    assert phi.shape == shape and phi.dtype == np.float64
+    assert np.array_equal(phi, domain_phase(shape, spacing, np.random.default_rng(3)))
+    # the draws, in the function's order: centres, normals, offsets
+    rng = np.random.default_rng(3)
+    n = round(24 * 20 * 16 / spacing**3)
+    dims = np.array(shape, dtype=np.float64)
+    centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
+    normals = rng.standard_normal((n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    offsets = rng.uniform(0.0, spacing, n)
+    grid = np.indices(shape).reshape(3, -1).T.astype(np.float64)
+    # the cell of each voxel by brute force over the centres, distances wrapping at the sides
+    d = np.abs(grid[:, None, :] - centres[None, :, :])
+    d = np.minimum(d, dims - d)
+    cell = np.argmin((d**2).sum(axis=2), axis=1)
+    expected = (grid * normals[cell]).sum(axis=1) + offsets[cell]
+    tie = np.sort((d**2).sum(axis=2), axis=1)
+    clear = tie[:, 1] - tie[:, 0] > 1e-9  # voxels equidistant from two centres may go either way
+    assert np.allclose(phi.ravel()[clear], expected[clear])
+    # straight sheets: along x (axis 2) the phase steps by the cell's n_x wherever both voxels share a cell
+    cells = cell.reshape(shape)
+    same = cells[:, :, 1:] == cells[:, :, :-1]
+    assert same.mean() > 0.5
+    sure = clear.reshape(shape)
+    pairs = same & sure[:, :, 1:] & sure[:, :, :-1]
+    steps, want = np.diff(phi, axis=2)[pairs], normals[cells[:, :, 1:], 2][pairs]
+    assert np.allclose(steps, want)
+    used = np.unique(cell)
+    assert len(used) > 1 and len(np.unique(np.round(normals[used], 6), axis=0)) == len(used)
+    # not periodic: the plain nearest centre
+    flat = domain_phase(shape, spacing, np.random.default_rng(3), periodic=False)
+    _, plain = cKDTree(centres).query(grid)
+    assert np.allclose(flat.ravel(), (grid * normals[plain]).sum(axis=1) + offsets[plain])
+
+
+def test_choose_shells_takes_domains_at_their_spacing_without_measuring(monkeypatch) -> None:
+    """'domains' measures nothing: its spacing is the given one, else :data:`DOMAIN_SPACING`."""
+    import texsynth.synth.pixel.laminar as laminar
+
+    def fail(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise AssertionError("measured")
+
+    monkeypatch.setattr(laminar, "fringe_centres", fail)
+    monkeypatch.setattr(laminar, "fringe_concentricity", fail)
+    image = np.zeros((32, 32), dtype=np.float32)
+    assert laminar.choose_shells("domains", None, [image]) == laminar.Shells(
+        "domains", None, laminar.DOMAIN_SPACING, None
+    )
+    assert laminar.choose_shells("domains", 3.5, [image]).spacing == 3.5
