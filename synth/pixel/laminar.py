@@ -25,10 +25,8 @@ once on the starts' own slices hold at every period. Shells around centres (``so
 fringes curve around points, how far apart (:func:`curvature_centres`), or round one (:func:`concentric_fit`)?
 Or straight stacks in random cells of a few periods, turbostratic crystallites (:func:`domain_phase`).
 
-References
-----------
-A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis of
-directional textures for virtual material design", ICIP 2014: the structure layer first, then the texture.
+Reference: A. Akl, C. Yaacoub, M. Donias, J.-P. Da Costa, C. Germain, "Structure tensor based synthesis
+of directional textures for virtual material design", ICIP 2014: the structure layer first, then the texture.
 """
 
 from __future__ import annotations
