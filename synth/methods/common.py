@@ -293,7 +293,8 @@ class SolidParams(MethodParams):
         return value
 
 
-#: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`).
+#: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`), down to the
+#: domains' default (:data:`DOMAIN_SPACING`).
 CENTRE_SPACING_RANGE = (min(DOMAIN_SPACING, CENTRE_SPACINGS[0]), CENTRE_SPACINGS[-1])
 
 

@@ -380,8 +380,9 @@ def _nearest_centre(
 
 
 #: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real onion core crop
-#: (short straight fringes around a disordered centre), 2 periods gave `solid-kopf`'s slices the fringe
-#: lengths of the best 2D output and 3 periods longer ones (docs/laminar.md, "The core's over-order").
+#: (short straight fringes around a disordered centre), 2 periods brought `solid-kopf`'s slices' fringe
+#: lengths close to the best 2D output's and 3 periods left them longer (docs/solid.md, "Straight stacks
+#: in domains").
 DOMAIN_SPACING = 2.0
 
 
