@@ -17,6 +17,7 @@ from texsynth.synth.pixel.laminar import (
     CENTRE_SPACINGS,
     CENTRED_MIN_CONCENTRATION,
     CONCENTRIC_MIN_EXPLAINED,
+    DOMAIN_MAX_BEND,
     DOMAIN_SPACING,
     MIN_PERIOD_SIDE,
 )
@@ -294,12 +295,12 @@ class SolidParams(MethodParams):
 
 
 #: ``centre_spacing`` bounds (periods): the calibrated table's ends (:data:`CENTRE_SPACINGS`), down to the
-#: domains' default (:data:`DOMAIN_SPACING`).
-CENTRE_SPACING_RANGE = (min(DOMAIN_SPACING, CENTRE_SPACINGS[0]), CENTRE_SPACINGS[-1])
+#: smallest domains measured (2 periods, below :data:`DOMAIN_SPACING`).
+CENTRE_SPACING_RANGE = (min(2.0, DOMAIN_SPACING, CENTRE_SPACINGS[0]), CENTRE_SPACINGS[-1])
 
 
 #: The laminar start's sheets (:func:`shells_field`).
-ShellKind = Literal["auto", "surfaces", "centres", "domains"]
+ShellKind = Literal["auto", "sheets", "surfaces", "centres", "domains"]
 
 
 def shells_field(default: str, measured: str) -> Any:
@@ -307,19 +308,21 @@ def shells_field(default: str, measured: str) -> Any:
     measured (``measured``, appended to the details): ``shells: ShellKind = shells_field(...)``."""
     return Field(
         default,
-        description="Starting sheets: surfaces of a random field, shells around random centres (onions) "
-        "or straight stacks in random domains; auto: by the fringes' curvature.",
+        description="Starting sheets: surfaces of a random field, shells around centres (onions) or "
+        "straight stacks in domains; sheets, auto: chosen from the exemplars' fringes.",
         json_schema_extra=ui(
             details=(
                 "'surfaces': sheets at the period around the zero level of a random field of the sheets' "
                 "length; 'centres': spherical shells around random centres centre_spacing periods apart "
                 "(closed onion shells); 'domains': straight stacks, each with its own random normal, in "
                 "random cells centre_spacing periods apart (turbostratic crystallites: short straight "
-                f"fringes; {DOMAIN_SPACING:g} when empty, measured on the onion core crop); 'auto': "
-                "'centres' when the exemplars' fringes curve around points "
-                f"(at least {CENTRED_MIN_CONCENTRATION:g} of their centres of curvature gather: many small "
-                "onions) or around one point (one centre explains at least "
-                f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight: a particle "
+                f"fringes; {DOMAIN_SPACING:g} when empty, measured on real crops); 'sheets': 'domains' "
+                f"when the fringes keep their orientation less than {DOMAIN_MAX_BEND:g} periods and their "
+                "centres of curvature do not gather (isotropic exemplars of short straight pieces: "
+                "disordered cores, soot), else 'surfaces'; 'auto': 'centres' when at least "
+                f"{CENTRED_MIN_CONCENTRATION:g} of the fringes' centres of curvature gather (many small "
+                "onions), else 'domains' as 'sheets', else 'centres' when one centre explains at least "
+                f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight (a particle "
                 "seen whole), else 'surfaces'. Only with the laminar start. " + measured
             )
         ),

@@ -216,8 +216,9 @@ class SolidChenWangParams(ShellParams):
     )
     shells: ShellKind = shells_field(
         "auto",
-        "Default 'auto': the centres measured better on the onion truth (sessions cw6-cw8) and on the real "
-        "onion crops (session 17; docs/solid.md).",
+        "Default 'auto': the centres measured better on the onion truth (sessions cw6-cw8) and the onion "
+        "crop's arcs (session 17), the domains on the real crops of short straight fringes (session 19; "
+        "docs/solid.md).",
     )
     oriented_length: float = Field(
         ORIENTED_LENGTH,
@@ -610,7 +611,7 @@ class _Schedule:
     stack_period: float = 0.0
     #: The start's length (periods): the sheets' (laminar) or the crumples' (oriented); 0 without a start.
     length: float = 0.0
-    #: The laminar start's sheets: 'surfaces' or 'centres' (``shells``); None without the laminar start.
+    #: The laminar start's sheets: 'surfaces', 'centres' or 'domains' (``shells``); None without it.
     shells: str | None = None
     #: The exemplars' centres of curvature: their concentration and the fitted spacing (periods); None
     #: without the laminar start.
@@ -619,6 +620,9 @@ class _Schedule:
     #: How much one centre per exemplar explains their orientations (``concentric_fit``); None without
     #: the laminar start.
     concentric: float | None = None
+    #: How far the exemplars' fringes keep their orientation (periods, ``bend_length``); None when the
+    #: choice of the sheets did not need it.
+    bend: float | None = None
 
     @property
     def laminar_start(self) -> bool:
@@ -660,7 +664,7 @@ class _Schedule:
         if coarse_iterations is None:
             coarse_iterations = iterations
         period = stack = length = 0.0
-        shells = concentration = spacing = concentric = None
+        shells = concentration = spacing = concentric = bend = None
         if start != "none":
             period = float(np.mean([dominant_period(np.asarray(exemplars[p])) for p in params.planes]))
         if start == "oriented":  # the sheets' spacing behind the planes' apparent periods (as solid-kopf)
@@ -672,7 +676,7 @@ class _Schedule:
             length = resolved_length(params.structure_length, lambda: chen_wang_structure_length(images))
             chosen = choose_shells(params.shells, params.centre_spacing, images)
             shells, concentration = chosen.kind, chosen.concentration
-            spacing, concentric = chosen.spacing, chosen.concentric
+            spacing, concentric, bend = chosen.spacing, chosen.concentric, chosen.bend
         return cls(
             iterations,
             coarse_iterations,
@@ -686,6 +690,7 @@ class _Schedule:
             concentration,
             spacing,
             concentric,
+            bend,
         )
 
     def levels(self, levels: int) -> int:
@@ -734,13 +739,15 @@ class _ChenWangLoop:
             else None,
             # The start's length in periods (the sheets' fitted or given; the crumples'), None without one.
             "start_length": schedule.length if schedule.laminar_start else None,
-            # The laminar start's sheets ('surfaces' or 'centres'), None without it.
+            # The laminar start's sheets ('surfaces', 'centres' or 'domains'), None without it.
             "shells": schedule.shells,
             # The exemplars' centres of curvature (share gathered) and the centres' spacing (periods).
             "centre_concentration": schedule.concentration,
             "centre_spacing": schedule.centre_spacing,
             # How much one centre explains the exemplars' orientations (a particle seen whole).
             "concentric_explained": schedule.concentric,
+            # How far the exemplars' fringes keep their orientation (periods: short ones get domains).
+            "fringe_bend": schedule.bend,
             "mean_match_distance": {},
             "mean_candidates": {},
             "level_seconds": {},

@@ -206,9 +206,10 @@ class SolidKopfParams(ShellParams):
         ),
     )
     shells: ShellKind = shells_field(
-        "surfaces",
-        "Default 'surfaces': 'auto' draws rings closer to the onion truth's, with better orientations, but "
-        "its fringe lengths and the real onion crop's tortuosity measured worse (session 17; docs/solid.md).",
+        "sheets",
+        "Default 'sheets': domains measured better on the real crops of short straight fringes and the "
+        "surfaces on the onion crop's long arcs; 'auto' drew rings closer to the onion truth's but its "
+        "fringe lengths measured worse (sessions 17 and 19; docs/solid.md).",
     )
     oriented_length: float | None = Field(
         ORIENTED_LENGTH,
@@ -592,12 +593,14 @@ class _KopfLoop:
                 "period": self.period if self.period > 0 else None,
                 # The structured start's sheet or crumple length (periods), fitted ('auto') or given.
                 "start_length": self.start_length,
-                # The laminar start's sheets ('surfaces' or 'centres'), the exemplars' centres of curvature
-                # (share gathered), the centres' spacing (periods) and how much one centre explains.
+                # The laminar start's sheets ('surfaces', 'centres' or 'domains'), the exemplars' centres of
+                # curvature (share gathered), the centres' or domains' spacing (periods), how much one
+                # centre explains and how far the fringes keep their orientation (periods).
                 "shells": self.shells.kind if self.shells else None,
                 "centre_concentration": self.shells.concentration if self.shells else None,
                 "centre_spacing": self.shells.spacing if self.shells else None,
                 "concentric_explained": self.shells.concentric if self.shells else None,
+                "fringe_bend": self.shells.bend if self.shells else None,
                 "order_usage": self.order_usage,
             },
         )

@@ -53,6 +53,7 @@ __all__ = [
     "CENTRE_SPACINGS",
     "CENTRE_VOTE_SIGMA",
     "CONCENTRIC_MIN_EXPLAINED",
+    "DOMAIN_MAX_BEND",
     "DOMAIN_SPACING",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
@@ -379,11 +380,16 @@ def _nearest_centre(
     return distance, index, points, n
 
 
-#: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real onion core crop
-#: (short straight fringes around a disordered centre), 2 periods brought `solid-kopf`'s slices' fringe
-#: lengths close to the best 2D output's and 3 periods left them longer (docs/solid.md, "Straight stacks
-#: in domains").
-DOMAIN_SPACING = 2.0
+#: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real crops whose
+#: fringes are short and straight (the onion core, soot-256, the particle's edge, the onion's top),
+#: 2.5 periods gave `solid-kopf` fringe lengths and tortuosity closer to the exemplars' than 2 or 3
+#: (docs/solid.md, "Straight stacks in domains, chosen").
+DOMAIN_SPACING = 2.5
+#: ``shells='sheets'``: exemplars whose fringes keep their orientation less than this (periods,
+#: :func:`bend_length`) without gathering their centres of curvature are short straight pieces, started
+#: from domains; the real crops measured 1.6-2.15 (domains better) against the onion crop's 2.4 (surfaces
+#: better; docs/solid.md).
+DOMAIN_MAX_BEND = 2.3
 
 
 def domain_phase(
@@ -824,29 +830,48 @@ class Shells:
     spacing: float | None
     #: :func:`fringe_concentricity`: how much one centre explains the exemplars' orientations.
     concentric: float | None
+    #: The exemplars' mean :func:`bend_length` (periods): how far their fringes keep their orientation.
+    bend: float | None = None
 
 
 def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarray]) -> Shells:
-    """``shells`` ('auto', 'surfaces', 'centres' or 'domains') resolved for ``images``: 'auto' takes the
-    centres where the fringes' centres of curvature gather (:data:`CENTRED_MIN_CONCENTRATION`: many small
-    onions) or one centre explains their orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen
-    whole); the centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`).
-    Only what the choice needs is measured: 'surfaces' nothing, 'centres' the spacing when none is given,
-    'domains' nothing (their spacing: the given one, else :data:`DOMAIN_SPACING`)."""
+    """``shells`` ('auto', 'sheets', 'surfaces', 'centres' or 'domains') resolved for ``images``.
+
+    'sheets': 'domains' when the fringes are short straight pieces in every orientation (they keep it
+    less than :data:`DOMAIN_MAX_BEND` periods, :func:`bend_length`; their centres of curvature do not
+    gather, :data:`CENTRED_MIN_CONCENTRATION`; the exemplars are isotropic, :data:`ISOTROPIC_MAX`: the
+    bend of one orientation is measured about its mean, which says nothing of straight laminae), else
+    'surfaces'. 'auto': 'centres' where the centres of curvature gather (many small onions), else
+    'domains' as 'sheets', else 'centres' where one centre explains the orientations
+    (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole), else 'surfaces'. The centres' ``spacing``
+    (periods) is the given one, else fitted (:func:`fringe_centres`); the domains', the given one, else
+    :data:`DOMAIN_SPACING`. Only what the choice needs is measured: 'surfaces' and 'domains' nothing,
+    'centres' the spacing when none is given, 'sheets' no centre's share.
+    """
     if shells == "surfaces":
         return Shells("surfaces", None, None, None)
     if shells == "domains":
         return Shells("domains", None, DOMAIN_SPACING if spacing is None else float(spacing), None)
-    concentration = fitted = None
-    if shells == "auto" or spacing is None:
+    concentration = fitted = concentric = None
+    if shells in ("auto", "sheets") or spacing is None:
         concentration, fitted = fringe_centres(images)
     if shells == "centres":
         return Shells("centres", concentration, fitted if spacing is None else float(spacing), None)
-    concentric = fringe_concentricity(images)
     assert concentration is not None and fitted is not None
-    centred = concentration >= CENTRED_MIN_CONCENTRATION or concentric >= CONCENTRIC_MIN_EXPLAINED
-    kind = "centres" if centred else "surfaces"
-    return Shells(kind, concentration, fitted if spacing is None else float(spacing), concentric)
+    given = fitted if spacing is None else float(spacing)
+    gathered = concentration >= CENTRED_MIN_CONCENTRATION
+    if shells == "auto":
+        concentric = fringe_concentricity(images)
+        if gathered:
+            return Shells("centres", concentration, given, concentric)
+    bend = float(np.mean([bend_length(im) for im in images]))
+    isotropic = float(np.mean([mean_tensor_coherence(im) for im in images])) < ISOTROPIC_MAX
+    if not gathered and bend < DOMAIN_MAX_BEND and isotropic:
+        domains = DOMAIN_SPACING if spacing is None else float(spacing)
+        return Shells("domains", concentration, domains, concentric, bend)
+    if concentric is not None and concentric >= CONCENTRIC_MIN_EXPLAINED:
+        return Shells("centres", concentration, given, concentric, bend)
+    return Shells("surfaces", concentration, given, concentric, bend)
 
 
 def fitted_structure_length(images: Sequence[np.ndarray]) -> float:

@@ -643,3 +643,30 @@ def test_domains_start_from_straight_stacks_at_their_spacing(monkeypatch: pytest
     surfaces = synthesize(method, onions, size=SIZE, params={**params, "shells": "surfaces"}, seed=2)
     assert surfaces.stats["shells"] == "surfaces" and len(calls) == 3  # no new call
     assert surfaces.image.tobytes() != run.image.tobytes()
+
+
+@pytest.mark.parametrize("method", ["solid-kopf", "solid-chen-wang"])
+def test_the_default_sheets_are_domains_for_short_straight_fringes(method: str) -> None:
+    """``solid-kopf``'s default ``shells='sheets'`` and ``solid-chen-wang``'s ``'auto'`` (no centre found
+    here) start from the domains (:data:`DOMAIN_SPACING`) on an isotropic exemplar of short straight
+    fringes: the same bytes as ``shells='domains'``; on long curved sheets, the surfaces' bytes. The stats
+    give the measured bend."""
+    from texsynth.synth.pixel.laminar import DOMAIN_MAX_BEND, DOMAIN_SPACING, domain_phase, laminar_phase
+
+    def slice_of(phi: np.ndarray) -> np.ndarray:
+        noise = np.random.default_rng(0).normal(0.0, 0.05, phi.shape[1:])
+        return np.clip(0.5 + 0.35 * np.cos(2 * np.pi * phi[8] / 6.0) + noise, 0.0, 1.0).astype(np.float32)
+
+    short = slice_of(domain_phase((16, 96, 96), 12.0, np.random.default_rng(0)))
+    long = slice_of(laminar_phase((16, 96, 96), 48.0, np.random.default_rng(0)))
+    small = SMALL if method == "solid-kopf" else {"levels": 2, "iterations": 1, "neighbourhood_size": 5}
+    params = {**small, "structure": "laminar"}
+    default = synthesize(method, short, size=SIZE, params=params, seed=2)
+    assert default.stats["shells"] == "domains" and default.stats["centre_spacing"] == DOMAIN_SPACING
+    assert default.stats["fringe_bend"] < DOMAIN_MAX_BEND
+    domains = synthesize(method, short, size=SIZE, params={**params, "shells": "domains"}, seed=2)
+    assert domains.image.tobytes() == default.image.tobytes() and domains.stats["fringe_bend"] is None
+    curved = synthesize(method, long, size=SIZE, params=params, seed=2)
+    assert curved.stats["shells"] == "surfaces" and curved.stats["fringe_bend"] >= DOMAIN_MAX_BEND
+    surfaces = synthesize(method, long, size=SIZE, params={**params, "shells": "surfaces"}, seed=2)
+    assert surfaces.image.tobytes() == curved.image.tobytes()

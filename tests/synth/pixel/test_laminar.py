@@ -596,3 +596,66 @@ def test_choose_shells_takes_domains_at_their_spacing_without_measuring(monkeypa
         "domains", None, laminar.DOMAIN_SPACING, None
     )
     assert laminar.choose_shells("domains", 3.5, [image]).spacing == 3.5
+
+
+def _sheet_slice(phi: np.ndarray, seed: int) -> np.ndarray:
+    """The middle slice of ``cos(2 pi phi / 6)`` (period 6 px) with a little noise."""
+    noise = np.random.default_rng(seed).normal(0.0, 0.05, phi.shape[1:])
+    return (0.5 + 0.35 * np.cos(2 * np.pi * phi[phi.shape[0] // 2] / 6.0) + noise).astype(np.float32)
+
+
+def test_sheets_take_domains_for_short_straight_fringes_in_every_orientation() -> None:
+    """``shells='sheets'`` (``solid-kopf``'s default; ``'auto'`` when no centre is found): the domains
+    for a slice of domains two periods across (its fringes keep their orientation about 1.2 periods), the
+    surfaces for a slice of surfaces eight periods long (2.9), for small onions (their centres of
+    curvature gather, though their fringes turn within 1.4 periods) and for a straight grating (one
+    orientation: its bend about the mean says nothing); the measured bend is returned."""
+    from texsynth.synth.io.laminar import onion_volume
+
+    domains = _sheet_slice(laminar.domain_phase((16, 96, 96), 12.0, np.random.default_rng(0)), 0)
+    long_sheets = _sheet_slice(laminar.laminar_phase((16, 96, 96), 48.0, np.random.default_rng(0)), 0)
+    onions = mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]
+    r, c = np.mgrid[0:96, 0:96].astype(np.float64)
+    grating = (0.5 + 0.35 * np.cos(2 * np.pi * (0.8 * r + 0.6 * c) / 6.0)).astype(np.float32)
+    grating += np.random.default_rng(1).normal(0.0, 0.05, grating.shape).astype(np.float32)
+
+    chosen = laminar.choose_shells("sheets", None, [domains])
+    assert chosen.kind == "domains" and chosen.spacing == laminar.DOMAIN_SPACING
+    assert chosen.bend is not None and chosen.bend < laminar.DOMAIN_MAX_BEND and chosen.concentric is None
+    assert laminar.choose_shells("sheets", 3.0, [domains]).spacing == 3.0
+    long_chosen = laminar.choose_shells("sheets", None, [long_sheets])
+    assert long_chosen.kind == "surfaces" and long_chosen.bend >= laminar.DOMAIN_MAX_BEND
+    small = laminar.choose_shells("sheets", None, [onions])
+    assert small.kind == "surfaces" and small.bend < laminar.DOMAIN_MAX_BEND
+    assert small.concentration >= laminar.CENTRED_MIN_CONCENTRATION
+    straight = laminar.choose_shells("sheets", None, [grating])
+    assert straight.kind == "surfaces" and straight.bend < laminar.DOMAIN_MAX_BEND
+    assert laminar.mean_tensor_coherence(grating) >= laminar.ISOTROPIC_MAX
+    # 'auto': the centres first (small onions), else as 'sheets', with one centre's share measured
+    assert laminar.choose_shells("auto", None, [onions]).kind == "centres"
+    auto = laminar.choose_shells("auto", None, [domains])
+    assert auto.kind == "domains" and auto.concentric is not None and auto.bend == pytest.approx(chosen.bend)
+    assert laminar.choose_shells("auto", None, [long_sheets]).kind == "surfaces"
+
+
+def test_sheets_on_the_real_crops_choose_as_measured() -> None:
+    """The rule's measured cases (docs/solid.md, "Straight stacks in domains, chosen"): the onion crop's long
+    arcs keep the surfaces; the crops of short straight pieces (the core, the onion's top, the particle's
+    edge) take the domains. None gathers its centres of curvature; all are isotropic."""
+    from pathlib import Path
+
+    from texsynth.synth.io import load_image
+
+    data = Path(__file__).resolve().parents[3] / "benchmarks" / "data"
+    expected = {
+        "hrtem-onion-128.png": "surfaces",
+        "hrtem-onion-core-128.png": "domains",
+        "hrtem-onion-top-128.png": "domains",
+        "hrtem-particle-edge-128.png": "domains",
+    }
+    for name, kind in expected.items():
+        image = np.asarray(load_image(data / name, mode="grey"), dtype=np.float32)
+        chosen = laminar.choose_shells("sheets", None, [image])
+        assert chosen.kind == kind, (name, chosen)
+        assert chosen.concentration < laminar.CENTRED_MIN_CONCENTRATION
+        assert laminar.mean_tensor_coherence(image) < laminar.ISOTROPIC_MAX

@@ -1,0 +1,155 @@
+"""Which starting sheets fit a real laminar crop: surfaces, or straight stacks in domains (issue 24).
+
+Run: ``python -m benchmarks.bench_sheets`` (writes docs/sheets-crops.json, the section ``sheets-crops``
+of docs/solid.md and docs/img/sheets-*.png); ``--report`` rewrites the section from the JSON alone;
+``--only METHOD`` runs that method's rows and keeps the others'.
+
+The real crops whose single exemplar takes the laminar start (the onion crops of benchmarks/data and
+../shared/data's soot-256). For each: what the exemplar measures (:func:`bend_length`, how far its fringes
+keep their orientation; the centres of curvature; one centre's share) and what ``shells='sheets'`` and
+``'auto'`` choose; then ``solid-kopf`` 64^3 with the surfaces and with domains 2, 2.5 and 3 periods apart,
+and ``solid-chen-wang`` with its default and, where that takes the domains, what ``'auto'`` took before
+(the centres where one centre explains the orientations, else the surfaces).
+Seeds 1-3; per axis every second slice against the exemplar (``bench_laminar.against_exemplars``): cells
+``xy / xz / yz`` means over the seeds and the worst seed-axis, the targets of docs/solid.md. Pictures:
+seed 1's mid-slices of the surfaces and of the default domains, for each crop.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image
+
+from benchmarks._report import DATA, machine, write_section
+from benchmarks.bench_laminar import DOCS, MEASURES, _cells, against_exemplars
+from texsynth.synth.api import synthesize
+from texsynth.synth.io import load_image
+from texsynth.synth.output.volume import slices_image
+from texsynth.synth.pixel import laminar
+
+RESULTS = DOCS / "sheets-crops.json"
+CROPS = {
+    "onion": DOCS.parent / "benchmarks" / "data" / "hrtem-onion-128.png",
+    "onion top": DOCS.parent / "benchmarks" / "data" / "hrtem-onion-top-128.png",
+    "onion core": DOCS.parent / "benchmarks" / "data" / "hrtem-onion-core-128.png",
+    "particle edge": DOCS.parent / "benchmarks" / "data" / "hrtem-particle-edge-128.png",
+    "soot-256": DATA / "hrtem-soot-256.png",
+}
+SIDE = 64
+SEEDS = (1, 2, 3)
+KOPF_RUNS = {
+    "surfaces": {"shells": "surfaces"},
+    "domains 2": {"shells": "domains", "centre_spacing": 2.0},
+    "domains 2.5": {"shells": "domains", "centre_spacing": 2.5},
+    "domains 3": {"shells": "domains", "centre_spacing": 3.0},
+}
+
+
+def measures(image: np.ndarray) -> dict[str, Any]:
+    """What the exemplar measures, and what the two automatic choices take."""
+    sheets = laminar.choose_shells("sheets", None, [image])
+    auto = laminar.choose_shells("auto", None, [image])
+    return {
+        "bend": sheets.bend,
+        "concentration": sheets.concentration,
+        "concentric": auto.concentric,
+        "sheets": sheets.kind,
+        "auto": auto.kind,
+    }
+
+
+def _run(method: str, image: np.ndarray, params: dict[str, Any], seed: int) -> dict[str, Any]:
+    planes = dict.fromkeys(("xy", "xz", "yz"), image)
+    cpu, wall = time.process_time(), time.perf_counter()
+    result = synthesize(method, exemplars=planes, size=(SIDE,) * 3, params=params, seed=seed)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    return {
+        "seed": seed,
+        "cpu": cpu,
+        "wall": wall,
+        "shells": result.stats.get("shells"),
+        "axes": against_exemplars(image, result.image),
+        "volume": result.image,
+    }
+
+
+def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Every crop's runs; with ``only``, just those methods' (the others' rows kept from the JSON)."""
+    saved = json.loads(RESULTS.read_text())["crops"] if only and RESULTS.exists() else {}
+    out: dict[str, Any] = {"machine": machine(), "crops": {}}
+    for name, path in CROPS.items():
+        image = np.ascontiguousarray(load_image(path, mode="grey"), dtype=np.float32)
+        crop: dict[str, Any] = {"file": path.name, **measures(image), "rows": {}}
+        runs = [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
+        runs.append(("solid-chen-wang", "default", {}))
+        if crop["auto"] == "domains":  # what 'auto' took before the domains: centres or surfaces
+            before = "centres" if crop["concentric"] >= laminar.CONCENTRIC_MIN_EXPLAINED else "surfaces"
+            runs.append(("solid-chen-wang", before, {"shells": before}))
+        kept = saved.get(name, {}).get("rows", {})
+        for method, key, params in runs:
+            if only and method not in only and f"{method} {key}" in kept:
+                crop["rows"][f"{method} {key}"] = kept[f"{method} {key}"]
+                continue
+            rows = [_run(method, image, params, seed) for seed in SEEDS]
+            if method == "solid-kopf" and key in ("surfaces", "domains 2.5"):
+                slug = f"sheets-{path.stem}-{key.split()[0]}"
+                title = f"{name}, solid-kopf {key}, {SIDE}^3, seed {SEEDS[0]}"
+                Image.fromarray(slices_image(rows[0]["volume"], image, title=title)).save(
+                    DOCS / "img" / f"{slug}.png"
+                )
+            for row in rows:
+                del row["volume"]
+            crop["rows"][f"{method} {key}"] = rows
+            print(f"{name}: {method} {key} done", flush=True)
+        out["crops"][name] = crop
+    RESULTS.write_text(json.dumps(out, indent=1) + "\n")
+    return out
+
+
+def _default(crop: dict[str, Any], key: str) -> bool:
+    method, _, setting = key.partition(" ")
+    if method == "solid-chen-wang":
+        return setting == "default"
+    return setting == ("surfaces" if crop["sheets"] == "surfaces" else "domains 2.5")
+
+
+def report(saved: dict[str, Any]) -> str:
+    head = "| crop (bend, periods) | run | " + " | ".join(label for _, label, *_ in MEASURES) + " | wall s |"
+    lines = [head, "|" + "---|" * (len(MEASURES) + 3)]
+    pictures = []
+    for name, crop in saved["crops"].items():
+        label = f"{name} ({crop['bend']:.2f}: {crop['sheets']}; auto {crop['auto']})"
+        for key, rows in crop["rows"].items():
+            shells = rows[0]["shells"]
+            run = f"{key} ({shells})" if key.endswith("default") else key
+            run = f"**{run}, default**" if _default(crop, key) and not key.endswith("default") else run
+            wall = float(np.median([r["wall"] for r in rows]))
+            lines.append(f"| {label} | {run} | " + " | ".join(_cells(rows)) + f" | {wall:.1f} |")
+        stem = Path(crop["file"]).stem
+        pictures.append(
+            f"![{name}, surfaces](img/sheets-{stem}-surfaces.png) "
+            f"![{name}, domains](img/sheets-{stem}-domains.png)"
+        )
+    foot = f"_Measured on {saved['machine']}; seeds {', '.join(map(str, SEEDS))}, {SIDE}^3._"
+    return "\n".join([*lines, "", foot, "", *pictures])
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--report", action="store_true", help="rewrite the docs from the saved JSON")
+    parser.add_argument("--only", action="append", default=[], help="run only this method (repeatable)")
+    args = parser.parse_args(argv)
+    saved = json.loads(RESULTS.read_text()) if args.report else run(tuple(args.only))
+    markdown = report(saved)
+    write_section("sheets-crops", markdown, DOCS / "solid.md")
+    print(markdown)
+
+
+if __name__ == "__main__":
+    main()
