@@ -31,7 +31,7 @@ of directional textures for virtual material design", ICIP 2014: the structure l
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -357,27 +357,46 @@ def centre_phase(
     distance wraps at the volume's sides (a k-d tree with the volume as its box).
     Returns ``(D, H, W)`` float64.
     """
-    distance, _, _, _ = _nearest_centre(shape, spacing, rng, periodic)
-    return distance.reshape(shape)
+    tree, _ = _centres(shape, spacing, rng, periodic)
+    phase = np.empty(shape, dtype=np.float64)
+    for slab, points in _slabs(shape):
+        distance, _ = tree.query(points, workers=current_threads())
+        phase[slab] = distance.reshape(phase[slab].shape)
+    return phase
 
 
-def _nearest_centre(
+def _centres(
     shape: tuple[int, int, int], spacing: float, rng: np.random.Generator, periodic: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Random centres, one per ``spacing**3`` voxels (at least one), uniform in the volume, and for each
-    voxel (raster order) the distance to its nearest centre and that centre's index, wrapping at the sides
-    with ``periodic`` (a k-d tree with the volume as its box); also the voxels' coordinates ``(N, 3)`` and
-    the number of centres. The centres are the only draws from ``rng``."""
+) -> tuple[cKDTree, int]:
+    """Random centres, one per ``spacing**3`` voxels (at least one), uniform in the volume, in a k-d tree
+    (with ``periodic``, the volume is its box: distances wrap at the sides), and their number. The centres
+    are the only draws from ``rng``."""
     dims = np.asarray(shape, dtype=np.float64)
     n = max(1, round(float(np.prod(dims)) / max(spacing, 1.0) ** 3))
     centres = rng.uniform(0.0, 1.0, (n, 3)) * dims
     if periodic:  # the box is half-open: a centre drawn at the far side exactly wraps to 0
         centres = np.where(centres >= dims, 0.0, centres)
-    tree = cKDTree(centres, boxsize=dims if periodic else None)
-    grid = np.stack(np.meshgrid(*(np.arange(n_, dtype=np.float64) for n_ in shape), indexing="ij"), axis=-1)
-    points = grid.reshape(-1, 3)
-    distance, index = tree.query(points)
-    return distance, index, points, n
+    return cKDTree(centres, boxsize=dims if periodic else None), n
+
+
+#: Voxels per slab of the nearest-centre queries (:func:`_slabs`): the coordinates and answers of one slab
+#: at a time (a 256^3 start held 1.2 GB of them at once).
+NEAREST_SLAB = 2**20
+
+
+def _slabs(shape: tuple[int, int, int]) -> Iterator[tuple[slice, np.ndarray]]:
+    """The volume in slabs of whole first-axis planes, about :data:`NEAREST_SLAB` voxels each: each slab's
+    slice and its voxels' coordinates ``(N, 3)`` (float64, raster order). The k-d tree is queried slab by
+    slab on the job's threads: each voxel's nearest centre is its own answer, the same on any count."""
+    plane = shape[1] * shape[2]
+    rows, cols = (
+        a.ravel() for a in np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape[1:]), indexing="ij")
+    )
+    step = max(1, NEAREST_SLAB // max(plane, 1))
+    for z0 in range(0, shape[0], step):
+        z1 = min(shape[0], z0 + step)
+        depth = np.repeat(np.arange(z0, z1, dtype=np.float64), plane)
+        yield slice(z0, z1), np.column_stack([depth, np.tile(rows, z1 - z0), np.tile(cols, z1 - z0)])
 
 
 #: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real crops whose
@@ -403,11 +422,16 @@ def domain_phase(
     each cell, so ``cos(2 pi phi / period)`` stacks straight sheets there, each cell its own way.
     Returns ``(D, H, W)`` float64.
     """
-    _, cell, points, n = _nearest_centre(shape, spacing, rng, periodic)
+    tree, n = _centres(shape, spacing, rng, periodic)
     normals = rng.standard_normal((n, 3))  # each cell's normal and offset, drawn after the centres
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     offsets = rng.uniform(0.0, max(spacing, 1.0), n)
-    return (np.einsum("ij,ij->i", points, normals[cell]) + offsets[cell]).reshape(shape)
+    phase = np.empty(shape, dtype=np.float64)
+    for slab, points in _slabs(shape):
+        _, cell = tree.query(points, workers=current_threads())
+        phi = np.einsum("ij,ij->i", points, normals[cell]) + offsets[cell]
+        phase[slab] = phi.reshape(phase[slab].shape)
+    return phase
 
 
 def centre_phase_reference(

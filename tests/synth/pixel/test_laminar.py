@@ -659,3 +659,38 @@ def test_sheets_on_the_real_crops_choose_as_measured() -> None:
         assert chosen.kind == kind, (name, chosen)
         assert chosen.concentration < laminar.CENTRED_MIN_CONCENTRATION
         assert laminar.mean_tensor_coherence(image) < laminar.ISOTROPIC_MAX
+
+
+_NEAREST_CENTRE_BYTES = """
+import hashlib, json
+import numpy as np
+from texsynth.synth.pixel import laminar
+from texsynth.synth.threads import use_threads
+out = {}
+for name, drawn in (("centres", laminar.centre_phase), ("domains", laminar.domain_phase)):
+    for periodic in (True, False):
+        digests = []
+        for threads in (1, 2, 4):
+            with use_threads(threads):
+                phi = drawn((20, 24, 28), 5.0, np.random.default_rng(7), periodic=periodic)
+            digests.append(hashlib.sha256(phi.tobytes()).hexdigest())
+        out[f"{name} {periodic}"] = digests
+print(json.dumps(out))
+"""
+
+
+def test_the_nearest_centre_phases_keep_their_bytes_on_any_thread_count() -> None:
+    """The k-d tree is queried on the job's threads (each voxel's nearest centre is its own answer): the
+    centres' and the domains' phases are the same bytes with 1, 2 and 4 threads (a process whose pool has
+    4), periodic or not."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_NUM_THREADS": "4"}
+    done = subprocess.run(
+        [sys.executable, "-c", _NEAREST_CENTRE_BYTES], env=env, capture_output=True, text=True, check=True
+    )
+    digests = json.loads(done.stdout.strip().splitlines()[-1])
+    assert len(digests) == 4 and all(len(set(d)) == 1 for d in digests.values()), digests
