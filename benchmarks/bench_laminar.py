@@ -1172,7 +1172,7 @@ CROP_SOLIDS_NOTES = """\
     the onion crop's xz and yz), the 2D line 0.01-0.02. Grey KL 0.00 and contrast 1.00 everywhere.
 - `solid-chen-wang` takes the fitted shells around centres on the onion crop (one centre explains 0.85 of
   its orientations: docs/solid.md, "One particle seen whole"); on the core, whose fringes keep their
-  orientation 1.95 periods (under 2.3), the domains since session 19 (the centres before: length KS
+  orientation 1.95 periods (under 2.2), the domains since session 19 (the centres before: length KS
   0.15-0.17, worst 0.19; orientation KL 0.03-0.05).
 - `solid-kopf` with `shells='centres'` (opt-in, its rows `shells=centres` above: session 17's `'auto'` on
   these crops, the same bytes) orients better (KL 0.02-0.06, worst 0.07) but leaves the onion crop's floor

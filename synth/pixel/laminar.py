@@ -406,9 +406,9 @@ def _slabs(shape: tuple[int, int, int]) -> Iterator[tuple[slice, np.ndarray]]:
 DOMAIN_SPACING = 2.5
 #: ``shells='sheets'``: exemplars whose fringes keep their orientation less than this (periods,
 #: :func:`bend_length`) without gathering their centres of curvature are short straight pieces, started
-#: from domains; the real crops measured 1.6-2.15 (domains better) against the onion crop's 2.4 (surfaces
-#: better; docs/solid.md).
-DOMAIN_MAX_BEND = 2.3
+#: from domains; seven real crops measured 1.6-2.15 (domains better) against 2.26-2.42 (surfaces better;
+#: docs/solid.md).
+DOMAIN_MAX_BEND = 2.2
 
 
 def domain_phase(
