@@ -6,15 +6,14 @@ of docs/solid.md and docs/img/sheets-*.png); ``--report`` rewrites the section f
 ``shells='sheets'`` on every crop moved by up to 16 px over the whole image (the measure alone).
 
 The real crops whose single exemplar takes the laminar start (the onion crops of benchmarks/data,
-../shared/data's soot-256, two windows of the onion crop moved nearer its core, :data:`SHIFTED`). For
-each: what the exemplar measures (:func:`bend_length`, how far its fringes keep their orientation; the
-centres of curvature; one centre's share) and what ``shells='sheets'`` and ``'auto'`` choose; then
-``solid-kopf`` 64^3 with the surfaces and with domains 2, 2.5 and 3 periods apart, and ``solid-chen-wang``
-with its default and, where that takes the domains, what ``'auto'`` took before (the centres where one
-centre explains the orientations, else the surfaces). Seeds 1-3; per axis every second slice against the
-exemplar (``bench_laminar.against_exemplars``): cells ``xy / xz / yz`` means over the seeds and the worst
-seed-axis, the targets of docs/solid.md. Pictures: seed 1's mid-slices of the surfaces and of the default
-domains, for each crop.
+../shared/data's soot-256, two windows of the onion crop moved nearer its core, :data:`SHIFTED`). For each:
+what the exemplar measures (:func:`bend_length`, how far its fringes keep their orientation; the centres of
+curvature; one centre's share) and what ``shells='sheets'`` and ``'auto'`` choose; then ``solid-kopf`` 64^3
+with the surfaces and with domains 2, 2.5 and 3 periods apart, and ``solid-chen-wang`` with its default and
+with the domains (the surfaces where its default takes the domains). Seeds 1-3; per axis every second slice
+against the exemplar (``bench_laminar.against_exemplars``): cells ``xy / xz / yz`` means over the seeds and
+the worst seed-axis, the targets of docs/solid.md. Pictures: seed 1's mid-slices of the surfaces and of the
+default domains, for each crop.
 """
 
 from __future__ import annotations
@@ -112,9 +111,8 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
         crop: dict[str, Any] = {**where, **measures(image), "rows": {}}
         runs = [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
         runs.append(("solid-chen-wang", "default", {}))
-        if crop["auto"] == "domains":  # what 'auto' took before the domains: centres or surfaces
-            before = "centres" if crop["concentric"] >= laminar.CONCENTRIC_MIN_EXPLAINED else "surfaces"
-            runs.append(("solid-chen-wang", before, {"shells": before}))
+        other = "surfaces" if crop["auto"] == "domains" else "domains"  # the other side of the rule
+        runs.append(("solid-chen-wang", other, {"shells": other}))
         kept = saved.get(name, {}).get("rows", {})
         for method, key, params in runs:
             if only and method not in only and f"{method} {key}" in kept:
