@@ -406,8 +406,8 @@ def _slabs(shape: tuple[int, int, int]) -> Iterator[tuple[slice, np.ndarray]]:
 DOMAIN_SPACING = 2.5
 #: ``shells='sheets'``: exemplars whose fringes keep their orientation less than this (periods,
 #: :func:`bend_length`) without gathering their centres of curvature are short straight pieces, started
-#: from domains; seven real crops measured 1.6-2.15 (domains better) against 2.26-2.42 (surfaces better;
-#: docs/solid.md).
+#: from domains; real crops measured 1.6-2.15 (domains better, but one shift of the onion crop at 2.10)
+#: against the onion crop's 2.42 (surfaces better; docs/solid.md).
 DOMAIN_MAX_BEND = 2.2
 
 
