@@ -1160,20 +1160,21 @@ REFERENCE_NOTES = """\
 
 
 CROP_SOLIDS_NOTES = """\
-- **Against the 2D line and the crops' own 64^2 floor** (session 19's run; onion crop / core; the core's
-  rows start from domains since session 19, docs/solid.md, "Straight stacks in domains, chosen"):
-  - *Tortuosity KS*: the solids 0.19-0.25 / 0.19-0.22 (worst 0.27 / 0.23), the crops' own blocks 0.22 /
+- **Against the 2D line and the crops' own 64^2 floor** (session 19's run; onion crop / core; `solid-kopf`
+  starts the core from domains since session 19, docs/solid.md, "Straight stacks in domains, chosen"):
+  - *Tortuosity KS*: the solids 0.19-0.25 / 0.18-0.21 (worst 0.27 / 0.23), the crops' own blocks 0.22 /
     0.21-0.23 (worst draws 0.28 / 0.26), the 2D line 0.17 / 0.21: at the floor, near the line.
   - *Length KS*: on the onion crop 0.11-0.13, below both its floor (0.15-0.18) and the 2D line (0.17); on
-    the core 0.09-0.12 (worst 0.15) against its floor 0.07-0.08 and the line 0.09 (0.15-0.18, worst 0.21,
-    from the surfaces and the centres before session 19: the one measure where the volumes were clearly
-    behind). The core's coherence 0.96-1.01 (the line 0.94; 1.04-1.09 before: over-ordered).
-  - *Orientation KL*: `solid-chen-wang` 0.06-0.09 (worst 0.11, the core), `solid-kopf` 0.04-0.13 (worst 0.16,
-    the onion crop's xz and yz), the 2D line 0.01-0.02. Grey KL 0.00 and contrast 1.00 everywhere.
-- `solid-chen-wang` takes the fitted shells around centres on the onion crop (one centre explains 0.85 of
-  its orientations: docs/solid.md, "One particle seen whole"); on the core, whose fringes keep their
-  orientation 1.95 periods (under 2.3), the domains since session 19 (the centres before: length KS
-  0.15-0.17, worst 0.19; orientation KL 0.03-0.05).
+    the core `solid-kopf` 0.11-0.12 (worst 0.15; 0.17-0.18, worst 0.21, from the surfaces before session
+    19), `solid-chen-wang` 0.15-0.17 (worst 0.19), against the core's floor 0.07-0.08 and the line 0.09: the
+    one measure where the volumes are still behind. The core's coherence: `solid-kopf` 1.01 (1.08 before),
+    `solid-chen-wang` 1.04-1.05, the line 0.94.
+  - *Orientation KL*: `solid-chen-wang` 0.03-0.09 (worst 0.10), `solid-kopf` 0.04-0.13 (worst 0.16, the onion
+    crop's xz and yz), the 2D line 0.01-0.02. Grey KL 0.00 and contrast 1.00 everywhere.
+- `solid-chen-wang` takes the fitted shells around centres on both crops since session 17 (one centre
+  explains 0.85 / 0.76 of their orientations: docs/solid.md, "One particle seen whole"); the domains would
+  shorten the core's fringes (length KS 0.09-0.10) but lose orientations, and on the onion crop moved nearer
+  its core they measured clearly worse (docs/solid.md, "Straight stacks in domains, chosen").
 - `solid-kopf` with `shells='centres'` (opt-in, its rows `shells=centres` above: session 17's `'auto'` on
   these crops, the same bytes) orients better (KL 0.02-0.06, worst 0.07) but leaves the onion crop's floor
   in tortuosity (0.24-0.25, worst 0.29) and gains nothing in length: its default takes the surfaces there

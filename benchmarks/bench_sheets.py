@@ -2,17 +2,18 @@
 
 Run: ``python -m benchmarks.bench_sheets`` (writes docs/sheets-crops.json, the section ``sheets-crops``
 of docs/solid.md and docs/img/sheets-*.png); ``--report`` rewrites the section from the JSON alone;
-``--only METHOD`` runs that method's rows and keeps the others'.
+``--only METHOD`` runs that method's rows and keeps the others'; ``--shifts`` only prints the choice of
+``shells='sheets'`` on every crop moved by up to 16 px over the whole image (the measure alone).
 
-The real crops whose single exemplar takes the laminar start (the onion crops of benchmarks/data and
-../shared/data's soot-256). For each: what the exemplar measures (:func:`bend_length`, how far its fringes
-keep their orientation; the centres of curvature; one centre's share) and what ``shells='sheets'`` and
-``'auto'`` choose; then ``solid-kopf`` 64^3 with the surfaces and with domains 2, 2.5 and 3 periods apart,
-and ``solid-chen-wang`` with its default and, where that takes the domains, what ``'auto'`` took before
-(the centres where one centre explains the orientations, else the surfaces).
-Seeds 1-3; per axis every second slice against the exemplar (``bench_laminar.against_exemplars``): cells
-``xy / xz / yz`` means over the seeds and the worst seed-axis, the targets of docs/solid.md. Pictures:
-seed 1's mid-slices of the surfaces and of the default domains, for each crop.
+The real crops whose single exemplar takes the laminar start (the onion crops of benchmarks/data,
+../shared/data's soot-256, two windows of the onion crop moved nearer its core, :data:`SHIFTED`). For each:
+what the exemplar measures (:func:`bend_length`, how far its fringes keep their orientation; the centres of
+curvature; one centre's share) and what ``shells='sheets'`` and ``'auto'`` choose; then ``solid-kopf`` 64^3
+with the surfaces and with domains 2, 2.5 and 3 periods apart, and ``solid-chen-wang`` with its default and
+with the domains (the surfaces where its default takes the domains). Seeds 1-3; per axis every second slice
+against the exemplar (``bench_laminar.against_exemplars``): cells ``xy / xz / yz`` means over the seeds and
+the worst seed-axis, the targets of docs/solid.md. Pictures: seed 1's mid-slices of the surfaces and of the
+default domains, for each crop.
 """
 
 from __future__ import annotations
@@ -41,6 +42,18 @@ CROPS = {
     "particle edge": DOCS.parent / "benchmarks" / "data" / "hrtem-particle-edge-128.png",
     "soot-256": DATA / "hrtem-soot-256.png",
 }
+#: The image the crops are windows of, and each crop's window there (row, column, side).
+SOURCE = DOCS.parent / "benchmarks" / "data" / "hrtem-fringe-mapping-512.png"
+WINDOWS = {
+    "onion": (120, 300, 128),
+    "onion top": (75, 280, 128),
+    "onion core": (92, 296, 128),
+    "particle edge": (384, 128, 128),
+    "soot-256": (256, 256, 256),
+}
+SHIFTS = (-16, -8, 0, 8, 16)
+#: Crops moved over :data:`SOURCE` that the runs add (rows, columns of px): the onion crop nearer its core.
+SHIFTED = {"onion, 16 px up": ("onion", -16, 0), "onion, 8 px up": ("onion", -8, 0)}
 SIDE = 64
 SEEDS = (1, 2, 3)
 KOPF_RUNS = {
@@ -83,14 +96,23 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
     """Every crop's runs; with ``only``, just those methods' (the others' rows kept from the JSON)."""
     saved = json.loads(RESULTS.read_text())["crops"] if only and RESULTS.exists() else {}
     out: dict[str, Any] = {"machine": machine(), "crops": {}}
-    for name, path in CROPS.items():
-        image = np.ascontiguousarray(load_image(path, mode="grey"), dtype=np.float32)
-        crop: dict[str, Any] = {"file": path.name, **measures(image), "rows": {}}
+    source = np.ascontiguousarray(load_image(SOURCE, mode="grey"), dtype=np.float32)
+    for name in [*CROPS, *SHIFTED]:
+        if name in CROPS:
+            path = CROPS[name]
+            image = np.ascontiguousarray(load_image(path, mode="grey"), dtype=np.float32)
+            where = {"file": path.name, "stem": path.stem}
+        else:
+            base, dr, dc = SHIFTED[name]
+            row, col, side = WINDOWS[base]
+            image = np.ascontiguousarray(source[row + dr : row + dr + side, col + dc : col + dc + side])
+            window = f"rows {row + dr}-{row + dr + side - 1}, columns {col + dc}-{col + dc + side - 1}"
+            where = {"file": f"{SOURCE.name}, {window}", "stem": f"{CROPS[base].stem}-{-dr}up"}
+        crop: dict[str, Any] = {**where, **measures(image), "rows": {}}
         runs = [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
         runs.append(("solid-chen-wang", "default", {}))
-        if crop["auto"] == "domains":  # what 'auto' took before the domains: centres or surfaces
-            before = "centres" if crop["concentric"] >= laminar.CONCENTRIC_MIN_EXPLAINED else "surfaces"
-            runs.append(("solid-chen-wang", before, {"shells": before}))
+        other = "surfaces" if crop["auto"] == "domains" else "domains"  # the other side of the rule
+        runs.append(("solid-chen-wang", other, {"shells": other}))
         kept = saved.get(name, {}).get("rows", {})
         for method, key, params in runs:
             if only and method not in only and f"{method} {key}" in kept:
@@ -98,7 +120,7 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
                 continue
             rows = [_run(method, image, params, seed) for seed in SEEDS]
             if method == "solid-kopf" and key in ("surfaces", "domains 2.5"):
-                slug = f"sheets-{path.stem}-{key.split()[0]}"
+                slug = f"sheets-{crop['stem']}-{key.split()[0]}"
                 title = f"{name}, solid-kopf {key}, {SIDE}^3, seed {SEEDS[0]}"
                 Image.fromarray(slices_image(rows[0]["volume"], image, title=title)).save(
                     DOCS / "img" / f"{slug}.png"
@@ -110,6 +132,37 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
         out["crops"][name] = crop
     RESULTS.write_text(json.dumps(out, indent=1) + "\n")
     return out
+
+
+def shifts() -> str:
+    """Each crop moved by :data:`SHIFTS` px in rows and columns over :data:`SOURCE` (inside it): which
+    start one exemplar gets (``'auto'`` structure, the pilot taken as laminar) and the range of the bend."""
+    image = np.ascontiguousarray(load_image(SOURCE, mode="grey"), dtype=np.float32)
+    planes = ("xy", "xz", "yz")
+    lines = [
+        "| crop | positions | domains | surfaces | random start | bend (periods) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, (row, col, side) in WINDOWS.items():
+        kinds, bends = [], []
+        for dr in SHIFTS:
+            for dc in SHIFTS:
+                r, c = row + dr, col + dc
+                if r < 0 or c < 0 or r + side > image.shape[0] or c + side > image.shape[1]:
+                    continue
+                crop = np.ascontiguousarray(image[r : r + side, c : c + side])
+                if not laminar.starts_laminar(
+                    "auto", dict.fromkeys(planes, crop), planes, True, lambda _: True
+                ):
+                    kinds.append("random")
+                    continue
+                chosen = laminar.choose_shells("sheets", None, [crop])
+                kinds.append(chosen.kind)
+                bends.append(chosen.bend)
+        counts = [kinds.count(k) for k in ("domains", "surfaces", "random")]
+        spread = f"{min(bends):.2f}-{max(bends):.2f} (median {np.median(bends):.2f})" if bends else "n/a"
+        lines.append(f"| {name} | {len(kinds)} | " + " | ".join(map(str, counts)) + f" | {spread} |")
+    return "\n".join(lines)
 
 
 def _default(crop: dict[str, Any], key: str) -> bool:
@@ -131,7 +184,7 @@ def report(saved: dict[str, Any]) -> str:
             run = f"**{run}, default**" if _default(crop, key) and not key.endswith("default") else run
             wall = float(np.median([r["wall"] for r in rows]))
             lines.append(f"| {label} | {run} | " + " | ".join(_cells(rows)) + f" | {wall:.1f} |")
-        stem = Path(crop["file"]).stem
+        stem = crop.get("stem", Path(crop["file"]).stem)
         pictures.append(
             f"![{name}, surfaces](img/sheets-{stem}-surfaces.png) "
             f"![{name}, domains](img/sheets-{stem}-domains.png)"
@@ -144,7 +197,11 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--report", action="store_true", help="rewrite the docs from the saved JSON")
     parser.add_argument("--only", action="append", default=[], help="run only this method (repeatable)")
+    parser.add_argument("--shifts", action="store_true", help="only print the choice on the shifted crops")
     args = parser.parse_args(argv)
+    if args.shifts:
+        print(shifts())
+        return
     saved = json.loads(RESULTS.read_text()) if args.report else run(tuple(args.only))
     markdown = report(saved)
     write_section("sheets-crops", markdown, DOCS / "solid.md")

@@ -46,3 +46,19 @@ def test_the_table_marks_each_crops_default_and_its_misses() -> None:
     assert x_surfaces.count("**x**") == 4 and "**x**" not in x_domains
     assert x_domains.endswith("| 4.0 |")  # the median wall time of the seeds (3, 4, 5 s)
     assert "img/sheets-hrtem-x-128-surfaces.png" in text and "seeds 1, 2, 3, 64^3" in text
+
+
+def test_every_crop_is_its_window_of_the_whole_image() -> None:
+    """The shipped crops (and ../shared's soot-256, when present) are the windows ``--shifts`` moves."""
+    import numpy as np
+
+    from texsynth.synth.io import load_image
+
+    whole = np.asarray(load_image(bench_sheets.SOURCE, mode="grey"))
+    assert whole.shape == (512, 512) and set(bench_sheets.WINDOWS) == set(bench_sheets.CROPS)
+    for name, (row, col, side) in bench_sheets.WINDOWS.items():
+        path = bench_sheets.CROPS[name]
+        if not path.exists():
+            continue
+        crop = np.asarray(load_image(path, mode="grey"))
+        np.testing.assert_array_equal(crop, whole[row : row + side, col : col + side], err_msg=name)

@@ -217,8 +217,7 @@ class SolidChenWangParams(ShellParams):
     shells: ShellKind = shells_field(
         "auto",
         "Default 'auto': the centres measured better on the onion truth (sessions cw6-cw8) and the onion "
-        "crop's arcs (session 17), the domains on the real crops of short straight fringes (session 19; "
-        "docs/solid.md).",
+        "crops (session 17), the domains on soot-256 and the particle's edge (session 19; docs/solid.md).",
     )
     oriented_length: float = Field(
         ORIENTED_LENGTH,

@@ -406,9 +406,9 @@ def _slabs(shape: tuple[int, int, int]) -> Iterator[tuple[slice, np.ndarray]]:
 DOMAIN_SPACING = 2.5
 #: ``shells='sheets'``: exemplars whose fringes keep their orientation less than this (periods,
 #: :func:`bend_length`) without gathering their centres of curvature are short straight pieces, started
-#: from domains; the real crops measured 1.6-2.15 (domains better) against the onion crop's 2.4 (surfaces
-#: better; docs/solid.md).
-DOMAIN_MAX_BEND = 2.3
+#: from domains; real crops measured 1.6-2.15 (domains better, but one shift of the onion crop at 2.10)
+#: against the onion crop's 2.42 (surfaces better; docs/solid.md).
+DOMAIN_MAX_BEND = 2.2
 
 
 def domain_phase(
@@ -865,9 +865,9 @@ def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarra
     less than :data:`DOMAIN_MAX_BEND` periods, :func:`bend_length`; their centres of curvature do not
     gather, :data:`CENTRED_MIN_CONCENTRATION`; the exemplars are isotropic, :data:`ISOTROPIC_MAX`: the
     bend of one orientation is measured about its mean, which says nothing of straight laminae), else
-    'surfaces'. 'auto': 'centres' where the centres of curvature gather (many small onions), else
-    'domains' as 'sheets', else 'centres' where one centre explains the orientations
-    (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole), else 'surfaces'. The centres' ``spacing``
+    'surfaces'. 'auto': 'centres' where the centres of curvature gather (many small onions) or one centre
+    explains the orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole), else as
+    'sheets'. The centres' ``spacing``
     (periods) is the given one, else fitted (:func:`fringe_centres`); the domains', the given one, else
     :data:`DOMAIN_SPACING`. Only what the choice needs is measured: 'surfaces' and 'domains' nothing,
     'centres' the spacing when none is given, 'sheets' no centre's share.
@@ -886,15 +886,13 @@ def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarra
     gathered = concentration >= CENTRED_MIN_CONCENTRATION
     if shells == "auto":
         concentric = fringe_concentricity(images)
-        if gathered:
+        if gathered or concentric >= CONCENTRIC_MIN_EXPLAINED:
             return Shells("centres", concentration, given, concentric)
     bend = float(np.mean([bend_length(im) for im in images]))
     isotropic = float(np.mean([mean_tensor_coherence(im) for im in images])) < ISOTROPIC_MAX
     if not gathered and bend < DOMAIN_MAX_BEND and isotropic:
         domains = DOMAIN_SPACING if spacing is None else float(spacing)
         return Shells("domains", concentration, domains, concentric, bend)
-    if concentric is not None and concentric >= CONCENTRIC_MIN_EXPLAINED:
-        return Shells("centres", concentration, given, concentric, bend)
     return Shells("surfaces", concentration, given, concentric, bend)
 
 
