@@ -359,8 +359,7 @@ def centre_phase(
     """
     tree, _ = _centres(shape, spacing, rng, periodic)
     phase = np.empty(shape, dtype=np.float64)
-    for slab, points in _slabs(shape):
-        distance, _ = tree.query(points, workers=current_threads())
+    for slab, _, distance, _ in _nearest(tree, shape):
         phase[slab] = distance.reshape(phase[slab].shape)
     return phase
 
@@ -379,15 +378,18 @@ def _centres(
     return cKDTree(centres, boxsize=dims if periodic else None), n
 
 
-#: Voxels per slab of the nearest-centre queries (:func:`_slabs`): the coordinates and answers of one slab
+#: Voxels per slab of the nearest-centre queries (:func:`_nearest`): the coordinates and answers of one slab
 #: at a time (a 256^3 start held 1.2 GB of them at once).
 NEAREST_SLAB = 2**20
 
 
-def _slabs(shape: tuple[int, int, int]) -> Iterator[tuple[slice, np.ndarray]]:
+def _nearest(
+    tree: cKDTree, shape: tuple[int, int, int]
+) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray]]:
     """The volume in slabs of whole first-axis planes, about :data:`NEAREST_SLAB` voxels each: each slab's
-    slice and its voxels' coordinates ``(N, 3)`` (float64, raster order). The k-d tree is queried slab by
-    slab on the job's threads: each voxel's nearest centre is its own answer, the same on any count."""
+    slice, its voxels' coordinates ``(N, 3)`` (float64, raster order) and their nearest centre in ``tree``
+    (distance, index). The tree is queried on the job's threads: each voxel's nearest centre is its own
+    answer, the same on any count."""
     plane = shape[1] * shape[2]
     rows, cols = (
         a.ravel() for a in np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape[1:]), indexing="ij")
@@ -396,7 +398,9 @@ def _slabs(shape: tuple[int, int, int]) -> Iterator[tuple[slice, np.ndarray]]:
     for z0 in range(0, shape[0], step):
         z1 = min(shape[0], z0 + step)
         depth = np.repeat(np.arange(z0, z1, dtype=np.float64), plane)
-        yield slice(z0, z1), np.column_stack([depth, np.tile(rows, z1 - z0), np.tile(cols, z1 - z0)])
+        points = np.column_stack([depth, np.tile(rows, z1 - z0), np.tile(cols, z1 - z0)])
+        distance, index = tree.query(points, workers=current_threads())
+        yield slice(z0, z1), points, distance, index
 
 
 #: The domains' spacing (periods) when none is given (:func:`domain_phase`): on the real crops whose
@@ -427,8 +431,7 @@ def domain_phase(
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     offsets = rng.uniform(0.0, max(spacing, 1.0), n)
     phase = np.empty(shape, dtype=np.float64)
-    for slab, points in _slabs(shape):
-        _, cell = tree.query(points, workers=current_threads())
+    for slab, points, _, cell in _nearest(tree, shape):
         phi = np.einsum("ij,ij->i", points, normals[cell]) + offsets[cell]
         phase[slab] = phi.reshape(phase[slab].shape)
     return phase
