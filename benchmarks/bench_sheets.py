@@ -58,10 +58,10 @@ SIDE = 64
 SEEDS = (1, 2, 3)
 KOPF_RUNS = {
     "surfaces": {"shells": "surfaces"},
-    "domains 2": {"shells": "domains", "centre_spacing": 2.0},
-    "domains 2.5": {"shells": "domains", "centre_spacing": 2.5},
-    "domains 3": {"shells": "domains", "centre_spacing": 3.0},
+    **{f"domains {d:g}": {"shells": "domains", "centre_spacing": d} for d in (2.0, 2.5, 3.0)},
 }
+#: The row of ``solid-kopf``'s default domains (:data:`DOMAIN_SPACING` apart).
+KOPF_DOMAINS = f"domains {laminar.DOMAIN_SPACING:g}"
 
 
 def measures(image: np.ndarray) -> dict[str, Any]:
@@ -104,9 +104,8 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
             where = {"file": path.name, "stem": path.stem}
         else:
             base, dr, dc = SHIFTED[name]
-            row, col, side = WINDOWS[base]
-            image = np.ascontiguousarray(source[row + dr : row + dr + side, col + dc : col + dc + side])
-            window = f"rows {row + dr}-{row + dr + side - 1}, columns {col + dc}-{col + dc + side - 1}"
+            image, (r, c, side) = _window(source, base, dr, dc)
+            window = f"rows {r}-{r + side - 1}, columns {c}-{c + side - 1}"
             where = {"file": f"{SOURCE.name}, {window}", "stem": f"{CROPS[base].stem}-{-dr}up"}
         crop: dict[str, Any] = {**where, **measures(image), "rows": {}}
         runs = [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
@@ -119,7 +118,7 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
                 crop["rows"][f"{method} {key}"] = kept[f"{method} {key}"]
                 continue
             rows = [_run(method, image, params, seed) for seed in SEEDS]
-            if method == "solid-kopf" and key in ("surfaces", "domains 2.5"):
+            if method == "solid-kopf" and key in ("surfaces", KOPF_DOMAINS):
                 slug = f"sheets-{crop['stem']}-{key.split()[0]}"
                 title = f"{name}, solid-kopf {key}, {SIDE}^3, seed {SEEDS[0]}"
                 Image.fromarray(slices_image(rows[0]["volume"], image, title=title)).save(
@@ -134,6 +133,16 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
     return out
 
 
+def _window(source: np.ndarray, name: str, dr: int, dc: int) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """Crop ``name``'s window of ``source`` moved by ``dr``, ``dc`` px, and where it lies (row, column,
+    side); an empty image where it leaves ``source``."""
+    row, col, side = WINDOWS[name]
+    r, c = row + dr, col + dc
+    if r < 0 or c < 0 or r + side > source.shape[0] or c + side > source.shape[1]:
+        return np.empty((0, 0), dtype=source.dtype), (r, c, side)
+    return np.ascontiguousarray(source[r : r + side, c : c + side]), (r, c, side)
+
+
 def shifts() -> str:
     """Each crop moved by :data:`SHIFTS` px in rows and columns over :data:`SOURCE` (inside it): which
     start one exemplar gets (``'auto'`` structure, the pilot taken as laminar) and the range of the bend."""
@@ -143,14 +152,13 @@ def shifts() -> str:
         "| crop | positions | domains | surfaces | random start | bend (periods) |",
         "|---|---|---|---|---|---|",
     ]
-    for name, (row, col, side) in WINDOWS.items():
+    for name in WINDOWS:
         kinds, bends = [], []
         for dr in SHIFTS:
             for dc in SHIFTS:
-                r, c = row + dr, col + dc
-                if r < 0 or c < 0 or r + side > image.shape[0] or c + side > image.shape[1]:
+                crop, _ = _window(image, name, dr, dc)
+                if crop.size == 0:
                     continue
-                crop = np.ascontiguousarray(image[r : r + side, c : c + side])
                 if not laminar.starts_laminar(
                     "auto", dict.fromkeys(planes, crop), planes, True, lambda _: True
                 ):
@@ -169,7 +177,7 @@ def _default(crop: dict[str, Any], key: str) -> bool:
     method, _, setting = key.partition(" ")
     if method == "solid-chen-wang":
         return setting == "default"
-    return setting == ("surfaces" if crop["sheets"] == "surfaces" else "domains 2.5")
+    return setting == ("surfaces" if crop["sheets"] == "surfaces" else KOPF_DOMAINS)
 
 
 def report(saved: dict[str, Any]) -> str:
