@@ -22,11 +22,14 @@ import numpy as np
 from scipy import ndimage as ndi
 
 __all__ = [
+    "BLEND_SLAB",
     "BLEND_STEPS",
     "FINE_SIGMA",
     "SLICES_PER_AXIS",
     "GrainSums",
     "blend_weight",
+    "blended",
+    "fine_energies",
     "fine_share",
     "grain_sums",
 ]
@@ -37,6 +40,8 @@ FINE_SIGMA = 1.0
 BLEND_STEPS = 1000
 #: Slices sampled per axis by :func:`grain_sums` (evenly spaced).
 SLICES_PER_AXIS = 16
+#: Planes blended at a time by :func:`blended`.
+BLEND_SLAB = 8
 
 
 def _high(image: np.ndarray, mode: str) -> np.ndarray:
@@ -106,6 +111,15 @@ def grain_sums(discrete: np.ndarray, average: np.ndarray, axes: Iterable[int], p
         hd, hm = _high(d, mode), _high(m, mode)
         s += [np.sum(hd * hd), np.sum(hd * hm), np.sum(hm * hm), np.sum(d * d), np.sum(d * m), np.sum(m * m)]
     return GrainSums(*(float(v) for v in s))
+
+
+def blended(discrete: np.ndarray, average: np.ndarray, a: float) -> np.ndarray:
+    """``(1 - a) * discrete + a * average`` as float32, a slab of :data:`BLEND_SLAB` planes at a time (a
+    volume's float64 average is not copied whole)."""
+    out = np.empty(discrete.shape, dtype=np.float32)
+    for z in range(0, discrete.shape[0], BLEND_SLAB):
+        out[z : z + BLEND_SLAB] = (1.0 - a) * discrete[z : z + BLEND_SLAB] + a * average[z : z + BLEND_SLAB]
+    return out
 
 
 def blend_weight(sums: GrainSums, target: float) -> float:

@@ -42,7 +42,7 @@ import numpy as np
 from pydantic import Field, field_validator
 from scipy import ndimage as ndi
 
-from texsynth.synth.analysis.grain import blend_weight, fine_share, grain_sums
+from texsynth.synth.analysis.grain import blend_weight, blended, fine_share, grain_sums
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
@@ -892,9 +892,7 @@ class _ChenWangLoop:
             "final": float(sums.share(blend)) / max(target, 1e-12),
         }
         self.stats["final_blend"] = blend
-        if blend == 0.0:
-            return volume
-        return ((1.0 - blend) * volume + blend * average).astype(np.float32)
+        return volume if blend == 0.0 else blended(volume, average, blend)
 
     def finish(self) -> tuple[np.ndarray, dict]:
         """The finest level's volume (remapped onto the exemplars' grey levels with ``grey_remap``)."""

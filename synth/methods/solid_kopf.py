@@ -40,7 +40,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from texsynth.synth.analysis.grain import blend_weight, fine_share, grain_sums
+from texsynth.synth.analysis.grain import blend_weight, blended, fine_share, grain_sums
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
@@ -578,7 +578,7 @@ class _KopfLoop:
             "best": float(sums.share(0.0)) / max(target, 1e-12),
             "final": float(sums.share(blend)) / max(target, 1e-12),
         }
-        return best if blend == 0.0 else ((1.0 - blend) * best + blend * self.vol).astype(np.float32)
+        return best if blend == 0.0 else blended(best, self.vol, blend)
 
     def result(self, seed: int) -> Result:
         """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""

@@ -11,6 +11,7 @@ from texsynth.synth.analysis.grain import (
     FINE_SIGMA,
     GrainSums,
     blend_weight,
+    blended,
     fine_share,
     grain_sums,
 )
@@ -70,3 +71,12 @@ def test_blend_weight_is_the_least_step_that_reaches_the_target() -> None:
 def test_grain_sums_need_two_volumes_of_one_shape() -> None:
     with pytest.raises(ValueError, match="one shape"):
         grain_sums(np.zeros((4, 4, 4)), np.zeros((4, 4, 5)), axes=[0], periodic=False)
+
+
+def test_blended_is_the_whole_array_expression_slab_by_slab() -> None:
+    rng = np.random.default_rng(6)
+    d = rng.random((19, 6, 5)).astype(np.float32)  # not a multiple of the slab
+    m = rng.random((19, 6, 5))  # float64, as the solver's averages
+    got = blended(d, m, 0.37)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, ((1.0 - 0.37) * d + 0.37 * m).astype(np.float32))

@@ -645,6 +645,7 @@ def test_auto_shells_take_centres_for_one_particle_seen_whole() -> None:
     r, c = np.mgrid[0:96, 0:96].astype(np.float64)
     d, angle = np.hypot(r - 46.0, c - 50.0), np.arctan2(r - 46.0, c - 50.0)
     noise = np.random.default_rng(3).normal(0, 0.1, d.shape)
+
     def rings(wiggle: float) -> np.ndarray:
         image = 0.5 + 0.4 * np.cos(2 * np.pi * (d + wiggle * np.sin(5 * angle + d / 10.0)) / 6.0) + noise
         return np.clip(image, 0.0, 1.0).astype(np.float32)
