@@ -32,6 +32,7 @@ __all__ = [
     "fine_energies",
     "fine_share",
     "grain_sums",
+    "match_grain",
 ]
 
 #: Scale of the smoothing whose residual is the grain, pixels.
@@ -128,3 +129,22 @@ def blend_weight(sums: GrainSums, target: float) -> float:
     a = np.arange(BLEND_STEPS + 1) / BLEND_STEPS
     ok = np.flatnonzero(sums.share(a) <= target)
     return float(a[ok[0]]) if len(ok) else 1.0
+
+
+def match_grain(
+    discrete: np.ndarray,
+    average: np.ndarray,
+    exemplars: Iterable[np.ndarray],
+    axes: Iterable[int],
+    periodic: bool,
+    blend: float | None = None,
+) -> tuple[np.ndarray, float, dict[str, float]]:
+    """``discrete`` blended with ``average`` by ``blend``, or (None) by the least weight whose slices normal
+    to ``axes`` are no grainier than the ``exemplars``' mean :func:`fine_share`: ``(volume, weight, ratios)``,
+    ``ratios`` the slices' grain over the exemplars' before (``'discrete'``) and after (``'final'``)."""
+    target = float(np.mean([fine_share(image) for image in exemplars]))
+    sums = grain_sums(discrete, average, list(axes), periodic)
+    a = blend_weight(sums, target) if blend is None else float(blend)
+    scale = max(target, 1e-12)
+    ratios = {"discrete": float(sums.share(0.0)) / scale, "final": float(sums.share(a)) / scale}
+    return (discrete if a == 0.0 else blended(discrete, average, a)), a, ratios

@@ -42,7 +42,7 @@ import numpy as np
 from pydantic import Field, field_validator
 from scipy import ndimage as ndi
 
-from texsynth.synth.analysis.grain import blend_weight, blended, fine_share, grain_sums
+from texsynth.synth.analysis.grain import match_grain
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
@@ -883,16 +883,13 @@ class _ChenWangLoop:
             self.stats["final_blend"] = 0.0
             return volume
         images = [self.plan.exemplars[PLANES.index(p)][0] for p in params.planes]
-        target = float(np.mean([fine_share(image) for image in images]))
-        sums = grain_sums(volume, average, [PLANES.index(p) for p in params.planes], params.periodic)
-        blend = 1.0 if params.final_step == "average" else blend_weight(sums, target)
+        axes = [PLANES.index(p) for p in params.planes]
+        given = 1.0 if params.final_step == "average" else None
+        volume, blend, ratios = match_grain(volume, average, images, axes, params.periodic, given)
         # the slices' grain over the exemplars': the discrete volume's, then the one returned
-        self.stats["grain_ratio"] = {
-            "discrete": float(sums.share(0.0)) / max(target, 1e-12),
-            "final": float(sums.share(blend)) / max(target, 1e-12),
-        }
+        self.stats["grain_ratio"] = ratios
         self.stats["final_blend"] = blend
-        return volume if blend == 0.0 else blended(volume, average, blend)
+        return volume
 
     def finish(self) -> tuple[np.ndarray, dict]:
         """The finest level's volume (remapped onto the exemplars' grey levels with ``grey_remap``)."""

@@ -40,7 +40,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from texsynth.synth.analysis.grain import blend_weight, blended, fine_share, grain_sums
+from texsynth.synth.analysis.grain import match_grain
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
@@ -569,16 +569,11 @@ class _KopfLoop:
     def _grain_capped(self, best: np.ndarray) -> np.ndarray:
         """The best copies blended with the average (``self.vol``) by the least weight whose slices are no
         grainier than the exemplars (:mod:`texsynth.synth.analysis.grain`): unchanged where they are not."""
-        active = list(self.run.active)
-        target = float(np.mean([fine_share(self.images[p]) for p in active]))
-        sums = grain_sums(best, self.vol, active, self.params.periodic)
-        blend = blend_weight(sums, target)
-        self.final_blend = blend
-        self.grain_ratio = {
-            "best": float(sums.share(0.0)) / max(target, 1e-12),
-            "final": float(sums.share(blend)) / max(target, 1e-12),
-        }
-        return best if blend == 0.0 else blended(best, self.vol, blend)
+        images = [self.images[p] for p in self.run.active]
+        best, self.final_blend, self.grain_ratio = match_grain(
+            best, self.vol, images, self.run.active, self.params.periodic
+        )
+        return best
 
     def result(self, seed: int) -> Result:
         """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""

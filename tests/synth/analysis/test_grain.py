@@ -14,6 +14,7 @@ from texsynth.synth.analysis.grain import (
     blended,
     fine_share,
     grain_sums,
+    match_grain,
 )
 
 
@@ -80,3 +81,20 @@ def test_blended_is_the_whole_array_expression_slab_by_slab() -> None:
     got = blended(d, m, 0.37)
     assert got.dtype == np.float32
     np.testing.assert_array_equal(got, ((1.0 - 0.37) * d + 0.37 * m).astype(np.float32))
+
+
+def test_match_grain_blends_by_the_weight_given_or_the_least_that_reaches_the_exemplars() -> None:
+    rng = np.random.default_rng(7)
+    smooth = ndi.gaussian_filter(rng.normal(size=(16, 16, 16)), 1.2)
+    speckled = smooth + 0.4 * smooth.std() * rng.normal(size=smooth.shape)
+    average = ndi.gaussian_filter(smooth, 0.8)  # smoother than the exemplar
+    exemplar = smooth[8]
+    volume, a, ratios = match_grain(speckled, average, [exemplar], [0, 1, 2], periodic=False)
+    sums = grain_sums(speckled, average, [0, 1, 2], periodic=False)
+    assert a == blend_weight(sums, fine_share(exemplar)) and 0 < a < 1
+    assert ratios["discrete"] > 1.0 >= ratios["final"]
+    np.testing.assert_array_equal(volume, blended(speckled, average, a))
+    whole, one, _ = match_grain(speckled, average, [exemplar], [0], periodic=False, blend=1.0)
+    assert one == 1.0 and np.allclose(whole, average.astype(np.float32))
+    kept, zero, _ = match_grain(smooth, speckled, [speckled[8]], [0], periodic=False)
+    assert zero == 0.0 and kept is smooth

@@ -693,7 +693,7 @@ def test_auto_best_step_is_no_grainier_than_the_exemplar() -> None:
     loop.vol = ndi.gaussian_filter(smooth, 0.7).astype(np.float32)  # the average: smoother than the exemplar
     capped = _KopfLoop._grain_capped(loop, speckled)
     assert 0.0 < loop.final_blend < 1.0
-    assert loop.grain_ratio["best"] > 1.5 and loop.grain_ratio["final"] <= 1.0
+    assert loop.grain_ratio["discrete"] > 1.5 and loop.grain_ratio["final"] <= 1.0
     grain = np.mean([fine_share(capped[i]) for i in range(0, 24, 2)]) / fine_share(ex)
     assert 0.9 < grain < 1.1
     noisy = smooth + 0.05 * smooth.std() * rng.normal(size=smooth.shape).astype(np.float32)
