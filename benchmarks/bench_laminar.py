@@ -1160,21 +1160,26 @@ REFERENCE_NOTES = """\
 
 
 CROP_SOLIDS_NOTES = """\
-- **Against the 2D line and the crops' own 64^2 floor** (session 19's run; onion crop / core; `solid-kopf`
-  starts the core from domains since session 19, docs/solid.md, "Straight stacks in domains, chosen"):
-  - *Tortuosity KS*: the solids 0.19-0.25 / 0.18-0.21 (worst 0.27 / 0.23), the crops' own blocks 0.22 /
+- **Session 20's run** (docs/solid.md, "`solid-chen-wang`'s grain"): `solid-chen-wang`'s slices are no
+  longer grainier than the crop (1.8x / 1.7x before: salt-and-pepper), and `solid-kopf`'s best-copy last
+  step neither (its onion-crop and core rows took it: 1.5x / 1.4x before). With the speckle gone the
+  coherence reads 1.05-1.07 where it read 0.97-1.02; `solid-chen-wang` starts the core from domains
+  (centres before): length KS 0.15-0.17 (worst 0.19) -> 0.09-0.12 (worst 0.14), coherence 1.02-1.03, its
+  orientation KL 0.03-0.05 -> 0.06-0.09 (worst 0.12).
+- **Against the 2D line and the crops' own 64^2 floor** (onion crop / core):
+  - *Tortuosity KS*: the solids 0.17-0.21 / 0.15-0.20 (worst 0.27 / 0.23), the crops' own blocks 0.22 /
     0.21-0.23 (worst draws 0.28 / 0.26), the 2D line 0.17 / 0.21: at the floor, near the line.
   - *Length KS*: on the onion crop 0.11-0.13, below both its floor (0.15-0.18) and the 2D line (0.17); on
-    the core `solid-kopf` 0.11-0.12 (worst 0.15; 0.17-0.18, worst 0.21, from the surfaces before session
-    19), `solid-chen-wang` 0.15-0.17 (worst 0.19), against the core's floor 0.07-0.08 and the line 0.09: the
-    one measure where the volumes are still behind. The core's coherence: `solid-kopf` 1.01 (1.08 before),
-    `solid-chen-wang` 1.04-1.05, the line 0.94.
-  - *Orientation KL*: `solid-chen-wang` 0.03-0.09 (worst 0.10), `solid-kopf` 0.04-0.13 (worst 0.16, the onion
-    crop's xz and yz), the 2D line 0.01-0.02. Grey KL 0.00 and contrast 1.00 everywhere.
-- `solid-chen-wang` takes the fitted shells around centres on both crops since session 17 (one centre
-  explains 0.85 / 0.76 of their orientations: docs/solid.md, "One particle seen whole"); the domains would
-  shorten the core's fringes (length KS 0.09-0.10) but lose orientations, and on the onion crop moved nearer
-  its core they measured clearly worse (docs/solid.md, "Straight stacks in domains, chosen").
+    the core `solid-kopf` 0.12-0.13 (worst 0.15; 0.17-0.18, worst 0.21, from the surfaces before session
+    19), `solid-chen-wang` 0.09-0.12 (worst 0.14), against the core's floor 0.07-0.08 and the line 0.09.
+    The core's coherence: `solid-kopf` 1.06 (1.01 with the speckle, 1.08 from the surfaces), `solid-chen-wang`
+    1.02-1.03, the line 0.94.
+  - *Orientation KL*: `solid-chen-wang` 0.06-0.09 (worst 0.12) on the core, 0.07-0.09 (worst 0.10) on the
+    onion crop; `solid-kopf` 0.04-0.13 (worst 0.17, the onion crop's xz and yz), the 2D line 0.01-0.02. Grey
+    KL 0.00 and contrast 1.00 everywhere.
+- `solid-chen-wang` takes the fitted shells around centres on the onion crop (one centre explains 0.85 of
+  its orientations: docs/solid.md, "One particle seen whole") and, since session 20, the domains on the core
+  (its fringes keep their orientation 1.95 periods: the rule of `solid-kopf`'s default).
 - `solid-kopf` with `shells='centres'` (opt-in, its rows `shells=centres` above: session 17's `'auto'` on
   these crops, the same bytes) orients better (KL 0.02-0.06, worst 0.07) but leaves the onion crop's floor
   in tortuosity (0.24-0.25, worst 0.29) and gains nothing in length: its default takes the surfaces there

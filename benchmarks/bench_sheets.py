@@ -10,7 +10,7 @@ The real crops whose single exemplar takes the laminar start (the onion crops of
 what the exemplar measures (:func:`bend_length`, how far its fringes keep their orientation; the centres of
 curvature; one centre's share) and what ``shells='sheets'`` and ``'auto'`` choose; then ``solid-kopf`` 64^3
 with the surfaces and with domains 2, 2.5 and 3 periods apart, and ``solid-chen-wang`` with its default and
-with the domains (the surfaces where its default takes the domains). Seeds 1-3; per axis every second slice
+with each of the two other starts (centres, domains, surfaces). Seeds 1-3; per axis every second slice
 against the exemplar (``bench_laminar.against_exemplars``): cells ``xy / xz / yz`` means over the seeds and
 the worst seed-axis, the targets of docs/solid.md. Pictures: seed 1's mid-slices of the surfaces and of the
 default domains, for each crop.
@@ -110,8 +110,8 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
         crop: dict[str, Any] = {**where, **measures(image), "rows": {}}
         runs = [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
         runs.append(("solid-chen-wang", "default", {}))
-        other = "surfaces" if crop["auto"] == "domains" else "domains"  # the other side of the rule
-        runs.append(("solid-chen-wang", other, {"shells": other}))
+        others = [kind for kind in ("centres", "domains", "surfaces") if kind != crop["auto"]]
+        runs += [("solid-chen-wang", kind, {"shells": kind}) for kind in others]  # every other start
         kept = saved.get(name, {}).get("rows", {})
         for method, key, params in runs:
             if only and method not in only and f"{method} {key}" in kept:

@@ -169,6 +169,12 @@ def format_table(metrics: Mapping[str, Any]) -> str:
         ),
         ("structure", "coherence KL, nats", None, lambda b: b["structure"]["coherence_kl"]),
         ("structure", "Log-Euclidean, mean tensors", None, lambda b: b["structure"]["log_euclidean"]),
+        (
+            "grain",
+            "variance share finer than 1 px",
+            lambda b: b["grain"]["exemplar"],
+            lambda b: b["grain"]["output"],
+        ),
     ]
     if "fringes" in first:
         side_rows = [

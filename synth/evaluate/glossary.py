@@ -98,6 +98,13 @@ GLOSSARY: dict[str, Measure] = {
         "lower",
         0.25,
     ),
+    "grain_ratio": Measure(
+        "grain ratio",
+        "output's share of grey-level variance finer than a 1-px blur over the exemplar's (1 = as grainy; "
+        "speckle raises it, blur lowers it)",
+        "near-1",
+        0.3,
+    ),
     "fringe_ks_length": Measure(
         "fringe length KS",
         "Kolmogorov-Smirnov distance between the fringe-length distributions (HRTEM lattice fringes)",

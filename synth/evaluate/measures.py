@@ -49,6 +49,7 @@ from texsynth.synth.analysis.fringes import (
     extract_fringes_stack,
     fringe_summary,
 )
+from texsynth.synth.analysis.grain import fine_energies
 from texsynth.synth.analysis.tensor import (
     coherence,
     orientation_histogram,
@@ -379,6 +380,10 @@ class ImageStats:
     n_images: int = 1
     #: The fringes extracted from this one image (not pooled), for overlays drawn after the metrics.
     extracted: Fringes | None = None
+    #: Grain (:func:`~texsynth.synth.analysis.grain.fine_energies`): the high-passed and the centred sums
+    #: of squares, pooled by summing (their ratio is the images' share of variance finer than 1 px).
+    fine_energy: float = 0.0
+    centred_energy: float = 0.0
 
     @staticmethod
     def pool(items: Iterable[ImageStats]) -> ImageStats:
@@ -395,7 +400,14 @@ class ImageStats:
             n_loops=sum(s.n_loops for s in items),
             fringe_area=sum(s.fringe_area for s in items),
             n_images=sum(s.n_images for s in items),
+            fine_energy=float(sum(s.fine_energy for s in items)),
+            centred_energy=float(sum(s.centred_energy for s in items)),
         )
+
+    @property
+    def fine_share(self) -> float | None:
+        """The pooled share of variance finer than 1 px (None for flat images)."""
+        return self.fine_energy / self.centred_energy if self.centred_energy > 0 else None
 
     @property
     def mean_tensor(self) -> np.ndarray:
@@ -428,6 +440,7 @@ def stack_stats(greys: np.ndarray, settings: MeasureSettings) -> list[ImageStats
             lengths, tortuosity, loops = fr.lengths, fr.tortuosity, fr.n_loops
         else:
             lengths, tortuosity, loops = np.zeros(0), np.zeros(0), 0
+        fine, centred = fine_energies(grey)
         out.append(
             ImageStats(
                 grey=grey_histogram(grey, settings.grey_bins),
@@ -441,6 +454,8 @@ def stack_stats(greys: np.ndarray, settings: MeasureSettings) -> list[ImageStats
                 n_loops=loops,
                 fringe_area=grey.size,
                 extracted=fr,
+                fine_energy=fine,
+                centred_energy=centred,
             )
         )
     return out
@@ -657,6 +672,13 @@ def compare_stats(
             },
             "log_euclidean": le,
         },
+        "grain": {
+            "exemplar": ref.fine_share,
+            "output": out.fine_share,
+            "ratio": out.fine_share / ref.fine_share
+            if ref.fine_share and out.fine_share is not None
+            else None,
+        },
     }
     if settings.fringes:
         result["fringes"] = _fringe_block(ref, out, settings)
@@ -672,6 +694,7 @@ def _headline(block: Mapping[str, Any]) -> dict[str, Any]:
         "skewness_difference": block["moments"]["difference"]["skewness"],
         "orientation_kl": block["structure"]["orientation_kl"],
         "log_euclidean": block["structure"]["log_euclidean"],
+        "grain_ratio": block["grain"]["ratio"],
     }
     if "fringes" in block:
         fr = block["fringes"]

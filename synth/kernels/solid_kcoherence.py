@@ -1023,6 +1023,8 @@ def solve_reference(
     weightf = s.weight.reshape(3, n_vox)
     pw, gw, lam = weights.position_weight, weights.grey_weight, weights.consensus
     planes = [int(p) for p in np.flatnonzero(g.active)]
+    if int(start) == 0:
+        scratch["consensus"] = np.empty(shape, dtype=np.float64)
     for lo in range(int(start), int(stop), SOLVE_BLOCK):
         block = order[lo : min(int(stop), lo + SOLVE_BLOCK)]
         volf = s.volume.ravel().copy()  # the volume as the block found it
@@ -1051,6 +1053,7 @@ def solve_reference(
                     if y0 <= cy < y1 and x0 <= cx < x1 and gg not in [c for c, _ in cands]:
                         cands.append((gg, p))
             mu = swe / sw
+            scratch["consensus"].ravel()[int(v)] = mu
             cost = np.zeros(len(cands))
             for j, (gg, pg) in enumerate(cands):
                 sharing = [p for p in planes if b.layout[p, 0] == b.layout[pg, 0]]

@@ -321,9 +321,9 @@ def shells_field(default: str, measured: str) -> Any:
                 "centres of curvature do not gather (isotropic exemplars of short straight pieces: "
                 "disordered cores, soot), else 'surfaces'; 'auto': 'centres' when at least "
                 f"{CENTRED_MIN_CONCENTRATION:g} of the fringes' centres of curvature gather (many small "
-                "onions) or one centre explains at least "
+                "onions), else 'domains' as 'sheets', else 'centres' when one centre explains at least "
                 f"{CONCENTRIC_MIN_EXPLAINED:g} of their orientations' departure from straight (a particle "
-                "seen whole), else as 'sheets'. Only with the laminar start. " + measured
+                "seen whole, long fringes), else 'surfaces'. Only with the laminar start. " + measured
             )
         ),
     )

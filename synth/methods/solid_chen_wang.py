@@ -13,16 +13,17 @@ histogram** factor; every voxel is an exemplar pixel). Coarse to fine
 materials; ``planes=('xz', 'yz')`` for laminae (ALGORITHMS.md, section 4).
 
 References: J. Chen, B. Wang, "High quality solid texture synthesis using position and index histogram
-matching", The Visual Computer 26(4):253-262, 2010. J. Kopf et al., "Solid texture synthesis from 2D
-exemplars", SIGGRAPH 2007. X. Tong et al., SIGGRAPH 2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et
-al., "Fast example-based surface texture synthesis via discrete optimization", The Visual Computer 22, 2006.
+matching", The Visual Computer 26(4):253-262, 2010. J. Kopf et al., SIGGRAPH 2007. X. Tong et al., SIGGRAPH
+2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et al., The Visual Computer 22, 2006 (discrete solver).
 
 Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
 - Kopf's form of histogram re-weighting for both histograms (the paper's formulas are not available);
-- the solver adds a ``consensus`` term (the fit alone is speckled) and Kopf's grey-level histogram;
-- fewer candidates (``solve_radius`` 0, ``kset_window`` 1); a level starts from the first plane's matches;
-- parallel passes (Jacobi search, index histogram frozen per call; solve in blocks); every voxel searched;
+- the solver adds a ``consensus`` term (the fit alone is speckled) and Kopf's grey-level histogram; fewer
+  candidates (``solve_radius`` 0, ``kset_window`` 1); a level starts from the first plane's matches; parallel
+  passes (Jacobi search, index histogram frozen per call; solve in blocks); every voxel searched;
 - a final rank remap onto the exemplars' grey levels (``grey_remap``, as Kopf): the solver loses the tails;
+- the last step blends in the matches' average until the slices are no grainier than the exemplar
+  (``final_step``, :mod:`texsynth.synth.analysis.grain`): the discrete copies speckle on smooth exemplars;
 - 3 iterations per level (the study: 10); laminae 10, orientation re-weighting, 60 coarse ones, radius 1;
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`), matched by the tree search on the
   levels that keep the period: curved sheets for one isotropic laminar exemplar (short fringes: solid-kopf's
@@ -41,6 +42,7 @@ import numpy as np
 from pydantic import Field, field_validator
 from scipy import ndimage as ndi
 
+from texsynth.synth.analysis.grain import match_grain
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
@@ -217,7 +219,7 @@ class SolidChenWangParams(ShellParams):
     shells: ShellKind = shells_field(
         "auto",
         "Default 'auto': the centres measured better on the onion truth (sessions cw6-cw8) and the onion "
-        "crops (session 17), the domains on soot-256 and the particle's edge (session 19; docs/solid.md).",
+        "crop (session 17), the domains on the crops of short fringes (sessions 19-20; docs/solid.md).",
     )
     oriented_length: float = Field(
         ORIENTED_LENGTH,
@@ -288,6 +290,18 @@ class SolidChenWangParams(ShellParams):
         le=100.0,
         description="How strongly a voxel follows what most of its neighbours propose.",
         json_schema_extra=ui(details=("Solver: weight of the proposals' consensus.")),
+    )
+    final_step: Literal["auto", "discrete", "average"] = Field(
+        "auto",
+        description="How voxels get their final values: exemplar pixels (the paper), their matches' average, "
+        "or 'auto': no grainier than the exemplar.",
+        json_schema_extra=ui(
+            details=(
+                "The finest level's last step: 'discrete' (the paper: every voxel copies one exemplar pixel, "
+                "which can speckle), 'average' (Kopf's weighted average of the last matches), 'auto': the "
+                "least blend of the two whose slices are no grainier than the exemplar (none if not)."
+            )
+        ),
     )
     grey_remap: bool = Field(
         True,
@@ -859,10 +873,28 @@ class _ChenWangLoop:
         for start, stop in self.meter.chunks(len(order), cost, stage):
             fn(self.bank, self.geometry, self.state, weights, order, start, stop, self.scratch)
 
+    def _final_volume(self) -> np.ndarray:
+        """The discrete volume blended with the last matches' least-squares average (``final_step``): by
+        the weight given, or ('auto') the least one whose slices' grain (:mod:`texsynth.synth.analysis.grain`)
+        is at most the exemplars' mean."""
+        params, volume = self.params, self.state.volume
+        average = self.scratch.get("consensus")  # the last solve pass's mu: Kopf's voxel of those matches
+        if params.final_step == "discrete" or average is None:
+            self.stats["final_blend"] = 0.0
+            return volume
+        images = [self.plan.exemplars[PLANES.index(p)][0] for p in params.planes]
+        axes = [PLANES.index(p) for p in params.planes]
+        given = 1.0 if params.final_step == "average" else None
+        volume, blend, ratios = match_grain(volume, average, images, axes, params.periodic, given)
+        # the slices' grain over the exemplars': the discrete volume's, then the one returned
+        self.stats["grain_ratio"] = ratios
+        self.stats["final_blend"] = blend
+        return volume
+
     def finish(self) -> tuple[np.ndarray, dict]:
         """The finest level's volume (remapped onto the exemplars' grey levels with ``grey_remap``)."""
         self.stats["usage_spread"] = _usage_spread(self.state.origin, self.bank, self.geometry.active)
-        volume = np.clip(self.state.volume, 0.0, 1.0).astype(np.float32)
+        volume = np.clip(self._final_volume(), 0.0, 1.0).astype(np.float32)
         pooled = np.concatenate(
             [self.plan.exemplars[PLANES.index(p)][0].ravel() for p in self.params.planes]
         ).astype(np.float32)

@@ -27,7 +27,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
   curved sheets (a centred field; length fitted: ``structure_length``) for isotropic fringes, a crumpled
   stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep the random start;
-- after a structured start the last step copies the best match's pixel (``final_step``), not the average.
+- after a structured start the last step copies the best match's pixel (``final_step``), not the average,
+  blended with the average where that is grainier than the exemplar (:mod:`texsynth.synth.analysis.grain`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
+from texsynth.synth.analysis.grain import match_grain
 from texsynth.synth.analysis.orientation_histogram import (
     OrientationLabels,
     orientation_excess,
@@ -269,7 +271,8 @@ class SolidKopfParams(ShellParams):
                 "The last step of the finest level: 'average' (the paper: the weighted average of the "
                 "proposals), 'best' (each voxel copies the best-matching neighbourhood's pixel, which keeps "
                 "the exemplar's grain), 'auto': after a laminar or oriented start, the one whose slices "
-                "keep the exemplars' mean coherence better, else 'average'."
+                "keep the exemplars' mean coherence better (the best copies blended with the average until "
+                "no grainier than the exemplar), else 'average'."
             )
         ),
     )
@@ -411,6 +414,8 @@ class _KopfLoop:
         self.src = np.zeros((3, 0), dtype=np.int64)
         self.pooled = np.zeros(0, dtype=np.float32)
         self.final = "average"  # the last step taken (``final_step``)
+        self.final_blend: float | None = None  # the average's share in 'auto''s best step (grain capped)
+        self.grain_ratio: dict[str, float] | None = None
         self.start_length: float | None = None  # periods; set by the caller after a structured start
         self.shells: Shells | None = None  # the laminar start's sheets; set by the caller
         self.order_usage = False  # the usage target follows the exemplar's order (``order_usage``)
@@ -557,8 +562,18 @@ class _KopfLoop:
             self.final = "best" if gaps[1] < gaps[0] else "average"
             if self.final == "average":
                 return
+            best = self._grain_capped(best)
         self.final = "best"
         self.vol = best
+
+    def _grain_capped(self, best: np.ndarray) -> np.ndarray:
+        """The best copies blended with the average (``self.vol``) by the least weight whose slices are no
+        grainier than the exemplars (:mod:`texsynth.synth.analysis.grain`): unchanged where they are not."""
+        images = [self.images[p] for p in self.run.active]
+        best, self.final_blend, self.grain_ratio = match_grain(
+            best, self.vol, images, self.run.active, self.params.periodic
+        )
+        return best
 
     def result(self, seed: int) -> Result:
         """The finished volume (its grey levels remapped onto the exemplars' when histogram matching)."""
@@ -590,6 +605,9 @@ class _KopfLoop:
                 "contrast_before_remap": contrast,
                 "laminar_start": self.period > 0,
                 "final_step": self.final,
+                # 'auto''s best step: the average's weight that caps its grain, and the grain before and after
+                "final_blend": self.final_blend,
+                "grain_ratio": self.grain_ratio,
                 "period": self.period if self.period > 0 else None,
                 # The structured start's sheet or crumple length (periods), fitted ('auto') or given.
                 "start_length": self.start_length,

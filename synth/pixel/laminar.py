@@ -868,9 +868,10 @@ def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarra
     less than :data:`DOMAIN_MAX_BEND` periods, :func:`bend_length`; their centres of curvature do not
     gather, :data:`CENTRED_MIN_CONCENTRATION`; the exemplars are isotropic, :data:`ISOTROPIC_MAX`: the
     bend of one orientation is measured about its mean, which says nothing of straight laminae), else
-    'surfaces'. 'auto': 'centres' where the centres of curvature gather (many small onions) or one centre
-    explains the orientations (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole), else as
-    'sheets'. The centres' ``spacing``
+    'surfaces'. 'auto': 'centres' where the centres of curvature gather (many small onions), else
+    'domains' as 'sheets', else 'centres' where one centre explains the orientations
+    (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole, its fringes long), else 'surfaces'. The
+    centres' ``spacing``
     (periods) is the given one, else fitted (:func:`fringe_centres`); the domains', the given one, else
     :data:`DOMAIN_SPACING`. Only what the choice needs is measured: 'surfaces' and 'domains' nothing,
     'centres' the spacing when none is given, 'sheets' no centre's share.
@@ -887,15 +888,17 @@ def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarra
     assert concentration is not None and fitted is not None
     given = fitted if spacing is None else float(spacing)
     gathered = concentration >= CENTRED_MIN_CONCENTRATION
-    if shells == "auto":
-        concentric = fringe_concentricity(images)
-        if gathered or concentric >= CONCENTRIC_MIN_EXPLAINED:
-            return Shells("centres", concentration, given, concentric)
+    if shells == "auto" and gathered:
+        return Shells("centres", concentration, given, None)
     bend = float(np.mean([bend_length(im) for im in images]))
     isotropic = float(np.mean([mean_tensor_coherence(im) for im in images])) < ISOTROPIC_MAX
     if not gathered and bend < DOMAIN_MAX_BEND and isotropic:
         domains = DOMAIN_SPACING if spacing is None else float(spacing)
-        return Shells("domains", concentration, domains, concentric, bend)
+        return Shells("domains", concentration, domains, None, bend)
+    if shells == "auto":
+        concentric = fringe_concentricity(images)
+        if concentric >= CONCENTRIC_MIN_EXPLAINED:
+            return Shells("centres", concentration, given, concentric, bend)
     return Shells("surfaces", concentration, given, concentric, bend)
 
 

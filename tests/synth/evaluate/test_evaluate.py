@@ -121,6 +121,33 @@ def test_repeated_slice_volume_per_axis_results():
     assert strided["axes"]["0"]["slices"]["count"] == depth // 2
     assert m["overall"]["grey"]["kl"] == pytest.approx(0.0, abs=1e-12)
     assert set(m["summary"]["per_axis"]) == {"0", "1", "2"}
+    # grain: the exemplar's own slices are as grainy as it; the columns' slices have no vertical
+    # variation, and so a different share
+    assert a0["grain"]["ratio"] == pytest.approx(1.0, rel=1e-12)
+    assert m["summary"]["per_axis"]["0"]["grain_ratio"] == pytest.approx(1.0, rel=1e-12)
+    assert a1["grain"]["ratio"] != pytest.approx(1.0, rel=0.05)
+
+
+def test_grain_ratio_sees_speckle_that_the_histograms_do_not():
+    smooth = _directional((64, 64), seed=2)
+    rng = np.random.default_rng(3)
+    # the same pixels, one in five swapped with a random other: the grey histogram is unchanged
+    speckled = smooth.ravel().copy()
+    picked = rng.choice(speckled.size, speckled.size // 5, replace=False)
+    speckled[picked] = speckled[rng.permutation(picked)]
+    speckled = speckled.reshape(smooth.shape)
+    same = evaluate_pair(smooth, smooth, fringes=False)["summary"]
+    pair = evaluate_pair(smooth, speckled, fringes=False)
+    assert same["grain_ratio"] == pytest.approx(1.0)
+    assert pair["summary"]["grey_kl"] == pytest.approx(0.0, abs=1e-12)
+    assert pair["summary"]["grain_ratio"] > 2.0
+    assert pair["grain"]["exemplar"] < pair["grain"]["output"] < 1.0
+    # blurred, the output is smoother than the exemplar
+    blurred = ndi.gaussian_filter(smooth, 1.5)
+    assert evaluate_pair(smooth, blurred, fringes=False)["summary"]["grain_ratio"] < 0.5
+    # a flat exemplar has no share to compare with
+    flat = np.full((32, 32), 0.5, dtype=np.float32)
+    assert evaluate_pair(flat, smooth[:32, :32], fringes=False)["summary"]["grain_ratio"] is None
 
 
 def test_metrics_are_plain_json():

@@ -516,7 +516,8 @@ def test_a_structured_start_on_a_too_small_exemplar_is_named(shape) -> None:
 
 def test_choose_shells_measures_only_what_the_choice_needs(monkeypatch: pytest.MonkeyPatch) -> None:
     """'surfaces' measures nothing; 'centres' with a spacing given nothing, without one only the fitted
-    spacing; 'auto' both measures (and picks the centres for small onions)."""
+    spacing; 'auto' the centres of curvature, which pick the centres for small onions (one centre's share
+    is measured only for an exemplar that neither they nor the fringes' bend decide)."""
     from texsynth.synth.io.laminar import onion_volume
 
     onions = [mid_slices(onion_volume((64, 64, 64), seed=1))["xy"]]
@@ -530,7 +531,7 @@ def test_choose_shells_measures_only_what_the_choice_needs(monkeypatch: pytest.M
     fitted = laminar.choose_shells("centres", None, onions)
     assert calls == ["fringe_centres"] and fitted.concentric is None and fitted.spacing > 0
     auto = laminar.choose_shells("auto", None, onions)
-    assert calls[1:] == ["fringe_centres", "fringe_concentricity"] and auto.kind == "centres"
+    assert calls[1:] == ["fringe_centres"] and auto.kind == "centres" and auto.concentric is None
     assert (
         auto.spacing == pytest.approx(fitted.spacing)
         and auto.concentration >= laminar.CENTRED_MIN_CONCENTRATION
@@ -631,11 +632,13 @@ def test_sheets_take_domains_for_short_straight_fringes_in_every_orientation() -
     straight = laminar.choose_shells("sheets", None, [grating])
     assert straight.kind == "surfaces" and straight.bend < laminar.DOMAIN_MAX_BEND
     assert laminar.mean_tensor_coherence(grating) >= laminar.ISOTROPIC_MAX
-    # 'auto': the centres first (small onions), else as 'sheets', with one centre's share measured
+    # 'auto': the centres first (small onions), then the domains as 'sheets' (one centre's share is then
+    # not needed, so not measured), else the surfaces when no centre explains the orientations
     assert laminar.choose_shells("auto", None, [onions]).kind == "centres"
     auto = laminar.choose_shells("auto", None, [domains])
-    assert auto.kind == "domains" and auto.concentric is not None and auto.bend == pytest.approx(chosen.bend)
-    assert laminar.choose_shells("auto", None, [long_sheets]).kind == "surfaces"
+    assert auto.kind == "domains" and auto.concentric is None and auto.bend == pytest.approx(chosen.bend)
+    long_auto = laminar.choose_shells("auto", None, [long_sheets])
+    assert long_auto.kind == "surfaces" and long_auto.concentric < laminar.CONCENTRIC_MIN_EXPLAINED
 
 
 def test_sheets_on_the_real_crops_choose_as_measured() -> None:
