@@ -9,11 +9,12 @@ The real crops whose single exemplar takes the laminar start (the onion crops of
 ../shared/data's soot-256, two windows of the onion crop moved nearer its core, :data:`SHIFTED`). For each:
 what the exemplar measures (:func:`bend_length`, how far its fringes keep their orientation; the centres of
 curvature; one centre's share) and what ``shells='sheets'`` and ``'auto'`` choose; then ``solid-kopf`` 64^3
-with the surfaces and with domains 2, 2.5 and 3 periods apart, and ``solid-chen-wang`` with its default and
-with each of the two other starts (centres, domains, surfaces). Seeds 1-3; per axis every second slice
-against the exemplar (``bench_laminar.against_exemplars``): cells ``xy / xz / yz`` means over the seeds and
-the worst seed-axis, the targets of docs/solid.md. Pictures: seed 1's mid-slices of the surfaces and of the
-default domains, for each crop.
+with its default (the start and the domains' spacing it takes are in the row's name), the surfaces and
+domains 2, 2.5 and 3 periods apart, and ``solid-chen-wang`` with its default and each of the two other
+starts (centres, domains, surfaces). Seeds 1-3; per axis every second slice against the exemplar
+(``bench_laminar.against_exemplars``): cells ``xy / xz / yz`` means over the seeds and the worst seed-axis,
+the targets of docs/solid.md. Pictures: seed 1's mid-slices of the surfaces and of the default domains (the
+domains 2.5 periods apart where the default is the surfaces), for each crop.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ KOPF_RUNS = {
     "surfaces": {"shells": "surfaces"},
     **{f"domains {d:g}": {"shells": "domains", "centre_spacing": d} for d in (2.0, 2.5, 3.0)},
 }
-#: The row of ``solid-kopf``'s default domains (:data:`DOMAIN_SPACING` apart).
+#: The row of the domains :data:`DOMAIN_SPACING` apart (pictured where the default is the surfaces).
 KOPF_DOMAINS = f"domains {laminar.DOMAIN_SPACING:g}"
 
 
@@ -87,6 +88,7 @@ def _run(method: str, image: np.ndarray, params: dict[str, Any], seed: int) -> d
         "cpu": cpu,
         "wall": wall,
         "shells": result.stats.get("shells"),
+        "spacing": result.stats.get("centre_spacing"),
         "axes": against_exemplars(image, result.image),
         "volume": result.image,
     }
@@ -108,7 +110,8 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
             window = f"rows {r}-{r + side - 1}, columns {c}-{c + side - 1}"
             where = {"file": f"{SOURCE.name}, {window}", "stem": f"{CROPS[base].stem}-{-dr}up"}
         crop: dict[str, Any] = {**where, **measures(image), "rows": {}}
-        runs = [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
+        runs = [("solid-kopf", "default", {})]
+        runs += [("solid-kopf", key, params) for key, params in KOPF_RUNS.items()]
         runs.append(("solid-chen-wang", "default", {}))
         others = [kind for kind in ("centres", "domains", "surfaces") if kind != crop["auto"]]
         runs += [("solid-chen-wang", kind, {"shells": kind}) for kind in others]  # every other start
@@ -118,8 +121,9 @@ def run(only: tuple[str, ...] = ()) -> dict[str, Any]:
                 crop["rows"][f"{method} {key}"] = kept[f"{method} {key}"]
                 continue
             rows = [_run(method, image, params, seed) for seed in SEEDS]
-            if method == "solid-kopf" and key in ("surfaces", KOPF_DOMAINS):
-                slug = f"sheets-{crop['stem']}-{key.split()[0]}"
+            domains_row = "default" if crop["sheets"] == "domains" else KOPF_DOMAINS
+            if method == "solid-kopf" and key in ("surfaces", domains_row):
+                slug = f"sheets-{crop['stem']}-{'surfaces' if key == 'surfaces' else 'domains'}"
                 title = f"{name}, solid-kopf {key}, {SIDE}^3, seed {SEEDS[0]}"
                 Image.fromarray(slices_image(rows[0]["volume"], image, title=title)).save(
                     DOCS / "img" / f"{slug}.png"
@@ -173,11 +177,13 @@ def shifts() -> str:
     return "\n".join(lines)
 
 
-def _default(crop: dict[str, Any], key: str) -> bool:
-    method, _, setting = key.partition(" ")
-    if method == "solid-chen-wang":
-        return setting == "default"
-    return setting == ("surfaces" if crop["sheets"] == "surfaces" else KOPF_DOMAINS)
+def _label(key: str, rows: list[dict[str, Any]]) -> str:
+    """A default row's name with the start it took (and the domains' spacing)."""
+    if not key.endswith("default"):
+        return key
+    shells, spacing = rows[0]["shells"], rows[0].get("spacing")
+    start = f"{shells} {spacing:.2g}" if shells == "domains" and spacing else shells
+    return f"{key} ({start})" if start else key
 
 
 def report(saved: dict[str, Any]) -> str:
@@ -187,9 +193,7 @@ def report(saved: dict[str, Any]) -> str:
     for name, crop in saved["crops"].items():
         label = f"{name} ({crop['bend']:.2f}: {crop['sheets']}; auto {crop['auto']})"
         for key, rows in crop["rows"].items():
-            shells = rows[0]["shells"]
-            run = f"{key} ({shells})" if key.endswith("default") else key
-            run = f"**{run}, default**" if _default(crop, key) and not key.endswith("default") else run
+            run = _label(key, rows)
             wall = float(np.median([r["wall"] for r in rows]))
             lines.append(f"| {label} | {run} | " + " | ".join(_cells(rows)) + f" | {wall:.1f} |")
         stem = crop.get("stem", Path(crop["file"]).stem)

@@ -6,11 +6,14 @@ from benchmarks import bench_sheets
 from benchmarks.bench_laminar import AXES, MEASURES
 
 
-def _rows(value: float, shells: str) -> list[dict]:
+def _rows(value: float, shells: str, spacing: float | None = None) -> list[dict]:
     axes = {a: {key: value for key, *_ in MEASURES} for a in AXES}
     for a in AXES:
         axes[a]["coherence_ratio"] = axes[a]["contrast"] = 1.0
-    return [{"seed": s, "cpu": 3.0, "wall": 2.0 + s, "shells": shells, "axes": axes} for s in (1, 2, 3)]
+    return [
+        {"seed": s, "cpu": 3.0, "wall": 2.0 + s, "shells": shells, "spacing": spacing, "axes": axes}
+        for s in (1, 2, 3)
+    ]
 
 
 def _crop(sheets: str, auto: str) -> dict:
@@ -22,6 +25,7 @@ def _crop(sheets: str, auto: str) -> dict:
         "sheets": sheets,
         "auto": auto,
         "rows": {
+            "solid-kopf default": _rows(0.05, sheets, 2.0 if sheets == "domains" else 4.4),
             "solid-kopf surfaces": _rows(0.2, "surfaces"),
             "solid-kopf domains 2.5": _rows(0.05, "domains"),
             "solid-chen-wang default": _rows(0.05, auto),
@@ -36,12 +40,14 @@ def test_the_table_marks_each_crops_default_and_its_misses() -> None:
     }
     text = bench_sheets.report(saved)
     lines = [line for line in text.splitlines() if line.startswith("| x") or line.startswith("| y")]
-    assert len(lines) == 6
-    x_surfaces, x_domains, x_cw, y_surfaces, y_domains, _ = lines
+    assert len(lines) == 8
+    x_default, x_surfaces, x_domains, x_cw, y_default, y_surfaces, y_domains, _ = lines
     assert "| x (1.95: domains; auto domains) | solid-kopf surfaces |" in x_surfaces
-    assert "**solid-kopf domains 2.5, default**" in x_domains and "default" not in x_surfaces
+    # a default row names the start it took, with the domains' spacing
+    assert "| solid-kopf default (domains 2) |" in x_default and "default" not in x_surfaces
+    assert "| solid-kopf domains 2.5 |" in x_domains
     assert "solid-chen-wang default (domains)" in x_cw
-    assert "**solid-kopf surfaces, default**" in y_surfaces and "default" not in y_domains
+    assert "| solid-kopf default (surfaces) |" in y_default and "default" not in y_surfaces + y_domains
     # 0.2 misses every "below" target (**x**), 0.05 none; the ratios at 1.0 never
     assert x_surfaces.count("**x**") == 4 and "**x**" not in x_domains
     assert x_domains.endswith("| 4.0 |")  # the median wall time of the seeds (3, 4, 5 s)

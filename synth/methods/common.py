@@ -19,6 +19,7 @@ from texsynth.synth.pixel.laminar import (
     CONCENTRIC_MIN_EXPLAINED,
     DOMAIN_MAX_BEND,
     DOMAIN_SPACING,
+    DOMAIN_SPACING_RANGE,
     MIN_PERIOD_SIDE,
 )
 
@@ -316,7 +317,9 @@ def shells_field(default: str, measured: str) -> Any:
                 "length; 'centres': spherical shells around random centres centre_spacing periods apart "
                 "(closed onion shells); 'domains': straight stacks, each with its own random normal, in "
                 "random cells centre_spacing periods apart (turbostratic crystallites: short straight "
-                f"fringes; {DOMAIN_SPACING:g} when empty, measured on real crops); 'sheets': 'domains' "
+                f"fringes; {DOMAIN_SPACING:g} when empty, measured on real crops; chosen by 'sheets' or "
+                f"'auto', {DOMAIN_SPACING_RANGE[0]:g}-{DOMAIN_SPACING_RANGE[1]:g} by how far the fringes "
+                f"keep their orientation); 'sheets': 'domains' "
                 f"when the fringes keep their orientation less than {DOMAIN_MAX_BEND:g} periods and their "
                 "centres of curvature do not gather (isotropic exemplars of short straight pieces: "
                 "disordered cores, soot), else 'surfaces'; 'auto': 'centres' when at least "

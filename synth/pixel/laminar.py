@@ -55,6 +55,8 @@ __all__ = [
     "CONCENTRIC_MIN_EXPLAINED",
     "DOMAIN_MAX_BEND",
     "DOMAIN_SPACING",
+    "DOMAIN_SPACING_BENDS",
+    "DOMAIN_SPACING_RANGE",
     "ISOTROPIC_MAX",
     "MIN_PERIOD",
     "MIN_PERIOD_SIDE",
@@ -408,6 +410,12 @@ def _nearest(
 #: 2.5 periods gave `solid-kopf` fringe lengths and tortuosity closer to the exemplars' than 2 or 3
 #: (docs/solid.md, "Straight stacks in domains, chosen").
 DOMAIN_SPACING = 2.5
+#: ``shells='sheets'`` and ``'auto'``: the domains' spacing follows how far the exemplar's fringes keep
+#: their orientation (:func:`bend_length`, periods): :data:`DOMAIN_SPACING_RANGE` at these bends, linear
+#: between (soot-256 and the particle's edge, 1.64-1.67, measured better 2 periods apart; the onion core
+#: and top, 1.95-2.15, 2.5: docs/solid.md).
+DOMAIN_SPACING_BENDS = (1.7, 1.9)
+DOMAIN_SPACING_RANGE = (2.0, DOMAIN_SPACING)
 #: ``shells='sheets'``: exemplars whose fringes keep their orientation less than this (periods,
 #: :func:`bend_length`) without gathering their centres of curvature are short straight pieces, started
 #: from domains; real crops measured 1.6-2.15 (domains better, but one shift of the onion crop at 2.10)
@@ -852,7 +860,7 @@ class Shells:
     #: 'domains' (straight stacks in random cells).
     kind: str
     #: :func:`fringe_centres`' concentration and the centres' spacing (periods: given, else fitted; the
-    #: domains': given, else :data:`DOMAIN_SPACING`).
+    #: domains': given, else by the bend, :data:`DOMAIN_SPACING_BENDS`, or :data:`DOMAIN_SPACING` alone).
     concentration: float | None
     spacing: float | None
     #: :func:`fringe_concentricity`: how much one centre explains the exemplars' orientations.
@@ -871,9 +879,9 @@ def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarra
     'surfaces'. 'auto': 'centres' where the centres of curvature gather (many small onions), else
     'domains' as 'sheets', else 'centres' where one centre explains the orientations
     (:data:`CONCENTRIC_MIN_EXPLAINED`: a particle seen whole, its fringes long), else 'surfaces'. The
-    centres' ``spacing``
-    (periods) is the given one, else fitted (:func:`fringe_centres`); the domains', the given one, else
-    :data:`DOMAIN_SPACING`. Only what the choice needs is measured: 'surfaces' and 'domains' nothing,
+    centres' ``spacing`` (periods) is the given one, else fitted (:func:`fringe_centres`); the domains',
+    the given one, else by the bend (:data:`DOMAIN_SPACING_BENDS`), or :data:`DOMAIN_SPACING` for
+    'domains' asked alone. Only what the choice needs is measured: 'surfaces' and 'domains' nothing,
     'centres' the spacing when none is given, 'sheets' no centre's share.
     """
     if shells == "surfaces":
@@ -893,7 +901,8 @@ def choose_shells(shells: str, spacing: float | None, images: Sequence[np.ndarra
     bend = float(np.mean([bend_length(im) for im in images]))
     isotropic = float(np.mean([mean_tensor_coherence(im) for im in images])) < ISOTROPIC_MAX
     if not gathered and bend < DOMAIN_MAX_BEND and isotropic:
-        domains = DOMAIN_SPACING if spacing is None else float(spacing)
+        fitted_domains = float(np.interp(bend, DOMAIN_SPACING_BENDS, DOMAIN_SPACING_RANGE))
+        domains = fitted_domains if spacing is None else float(spacing)
         return Shells("domains", concentration, domains, None, bend)
     if shells == "auto":
         concentric = fringe_concentricity(images)

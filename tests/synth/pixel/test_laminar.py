@@ -621,7 +621,7 @@ def test_sheets_take_domains_for_short_straight_fringes_in_every_orientation() -
     grating += np.random.default_rng(1).normal(0.0, 0.05, grating.shape).astype(np.float32)
 
     chosen = laminar.choose_shells("sheets", None, [domains])
-    assert chosen.kind == "domains" and chosen.spacing == laminar.DOMAIN_SPACING
+    assert chosen.kind == "domains" and chosen.spacing == laminar.DOMAIN_SPACING_RANGE[0]  # short: 2
     assert chosen.bend is not None and chosen.bend < laminar.DOMAIN_MAX_BEND and chosen.concentric is None
     assert laminar.choose_shells("sheets", 3.0, [domains]).spacing == 3.0
     long_chosen = laminar.choose_shells("sheets", None, [long_sheets])
@@ -697,3 +697,17 @@ def test_the_nearest_centre_phases_keep_their_bytes_on_any_thread_count() -> Non
     )
     digests = json.loads(done.stdout.strip().splitlines()[-1])
     assert len(digests) == 4 and all(len(set(d)) == 1 for d in digests.values()), digests
+
+
+def test_the_domains_spacing_follows_the_bend(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``'sheets'`` and ``'auto'`` space the domains by the exemplar's bend: 2 periods up to 1.7 periods of
+    bend (soot-256, the particle's edge), 2.5 from 1.9 (the onion's core and top), linear between; a given
+    spacing wins, and ``shells='domains'`` alone measures nothing and takes :data:`DOMAIN_SPACING`."""
+    domains = _sheet_slice(laminar.domain_phase((16, 96, 96), 12.0, np.random.default_rng(0)), 0)
+    for bend, spacing in ((1.2, 2.0), (1.7, 2.0), (1.8, 2.25), (1.9, 2.5), (2.1, 2.5)):
+        monkeypatch.setattr(laminar, "bend_length", lambda image, _b=bend: _b)
+        for kind in ("sheets", "auto"):
+            chosen = laminar.choose_shells(kind, None, [domains])
+            assert chosen.kind == "domains" and chosen.spacing == pytest.approx(spacing), (bend, kind)
+        assert laminar.choose_shells("sheets", 3.0, [domains]).spacing == 3.0
+    assert laminar.choose_shells("domains", None, [domains]).spacing == laminar.DOMAIN_SPACING
