@@ -12,9 +12,8 @@ histogram** factor; every voxel is an exemplar pixel). Coarse to fine
 :mod:`texsynth.synth.kernels.solid_kcoherence` has the formulas. One exemplar per plane for anisotropic
 materials; ``planes=('xz', 'yz')`` for laminae (ALGORITHMS.md, section 4).
 
-References: J. Chen, B. Wang, "High quality solid texture synthesis using position and index histogram
-matching", The Visual Computer 26(4):253-262, 2010. J. Kopf et al., SIGGRAPH 2007. X. Tong et al., SIGGRAPH
-2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et al., The Visual Computer 22, 2006 (discrete solver).
+References: J. Chen, B. Wang, The Visual Computer 26(4):253-262, 2010. J. Kopf et al., SIGGRAPH 2007. X.
+Tong et al., SIGGRAPH 2002 (k-coherence). J. Han, K. Zhou, L.-Y. Wei et al., Vis. Comput. 22, 2006 (solver).
 
 Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
 - Kopf's form of histogram re-weighting for both histograms (the paper's formulas are not available);

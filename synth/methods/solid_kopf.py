@@ -9,17 +9,16 @@ divided by ``1 + gain * max(0, H_s(b) - H_e(b))`` (eq 4: histogram matching). Co
 pyramids (:func:`texsynth.synth.pixel.solid.run_levels`); ``planes``: all three views, or two for laminae.
 
 References: J. Kopf, C.-W. Fu, D. Cohen-Or, O. Deussen, D. Lischinski, T.-T. Wong, "Solid texture
-synthesis from 2D exemplars", ACM Trans. Graph. 26(3) (SIGGRAPH 2007), article 2; eqs 1-4. V. Kwatra et
-al., "Texture optimization for example-based synthesis", SIGGRAPH 2005 (the IRLS optimisation). X. Tong et
-al., SIGGRAPH 2002 (k-coherence search). R. D. Urs et al., BMVC 2012 (the settings and the scan orders).
+synthesis from 2D exemplars", SIGGRAPH 2007, eqs 1-4. V. Kwatra et al., SIGGRAPH 2005 (IRLS). X. Tong et
+al., SIGGRAPH 2002 (k-coherence). R. D. Urs et al., BMVC 2012 (the settings and the scan orders).
 
 Departures (why and the measurements: docs/solid.md, "Departures from the papers"):
 - histogram gain 64, not eq 4's 1 (:data:`HISTOGRAM_GAIN`): gain 1 let the volume collapse to flat grey;
 - exemplar-usage re-weighting (:data:`POSITION_GAIN`, after Chen & Wang): against laminar attractors;
   on a crop that mixes order and disorder its target follows the local order (``order_usage``);
 - one rank remap of the finished volume (``histogram_matching``); ``stats['contrast_before_remap']``;
-- k-coherence search seeded by the coarser level, the k-d tree only at the very first iteration;
-- 4 iterations per level (the study: 10); a sparse grid of centres whose phase is drawn every iteration;
+- k-coherence search seeded by the coarser level (the k-d tree only at the very first iteration); 4
+  iterations per level (the study: 10); a sparse grid of centres whose phase is drawn every iteration;
 - the histogram follows the update in blocks of ``max(4096, N / 16)`` voxels (parallel), not voxel by voxel;
 - the schedule follows the structure (``adapt_to_structure``): micro-structures 2 levels, laminae 10 its;
 - orientation-usage re-weighting (``orientation_gain`` 32; 0 = the paper): eq 4 on orientation histograms;
@@ -27,8 +26,8 @@ Departures (why and the measurements: docs/solid.md, "Departures from the papers
 - structured starts (``structure``, :mod:`texsynth.synth.pixel.laminar`; Akl 2014's structure first, in 3D):
   curved sheets (a centred field; length fitted: ``structure_length``) for isotropic fringes, a crumpled
   stack for anisotropic ones; bent laminae (straight over 2 periods and more) keep the random start;
-- after a structured start the last step copies the best match's pixel (``final_step``), not the average,
-  blended with the average where that is grainier than the exemplar (:mod:`texsynth.synth.analysis.grain`).
+- after a structured start the last step copies the best match's pixel (``final_step``), blended with the
+  average where that is grainier than the exemplar (:mod:`texsynth.synth.analysis.grain`).
 """
 
 from __future__ import annotations
