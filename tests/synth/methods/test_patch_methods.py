@@ -161,6 +161,50 @@ def test_copy_map_finds_verbatim_copies():
     assert copy_share(copy_map(rng.random((80, 80)), ex)) == 0.0
 
 
+def _copy_map_reference(output: np.ndarray, exemplar: np.ndarray, patch: int = 7) -> np.ndarray:
+    """Plainly: every output patch against its CANDIDATES nearest exemplar patches in the PCA space (one
+    unbounded search each), the least exact RMS distance; stride 1 (small images)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+    from scipy.spatial import cKDTree
+
+    from texsynth.synth.evaluate.patches import CANDIDATES, PCA_DIMS
+
+    ex = sliding_window_view(exemplar.astype(np.float64), (patch, patch)).reshape(-1, patch * patch)
+    mean = ex.mean(axis=0)
+    _, vecs = np.linalg.eigh((ex - mean).T @ (ex - mean))
+    basis = np.ascontiguousarray(vecs[:, ::-1][:, :PCA_DIMS])
+    tree = cKDTree((ex - mean) @ basis)
+    q = sliding_window_view(output.astype(np.float64), (patch, patch)).reshape(-1, patch * patch)
+    _, idx = tree.query((q - mean) @ basis, k=CANDIDATES)
+    d = np.sqrt(((ex[idx] - q[:, None, :]) ** 2).mean(axis=2).min(axis=1))
+    h, w = output.shape[0] - patch + 1, output.shape[1] - patch + 1
+    return d.reshape(h, w)
+
+
+def test_copy_map_is_the_two_candidate_search_and_finds_copies_first():
+    """The copies' shortcut (a search within a hair first) gives the bytes of the plain two-candidate
+    search; copies are 0; elsewhere the value bounds the true nearest distance from above."""
+    rng = np.random.default_rng(3)
+    y, x = np.mgrid[0:48, 0:48]
+    ex = (0.5 + 0.3 * np.sin(x / 2.5 + np.cos(y / 5.0)) + 0.1 * rng.random((48, 48))).astype(np.float32)
+    out = rng.random((60, 60)).astype(np.float32)
+    out[5:35, 10:40] = ex[8:38, 4:34]  # a verbatim block inside noise
+    out[40:58, 2:20] = np.clip(ex[20:38, 20:38] + 0.004 * rng.standard_normal((18, 18)), 0, 1)  # near-copy
+    got = copy_map(out, ex)
+    ref = _copy_map_reference(out, ex)
+    half = 3
+    np.testing.assert_array_equal(got[half:-half, half:-half], ref.astype(np.float32))
+    assert np.all(got[5 + half : 35 - half, 10 + half : 40 - half] == 0.0)
+    near = got[40 + half : 58 - half, 2 + half : 20 - half]
+    assert near.min() > 0.0 and near.max() < 0.01
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    q = sliding_window_view(out, (7, 7)).reshape(-1, 49)
+    e = sliding_window_view(ex, (7, 7)).reshape(-1, 49)
+    true = np.sqrt(((q[:, None, :] - e[None, :, :]) ** 2).mean(axis=2).min(axis=1)).reshape(54, 54)
+    assert np.all(ref >= true - 1e-6)
+
+
 def test_quilting_is_mostly_copies_and_rclg_is_not():
     y, x = np.mgrid[0:64, 0:64]
     ex = 0.5 + 0.25 * np.sin(x / 3.0 + np.sin(y / 7.0)) + 0.05 * np.random.default_rng(0).random((64, 64))
