@@ -360,12 +360,13 @@ def synthesize_gaussian_patches(
         share = 1.0 if member is not None else 1.0 / len(positions)
         return [(int(py), int(px), share) for py, px in chosen]
 
-    # The patches of a wave do not overlap: they are built on the job's threads (NumPy, SciPy's FFT and
-    # LAPACK release the GIL), each from its own random stream (patch_rng), the usage counts as they were
-    # when the wave began; then the wave's patches are counted, in raster order.
+    # The patches of a wave do not overlap: each is built from its own random stream (patch_rng), the usage
+    # counts as they were when the wave began; then the wave's patches are counted, in raster order. A
+    # patch's steps are mostly Python holding the GIL, so the wave runs on the calling thread (gil_bound: a
+    # second thread made it slower, docs/patch.md); the bytes are those of any thread count.
     base = int(rng.integers(2**63))
     built: dict[int, list[tuple[int, int, float]]] = {}
-    with patch_workers() as run_wave:
+    with patch_workers(gil_bound=True) as run_wave:
         for wave in layout.waves():
             factors = usage.factors() if params.usage_weight > 0 else None
             for n, used in zip(wave, run_wave(partial(place, factors=factors), wave), strict=True):

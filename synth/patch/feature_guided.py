@@ -462,11 +462,13 @@ def synthesize_feature_guided(
         return figures, stitch(n, flat)
 
     # The patches of a wave do not overlap: each is searched, drawn from its own random stream
-    # (patch_rng), warped, cut and pasted on the job's threads, with the usage counts as they were when
-    # the wave began; then the wave's patches are counted and their figures kept, in raster order.
+    # (patch_rng), warped, cut and pasted, with the usage counts as they were when the wave began; then
+    # the wave's patches are counted and their figures kept, in raster order. A patch's steps are mostly
+    # Python holding the GIL, so the wave runs on the calling thread (gil_bound: a second thread made it
+    # slower, docs/patch.md); the bytes are those of any thread count.
     base = int(rng.integers(2**63))
     by_patch: dict[int, list[int]] = {}
-    with patch_workers() as run_wave:
+    with patch_workers(gil_bound=True) as run_wave:
         for wave in layout.waves():
             factors = [u.factors() for u in usages] if s.usage_weight > 0 else None
             placed = run_wave(partial(place, factors=factors), wave)

@@ -50,12 +50,19 @@ def patch_rng(base: int, n: int) -> np.random.Generator:
 
 
 @contextmanager
-def patch_workers() -> Iterator[Callable[[Callable[[int], Any], list[int]], list[Any]]]:
+def patch_workers(
+    gil_bound: bool = False,
+) -> Iterator[Callable[[Callable[[int], Any], list[int]], list[Any]]]:
     """A runner for the patches of one wave (:meth:`PatchLayout.waves`): ``run(place, wave)`` returns
     ``[place(n) for n in wave]``, computed on the job's threads (``current_threads``, read here, in the
     thread that runs the job; :func:`texsynth.synth.threads.thread_map`). The results do not depend on
-    the count when ``place`` writes only its own patch's pixels and draws its own random numbers."""
-    threads = current_threads()
+    the count when ``place`` writes only its own patch's pixels and draws its own random numbers.
+
+    ``gil_bound``: ``place`` is a Python pipeline that holds the GIL most of its time (the Gaussian
+    models' and feature-guided's per-patch steps): the wave is placed on the calling thread, because a
+    second Python thread there only queues for the GIL and slows the wave down (docs/patch.md); the
+    job's threads still serve the steps inside ``place`` that release it."""
+    threads = 1 if gil_bound else current_threads()
     yield lambda place, wave: thread_map(place, wave, threads)
 
 

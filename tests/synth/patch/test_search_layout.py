@@ -162,6 +162,22 @@ def test_patch_workers_run_every_patch_and_keep_the_order():
     from texsynth.synth.threads import use_threads
 
     for threads in (1, 2):
-        with use_threads(threads), patch_workers() as run:
-            assert run(lambda n: n * n, [3, 1, 2]) == [9, 1, 4]
-            assert run(lambda n: -n, [5]) == [-5]
+        for gil_bound in (False, True):
+            with use_threads(threads), patch_workers(gil_bound) as run:
+                assert run(lambda n: n * n, [3, 1, 2]) == [9, 1, 4]
+                assert run(lambda n: -n, [5]) == [-5]
+
+
+def test_gil_bound_patch_workers_place_a_wave_on_the_calling_thread():
+    import threading
+    import time
+
+    from texsynth.synth.patch.layout import patch_workers
+    from texsynth.synth.threads import use_threads
+
+    def where(n: int) -> int:
+        time.sleep(0.002)  # long enough for a helper thread to take items, were there one
+        return threading.get_ident()
+
+    with use_threads(2), patch_workers(gil_bound=True) as run:
+        assert set(run(where, list(range(8)))) == {threading.get_ident()}
