@@ -17,7 +17,8 @@ jobs share the two cores; the wall time, what a user waits). These children run 
 tree's command does (single-threaded when its ``texsynth.synth.cli`` sets ``OPENBLAS_NUM_THREADS``).
 
 ``--baseline DIR`` also times an earlier checkout (``git archive REV | tar -x -C DIR``), alternating
-its runs with the current tree's so that both see the same load: the "before" column.
+its runs with the current tree's so that both see the same load: the "before" column. What the command
+costs outside the synthesis on every exemplar is ``benchmarks.bench_overhead``'s (the command itself, probed).
 """
 
 from __future__ import annotations
@@ -208,93 +209,6 @@ def measure(tree: Path, baseline: Path | None = None) -> dict:
     return results
 
 
-#: The stages outside the synthesis (keys of the instrumented child's figures), in the table's order.
-OUTSIDE = (
-    "imports (cli, method, kernels)",
-    "imports (writer, evaluation, plots)",
-    "first kernel call (cache load)",
-    "evaluation",
-    "plots",
-    "other files (output, tensor images, json)",
-)
-
-
-def overhead(
-    tree: Path, methods: list[str], exemplars: dict[str, Path], json_path: Path | None = None
-) -> list[dict]:
-    """The instrumented child in CPU seconds (``time.process_time``: every thread of the process, what
-    the work costs whatever the load), per method and exemplar, with interpreter start's CPU."""
-    script = _STAGES.replace("time.perf_counter()", "time.process_time()")
-    start = _child(
-        tree,
-        "import json, resource; u = resource.getrusage(resource.RUSAGE_SELF); "
-        "print(json.dumps({'cpu': u.ru_utime + u.ru_stime}))",
-    )["cpu"]
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for method in methods:
-            for name, path in exemplars.items():
-                load = os.getloadavg()[0]
-                stages = _child(tree, script, method, str(path), str(Path(tmp) / "stages"))
-                outside = start + sum(stages[k] for k in OUTSIDE)
-                rows.append(
-                    {
-                        "method": method,
-                        "exemplar": name,
-                        "stages": stages,
-                        "python_start": start,
-                        "outside": outside,
-                        "load": load,
-                    }
-                )
-                print(
-                    f"{method} {name}: outside the synthesis {outside:.2f} s CPU (load {load:.1f})",
-                    flush=True,
-                )
-                if json_path is not None:  # after every row: a long run stopped early keeps its figures
-                    json_path.write_text(json.dumps(rows, indent=2))
-    return rows
-
-
-def overhead_report(rows: list[dict]) -> str:
-    """The ``command-overhead`` section: CPU seconds per stage outside the synthesis."""
-    short = ["imports", "writer imports", "first kernel call", "evaluation", "plots", "other files"]
-    lines = [
-        "## The command's overhead, every exemplar (`python -m benchmarks.bench_command --overhead`)",
-        "",
-        "CPU seconds (the process's, every thread: what the work costs whatever else runs; wall time on a "
-        "quiet machine is about the same, the stages being single-threaded) of one instrumented "
-        "`synthesize` process per row, 128 -> 256, split into stages as in the table above; "
-        "'outside' = interpreter start + every stage but the synthesis. Target (issue 25): outside <= 1.0 s "
-        "on every exemplar of docs/quality.md and on laminar HRTEM (`benchmarks/data/hrtem-onion-128.png`). "
-        "The docs/quality.md exemplars as 8-bit PNGs (`benchmarks.bench_quality.exemplars`).",
-        "",
-        "| method | exemplar | " + " | ".join(short) + " | synthesis | outside | load |",
-        "|---|---|" + "---|" * (len(short) + 3),
-    ]
-    for row in rows:
-        st = row["stages"]
-        cells = " | ".join(f"{st[k]:.2f}" for k in OUTSIDE)
-        lines.append(
-            f"| `{row['method']}` | {row['exemplar']} | {cells} | {st['synthesis (warm)']:.2f} | "
-            f"{row['outside']:.2f} ({'meets' if row['outside'] <= 1.0 else 'misses'}) | {row['load']:.1f} |"
-        )
-    return "\n".join(lines)
-
-
-def _quality_exemplars(folder: Path) -> dict[str, Path]:
-    """docs/quality.md's six exemplars as PNGs in ``folder``, and laminar HRTEM."""
-    from benchmarks.bench_quality import exemplars
-    from texsynth.synth.io import save_image
-
-    out = {}
-    for name, image in exemplars().items():
-        out[name] = folder / f"{name}.png"
-        save_image(out[name], image)
-    out["hrtem-onion-128"] = ROOT / "benchmarks" / "data" / "hrtem-onion-128.png"
-    return out
-
-
 def _span(values: list[float]) -> str:
     low, high = min(values), max(values)
     return f"{low:.2f}" if round(low, 2) == round(high, 2) else f"{low:.2f}-{high:.2f}"
@@ -457,23 +371,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-name", help="how the document names the baseline (e.g. its commit)")
     parser.add_argument("--json", type=Path, help="also write the raw figures here")
     parser.add_argument("--report", type=Path, help="no measurement: the section from raw figures (--json)")
-    parser.add_argument(
-        "--overhead",
-        action="store_true",
-        help="only the CPU seconds outside the synthesis, every docs/quality.md exemplar and laminar HRTEM",
-    )
-    parser.add_argument("--methods", default="tensor-constrained,wei-levoy", help="with --overhead")
     args = parser.parse_args(argv)
-    if args.overhead:
-        with tempfile.TemporaryDirectory() as tmp:
-            rows = overhead(
-                args.tree.resolve(), args.methods.split(","), _quality_exemplars(Path(tmp)), args.json
-            )
-        markdown = overhead_report(rows)
-        print(markdown)
-        if args.tree.resolve() == ROOT:
-            write_section("command-overhead", markdown)
-        return 0
     if args.report:
         results = json.loads(args.report.read_text())
     else:

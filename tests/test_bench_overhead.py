@@ -1,11 +1,11 @@
-"""``benchmarks.bench_overhead --timeline``: the main thread's stage changes joined into segments, and the
-cores busy in each (the process's CPU over the wall)."""
+"""``benchmarks.bench_overhead``: the timeline's stage changes joined into segments, and the
+cores busy in each (the process's CPU over the wall); the table's outside figures, probed and bare."""
 
 from __future__ import annotations
 
 import pytest
 
-from benchmarks.bench_overhead import segments, timeline_table
+from benchmarks.bench_overhead import segments, summarise, timeline_table
 
 
 def test_segments_join_a_stage_and_give_short_pieces_to_the_one_before() -> None:
@@ -33,3 +33,19 @@ def test_segments_join_a_stage_and_give_short_pieces_to_the_one_before() -> None
 def test_cores_busy_is_capped_at_the_thread_count() -> None:
     got = segments([(0.0, 0.0, "synthesis"), (1.0, 3.0, "other")], threads=2)
     assert got == [("synthesis", 0.0, 1.0, 2.0)]
+
+
+def test_outside_without_the_probe_is_each_bare_run_less_its_probed_synthesis() -> None:
+    def probed(synthesis: tuple[float, float], wall: float, cpu: float) -> dict:
+        stages = {"synthesis": synthesis, "imports": (0.5, 0.5)}
+        return {"stages": stages, "wall": wall, "cpu": cpu, "load": 1.0}
+
+    runs = [probed((1.0, 1.8), 2.0, 3.0), probed((1.2, 2.0), 2.3, 3.3), probed((1.1, 1.9), 2.1, 3.1)]
+    bare = [{"wall": 1.9, "cpu": 2.8}, {"wall": 2.1, "cpu": 3.1}, {"wall": 2.0, "cpu": 2.95}]
+    got = summarise(runs, bare)
+    assert got["outside_wall"] == pytest.approx(1.0) and got["outside_cpu"] == pytest.approx(1.2)
+    # pairs: (0.9, 1.0), (0.9, 1.1), (0.9, 1.05): medians 0.9 and 1.05
+    assert got["plain_outside_wall"] == pytest.approx(0.9)
+    assert got["plain_outside_cpu"] == pytest.approx(1.05)
+    assert got["plain_wall"] == pytest.approx(2.0)
+    assert "plain_wall" not in summarise(runs)  # the timeline's runs have no bare twin

@@ -16,7 +16,10 @@ A one-shot engine command also spares the work of Python's cycle collector that 
 (docs/benchmarks.md, "Outside the synthesis"): the collector is off while the command imports its
 modules (:func:`imports_without_gc`: about 140,000 objects that live to the end, which it would
 otherwise traverse several times as the heap grows) and, run as the ``texsynth`` program (:func:`entry`),
-the process ends without tearing its modules down one by one (output flushed, ``atexit`` run).
+the process ends without tearing its modules down one by one (output flushed, ``atexit`` run). Modules
+that the engine's dependencies import and no engine command uses (SciPy's array-API layer's ``from numpy
+import *`` pulls in ``numpy.f2py`` and ``numpy.testing``; numba reads ``yaml`` only for a config file)
+load on first use (:func:`modules_on_demand`).
 """
 
 from __future__ import annotations
@@ -25,8 +28,11 @@ import argparse
 import atexit
 import gc
 import importlib
+import importlib.util
 import os
 import sys
+import threading
+import types
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
 from typing import NoReturn
@@ -35,7 +41,7 @@ from texsynth.synth import __version__
 from texsynth.synth.errors import StorageError, SynthError
 from texsynth.synth.threads import single_threaded_blas
 
-__all__ = ["build_parser", "entry", "imports_without_gc", "main"]
+__all__ = ["build_parser", "entry", "imports_without_gc", "main", "modules_on_demand"]
 
 _ENGINE_COMMANDS = ("analyze", "methods", "synthesize", "evaluate")
 
@@ -87,6 +93,50 @@ def imports_without_gc() -> Iterator[None]:
     finally:
         gc.freeze()
         gc.enable()
+
+
+#: What the engine's dependencies import and no engine command uses: ``from numpy import *`` (SciPy's
+#: array-API layer, when ``scipy.ndimage`` loads) binds NumPy's ``f2py`` and ``testing``; numba imports
+#: ``yaml`` for a ``.numba_config.yaml`` that is seldom there. About 60 modules, 0.03-0.05 s of a start.
+ON_DEMAND = ("numpy.f2py", "numpy.testing", "yaml")
+_on_demand_lock = threading.Lock()
+
+
+class _OnDemand(types.ModuleType):
+    """Stands for one of :data:`ON_DEMAND` until an attribute is asked of it: then the real module is
+    imported (once, under a lock: the writer's threads may ask too), takes its place in ``sys.modules`` (and
+    on its package), and answers; the placeholder goes on answering for it where it was bound."""
+
+    def __getattr__(self, attr: str) -> object:
+        return getattr(_load(self.__name__), attr)
+
+
+def _load(name: str) -> types.ModuleType:
+    with _on_demand_lock:
+        parent, _, short = name.rpartition(".")
+        if isinstance(sys.modules.get(name), _OnDemand):
+            del sys.modules[name]
+            if parent:
+                with suppress(AttributeError):
+                    delattr(sys.modules[parent], short)
+        return importlib.import_module(name)
+
+
+def modules_on_demand() -> None:
+    """Put placeholders for :data:`ON_DEMAND`'s modules not loaded yet (and installed) in ``sys.modules``
+    and on their packages: an ``import`` or a ``from numpy import *`` binds them without loading them; the
+    first attribute asked of one loads it. Imports NumPy; for a command's start, before SciPy and numba."""
+    import numpy  # noqa: F401  (the package its submodules' placeholders go on)
+
+    with _on_demand_lock:
+        for name in ON_DEMAND:
+            if name in sys.modules or importlib.util.find_spec(name) is None:
+                continue
+            parent, _, short = name.rpartition(".")
+            placeholder = _OnDemand(name)
+            sys.modules[name] = placeholder
+            if parent:
+                setattr(sys.modules[parent], short, placeholder)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -256,9 +256,10 @@ def format_table(metrics: Mapping[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Load, evaluate, print; write plots on request."""
-    from texsynth.synth.cli import imports_without_gc
+    from texsynth.synth.cli import imports_without_gc, modules_on_demand
 
     with imports_without_gc():  # the package's doc: a one-shot command's imports live to the end
+        modules_on_demand()
         from texsynth.synth.evaluate import evaluate_pair, evaluate_volume
         from texsynth.synth.io import load_image, load_volume
 

@@ -59,10 +59,11 @@ class _ProgressBar:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from texsynth.synth.cli import imports_without_gc
+    from texsynth.synth.cli import imports_without_gc, modules_on_demand
 
     # deferred: ``--help`` imports no engine; only the chosen method's module is imported, and the writer
     with imports_without_gc():
+        modules_on_demand()
         from texsynth.synth.api import available_methods, check_inputs, find_method
         from texsynth.synth.params import parse_assignments
         from texsynth.synth.pipeline import load_inputs, synthesize_to_folder

@@ -82,6 +82,10 @@ def test_synthesize_imports_one_method_and_no_matplotlib(exemplar: Path, tmp_pat
     assert methods == {"texsynth.synth.methods.tensor_constrained"}
     assert "matplotlib" not in _top_level(loaded)
     assert "scipy.stats" not in loaded  # the exact KS test and the moments are computed without it
+    # the placeholders of what no engine command uses stand to the end (never asked anything)
+    assert {"numpy.f2py", "numpy.testing", "yaml"} <= set(loaded)
+    assert "numpy.f2py.crackfortran" not in loaded and "numpy.testing._private" not in loaded
+    assert "yaml.loader" not in loaded
     # every artifact is still written, plots included
     for name in (
         "output.png",
@@ -237,3 +241,44 @@ def test_the_s2_comparison_imports_no_optimiser() -> None:
     assert found["before"] == []
     assert found["value"] == pytest.approx(0.25)  # S2(0) is the volume fraction
     assert found["after"]
+
+
+def test_a_module_on_demand_loads_at_its_first_attribute_from_any_thread() -> None:
+    """:func:`texsynth.synth.cli.modules_on_demand`: ``from numpy import *`` (SciPy's array-API layer)
+    binds the placeholders without loading them; the first attribute asked loads the real module, which
+    then stands in ``sys.modules`` and on ``numpy``; eight threads asking at once all get their answer."""
+    seen = _fresh(
+        """
+        import json, sys, threading
+        from texsynth.synth.cli import modules_on_demand
+        modules_on_demand()
+        modules_on_demand()  # twice: nothing more
+        import numpy
+        from numpy import *  # noqa: F403
+        import scipy.ndimage
+        before = {n: type(sys.modules[n]).__name__ for n in ("numpy.f2py", "numpy.testing", "yaml")}
+        crack = "numpy.f2py.crackfortran" in sys.modules
+        import numpy.testing as placeholder
+        answers = []
+        def ask():
+            answers.append(placeholder.assert_array_equal is sys.modules["numpy.testing"].assert_array_equal)
+        threads = [threading.Thread(target=ask) for _ in range(8)]
+        for t in threads: t.start()
+        for t in threads: t.join()
+        import yaml
+        print(json.dumps({
+            "before": before, "crack": crack, "answers": answers,
+            "after": type(sys.modules["numpy.testing"]).__name__,
+            "attribute": numpy.testing is sys.modules["numpy.testing"],
+            "real": hasattr(sys.modules["numpy.testing"], "__file__"),
+            "yaml": yaml.safe_load("a: 1"),
+            "f2py": type(sys.modules["numpy.f2py"]).__name__,
+        }))
+        """
+    )
+    assert seen["before"] == {"numpy.f2py": "_OnDemand", "numpy.testing": "_OnDemand", "yaml": "_OnDemand"}
+    assert not seen["crack"]
+    assert seen["answers"] == [True] * 8
+    assert seen["after"] == "module" and seen["attribute"] and seen["real"]
+    assert seen["yaml"] == {"a": 1}
+    assert seen["f2py"] == "_OnDemand"  # never asked: never loaded
