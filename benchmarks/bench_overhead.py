@@ -247,14 +247,12 @@ def _env(tree: Path) -> dict[str, str]:
     return env
 
 
-def run_once(tree: Path, argv: list[str], timeline: bool = False) -> dict:
-    """One instrumented process: its stages (label -> [wall, CPU]), with 'start + exit' from outside;
-    with ``timeline``, also the main thread's stage changes (``timeline``: [(wall, CPU, stage)])."""
-    load = os.getloadavg()[0]
-    changes = Path(tempfile.mkstemp(suffix=".json", prefix="texsynth-timeline-")[1]) if timeline else None
+def _timed(tree: Path, command: list[str], argv: list[str]) -> tuple[float, float, str]:
+    """Run ``python COMMAND`` in ``tree`` with the children's environment: its wall and CPU seconds (user
+    + system, every thread) and its standard output; a failure raises with the end of its errors."""
     start = time.perf_counter()
     proc = subprocess.Popen(
-        [sys.executable, "-c", _PROBE, json.dumps(argv), str(changes) if changes else "-"],
+        [sys.executable, *command],
         cwd=tree,
         env=_env(tree),
         stdout=subprocess.PIPE,
@@ -266,8 +264,17 @@ def run_once(tree: Path, argv: list[str], timeline: bool = False) -> dict:
     out, err = proc.stdout.read(), proc.stderr.read()  # type: ignore[union-attr]
     if status:
         raise RuntimeError(f"{' '.join(argv)} failed on {tree}:\n{err[-2000:]}")
+    return wall, usage.ru_utime + usage.ru_stime, out
+
+
+def run_once(tree: Path, argv: list[str], timeline: bool = False) -> dict:
+    """One instrumented process: its stages (label -> [wall, CPU]), with 'start + exit' from outside;
+    with ``timeline``, also the main thread's stage changes (``timeline``: [(wall, CPU, stage)])."""
+    load = os.getloadavg()[0]
+    changes = Path(tempfile.mkstemp(suffix=".json", prefix="texsynth-timeline-")[1]) if timeline else None
+    probe = ["-c", _PROBE, json.dumps(argv), str(changes) if changes else "-"]
+    wall, cpu, out = _timed(tree, probe, argv)
     inside = json.loads(out.strip().splitlines()[-1])
-    cpu = usage.ru_utime + usage.ru_stime
     stages = {k: tuple(v) for k, v in inside["stages"].items()}
     stages["start + exit"] = (wall - inside["wall"], max(cpu - inside["cpu"], 0.0))
     run = {"stages": stages, "wall": wall, "cpu": cpu, "load": load}
@@ -279,22 +286,9 @@ def run_once(tree: Path, argv: list[str], timeline: bool = False) -> dict:
 
 def run_plain(tree: Path, argv: list[str]) -> dict:
     """The same command without the probe (``python -m texsynth.synth.cli``, as the ``texsynth`` script):
-    its whole wall and CPU seconds (user + system, every thread), for the probe-free 'outside'."""
-    start = time.perf_counter()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "texsynth.synth.cli", *argv],
-        cwd=tree,
-        env=_env(tree),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - start
-    err = proc.stderr.read()  # type: ignore[union-attr]
-    if status:
-        raise RuntimeError(f"{' '.join(argv)} failed on {tree}:\n{err[-2000:]}")
-    return {"wall": wall, "cpu": usage.ru_utime + usage.ru_stime}
+    its whole wall and CPU seconds, for the probe-free 'outside'."""
+    wall, cpu, _ = _timed(tree, ["-m", "texsynth.synth.cli", *argv], argv)
+    return {"wall": wall, "cpu": cpu}
 
 
 def segments(timeline: list, threads: int, least: float = 0.02) -> list[tuple[str, float, float, float]]:
