@@ -10,6 +10,7 @@ from texsynth.synth.io.atomic import atomic_write_bytes, atomic_write_json
 from texsynth.synth.io.depth import InputBits, array_to_unit, used_bits
 from texsynth.synth.io.images import (
     FORMAT_FILES,
+    PICTURE_PNG_LEVEL,
     SUPPORTED_FORMATS,
     ImageSource,
     LoadMode,
@@ -40,6 +41,7 @@ __all__ = [
     "MAX_ASPECT_RATIO",
     "MAX_SIDE",
     "MIN_SIDE",
+    "PICTURE_PNG_LEVEL",
     "SUPPORTED_FORMATS",
     "ImageSource",
     "InputBits",

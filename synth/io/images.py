@@ -42,6 +42,7 @@ from texsynth.synth.io.limits import LIMITS, check_image_shape, resolve_limit
 
 __all__ = [
     "FORMAT_FILES",
+    "PICTURE_PNG_LEVEL",
     "SUPPORTED_FORMATS",
     "ImageSource",
     "LoadMode",
@@ -54,6 +55,10 @@ __all__ = [
     "save_volume",
     "to_uint",
 ]
+
+#: zlib effort of the pictures made for people (tensor images, plots), not of the outputs (Pillow's default
+#: 6): at 4096^2 an orientation picture encodes 2.7x faster (4.9 -> 1.8 s), for a file 6-12% larger.
+PICTURE_PNG_LEVEL = 3
 
 #: File extension and media type of each format, for storing and serving uploads.
 FORMAT_FILES: dict[str, tuple[str, str]] = {

@@ -52,6 +52,7 @@ from texsynth.synth.evaluate.measures import (
     to_json_types,
 )
 from texsynth.synth.io import (
+    PICTURE_PNG_LEVEL,
     InputBits,
     array_to_unit,
     atomic_write_bytes,
@@ -150,9 +151,9 @@ class _Pictures:
 
 
 def _png_bytes(rendering: np.ndarray) -> bytes:
-    if rendering.dtype == np.uint8:  # already quantised: encoded as it is (the bytes a float round trip gave)
+    if rendering.dtype == np.uint8:  # already quantised: encoded as it is, with the pictures' zlib effort
         buf = io.BytesIO()
-        Image.fromarray(rendering).save(buf, format="PNG")
+        Image.fromarray(rendering).save(buf, format="PNG", compress_level=PICTURE_PNG_LEVEL)
         return buf.getvalue()
     return image_to_png_bytes(rendering)
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from texsynth.synth.io import atomic_write_bytes
+from texsynth.synth.io import PICTURE_PNG_LEVEL, atomic_write_bytes
 
 __all__ = ["Axes", "Chart", "Rose", "hex_colour", "nice_ticks"]
 
@@ -163,7 +163,7 @@ class Chart:
 
         path = Path(path)
         buffer = io.BytesIO()
-        self.to_image().save(buffer, format="PNG", compress_level=3)
+        self.to_image().save(buffer, format="PNG", compress_level=PICTURE_PNG_LEVEL)
         atomic_write_bytes(path, buffer.getvalue())
         return path
 

@@ -29,7 +29,6 @@ from typing import Literal
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
-from skimage.color import hsv2rgb
 
 from texsynth.synth.colour import to_grey
 from texsynth.synth.errors import InvalidParameter
@@ -102,13 +101,31 @@ def _to_uint8(x: np.ndarray) -> np.ndarray:
     return np.round(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
+#: The standard HSV -> RGB table: in sector ``floor(6 hue) mod 6`` of the hue circle, which of
+#: ``(v, q, p, t)`` (below) each of R, G and B takes.
+_SECTOR_PICKS = np.array([[0, 3, 2], [1, 0, 2], [2, 0, 3], [2, 1, 0], [3, 2, 0], [0, 2, 1]])
+
+
 def _hsv_uint8(hue: np.ndarray, saturation: np.ndarray, value: np.ndarray) -> np.ndarray:
-    hsv = np.stack(np.broadcast_arrays(hue, saturation, value), axis=-1).astype(np.float64)
-    return _to_uint8(hsv2rgb(hsv))
+    """RGB ``uint8`` of HSV in [0, 1] (broadcast together), in float64: the floats of scikit-image's
+    ``hsv2rgb`` (the same formulas; tested bit for bit), one channel at a time instead of its stacks of
+    the six sectors' RGB candidates (a sixth of its time and memory)."""
+    h, s, v = (np.asarray(a, dtype=np.float64) for a in np.broadcast_arrays(hue, saturation, value))
+    sector = np.floor(h * 6)
+    f = h * 6 - sector
+    p = v * (1 - s)
+    q = v * (1 - f * s)
+    t = v * (1 - (1 - f) * s)
+    sector = sector.astype(np.uint8) % 6
+    candidates = (v, q, p, t)
+    rgb = np.empty((*h.shape, 3), dtype=np.uint8)
+    for channel in range(3):
+        rgb[..., channel] = _to_uint8(np.choose(sector, [candidates[k] for k in _SECTOR_PICKS[:, channel]]))
+    return rgb
 
 
-#: Pixels coloured at once: the renderings are per pixel, so they are made in blocks of rows, and
-#: ``hsv2rgb``'s float64 temporaries (about 300 bytes per pixel) stay at about 20 MB whatever the image.
+#: Pixels coloured at once: the renderings are per pixel, so they are made in blocks of rows, and the
+#: colour conversion's float64 temporaries (about 100 bytes per pixel) stay small whatever the image.
 _BLOCK_PIXELS = 1 << 16
 
 

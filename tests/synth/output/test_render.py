@@ -215,6 +215,32 @@ def test_renderings_in_blocks_of_rows_equal_the_whole_field_at_once():
     assert np.array_equal(render.coherence_image(coh), np.round(sat * 255.0).astype(np.uint8))
 
 
+def test_the_colour_conversion_gives_scikit_image_hsv2rgb_floats_bit_for_bit():
+    """``_hsv_uint8`` (one channel at a time) against ``skimage.color.hsv2rgb`` then the same quantisation:
+    random HSV, the sectors' edges (hue k/6 and its neighbouring floats, 1.0), grey (saturation 0), black,
+    values outside [0, 1], and mixed dtypes and scalars broadcast together."""
+    from skimage.color import hsv2rgb
+
+    from texsynth.synth.output.render import _hsv_uint8, _to_uint8
+
+    def reference(h, s, v):
+        hsv = np.stack(np.broadcast_arrays(h, s, v), axis=-1).astype(np.float64)
+        return _to_uint8(hsv2rgb(hsv))
+
+    rng = np.random.default_rng(11)
+    edges = np.array([k / 6 for k in range(7)])
+    hue = np.concatenate([rng.random(5000), edges, np.nextafter(edges, 2.0), np.nextafter(edges, -1.0)])
+    sat = np.concatenate([rng.random(5000), np.zeros(7), np.ones(7), rng.random(7) * 1.4 - 0.2])
+    val = np.concatenate([rng.random(5000), np.zeros(7), np.ones(7), rng.random(7)])
+    got = _hsv_uint8(hue, sat, val)
+    assert got.dtype == np.uint8 and got.shape == (len(hue), 3)
+    assert np.array_equal(got, reference(hue, sat, val))
+    square = rng.random((40, 30)).astype(np.float32)
+    assert np.array_equal(_hsv_uint8(square, 1.0, 1.0), reference(square, 1.0, 1.0))
+    rows = np.linspace(0, 1, 40, dtype=np.float32).reshape(-1, 1)
+    assert np.array_equal(_hsv_uint8(square.astype(np.float64), rows, 0.5), reference(square, rows, 0.5))
+
+
 def test_an_orientation_picture_needs_no_float64_copies_of_its_field():
     """Traced peak of a 1024^2 orientation picture with coherence: about 4.5 MB of temporaries per
     block and the 3 MB picture (main: 360 bytes per pixel, 380 MB)."""
@@ -229,3 +255,27 @@ def test_an_orientation_picture_needs_no_float64_copies_of_its_field():
     finally:
         tracemalloc.stop()
     assert peak < 40 * 2**20, peak / 2**20
+
+
+def _zlib_level_class(png: bytes) -> int:
+    """The compression level class (FLEVEL, 0-3) in the zlib header of a PNG's first IDAT chunk."""
+    start = png.index(b"IDAT") + 4
+    return png[start + 1] >> 6
+
+
+def test_the_tensor_pictures_are_lossless_pngs_at_the_pictures_zlib_effort():
+    """The pictures made for people (tensor images, plots) are encoded at ``PICTURE_PNG_LEVEL`` (3: zlib's
+    'fast' class, levels 2-5), the outputs at Pillow's default (6: the 'default' class); pixels exact."""
+    import io as _io
+
+    from PIL import Image
+
+    from texsynth.synth.io import PICTURE_PNG_LEVEL, image_to_png_bytes
+    from texsynth.synth.output.artifacts import _png_bytes
+
+    rng = np.random.default_rng(5)
+    picture = orientation_image(rng.random((64, 48)) * np.pi - np.pi / 2, legend=True)
+    png = _png_bytes(picture)
+    assert np.array_equal(np.asarray(Image.open(_io.BytesIO(png))), picture)
+    assert PICTURE_PNG_LEVEL == 3 and _zlib_level_class(png) == 1
+    assert _zlib_level_class(image_to_png_bytes(rng.random((64, 48)).astype(np.float32))) == 2
