@@ -109,7 +109,7 @@ _SECTOR_PICKS = np.array([[0, 3, 2], [1, 0, 2], [2, 0, 3], [2, 1, 0], [3, 2, 0],
 def _hsv_uint8(hue: np.ndarray, saturation: np.ndarray, value: np.ndarray) -> np.ndarray:
     """RGB ``uint8`` of HSV in [0, 1] (broadcast together), in float64: the floats of scikit-image's
     ``hsv2rgb`` (the same formulas; tested bit for bit), one channel at a time instead of its stacks of
-    the six sectors' RGB candidates (a sixth of its time and memory)."""
+    the six sectors' RGB candidates (2.5 times faster, a third of its temporaries)."""
     h, s, v = (np.asarray(a, dtype=np.float64) for a in np.broadcast_arrays(hue, saturation, value))
     sector = np.floor(h * 6)
     f = h * 6 - sector
