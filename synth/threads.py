@@ -51,6 +51,7 @@ R = TypeVar("R")
 BLAS_THREADS = "OPENBLAS_NUM_THREADS"
 
 _NESTED = threading.local()  # how many use_threads blocks the calling thread is inside
+_IN_TASK = threading.local()  # whether the calling thread is running a task of thread_map
 
 #: The service's knob: threads of one job (default: the cores divided between the worker processes).
 THREADS_ENV = "TEXSYNTH_THREADS"
@@ -126,23 +127,28 @@ def thread_map(fn: Callable[[T], R], items: Sequence[T], threads: int) -> list[R
 
     The helpers are started at their first use and kept: a job does not pay for starting threads, and
     their CPU time stays in Linux's per-thread counters (the benchmarks' busiest thread). The results
-    are in ``items``' order whichever thread computed them; ``fn`` must not itself call :func:`thread_map`
-    with the same count. The first exception of ``fn`` is raised here (the other threads stop taking items).
+    are in ``items``' order whichever thread computed them. A call made inside a task of another runs its
+    items in line (a helper waiting on its own pool would wait for ever). The first exception of ``fn`` is
+    raised here (the other threads stop taking items).
     """
     n = len(items)
     helpers = min(int(threads), n) - 1
-    if helpers <= 0:
+    if helpers <= 0 or getattr(_IN_TASK, "on", False):
         return [fn(x) for x in items]
     out: list[Any] = [None] * n
     errors: list[BaseException] = []
     ticket = itertools.count()  # next() on a count is atomic under the GIL
 
     def work() -> None:
-        while not errors and (k := next(ticket)) < n:
-            try:
-                out[k] = fn(items[k])
-            except BaseException as err:  # raised again in the calling thread
-                errors.append(err)
+        _IN_TASK.on = True
+        try:
+            while not errors and (k := next(ticket)) < n:
+                try:
+                    out[k] = fn(items[k])
+                except BaseException as err:  # raised again in the calling thread
+                    errors.append(err)
+        finally:
+            _IN_TASK.on = False
 
     pool = _helpers(int(threads) - 1)
     futures = [pool.submit(work) for _ in range(helpers)]

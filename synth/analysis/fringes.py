@@ -37,12 +37,12 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
-from scipy import ndimage as ndi
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from skimage.filters import threshold_otsu
 from skimage.morphology import black_tophat, disk, skeletonize, white_tophat
 
+from texsynth.synth.analysis.split import gaussian_filter
 from texsynth.synth.analysis.tensor import wrap_angle
 from texsynth.synth.errors import InvalidInput, InvalidParameter
 
@@ -197,13 +197,13 @@ def fringe_band_pass(
         raise InvalidParameter("polarity", polarity, "must be 'dark' or 'bright'")
     # a stack (N, H, W) is filtered image by image: along its last two axes only
     planes = (-2, -1)
-    low = ndi.gaussian_filter(img, sigma, mode="reflect", axes=planes)
+    low = gaussian_filter(img, sigma, mode="reflect", axes=planes)
     if filter == "bottom-hat":
         footprint = disk(max(1, round(background)))
         tophat = black_tophat if polarity == "dark" else white_tophat
         return tophat(low, footprint if img.ndim == 2 else footprint[None])
     if filter == "dog":
-        dog = low - ndi.gaussian_filter(img, background, mode="reflect", axes=planes)
+        dog = low - gaussian_filter(img, background, mode="reflect", axes=planes)
         return -dog if polarity == "dark" else dog
     raise InvalidParameter("filter", filter, "must be 'bottom-hat' or 'dog'")
 

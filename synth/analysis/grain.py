@@ -19,7 +19,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage as ndi
+
+from texsynth.synth.analysis.split import gaussian_filter
 
 __all__ = [
     "BLEND_SLAB",
@@ -46,7 +47,7 @@ BLEND_SLAB = 8
 
 
 def _high(image: np.ndarray, mode: str) -> np.ndarray:
-    return image - ndi.gaussian_filter(image, FINE_SIGMA, mode=mode)
+    return image - gaussian_filter(image, FINE_SIGMA, mode=mode)
 
 
 def fine_energies(image: np.ndarray, mode: str = "reflect") -> tuple[float, float]:

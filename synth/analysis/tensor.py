@@ -22,8 +22,8 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from scipy import ndimage as ndi
 
+from texsynth.synth.analysis.split import gaussian_filter, per_pixel, split_rows
 from texsynth.synth.colour import to_grey
 from texsynth.synth.errors import InvalidParameter
 
@@ -128,14 +128,24 @@ def structure_tensor(
     out = np.zeros((*channels.shape[:2], 3), dtype=img.dtype)
     for c in range(channels.shape[2]):
         band = channels[..., c]
-        ix = ndi.gaussian_filter(band, sigma_d, order=(0, 1), mode=mode)
-        iy = -ndi.gaussian_filter(band, sigma_d, order=(1, 0), mode=mode)
-        out[..., 0] += ix * ix
-        out[..., 1] += ix * iy
-        out[..., 2] += iy * iy
+        ix = gaussian_filter(band, sigma_d, order=(0, 1), mode=mode)
+        iy = -gaussian_filter(band, sigma_d, order=(1, 0), mode=mode)
+        _add_products(out, ix, iy)
     for k in range(3):
-        out[..., k] = ndi.gaussian_filter(out[..., k], sigma_w, mode=mode)
+        out[..., k] = gaussian_filter(out[..., k], sigma_w, mode=mode)
     return out
+
+
+def _add_products(out: np.ndarray, ix: np.ndarray, iy: np.ndarray) -> None:
+    """``out[..., :] += (ix * ix, ix * iy, iy * iy)`` (eq 2), in runs of rows over the threads."""
+
+    def rows(a: int, b: int) -> None:
+        x, y, o = ix[..., a:b, :], iy[..., a:b, :], out[..., a:b, :, :]
+        o[..., 0] += x * x
+        o[..., 1] += x * y
+        o[..., 2] += y * y
+
+    split_rows(rows, ix.shape)
 
 
 def structure_tensor_stack(
@@ -155,14 +165,12 @@ def structure_tensor_stack(
     if img.ndim != 3:
         raise InvalidParameter("images", f"shape {img.shape}", "must be a stack of grey images (N, H, W)")
     _check_scales(sigma_d, sigma_w)
-    ix = ndi.gaussian_filter(img, sigma_d, order=(0, 1), mode=mode, axes=(1, 2))
-    iy = -ndi.gaussian_filter(img, sigma_d, order=(1, 0), mode=mode, axes=(1, 2))
+    ix = gaussian_filter(img, sigma_d, order=(0, 1), mode=mode, axes=(1, 2))
+    iy = -gaussian_filter(img, sigma_d, order=(1, 0), mode=mode, axes=(1, 2))
     out = np.zeros((*img.shape, 3), dtype=img.dtype)
-    out[..., 0] += ix * ix
-    out[..., 1] += ix * iy
-    out[..., 2] += iy * iy
+    _add_products(out, ix, iy)
     for k in range(3):
-        out[..., k] = ndi.gaussian_filter(out[..., k], sigma_w, mode=mode, axes=(1, 2))
+        out[..., k] = gaussian_filter(out[..., k], sigma_w, mode=mode, axes=(1, 2))
     return out
 
 
@@ -199,6 +207,10 @@ def cross_orientation_fraction(tensors: np.ndarray) -> float:
 
 def coherence(tensors: np.ndarray) -> np.ndarray:
     """Coherence ``C = (l1 - l2) / (l1 + l2)`` in [0, 1] (eq 4); 0 where the trace vanishes."""
+    return per_pixel(_coherence, tensors)
+
+
+def _coherence(tensors: np.ndarray) -> np.ndarray:
     a, b, c = tensors[..., 0], tensors[..., 1], tensors[..., 2]
     trace = a + c
     spread = np.sqrt((a - c) ** 2 + 4.0 * b * b)
@@ -208,6 +220,10 @@ def coherence(tensors: np.ndarray) -> np.ndarray:
 
 def orientation(tensors: np.ndarray) -> np.ndarray:
     """Orientation of the dominant eigenvector (gradient direction, eq 5), in ``(-pi/2, pi/2]``."""
+    return per_pixel(_orientation, tensors)
+
+
+def _orientation(tensors: np.ndarray) -> np.ndarray:
     a, b, c = tensors[..., 0], tensors[..., 1], tensors[..., 2]
     theta = 0.5 * np.arctan2(2.0 * b, a - c)
     return wrap_angle(theta).astype(tensors.dtype)

@@ -49,7 +49,7 @@ from texsynth.synth.params import ui
 from texsynth.synth.patch.cut import error_surface, strips_cut_mask
 from texsynth.synth.patch.graphcut import graph_cut_mask
 from texsynth.synth.patch.layout import PatchLayout, check_periodic_size, patch_rng
-from texsynth.synth.patch.memory import settle_heap, wave_bytes
+from texsynth.synth.patch.memory import settle_heap, wave_batch, wave_bytes
 from texsynth.synth.patch.search import PatchSearcher
 from texsynth.synth.patch.usage import UsagePenalty
 from texsynth.synth.threads import current_threads, thread_map
@@ -212,9 +212,17 @@ def run_quilting(
     normalised = params.error == "normalised"
     fast = params.blending == "boundary-cut"
 
+    # a run is searched in batches of at most `batch` patches (memory.wave_batch): the same bytes, since the
+    # patches of a wave neither overlap nor read each other
+    batch = wave_batch(searcher.grid, searcher.channels, threads)
+
     def place_run(todo: list[int], factors: np.ndarray | None) -> list[tuple[int, int, np.ndarray, float]]:
-        """Search, draw, cut and paste the patches ``todo`` of one wave (each has known strips), on the
-        calling thread; their regions are disjoint from those of the wave's other runs."""
+        """Search, draw, cut and paste the patches ``todo`` of one wave (each has known strips), ``batch`` at
+        a time, on the calling thread; their regions are disjoint from those of the wave's other runs."""
+        return [got for a in range(0, len(todo), batch) for got in place_batch(todo[a : a + batch], factors)]
+
+    def place_batch(todo: list[int], factors: np.ndarray | None) -> list[tuple[int, int, np.ndarray, float]]:
+        """:func:`place_run` of one batch."""
         where = [layout.rows_cols(patches[n][2], patches[n][3]) for n in todo]
         rows = np.stack([r for r, _ in where])
         cols = np.stack([c for _, c in where])
@@ -247,7 +255,7 @@ def run_quilting(
             placed.update(zip(run, got, strict=True))
 
     waves = layout.waves()
-    settle_heap(wave_bytes(max(map(len, waves)), searcher.grid, searcher.channels))
+    settle_heap(wave_bytes(min(max(map(len, waves)), batch * threads), searcher.grid, searcher.channels))
     for wave in waves:
         factors = usage.factors() if params.usage_weight > 0 else None
         for n in wave:

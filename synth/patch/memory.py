@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MAX_SETTLE", "settle_heap", "wave_bytes"]
+__all__ = ["MAX_SETTLE", "settle_heap", "wave_batch", "wave_bytes"]
 
 #: glibc's largest dynamic ``mmap`` threshold on 64-bit systems (``DEFAULT_MMAP_THRESHOLD_MAX``).
 MAX_SETTLE = 32 << 20
@@ -28,6 +28,13 @@ def wave_bytes(patches: int, grid: tuple[int, int], channels: int) -> int:
     padded to the exemplar's ``grid`` and its spectra (``16 C`` bytes a grid point), the spectral product and
     the correlation (16), the errors, SSDs and candidates (24)."""
     return int(patches) * int(grid[0]) * int(grid[1]) * (16 * int(channels) + 40)
+
+
+def wave_batch(grid: tuple[int, int], channels: int, threads: int) -> int:
+    """How many patches one thread searches at a time, so that the arrays of the searches running at once on
+    ``threads`` threads stay within :data:`MAX_SETTLE` (a 4096^2 output's waves hold 150 patches: searched
+    whole, they freed more than glibc keeps, and every wave took fresh pages again)."""
+    return max(1, MAX_SETTLE // (max(1, int(threads)) * wave_bytes(1, grid, channels)))
 
 
 def settle_heap(nbytes: int) -> int:

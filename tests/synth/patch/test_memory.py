@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from texsynth.synth.patch.memory import MAX_SETTLE, settle_heap, wave_bytes
+from texsynth.synth.patch.memory import MAX_SETTLE, settle_heap, wave_batch, wave_bytes
 
 # A wave's pattern: six arrays of 1.6 MB written and freed, twenty times, in a fresh process.
 _CHURN = """
@@ -47,3 +47,30 @@ def test_sizes() -> None:
     assert settle_heap(1 << 40) == MAX_SETTLE
     assert wave_bytes(13, (128, 128), 1) == 13 * 128 * 128 * 56
     assert wave_bytes(2, (10, 20), 3) == 2 * 200 * 88
+
+
+def test_wave_batch_keeps_a_waves_searches_within_the_largest_threshold() -> None:
+    one = wave_bytes(1, (160, 160), 1)  # a 128^2 exemplar's grid with 32 px patches
+    assert wave_batch((160, 160), 1, 1) == MAX_SETTLE // one == 23
+    assert wave_batch((160, 160), 1, 2) == 11  # two threads search at once
+    assert wave_batch((160, 160), 1, 2) * 2 * one <= MAX_SETTLE
+    assert wave_batch((4000, 4000), 3, 4) == 1  # never none
+
+
+def test_quilting_searched_in_batches_gives_the_same_bytes(monkeypatch) -> None:
+    """A wave's runs searched a patch or two at a time: the bytes of whole runs (the patches of a wave
+    neither overlap nor read each other)."""
+    import numpy as np
+
+    from texsynth.synth.api import synthesize
+    from texsynth.synth.methods import quilting
+
+    rng = np.random.default_rng(5)
+    exemplar = rng.random((48, 48)).astype(np.float32)
+    params = {"patch_size": 12}
+    whole = synthesize("quilting", exemplar, size=(150, 150), params=params, seed=3, threads=2)
+    for batch in (1, 2):
+        monkeypatch.setattr(quilting, "wave_batch", lambda grid, channels, threads, batch=batch: batch)
+        small = synthesize("quilting", exemplar, size=(150, 150), params=params, seed=3, threads=2)
+        assert small.image.tobytes() == whole.image.tobytes(), batch
+        assert np.array_equal(small.extras["source_map"], whole.extras["source_map"])
